@@ -1,0 +1,35 @@
+"""Shared helpers for the benchmark scripts (timing, scene discovery)."""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import statistics  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Callable  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+from kadv.scenes import Scene, box_room, load_scene  # noqa: E402
+
+REAL_SCENES = ("grey_white_room", "modern_hall", "japanese_classroom")
+
+
+def scenes_root() -> Path:
+    return Path(os.environ.get("KADV_TEST_SCENES", Path(__file__).resolve().parents[2] / "shared" / "scenes"))
+
+
+def bench_scenes() -> list[Scene]:
+    """The box room and the three real scenes."""
+    return [box_room(seed=0)] + [load_scene(scenes_root() / name / "scene.xml") for name in REAL_SCENES]
+
+
+def median_seconds(fn: Callable[[], object], repeats: int = 7, warmup: int = 1) -> float:
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)

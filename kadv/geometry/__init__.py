@@ -1,0 +1,27 @@
+"""Poses and cameras (OpenCV convention: x right, y down, z forward; metres)."""
+from __future__ import annotations
+
+from kadv.geometry.camera import Camera, intrinsics_from_fov, pixel_rays, to_open3d_pinhole
+from kadv.geometry.pose import (
+    axis_angle_to_matrix,
+    check_world_T_cam,
+    look_at,
+    matrix_to_axis_angle,
+    perturb_world_T_cam,
+    rc_from_world_T_cam,
+    world_T_cam_from_rc,
+)
+
+__all__ = [
+    "Camera",
+    "axis_angle_to_matrix",
+    "check_world_T_cam",
+    "intrinsics_from_fov",
+    "look_at",
+    "matrix_to_axis_angle",
+    "perturb_world_T_cam",
+    "pixel_rays",
+    "rc_from_world_T_cam",
+    "to_open3d_pinhole",
+    "world_T_cam_from_rc",
+]

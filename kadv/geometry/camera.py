@@ -1,0 +1,122 @@
+"""Pinhole cameras: intrinsics, per-pixel rays, and the conversion to Open3D's conventions."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import open3d as o3d
+import torch
+
+from kadv.geometry.pose import check_world_T_cam
+
+__all__ = ["Camera", "intrinsics_from_fov", "pixel_rays", "to_open3d_pinhole"]
+
+
+def intrinsics_from_fov(fov_x_deg: float, height: int, width: int) -> torch.Tensor:
+    """Intrinsics K (3, 3) of a pinhole camera with square pixels and horizontal field of view.
+
+    Pixel centres sit at integer + 0.5, so the principal point is the image centre (W/2, H/2).
+
+    Raises:
+        ValueError: if the field of view is not in (0, 180) degrees or the size is not positive.
+    """
+    if not (0.0 < float(fov_x_deg) < 180.0) or not math.isfinite(float(fov_x_deg)):
+        raise ValueError(f"fov_x_deg must be in (0, 180), got {fov_x_deg}")
+    if height <= 0 or width <= 0:
+        raise ValueError(f"image size must be positive, got height={height}, width={width}")
+    focal = 0.5 * width / math.tan(math.radians(fov_x_deg) / 2.0)
+    return torch.tensor(
+        [[focal, 0.0, width / 2.0], [0.0, focal, height / 2.0], [0.0, 0.0, 1.0]], dtype=torch.float64
+    )
+
+
+@dataclass
+class Camera:
+    """A camera a scene file defines, in the OpenCV convention.
+
+    Attributes:
+        world_T_cam: camera-to-world pose (4, 4), float64.
+        fov_x_deg: horizontal field of view in degrees.
+        width: film width in pixels the file asks for (for the aspect ratio), if any.
+        height: film height in pixels, if any.
+        name: where the camera came from.
+    """
+
+    world_T_cam: torch.Tensor
+    fov_x_deg: float
+    width: int | None = None
+    height: int | None = None
+    name: str = field(default="camera")
+
+    def __post_init__(self) -> None:
+        self.world_T_cam = check_world_T_cam(
+            torch.as_tensor(self.world_T_cam, dtype=torch.float64), f"{self.name}.world_T_cam"
+        )[0]
+        intrinsics_from_fov(self.fov_x_deg, 1, 1)  # validates the field of view
+
+    def intrinsics(self, height: int, width: int) -> torch.Tensor:
+        """K (3, 3) for an image of the given size with this camera's horizontal field of view."""
+        return intrinsics_from_fov(self.fov_x_deg, height, width)
+
+
+def _batched_intrinsics(K: torch.Tensor, batch: int) -> torch.Tensor:
+    K = torch.as_tensor(K, dtype=torch.float64)
+    if K.shape == (3, 3):
+        K = K.expand(batch, 3, 3)
+    if K.shape != (batch, 3, 3):
+        raise ValueError(f"K: expected (3, 3) or ({batch}, 3, 3), got {tuple(K.shape)}")
+    if not bool(torch.isfinite(K).all()) or bool((K[:, 0, 0] <= 0).any()) or bool((K[:, 1, 1] <= 0).any()):
+        raise ValueError("K: intrinsics must be finite with positive focal lengths")
+    return K
+
+
+def pixel_rays(
+    world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int = 1
+) -> tuple[np.ndarray, np.ndarray]:
+    """World-frame rays through pixel (sub-)centres, for all cameras at once.
+
+    Directions have camera-frame z = 1 (not unit length), so a ray parameter is a z-depth.
+
+    Args:
+        world_T_cam: poses (B, 4, 4).
+        K: intrinsics (3, 3) or (B, 3, 3).
+        height, width: image size in pixels.
+        supersample: s; each pixel gets s x s rays on a regular sub-grid.
+
+    Returns:
+        origins, directions: float64 arrays (B, H, s, W, s, 3); averaging over axes 2 and 4 gives
+        per-pixel values.
+    """
+    pose = check_world_T_cam(world_T_cam).detach().double()
+    batch = pose.shape[0]
+    K = _batched_intrinsics(K, batch)
+    s = int(supersample)
+    if s < 1:
+        raise ValueError(f"supersample must be >= 1, got {supersample}")
+    sub = (torch.arange(s, dtype=torch.float64) + 0.5) / s
+    v = (torch.arange(height, dtype=torch.float64)[:, None] + sub[None, :])  # (H, s)
+    u = (torch.arange(width, dtype=torch.float64)[:, None] + sub[None, :])  # (W, s)
+    vv = v[:, :, None, None].expand(height, s, width, s)
+    uu = u[None, None, :, :].expand(height, s, width, s)
+    pixels = torch.stack([uu, vv, torch.ones_like(uu)], dim=-1)  # (H, s, W, s, 3)
+    dirs_cam = torch.einsum("bij,hawcj->bhawci", torch.linalg.inv(K), pixels)
+    dirs_world = torch.einsum("bij,bhawcj->bhawci", pose[:, :3, :3], dirs_cam)
+    origins = pose[:, None, None, None, None, :3, 3].expand_as(dirs_world)
+    return origins.numpy(), dirs_world.numpy()
+
+
+def to_open3d_pinhole(world_T_cam: torch.Tensor, K: torch.Tensor) -> tuple[o3d.core.Tensor, o3d.core.Tensor]:
+    """Intrinsic and extrinsic (cam_T_world) tensors for ``RaycastingScene.create_rays_pinhole``.
+
+    Open3D (>= 0.18) also puts pixel centres at integer + 0.5, so K passes through unchanged
+    (``tests/geometry/test_camera.py`` pins that both give the same rays).
+
+    Args:
+        world_T_cam: one pose (4, 4).
+        K: intrinsics (3, 3) in kadv's convention.
+    """
+    pose = check_world_T_cam(world_T_cam)[0].detach().double()
+    intrinsic = torch.as_tensor(K, dtype=torch.float64)
+    cam_T_world = torch.linalg.inv(pose)
+    return o3d.core.Tensor(intrinsic.numpy()), o3d.core.Tensor(cam_T_world.numpy())

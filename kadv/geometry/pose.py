@@ -1,0 +1,121 @@
+"""Rigid poses: axis-angle <-> rotation, ``world_T_cam`` from (R, c), look-at.
+
+``world_T_cam`` (..., 4, 4) maps camera-frame points to the world; its rotation block is the
+camera's orientation R and its last column the optical centre c.
+"""
+from __future__ import annotations
+
+import torch
+from kornia.geometry.conversions import axis_angle_to_rotation_matrix, rotation_matrix_to_axis_angle
+
+__all__ = [
+    "axis_angle_to_matrix",
+    "check_world_T_cam",
+    "look_at",
+    "matrix_to_axis_angle",
+    "perturb_world_T_cam",
+    "rc_from_world_T_cam",
+    "world_T_cam_from_rc",
+]
+
+
+def axis_angle_to_matrix(axis_angle: torch.Tensor) -> torch.Tensor:
+    """Rotation vectors (..., 3) to rotation matrices (..., 3, 3).
+
+    kornia's Rodrigues form has exact, finite derivatives at exactly zero rotation (pinned by
+    ``tests/geometry/test_pose.py``), which the attack needs since it starts every run at zero.
+    """
+    shape = axis_angle.shape[:-1]
+    return axis_angle_to_rotation_matrix(axis_angle.reshape(-1, 3)).reshape(*shape, 3, 3)
+
+
+def matrix_to_axis_angle(rotation: torch.Tensor) -> torch.Tensor:
+    """Rotation matrices (..., 3, 3) to rotation vectors (..., 3) with angle in [0, pi]."""
+    shape = rotation.shape[:-2]
+    return rotation_matrix_to_axis_angle(rotation.reshape(-1, 3, 3)).reshape(*shape, 3)
+
+
+def world_T_cam_from_rc(rotation: torch.Tensor, centre: torch.Tensor) -> torch.Tensor:
+    """Build ``world_T_cam`` (..., 4, 4) from camera orientation R (..., 3, 3) and centre c (..., 3)."""
+    top = torch.cat([rotation, centre.unsqueeze(-1)], dim=-1)
+    bottom = torch.zeros_like(top[..., :1, :])
+    bottom[..., 0, 3] = 1.0
+    return torch.cat([top, bottom], dim=-2)
+
+
+def rc_from_world_T_cam(world_T_cam: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Split ``world_T_cam`` (..., 4, 4) into R (..., 3, 3) and centre c (..., 3)."""
+    return world_T_cam[..., :3, :3], world_T_cam[..., :3, 3]
+
+
+def perturb_world_T_cam(
+    world_T_cam: torch.Tensor, omega: torch.Tensor, delta: torch.Tensor
+) -> torch.Tensor:
+    """Apply the attack's pose parameters: R = R0 exp([omega]x) (camera frame), c = c0 + delta.
+
+    Args:
+        world_T_cam: base poses (B, 4, 4).
+        omega: rotation vectors in the camera frame (B, 3).
+        delta: centre offsets in world metres (B, 3).
+
+    Returns:
+        Perturbed poses (B, 4, 4), differentiable in ``omega`` and ``delta``.
+    """
+    rotation0, centre0 = rc_from_world_T_cam(world_T_cam)
+    return world_T_cam_from_rc(rotation0 @ axis_angle_to_matrix(omega), centre0 + delta)
+
+
+def look_at(
+    eye: torch.Tensor, target: torch.Tensor, up: torch.Tensor | tuple[float, float, float] = (0.0, 1.0, 0.0)
+) -> torch.Tensor:
+    """OpenCV-convention ``world_T_cam`` (..., 4, 4) of a camera at ``eye`` looking at ``target``.
+
+    The camera's z axis points at the target and its y axis (image down) points away from ``up``.
+
+    Raises:
+        ValueError: if eye and target coincide or the view direction is parallel to ``up``.
+    """
+    eye = torch.as_tensor(eye, dtype=torch.float32)
+    target = torch.as_tensor(target, dtype=eye.dtype)
+    up = torch.as_tensor(up, dtype=eye.dtype).expand_as(eye)
+    forward = target - eye
+    norm = forward.norm(dim=-1, keepdim=True)
+    if bool((norm < 1e-9).any()):
+        raise ValueError("look_at: eye and target coincide")
+    z = forward / norm
+    x = torch.linalg.cross(z, up)
+    x_norm = x.norm(dim=-1, keepdim=True)
+    if bool((x_norm < 1e-9).any()):
+        raise ValueError("look_at: view direction is parallel to the up vector")
+    x = x / x_norm
+    y = torch.linalg.cross(z, x)
+    return world_T_cam_from_rc(torch.stack([x, y, z], dim=-1), eye)
+
+
+def check_world_T_cam(world_T_cam: torch.Tensor, name: str = "world_T_cam", atol: float = 1e-4) -> torch.Tensor:
+    """Validate poses (B, 4, 4) or (4, 4) and return them as (B, 4, 4).
+
+    Raises:
+        ValueError: on a wrong shape, NaN/inf entries, a last row other than [0, 0, 0, 1], or a
+            rotation block that is not orthonormal with determinant +1.
+    """
+    pose = torch.as_tensor(world_T_cam)
+    if pose.ndim == 2:
+        pose = pose.unsqueeze(0)
+    if pose.ndim != 3 or pose.shape[-2:] != (4, 4):
+        raise ValueError(f"{name}: expected shape (B, 4, 4) or (4, 4), got {tuple(torch.as_tensor(world_T_cam).shape)}")
+    detached = pose.detach().double()
+    if not bool(torch.isfinite(detached).all()):
+        raise ValueError(f"{name}: pose contains NaN or inf")
+    bottom = torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=torch.float64)
+    if not bool(torch.allclose(detached[:, 3], bottom.expand_as(detached[:, 3]), atol=atol)):
+        raise ValueError(f"{name}: last row must be [0, 0, 0, 1]")
+    rotation = detached[:, :3, :3]
+    eye = torch.eye(3, dtype=torch.float64).expand_as(rotation)
+    orthonormal = (rotation.transpose(-1, -2) @ rotation - eye).abs().amax(dim=(-1, -2)) < atol
+    proper = (torch.linalg.det(rotation) - 1.0).abs() < atol
+    bad = ~(orthonormal & proper)
+    if bool(bad.any()):
+        index = int(bad.nonzero()[0, 0])
+        raise ValueError(f"{name}[{index}]: rotation block is not a rotation matrix (R^T R != I or det != +1)")
+    return pose

@@ -1,0 +1,65 @@
+"""PNG artefacts, written atomically so an interrupted run never leaves a truncated file."""
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+from PIL import Image  # noqa: E402
+
+__all__ = ["atomic_write", "save_depth_png", "save_rgb_png"]
+
+
+def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
+    """Call ``write(tmp_path)`` and move the result to ``path`` in one rename.
+
+    The temporary file sits in the destination folder so the rename stays on one filesystem.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(handle)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def save_rgb_png(path: str | Path, rgb: torch.Tensor) -> Path:
+    """Save an image (3, H, W) in [0, 1] as an 8-bit PNG."""
+    array = (rgb.detach().clamp(0, 1).permute(1, 2, 0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+    return atomic_write(path, lambda tmp: Image.fromarray(array).save(tmp, format="PNG"))
+
+
+def save_depth_png(path: str | Path, depth: torch.Tensor, mask: torch.Tensor | None = None,
+                   label: str = "depth [m]") -> Path:
+    """Save a depth map (1, H, W) colour-mapped with a colour bar; invalid pixels are grey."""
+    values = depth.detach()[0].cpu().numpy().astype(np.float64)
+    valid = values > 0 if mask is None else mask.detach()[0].cpu().numpy().astype(bool)
+    shown = np.ma.masked_where(~valid, values)
+    height, width = values.shape
+    dpi = 100
+    figure, axis = plt.subplots(figsize=(width / dpi * 1.25 + 0.6, height / dpi + 0.3), dpi=dpi)
+    cmap = plt.get_cmap("turbo").copy()
+    cmap.set_bad((0.5, 0.5, 0.5))
+    image = axis.imshow(shown, cmap=cmap, interpolation="nearest")
+    axis.set_axis_off()
+    figure.colorbar(image, ax=axis, fraction=0.046, pad=0.02, label=label)
+
+    def write(tmp: Path) -> None:
+        figure.savefig(tmp, format="png", bbox_inches="tight")
+
+    try:
+        return atomic_write(path, write)
+    finally:
+        plt.close(figure)

@@ -1,0 +1,228 @@
+"""The in-memory scene: triangles with per-corner UVs and normals, materials, cameras, lights."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kadv.geometry.camera import Camera
+
+__all__ = ["Material", "MeshPart", "Scene", "assemble_scene"]
+
+
+@dataclass
+class Material:
+    """Surface appearance used by the exact renderer.
+
+    Attributes:
+        name: material name from the file.
+        base_color: (3,) display (sRGB-encoded) colour in [0, 1]; multiplies the texture.
+        texture: optional (H, W, 3) float32 image in [0, 1], sRGB as stored, row 0 at v = 1.
+        opacity: optional (H, W) float32 alpha mask; texels below 0.5 let rays through.
+        uv_scale: (2,) multiplier applied to UVs before the texture lookup.
+        transparent: glass-like; dropped at load by default.
+        emissive: a light source's own surface; dropped at load by default.
+        two_sided: back faces are legitimate surfaces (Mitsuba ``twosided``, glTF ``doubleSided``).
+    """
+
+    name: str
+    base_color: np.ndarray = field(default_factory=lambda: np.full(3, 0.5, np.float32))
+    texture: np.ndarray | None = None
+    opacity: np.ndarray | None = None
+    uv_scale: np.ndarray = field(default_factory=lambda: np.ones(2, np.float32))
+    transparent: bool = False
+    emissive: bool = False
+    two_sided: bool = True
+
+    def __post_init__(self) -> None:
+        self.base_color = np.clip(np.asarray(self.base_color, np.float32).reshape(3), 0.0, 1.0)
+        self.uv_scale = np.asarray(self.uv_scale, np.float32).reshape(2)
+        if self.texture is not None:
+            texture = np.asarray(self.texture, np.float32)
+            if texture.ndim != 3 or texture.shape[2] != 3:
+                raise ValueError(f"material {self.name!r}: texture must be (H, W, 3), got {texture.shape}")
+            self.texture = texture
+        if self.opacity is not None:
+            self.opacity = np.asarray(self.opacity, np.float32)
+
+
+@dataclass
+class MeshPart:
+    """One loaded shape before assembly: triangles in world coordinates and a material index.
+
+    Attributes:
+        vertices: (V, 3) positions.
+        faces: (F, 3) vertex indices.
+        uvs: optional (F, 3, 2) per-corner texture coordinates.
+        normals: optional (F, 3, 3) per-corner shading normals; face normals when absent.
+        material: index into the scene's material list.
+        name: where the part came from (file or shape), for error messages.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uvs: np.ndarray | None
+    normals: np.ndarray | None
+    material: int
+    name: str
+
+
+def _face_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    corners = vertices[faces]
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    doubled_area = np.linalg.norm(cross, axis=1)
+    normals = cross / np.maximum(doubled_area, 1e-30)[:, None]
+    return normals, 0.5 * doubled_area
+
+
+@dataclass
+class Scene:
+    """A triangle scene in kadv's world frame (metres, y up after load-time normalisation).
+
+    Attributes:
+        vertices: (V, 3) float64 positions.
+        faces: (F, 3) int64 vertex indices.
+        uvs: (F, 3, 2) float32 per-corner texture coordinates (zeros where the file has none).
+        normals: (F, 3, 3) float32 per-corner unit shading normals.
+        material_ids: (F,) int64 index into ``materials`` per triangle.
+        materials: the materials.
+        cameras: cameras the file defines (may be empty).
+        lights: (L, 3) float64 positions of the file's light sources (may be empty).
+        name: a label for reports.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    uvs: np.ndarray
+    normals: np.ndarray
+    material_ids: np.ndarray
+    materials: list[Material]
+    cameras: list[Camera] = field(default_factory=list)
+    lights: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    name: str = "scene"
+
+    def __post_init__(self) -> None:
+        self.vertices = np.asarray(self.vertices, np.float64).reshape(-1, 3)
+        self.faces = np.asarray(self.faces, np.int64).reshape(-1, 3)
+        self.material_ids = np.asarray(self.material_ids, np.int64).reshape(-1)
+        self.lights = np.asarray(self.lights, np.float64).reshape(-1, 3)
+        n = len(self.faces)
+        if n == 0:
+            raise ValueError(f"scene {self.name!r}: has no triangles")
+        if not np.isfinite(self.vertices).all():
+            raise ValueError(f"scene {self.name!r}: vertices contain NaN or inf")
+        if self.faces.min() < 0 or self.faces.max() >= len(self.vertices):
+            raise ValueError(f"scene {self.name!r}: face indices out of range")
+        if self.uvs.shape != (n, 3, 2) or self.normals.shape != (n, 3, 3) or self.material_ids.shape != (n,):
+            raise ValueError(f"scene {self.name!r}: per-triangle arrays do not match {n} faces")
+        if self.material_ids.max() >= len(self.materials) or self.material_ids.min() < 0:
+            raise ValueError(f"scene {self.name!r}: material ids out of range")
+        face_normals, areas = _face_normals(self.vertices, self.faces)
+        if float(areas.sum()) <= 1e-12:
+            raise ValueError(f"scene {self.name!r}: total surface area is zero (degenerate triangles only)")
+        self.face_normals = face_normals.astype(np.float32)
+
+    @property
+    def num_triangles(self) -> int:
+        return len(self.faces)
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) axis-aligned bounds: row 0 the minimum corner, row 1 the maximum."""
+        return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+
+def _rotation_to_y_up(up_axis: str) -> np.ndarray:
+    """Rotation taking the file's up axis to +y (right-handed, no mirroring)."""
+    if up_axis == "y":
+        return np.eye(3)
+    if up_axis == "z":
+        return np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+    raise ValueError(f"up_axis must be 'y' or 'z', got {up_axis!r}")
+
+
+def assemble_scene(
+    parts: list[MeshPart],
+    materials: list[Material],
+    cameras: list[Camera] | None = None,
+    lights: np.ndarray | None = None,
+    *,
+    name: str = "scene",
+    scale: float = 1.0,
+    up_axis: str = "y",
+    drop_transparent: bool = True,
+    drop_emitters: bool = True,
+) -> Scene:
+    """Concatenate mesh parts into a :class:`Scene`, applying the load options.
+
+    Args:
+        parts: shapes in file coordinates.
+        materials: materials the parts index.
+        cameras: file cameras in file coordinates.
+        lights: (L, 3) light positions in file coordinates.
+        scale: metres per file unit.
+        up_axis: the file's up axis, ``"y"`` or ``"z"``; the scene is rotated to y-up.
+        drop_transparent: leave out triangles of transparent (glass) materials.
+        drop_emitters: leave out light-source surfaces (their centroids become lights).
+
+    Raises:
+        ValueError: on NaN/inf coordinates, a non-positive scale, or nothing left to render.
+    """
+    if not np.isfinite(scale) or scale <= 0:
+        raise ValueError(f"scale must be a positive number, got {scale}")
+    rotation = _rotation_to_y_up(up_axis)
+    light_list = [np.asarray(lights, np.float64).reshape(-1, 3)] if lights is not None else []
+    vertices, faces, uvs, normals, material_ids = [], [], [], [], []
+    offset = 0
+    for part in parts:
+        part_vertices = np.asarray(part.vertices, np.float64)
+        if not np.isfinite(part_vertices).all():
+            raise ValueError(f"{part.name}: vertices contain NaN or inf")
+        material = materials[part.material]
+        part_faces = np.asarray(part.faces, np.int64).reshape(-1, 3)
+        if len(part_faces) == 0:
+            continue
+        if material.emissive and drop_emitters:
+            light_list.append(part_vertices[np.unique(part_faces)].mean(axis=0, keepdims=True))
+            continue
+        if material.transparent and drop_transparent:
+            continue
+        n = len(part_faces)
+        if part.normals is None:
+            part_normals = np.repeat(_face_normals(part_vertices, part_faces)[0][:, None], 3, axis=1)
+        else:
+            part_normals = np.asarray(part.normals, np.float64).reshape(n, 3, 3)
+        vertices.append(part_vertices)
+        faces.append(part_faces + offset)
+        uvs.append(np.zeros((n, 3, 2)) if part.uvs is None else np.asarray(part.uvs).reshape(n, 3, 2))
+        normals.append(part_normals)
+        material_ids.append(np.full(n, part.material))
+        offset += len(part_vertices)
+    if not faces:
+        raise ValueError(f"scene {name!r}: no renderable triangles (all parts empty, transparent or emissive)")
+    all_normals = np.concatenate(normals) @ rotation.T
+    norm = np.linalg.norm(all_normals, axis=-1, keepdims=True)
+    all_vertices = np.concatenate(vertices) @ rotation.T * scale
+    all_faces = np.concatenate(faces)
+    flat = np.repeat(_face_normals(all_vertices, all_faces)[0][:, None], 3, axis=1)
+    # Files carry zero or NaN normals on degenerate corners: fall back to the face normal there.
+    bad = ~np.isfinite(norm) | (norm < 1e-8)
+    all_normals = np.where(bad, flat, all_normals / np.where(bad, 1.0, norm))
+    moved_cameras = []
+    for camera in cameras or []:
+        pose = camera.world_T_cam.numpy().copy()
+        pose[:3, :3] = rotation @ pose[:3, :3]
+        pose[:3, 3] = rotation @ pose[:3, 3] * scale
+        moved_cameras.append(Camera(pose, camera.fov_x_deg, camera.width, camera.height, camera.name))
+    all_lights = np.concatenate(light_list) if light_list else np.zeros((0, 3))
+    return Scene(
+        vertices=all_vertices,
+        faces=all_faces,
+        uvs=np.concatenate(uvs).astype(np.float32),
+        normals=all_normals.astype(np.float32),
+        material_ids=np.concatenate(material_ids),
+        materials=materials,
+        cameras=moved_cameras,
+        lights=all_lights @ rotation.T * scale,
+        name=name,
+    )

@@ -1,0 +1,52 @@
+"""Texture images: loading from files and converting colours to the renderer's display space."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+__all__ = ["image_to_rgba", "linear_to_srgb", "load_image"]
+
+
+def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
+    """Encode linear reflectances as sRGB so constant colours match sRGB textures on screen."""
+    linear = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
+    return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1.0 / 2.4) - 0.055)
+
+
+def image_to_rgba(image: Image.Image | np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """(H, W, 3) float32 RGB in [0, 1] and (H, W) alpha if the image has one."""
+    if isinstance(image, Image.Image):
+        has_alpha = image.mode in ("RGBA", "LA") or (image.mode == "P" and "transparency" in image.info)
+        image = np.asarray(image.convert("RGBA" if has_alpha else "RGB"))
+    array = np.asarray(image)
+    scale = 255.0 if array.dtype == np.uint8 else (65535.0 if array.dtype == np.uint16 else 1.0)
+    array = array.astype(np.float32) / scale
+    if array.ndim == 2:
+        array = array[:, :, None]
+    if array.shape[2] in (2, 4):
+        alpha, array = array[:, :, -1], array[:, :, :-1]
+    else:
+        alpha = None
+    if array.shape[2] == 1:
+        array = np.repeat(array, 3, axis=2)
+    return np.ascontiguousarray(array[:, :, :3]), alpha
+
+
+def load_image(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """Read a texture file as (H, W, 3) float32 RGB and optional (H, W) alpha.
+
+    Raises:
+        FileNotFoundError: if the file does not exist.
+        ValueError: if the file cannot be decoded as an image.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"texture file not found: {path}")
+    try:
+        with Image.open(path) as image:
+            image.load()
+            return image_to_rgba(image)
+    except OSError as error:
+        raise ValueError(f"texture file {path} could not be decoded: {error}") from error

@@ -1,0 +1,97 @@
+"""Meshes through trimesh (glTF/GLB, OBJ+MTL, PLY, OFF, STL), keeping every material and texture."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from kadv.scenes.scene import Material, MeshPart
+from kadv.scenes.textures import image_to_rgba, linear_to_srgb
+
+__all__ = ["TRIMESH_SUFFIXES", "load_mesh_file", "mesh_parts"]
+
+TRIMESH_SUFFIXES = (".glb", ".gltf", ".obj", ".ply", ".off", ".stl")
+
+
+def _material_from_visual(visual: object, fallback_name: str) -> Material:
+    material = getattr(visual, "material", None)
+    if material is None:  # ColorVisuals: per-vertex/face colours, keep their mean
+        colors = getattr(visual, "face_colors", None)
+        color = np.asarray(colors, np.float32)[:, :3].mean(axis=0) / 255.0 if colors is not None else np.full(3, 0.5)
+        return Material(fallback_name, base_color=color)
+    name = getattr(material, "name", None) or fallback_name
+    if isinstance(material, trimesh.visual.material.PBRMaterial):
+        factor = material.baseColorFactor
+        factor = np.ones(4) if factor is None else np.asarray(factor, np.float64)
+        factor = factor / 255.0 if factor.max() > 1.0 else factor
+        texture, alpha = (None, None)
+        if material.baseColorTexture is not None:
+            texture, alpha = image_to_rgba(material.baseColorTexture)
+        mode = (material.alphaMode or "OPAQUE").upper()
+        opacity = alpha if (mode == "MASK" and alpha is not None) else None
+        transparent = mode == "BLEND" and float(factor[3]) < 0.99 if len(factor) > 3 else False
+        emissive_factor = np.asarray(material.emissiveFactor if material.emissiveFactor is not None else [0, 0, 0])
+        # A glTF surface both emissive and black is a light fixture's emitting face.
+        emissive = bool(emissive_factor.max() > 0) and texture is None and float(factor[:3].max()) < 1e-3
+        return Material(
+            name,
+            base_color=linear_to_srgb(factor[:3]),  # glTF factors are linear, textures sRGB
+            texture=texture,
+            opacity=opacity,
+            transparent=transparent,
+            emissive=emissive,
+            two_sided=bool(material.doubleSided),
+        )
+    diffuse = np.asarray(getattr(material, "diffuse", [128, 128, 128, 255]), np.float64) / 255.0
+    image = getattr(material, "image", None)
+    texture, alpha = image_to_rgba(image) if image is not None else (None, None)
+    return Material(name, base_color=diffuse[:3] if texture is None else np.ones(3), texture=texture, opacity=alpha)
+
+
+def mesh_parts(
+    mesh: trimesh.Trimesh,
+    transform: np.ndarray,
+    material_index: int,
+    name: str,
+    flat_normals: bool = False,
+) -> MeshPart:
+    """Convert one trimesh mesh (in its own frame) to a world-frame :class:`MeshPart`."""
+    faces = np.asarray(mesh.faces, np.int64)
+    vertices_h = np.c_[np.asarray(mesh.vertices, np.float64), np.ones(len(mesh.vertices))]
+    vertices = (vertices_h @ np.asarray(transform, np.float64).T)[:, :3]
+    uv = getattr(mesh.visual, "uv", None)
+    uvs = None if uv is None or len(uv) != len(mesh.vertices) else np.asarray(uv, np.float64)[faces]
+    normals = None
+    if not flat_normals and len(faces):
+        normal_matrix = np.linalg.inv(np.asarray(transform, np.float64)[:3, :3]).T
+        with np.errstate(invalid="ignore", divide="ignore"):
+            normals = (np.asarray(mesh.vertex_normals, np.float64) @ normal_matrix.T)[faces]
+    return MeshPart(vertices, faces, uvs, normals, material_index, name)
+
+
+def load_mesh_file(path: Path, materials: list[Material]) -> list[MeshPart]:
+    """Load every mesh of a trimesh-readable file as parts, appending its materials to ``materials``.
+
+    Raises:
+        ValueError: if the file holds no triangle mesh or cannot be parsed.
+    """
+    try:
+        loaded = trimesh.load(str(path), force="scene", process=False)
+    except Exception as error:  # trimesh raises many kinds on malformed files
+        raise ValueError(f"{path}: could not be read as a mesh ({type(error).__name__}: {error})") from error
+    parts: list[MeshPart] = []
+    known: dict[int, int] = {}
+    for node in loaded.graph.nodes_geometry:
+        transform, geometry_name = loaded.graph[node]
+        mesh = loaded.geometry[geometry_name]
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+            continue
+        key = id(getattr(mesh.visual, "material", mesh.visual))
+        if key not in known:
+            known[key] = len(materials)
+            materials.append(_material_from_visual(mesh.visual, str(geometry_name)))
+        parts.append(mesh_parts(mesh, transform, known[key], f"{path}:{geometry_name}"))
+    if not parts:
+        raise ValueError(f"{path}: contains no triangle mesh")
+    return parts
