@@ -45,10 +45,13 @@ def textured_materials(rng: np.random.Generator, count: int) -> list[Material]:
 
 
 def quad_part(corners: np.ndarray, material: int, name: str, uv_extent: tuple[float, float] = (1.0, 1.0)) -> MeshPart:
-    """Two triangles of the quad ``corners`` (4, 3) in order, UVs spanning ``uv_extent``."""
+    """Two triangles of the quad ``corners`` (4, 3), UVs spanning ``uv_extent``.
+
+    The front face's normal is (c3 - c0) x (c1 - c0); corner 0 has uv (0, 0), corner 1 (u, 0).
+    """
     u, v = uv_extent
     uv = np.array([[0, 0], [u, 0], [u, v], [0, v]], np.float64)
-    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    faces = np.array([[0, 2, 1], [0, 3, 2]])
     return MeshPart(np.asarray(corners, np.float64), faces, uv[faces], None, material, name)
 
 
@@ -79,6 +82,9 @@ def box_room(
     fov_x_deg: float = 70.0,
 ) -> Scene:
     """A closed room (floor, ceiling, four walls) with random furniture boxes.
+
+    Walls face into the room and boxes outwards, so a back face seen from a camera means the camera
+    is outside the room or inside a box.
 
     The room spans x in [0, W], y in [0, H] (y up, floor at 0) and z in [0, D]. The file camera
     stands 1.5 m high near the corner (0, 0) looking across the room, at least 1 m from every box.
