@@ -1,20 +1,21 @@
-"""Median time of one exact render (cast + shading) and of the cast alone, per scene and size.
+"""Render timings: exact render and cast per scene and size; DifferentiableRenderer forward+backward.
 
 Run: .venv/bin/python benchmarks/render.py
 """
 from __future__ import annotations
 
+import torch
 from common import bench_scenes, median_seconds
 
 from kadv.geometry import pixel_rays
-from kadv.render import ExactRenderer
+from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
 
 SIZES = ((240, 320), (480, 640))
 
 
-def main() -> None:
+def exact_timings(scenes) -> None:
     print(f"{'scene':<22} {'size':>9} {'triangles':>10} {'render ms':>10} {'cast ms':>9}")
-    for scene in bench_scenes():
+    for scene in scenes:
         renderer = ExactRenderer(scene)
         camera = scene.cameras[0]
         for height, width in SIZES:
@@ -23,6 +24,36 @@ def main() -> None:
             render = median_seconds(lambda: renderer.render(camera.world_T_cam, K, height, width))
             cast = median_seconds(lambda: renderer.cast(origins, directions))
             print(f"{scene.name:<22} {height:>4}x{width:<4} {scene.num_triangles:>10} {render * 1e3:>10.1f} {cast * 1e3:>9.1f}")
+
+
+def differentiable_timings(scenes, height: int = 240, width: int = 320) -> None:
+    print(f"\nDifferentiableRenderer forward+backward at {height}x{width} (supersample 2, guard band 16)")
+    print(f"{'scene':<22} {'mode':<34} {'ms':>8}")
+    for scene in scenes:
+        renderer = ExactRenderer(scene)
+        camera = scene.cameras[0]
+        K = camera.intrinsics(height, width)
+        base = camera.world_T_cam[None]
+        exact_ms = median_seconds(lambda: renderer.render(base, K, height, width, supersample=2), repeats=3) * 1e3
+        print(f"{scene.name:<22} {'exact render alone (s=2)':<34} {exact_ms:>8.0f}")
+        for values, refresh in (("exact", "always"), ("warp", "every_k")):
+            for silhouette in (False, True):
+                config = DiffRenderConfig(values=values, refresh=refresh, silhouette=silhouette)
+                differentiable = DifferentiableRenderer(renderer, config)
+
+                def step() -> None:
+                    params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
+                    out = differentiable(params, base, K, height, width)
+                    (out.rgb.sum() + out.depth.sum()).backward()
+
+                label = f"values={values} refresh={refresh} sil={'on' if silhouette else 'off'}"
+                print(f"{scene.name:<22} {label:<34} {median_seconds(step, repeats=3) * 1e3:>8.0f}")
+
+
+def main() -> None:
+    scenes = bench_scenes()
+    exact_timings(scenes)
+    differentiable_timings(scenes)
 
 
 if __name__ == "__main__":

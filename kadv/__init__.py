@@ -2,11 +2,15 @@
 from __future__ import annotations
 
 from kadv.geometry import Camera, intrinsics_from_fov, look_at
-from kadv.render import ExactRenderer, RenderOutput, Shading
+from kadv.models import DepthModel, load_model
+from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer, RenderOutput, Shading
 from kadv.scenes import Material, Scene, box_room, load_scene
 
 __all__ = [
     "Camera",
+    "DepthModel",
+    "DiffRenderConfig",
+    "DifferentiableRenderer",
     "ExactRenderer",
     "Material",
     "RenderOutput",
@@ -14,6 +18,7 @@ __all__ = [
     "Shading",
     "box_room",
     "intrinsics_from_fov",
+    "load_model",
     "load_scene",
     "look_at",
 ]

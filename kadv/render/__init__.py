@@ -1,7 +1,28 @@
-"""Rendering: the exact ray-cast renderer and its shading."""
+"""Rendering: the exact ray-cast renderer, anchor layers, reprojection and the differentiable façade."""
 from __future__ import annotations
 
+from kadv.render.differentiable import DiffRenderConfig, DiffRenderOutput, DifferentiableRenderer
+from kadv.render.dibr import Reprojection, reproject
+from kadv.render.layers import AnchorLayers, render_anchor
 from kadv.render.raycast import ExactRenderer, RayHits, RenderOutput
 from kadv.render.shading import Shading, sample_texture, scene_lights
+from kadv.render.silhouette import EdgePairs, find_edge_pairs, silhouette_term
 
-__all__ = ["ExactRenderer", "RayHits", "RenderOutput", "Shading", "sample_texture", "scene_lights"]
+__all__ = [
+    "AnchorLayers",
+    "DiffRenderConfig",
+    "DiffRenderOutput",
+    "DifferentiableRenderer",
+    "EdgePairs",
+    "ExactRenderer",
+    "RayHits",
+    "RenderOutput",
+    "Reprojection",
+    "Shading",
+    "find_edge_pairs",
+    "render_anchor",
+    "reproject",
+    "sample_texture",
+    "scene_lights",
+    "silhouette_term",
+]

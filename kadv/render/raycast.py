@@ -12,10 +12,10 @@ import open3d as o3d
 import torch
 
 from kadv.geometry.camera import pixel_rays
-from kadv.render.shading import Shading, sample_texture, scene_lights, shade
+from kadv.render.shading import Shading, albedo, mip_pyramid, sample_texture, scene_lights, shade, uv_density
 from kadv.scenes.scene import Scene
 
-__all__ = ["ExactRenderer", "RenderOutput"]
+__all__ = ["ExactRenderer", "RayHits", "RenderOutput", "pixel_angle"]
 
 _INVALID_ID = np.uint32(2**32 - 1)
 # Alpha-masked surfaces (leaves) are skipped by re-casting just past the hit; bounded because
@@ -60,6 +60,12 @@ class RayHits:
         return self.triangle_ids >= 0
 
 
+def pixel_angle(K: torch.Tensor) -> float:
+    """Angle in radians one pixel subtends at the image centre (the smallest of the batch)."""
+    K = torch.as_tensor(K, dtype=torch.float64).reshape(-1, 3, 3)
+    return float(1.0 / torch.maximum(K[:, 0, 0], K[:, 1, 1]).max())
+
+
 class ExactRenderer:
     """Ray-cast renderer of a :class:`Scene`.
 
@@ -77,6 +83,8 @@ class ExactRenderer:
             o3d.core.Tensor(scene.vertices.astype(np.float32)), o3d.core.Tensor(scene.faces.astype(np.uint32))
         )
         self._masked = np.array([m.opacity is not None for m in scene.materials], bool)
+        self._pyramids = {i: mip_pyramid(m.texture) for i, m in enumerate(scene.materials) if m.texture is not None}
+        self._uv_density = uv_density(scene)
 
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
         """Cast rays (..., 3) each; alpha-masked texels let rays through.
@@ -90,7 +98,7 @@ class ExactRenderer:
         if self._masked.any():
             offset = np.zeros(len(t))
             for _ in range(_MAX_ALPHA_LAYERS):
-                see_through = self._see_through(ids, bary)
+                see_through = self.see_through(ids, bary)
                 if not see_through.any():
                     break
                 # Restart just past the hit; parameters along an unchanged direction add up.
@@ -110,7 +118,8 @@ class ExactRenderer:
         ids = np.where(raw_ids == _INVALID_ID, -1, raw_ids.astype(np.int64))
         return result["t_hit"].numpy().astype(np.float64), ids, result["primitive_uvs"].numpy().astype(np.float64)
 
-    def _see_through(self, ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    def see_through(self, ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
+        """(N,) True where a hit (triangle ids, barycentrics) falls on a transparent texel of an alpha mask."""
         hit = ids >= 0
         material_ids = np.where(hit, self.scene.material_ids[np.where(hit, ids, 0)], -1)
         candidates = hit & self._masked[np.maximum(material_ids, 0)]
@@ -129,7 +138,9 @@ class ExactRenderer:
         weights = np.c_[1.0 - bary[:, 0] - bary[:, 1], bary[:, 0], bary[:, 1]]
         return np.einsum("nk,nkc->nc", weights, per_corner[triangle_ids].astype(np.float64))
 
-    def _shade_hits(self, hits: RayHits, origins: np.ndarray, directions: np.ndarray) -> dict[str, np.ndarray]:
+    def shade_hits(self, hits: RayHits, origins: np.ndarray, directions: np.ndarray,
+                    pixel_angle: float | None = None) -> dict[str, np.ndarray]:
+        """Shade hits; ``pixel_angle`` (radians per sample) selects the texture mip level."""
         n = len(hits.t)
         ids = hits.triangle_ids[hits.hit]
         bary = hits.barycentrics[hits.hit]
@@ -140,8 +151,15 @@ class ExactRenderer:
         normals = self._interpolate(self.scene.normals, ids, bary)
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
         normals[back] *= -1
-        rgb = shade(self.scene, self.shading, self.lights, ids, self._interpolate(self.scene.uvs, ids, bary),
-                    points, normals)
+        uv = self._interpolate(self.scene.uvs, ids, bary)
+        footprint = None
+        if pixel_angle is not None:
+            distance = hits.t[hits.hit] * np.linalg.norm(dirs, axis=1)
+            incidence = np.abs(np.einsum("nc,nc->n", face_normals, dirs)) / np.linalg.norm(dirs, axis=1)
+            # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
+            footprint = distance * pixel_angle / np.sqrt(np.maximum(incidence, 0.05))
+        base = albedo(self.scene, ids, uv, footprint, self._pyramids, self._uv_density)
+        rgb = shade(self.scene, self.shading, self.lights, ids, uv, points, normals, base)
         out = {
             "rgb": np.tile(np.asarray(self.shading.background, np.float32), (n, 1)),
             "points": np.zeros((n, 3), np.float32),
@@ -172,10 +190,11 @@ class ExactRenderer:
         origins, directions = pixel_rays(world_T_cam, K, height, width)
         batch = origins.shape[0]
         hits = self.cast(origins, directions)
-        maps = self._shade_hits(hits, origins, directions)
+        angle = pixel_angle(K)
+        maps = self.shade_hits(hits, origins, directions, angle)
         if supersample > 1:
             sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, supersample)
-            sub = self._shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs)
+            sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / supersample)
             s = supersample
             maps["rgb"] = sub["rgb"].reshape(batch, height, s, width, s, 3).mean(axis=(2, 4)).reshape(-1, 3)
 

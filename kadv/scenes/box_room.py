@@ -20,27 +20,48 @@ def _downsample(image: np.ndarray, size: int = 256) -> np.ndarray:
     return image[::step, ::step]
 
 
-def textured_materials(rng: np.random.Generator, count: int) -> list[Material]:
-    """Random materials: tinted grey photographs, colour photographs, checkers and stripes."""
+def _photo(rng: np.random.Generator) -> np.ndarray:
+    return _downsample(getattr(skimage.data, _COLOUR_IMAGES[rng.integers(len(_COLOUR_IMAGES))])())[..., :3] / 255.0
+
+
+def _grey_photo(rng: np.random.Generator, tint: np.ndarray, contrast: float) -> np.ndarray:
+    grey = _downsample(getattr(skimage.data, _GREY_IMAGES[rng.integers(len(_GREY_IMAGES))])()) / 255.0
+    return (1.0 - contrast + contrast * grey[:, :, None]) * tint
+
+
+def _checker(rng: np.random.Generator, tint: np.ndarray) -> np.ndarray:
+    cells = int(rng.integers(2, 9))
+    board = (np.indices((64, 64)).sum(axis=0) // (64 // cells)) % 2
+    return np.where(board[:, :, None] == 0, tint, rng.uniform(0.1, 0.9, size=3))
+
+
+def _stripes(rng: np.random.Generator, tint: np.ndarray) -> np.ndarray:
+    phase = np.linspace(0, 2 * np.pi * int(rng.integers(2, 8)), 64)
+    stripes = 0.5 + 0.5 * np.sin(phase)[None, :, None]
+    return np.broadcast_to(stripes * tint + (1 - stripes) * tint[::-1] * 0.5, (64, 64, 3))
+
+
+def textured_materials(rng: np.random.Generator, role: str, count: int) -> list[Material]:
+    """Random materials for a surface role, as interiors tend to have them.
+
+    Roles: "paint" (walls, ceiling: a tint with a low-contrast grain), "floor" (planks, tiles,
+    carpet-like grain) and "furniture" (anything, including photographs and bold patterns).
+    """
     materials = []
     for index in range(count):
-        kind = rng.integers(4)
         tint = rng.uniform(0.35, 1.0, size=3)
-        if kind == 0:
-            grey = _downsample(getattr(skimage.data, _GREY_IMAGES[rng.integers(len(_GREY_IMAGES))])()) / 255.0
-            texture = grey[:, :, None] * tint
-        elif kind == 1:
-            texture = _downsample(getattr(skimage.data, _COLOUR_IMAGES[rng.integers(len(_COLOUR_IMAGES))])())[..., :3] / 255.0
-        elif kind == 2:
-            cells = int(rng.integers(2, 9))
-            board = (np.indices((64, 64)).sum(axis=0) // (64 // cells)) % 2
-            other = rng.uniform(0.1, 0.9, size=3)
-            texture = np.where(board[:, :, None] == 0, tint, other)
+        if role == "paint":
+            texture = _grey_photo(rng, tint, contrast=rng.uniform(0.05, 0.25))
+        elif role == "floor":
+            kind = rng.integers(3)
+            texture = (_stripes(rng, tint) if kind == 0 else _checker(rng, tint) if kind == 1
+                       else _grey_photo(rng, tint, contrast=rng.uniform(0.3, 0.8)))
+        elif role == "furniture":
+            kind = rng.integers(4)
+            texture = (_grey_photo(rng, tint, 1.0), _photo(rng), _checker(rng, tint), _stripes(rng, tint))[kind]
         else:
-            phase = np.linspace(0, 2 * np.pi * int(rng.integers(2, 8)), 64)
-            stripes = 0.5 + 0.5 * np.sin(phase)[None, :, None]
-            texture = np.broadcast_to(stripes * tint + (1 - stripes) * tint[::-1] * 0.5, (64, 64, 3))
-        materials.append(Material(f"procedural{index}", base_color=np.ones(3), texture=np.clip(texture, 0, 1)))
+            raise ValueError(f"unknown material role {role!r}")
+        materials.append(Material(f"{role}{index}", base_color=np.ones(3), texture=np.clip(texture, 0, 1)))
     return materials
 
 
@@ -53,6 +74,15 @@ def quad_part(corners: np.ndarray, material: int, name: str, uv_extent: tuple[fl
     uv = np.array([[0, 0], [u, 0], [u, v], [0, v]], np.float64)
     faces = np.array([[0, 2, 1], [0, 3, 2]])
     return MeshPart(np.asarray(corners, np.float64), faces, uv[faces], None, material, name)
+
+
+def _overlapped(corners: np.ndarray, margin: float = 1e-3) -> np.ndarray:
+    """Grow a quad by ``margin`` past its edges: faces that merely touch leave float cracks rays slip through."""
+    u = corners[1] - corners[0]
+    v = corners[3] - corners[0]
+    u_hat, v_hat = u / np.linalg.norm(u), v / np.linalg.norm(v)
+    signs = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float64)
+    return corners + margin * (signs[:, :1] * u_hat + signs[:, 1:] * v_hat)
 
 
 def _box_parts(lo: np.ndarray, hi: np.ndarray, material: int, name: str, tile: float) -> list[MeshPart]:
@@ -69,6 +99,7 @@ def _box_parts(lo: np.ndarray, hi: np.ndarray, material: int, name: str, tile: f
     ]
     parts = []
     for index, corners in enumerate(np.array(faces, np.float64)):
+        corners = _overlapped(corners)
         extent = (np.linalg.norm(corners[1] - corners[0]) / tile, np.linalg.norm(corners[3] - corners[0]) / tile)
         parts.append(quad_part(corners, material, f"{name}.face{index}", extent))
     return parts
@@ -102,7 +133,10 @@ def box_room(
     width, height, depth = (float(v) for v in size)
     if min(width, height, depth) < 2.0:
         raise ValueError(f"box_room: every side must be >= 2 m, got {size}")
-    materials = textured_materials(rng, 6 + num_boxes)
+    floor, ceiling = textured_materials(rng, "floor", 1) + textured_materials(rng, "paint", 1)
+    paint = textured_materials(rng, "paint", 2)  # most walls share one paint, an accent wall may differ
+    walls_paint = [paint[int(rng.random() < 0.25)] for _ in range(4)]
+    materials = [floor, ceiling, *walls_paint] + textured_materials(rng, "furniture", num_boxes)
     W, H, D = width, height, depth
     walls = {
         "floor": [[0, 0, 0], [W, 0, 0], [W, 0, D], [0, 0, D]],
@@ -114,7 +148,7 @@ def box_room(
     }
     parts = []
     for index, (name, corners) in enumerate(walls.items()):
-        corners = np.array(corners, np.float64)
+        corners = _overlapped(np.array(corners, np.float64))
         extent = (np.linalg.norm(corners[1] - corners[0]) / tile, np.linalg.norm(corners[3] - corners[0]) / tile)
         parts.append(quad_part(corners, index, name, extent))
     eye = np.array([min(1.0, W / 4), 1.5, min(1.0, D / 4)])

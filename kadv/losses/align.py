@@ -1,0 +1,53 @@
+"""Comparison spaces, min-max normalisation and least-squares scale-and-shift alignment.
+
+All maps are (B, 1, H, W); ``mask`` (B, 1, H, W) bool marks valid pixels.
+"""
+from __future__ import annotations
+
+import torch
+
+__all__ = ["align_scale_shift", "minmax_normalize", "to_comparison_space"]
+
+_EPS = 1e-8
+
+
+def to_comparison_space(values: torch.Tensor, kind: str, space: str, mask: torch.Tensor) -> torch.Tensor:
+    """Convert a depth or disparity map to ``space`` ("disparity" or "depth"); 0 at invalid pixels.
+
+    Args:
+        values: (B, 1, H, W) map.
+        kind: what ``values`` holds: "depth" (metres) or "disparity" (relative inverse depth).
+        space: the space to compare in.
+        mask: (B, 1, H, W) valid pixels.
+    """
+    for name, value in (("kind", kind), ("space", space)):
+        if value not in ("depth", "disparity"):
+            raise ValueError(f"{name} must be 'depth' or 'disparity', got {value!r}")
+    valid = mask & (values > _EPS) if kind != space else mask
+    converted = values if kind == space else 1.0 / values.clamp_min(_EPS)
+    return torch.where(valid, converted, torch.zeros_like(converted))
+
+
+def minmax_normalize(values: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Rescale each map's valid pixels to [0, 1] (min -> 0, max -> 1); invalid pixels -> 0."""
+    big = torch.finfo(values.dtype).max
+    low = torch.where(mask, values, torch.full_like(values, big)).amin(dim=(1, 2, 3), keepdim=True)
+    high = torch.where(mask, values, torch.full_like(values, -big)).amax(dim=(1, 2, 3), keepdim=True)
+    scaled = (values - low) / (high - low).clamp_min(_EPS)
+    return torch.where(mask, scaled, torch.zeros_like(scaled))
+
+
+def align_scale_shift(prediction: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """s * prediction + t with (s, t) per map minimising the squared error to ``target`` on ``mask``.
+
+    Closed-form normal equations, differentiable in both maps.
+    """
+    weight = mask.to(prediction.dtype)
+    count = weight.sum(dim=(1, 2, 3), keepdim=True).clamp_min(1.0)
+    mean_p = (weight * prediction).sum(dim=(1, 2, 3), keepdim=True) / count
+    mean_t = (weight * target).sum(dim=(1, 2, 3), keepdim=True) / count
+    centred_p = (prediction - mean_p) * weight
+    covariance = (centred_p * (target - mean_t)).sum(dim=(1, 2, 3), keepdim=True)
+    variance = (centred_p * centred_p).sum(dim=(1, 2, 3), keepdim=True)
+    scale = covariance / variance.clamp_min(_EPS)
+    return scale * (prediction - mean_p) + mean_t

@@ -1,0 +1,41 @@
+"""Standard depth metrics after scale-and-shift alignment in disparity space."""
+from __future__ import annotations
+
+import torch
+
+from kadv.losses.align import align_scale_shift, to_comparison_space
+
+__all__ = ["depth_metrics"]
+
+
+def depth_metrics(
+    prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor, prediction_kind: str = "disparity",
+    min_depth: float = 1e-3,
+) -> dict[str, torch.Tensor]:
+    """delta1/2/3, abs_rel and rmse per map (B,) on valid pixels.
+
+    The prediction is converted to disparity, aligned to the ground-truth disparity by least
+    squares, and converted back to depth; aligned disparities below 1/max(gt) are clamped there, so
+    a prediction that needs a negative depth counts as wrong rather than being dropped.
+
+    Args:
+        prediction: (B, 1, H, W) model output.
+        gt_depth: (B, 1, H, W) z-depth in metres.
+        mask: (B, 1, H, W) valid ground-truth pixels.
+        prediction_kind: "disparity" (relative, affine-invariant) or "depth".
+        min_depth: ground truth below this is treated as invalid.
+    """
+    mask = mask & (gt_depth > min_depth)
+    gt_disparity = to_comparison_space(gt_depth, "depth", "disparity", mask)
+    pred_disparity = to_comparison_space(prediction, prediction_kind, "disparity", mask)
+    aligned = align_scale_shift(pred_disparity, gt_disparity, mask)
+    floor = 1.0 / torch.where(mask, gt_depth, torch.zeros_like(gt_depth)).amax(dim=(1, 2, 3), keepdim=True)
+    pred_depth = 1.0 / torch.maximum(aligned, floor)
+    weight = mask.to(gt_depth.dtype)
+    count = weight.sum(dim=(1, 2, 3)).clamp_min(1.0)
+    safe_gt = torch.where(mask, gt_depth, torch.ones_like(gt_depth))
+    ratio = torch.maximum(pred_depth / safe_gt, safe_gt / pred_depth)
+    result = {f"delta{k}": ((ratio < 1.25**k) & mask).to(gt_depth.dtype).sum(dim=(1, 2, 3)) / count for k in (1, 2, 3)}
+    result["abs_rel"] = (weight * (pred_depth - safe_gt).abs() / safe_gt).sum(dim=(1, 2, 3)) / count
+    result["rmse"] = ((weight * (pred_depth - safe_gt) ** 2).sum(dim=(1, 2, 3)) / count).sqrt()
+    return result

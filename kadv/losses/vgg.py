@@ -1,0 +1,66 @@
+"""VGG-16 feature extractor in torchvision's layout (torchvision has no CPU build here).
+
+Module indices match ``torchvision.models.vgg16().features`` so its state dict loads as is.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import torch
+from torch import nn
+
+__all__ = ["VGG16_FILENAME", "VGG16_TAPS", "VGG16_URL", "load_vgg16_state_dict", "vgg16_features"]
+
+VGG16_URL = "https://download.pytorch.org/models/vgg16-397923af.pth"
+VGG16_FILENAME = "vgg16-397923af.pth"
+# Indices of relu1_2, relu2_2, relu3_3, relu4_3 in torchvision's vgg16().features.
+VGG16_TAPS = (3, 8, 15, 22)
+_CONFIG = (64, 64, "M", 128, 128, "M", 256, 256, 256, "M", 512, 512, 512)
+
+
+def vgg16_features() -> nn.Sequential:
+    """The VGG-16 convolutional layers up to relu4_3 (indices 0..22), randomly initialised."""
+    layers: list[nn.Module] = []
+    channels = 3
+    for item in _CONFIG:
+        if item == "M":
+            layers.append(nn.MaxPool2d(kernel_size=2, stride=2))
+        else:
+            layers += [nn.Conv2d(channels, item, kernel_size=3, padding=1), nn.ReLU(inplace=False)]
+            channels = item
+    return nn.Sequential(*layers)
+
+
+def load_vgg16_state_dict(path: str | Path | None = None) -> dict[str, torch.Tensor]:
+    """The ``features.*`` tensors of a torchvision-layout VGG-16 checkpoint, keys without the prefix.
+
+    Resolution: ``path`` -> ``$TORCH_HOME/hub/checkpoints/vgg16-397923af.pth`` -> download.
+
+    Raises:
+        FileNotFoundError: an explicit ``path`` that does not exist.
+        RuntimeError: no local copy and the download failed (offline), saying how to provide it.
+    """
+    if path is not None:
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"VGG-16 weights not found: {path}")
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    else:
+        torch_home = Path(os.environ.get("TORCH_HOME", Path.home() / ".cache" / "torch"))
+        cached = torch_home / "hub" / "checkpoints" / VGG16_FILENAME
+        if cached.is_file():
+            state = torch.load(cached, map_location="cpu", weights_only=True)
+        else:
+            try:
+                state = torch.hub.load_state_dict_from_url(VGG16_URL, map_location="cpu", progress=False)
+            except Exception as error:  # urllib raises several kinds when offline
+                raise RuntimeError(
+                    f"VGG-16 weights for the perceptual loss are not available: no file at {cached} and the "
+                    f"download from {VGG16_URL} failed ({type(error).__name__}). Copy {VGG16_FILENAME} there, "
+                    "pass loss.vgg_weights=/path/to/file, or use the weight-free loss (loss=ssim)."
+                ) from error
+    features = {k.removeprefix("features."): v for k, v in state.items() if k.startswith("features.")}
+    if not features:
+        raise ValueError("VGG-16 state dict has no 'features.*' entries (not a torchvision-layout checkpoint)")
+    return features

@@ -1,0 +1,94 @@
+"""kadv-tiny: a compact U-Net predicting relative disparity, trained on procedural rooms only.
+
+Its weights ship in ``kadv/models/weights/kadv_tiny.safetensors`` so everything runs offline.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+from safetensors import safe_open
+from safetensors.torch import load_file, save_file
+from torch import nn
+from torch.nn import functional as F
+
+from kadv.models.base import DepthModel, Preprocess
+
+__all__ = ["TINY_WEIGHTS", "TinyDepthNet", "KadvTiny", "load_kadv_tiny", "save_kadv_tiny"]
+
+TINY_WEIGHTS = Path(__file__).parent / "weights" / "kadv_tiny.safetensors"
+DEFAULT_CHANNELS = (16, 32, 64, 96, 128)
+# Working resolution (the training resolution): images are resized, keeping aspect, near 128 x 160.
+TINY_PREPROCESS = Preprocess(size=(128, 160), keep_aspect_ratio=True, multiple=32, interpolation="bilinear")
+
+
+def _block(c_in: int, c_out: int, stride: int = 1) -> nn.Sequential:
+    return nn.Sequential(
+        nn.Conv2d(c_in, c_out, 3, stride=stride, padding=1, bias=False), nn.GroupNorm(8, c_out), nn.GELU(),
+        nn.Conv2d(c_out, c_out, 3, padding=1, bias=False), nn.GroupNorm(8, c_out), nn.GELU(),
+    )
+
+
+class TinyDepthNet(nn.Module):
+    """U-Net: (B, 3, h, w) normalised RGB, h and w multiples of 32 -> (B, 1, h, w) disparity."""
+
+    def __init__(self, channels: tuple[int, ...] = DEFAULT_CHANNELS) -> None:
+        super().__init__()
+        self.channels = tuple(channels)
+        self.encoder = nn.ModuleList(
+            [_block(3, channels[0], stride=2)] + [_block(a, b, stride=2) for a, b in zip(channels, channels[1:])]
+        )
+        self.decoder = nn.ModuleList([_block(b + a, a) for a, b in zip(channels[:-1], channels[1:])])
+        self.head = nn.Sequential(nn.Conv2d(channels[0], channels[0], 3, padding=1), nn.GELU(),
+                                  nn.Conv2d(channels[0], 1, 1))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        skips = []
+        for block in self.encoder:
+            x = block(x)
+            skips.append(x)
+        x = skips.pop()
+        for block in reversed(self.decoder):
+            skip = skips.pop()
+            x = block(torch.cat([F.interpolate(x, size=skip.shape[-2:], mode="bilinear", align_corners=False), skip], 1))
+        x = F.interpolate(x, scale_factor=2, mode="bilinear", align_corners=False)
+        return F.softplus(self.head(x))
+
+
+class KadvTiny(DepthModel):
+    """kadv-tiny behind the :class:`DepthModel` interface (output: relative disparity)."""
+
+    def __init__(self, network: TinyDepthNet) -> None:
+        super().__init__(TINY_PREPROCESS, "disparity", "kadv_tiny")
+        self.network = network
+        self.freeze()
+
+    def predict(self, pixel_values: torch.Tensor) -> torch.Tensor:
+        return self.network(pixel_values)
+
+
+def save_kadv_tiny(network: TinyDepthNet, path: str | Path, metadata: dict[str, object] | None = None) -> Path:
+    """Write weights (float16 to stay small) with the architecture and training facts as metadata."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    info = {"channels": json.dumps(list(network.channels)), **{k: json.dumps(v) for k, v in (metadata or {}).items()}}
+    state = {k: v.detach().to(torch.float16).contiguous() for k, v in network.state_dict().items()}
+    save_file(state, str(path), metadata=info)
+    return path
+
+
+def load_kadv_tiny(weights: str | Path | None = None) -> KadvTiny:
+    """Load kadv-tiny from ``weights`` or the copy shipped in the package.
+
+    Raises:
+        FileNotFoundError: the weights file does not exist (says how to train it).
+    """
+    path = Path(weights) if weights is not None else TINY_WEIGHTS
+    if not path.is_file():
+        raise FileNotFoundError(f"kadv-tiny weights not found at {path}; train them with kadv-train-tiny")
+    with safe_open(str(path), framework="pt") as handle:
+        channels = tuple(json.loads(handle.metadata()["channels"]))
+    network = TinyDepthNet(channels)
+    network.load_state_dict({k: v.float() for k, v in load_file(str(path)).items()})
+    return KadvTiny(network)

@@ -1,0 +1,103 @@
+"""Training kadv-tiny on procedural rooms with a scale-and-shift-invariant disparity loss."""
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import torch
+from kornia.enhance import normalize
+from tqdm import tqdm
+
+from kadv.datasets import ViewBatch, render_procedural_views
+from kadv.losses import align_scale_shift, depth_metrics, to_comparison_space
+from kadv.models.tiny import DEFAULT_CHANNELS, TINY_PREPROCESS, KadvTiny, TinyDepthNet
+
+__all__ = ["TinyTrainConfig", "ssi_loss", "train_tiny"]
+
+
+@dataclass
+class TinyTrainConfig:
+    """Everything that determines a kadv-tiny training run (same config, same weights)."""
+
+    seed: int = 0
+    train_views: int = 4000
+    val_views: int = 200
+    val_seed: int = 1
+    steps: int = 6000
+    batch_size: int = 16
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    channels: tuple[int, ...] = DEFAULT_CHANNELS
+
+
+def ssi_loss(prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """Mean |align(pred) - d| / mean(d) with d the ground-truth disparity (MiDaS-style, invariant to scale and shift)."""
+    target = to_comparison_space(gt_depth, "depth", "disparity", mask)
+    weight = mask.to(prediction.dtype)
+    count = weight.sum(dim=(1, 2, 3)).clamp_min(1.0)
+    scale = (weight * target).sum(dim=(1, 2, 3)) / count
+    error = (weight * (align_scale_shift(prediction, target, mask) - target).abs()).sum(dim=(1, 2, 3)) / count
+    return (error / scale.clamp_min(1e-6)).mean()
+
+
+def _normalised(rgb: torch.Tensor) -> torch.Tensor:
+    return normalize(rgb, torch.tensor(TINY_PREPROCESS.mean), torch.tensor(TINY_PREPROCESS.std))
+
+
+def _augment(rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor, generator: torch.Generator):
+    flip = torch.rand(rgb.shape[0], generator=generator) < 0.5
+    rgb, depth, mask = (torch.where(flip[:, None, None, None], x.flip(-1), x) for x in (rgb, depth, mask))
+    gain = 0.7 + 0.6 * torch.rand(rgb.shape[0], 1, 1, 1, generator=generator)
+    bias = 0.1 * (torch.rand(rgb.shape[0], 3, 1, 1, generator=generator) - 0.5)
+    return (rgb * gain + bias).clamp(0, 1), depth, mask
+
+
+def evaluate(model: KadvTiny, views: ViewBatch, batch_size: int = 32) -> float:
+    """Mean delta1 (after alignment) of ``model`` on ``views``."""
+    scores = []
+    with torch.no_grad():
+        for start in range(0, len(views.rgb), batch_size):
+            part = slice(start, start + batch_size)
+            prediction = model(views.rgb[part])
+            scores.append(depth_metrics(prediction, views.depth[part], views.mask[part])["delta1"])
+    return float(torch.cat(scores).mean())
+
+
+def train_tiny(config: TinyTrainConfig, progress: bool = True) -> tuple[TinyDepthNet, dict[str, object]]:
+    """Render the data, train, and return the network with a log (losses, delta1, timings)."""
+    torch.manual_seed(config.seed)
+    np.random.seed(config.seed)
+    height, width = TINY_PREPROCESS.size
+    start = time.perf_counter()
+    train = render_procedural_views(config.train_views, config.seed, height, width, progress=progress)
+    val = render_procedural_views(config.val_views, config.val_seed, height, width, progress=progress)
+    render_seconds = time.perf_counter() - start
+    network = TinyDepthNet(tuple(config.channels))
+    optimiser = torch.optim.AdamW(network.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, max_lr=config.lr, total_steps=config.steps)
+    generator = torch.Generator().manual_seed(config.seed)
+    losses = []
+    start = time.perf_counter()
+    bar = tqdm(range(config.steps), desc="training kadv-tiny", disable=not progress)
+    for _ in bar:
+        index = torch.randint(len(train.rgb), (config.batch_size,), generator=generator)
+        rgb, depth, mask = _augment(train.rgb[index], train.depth[index], train.mask[index], generator)
+        loss = ssi_loss(network(_normalised(rgb)), depth, mask)
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+        schedule.step()
+        losses.append(loss.item())
+        bar.set_postfix(loss=f"{np.mean(losses[-50:]):.4f}")
+    train_seconds = time.perf_counter() - start
+    network.eval()
+    log = {
+        "config": asdict(config),
+        "render_seconds": render_seconds,
+        "train_seconds": train_seconds,
+        "final_loss": float(np.mean(losses[-100:])),
+        "val_delta1": evaluate(KadvTiny(network), val),
+        "losses": losses,
+    }
+    return network, log

@@ -1,0 +1,179 @@
+"""Differentiable reprojection of anchor RGB-D layers into the current pose.
+
+For each current pixel p with exact (detached) depth: X_P = D(p) K^-1 p~ (kornia ``depth_to_3d_v2``),
+X_A = A_T_P X_P (``transform_points``), q = pi(K_A X_A) (``project_points``). The anchor is sampled at
+q with a box filter of one current pixel (s x s bilinear sub-samples of the s-times supersampled
+anchor), so the gradient is that of the box-filtered image the finite-difference reference sees.
+
+Sampling is depth-aware: a bilinear tap counts only if the expected point X_A lies on the tap's
+own surface (within a tolerance of its triangle's plane). Taps across an occlusion edge would mix
+two surfaces and give the gradient of the wrong one; silhouettes get their own term
+(:mod:`kadv.render.silhouette`). Depth is the z of the sampled anchor point mapped back with P_T_A.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from kornia.geometry.camera.perspective import project_points
+from kornia.geometry.depth import depth_to_3d_v2
+from kornia.geometry.linalg import transform_points
+
+from kadv.render.layers import AnchorLayers
+
+__all__ = ["Reprojection", "reproject"]
+
+
+@dataclass
+class Reprojection:
+    """The anchor warped into the current views.
+
+    Attributes:
+        rgb: (B, 3, H, W) warped colour (0 where invalid).
+        depth: (B, 1, H, W) warped z-depth in the current frame (0 where invalid).
+        valid: (B, 1, H, W) bool: sampled from the right surface, inside the anchor, depth agrees.
+        layer: (B, 1, H, W) int64 index of the anchor layer used (-1 where invalid).
+    """
+
+    rgb: torch.Tensor
+    depth: torch.Tensor
+    valid: torch.Tensor
+    layer: torch.Tensor
+
+
+def _gather(maps: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    """maps (B, C, N), index (B, M) -> (B, C, M)."""
+    return torch.gather(maps, 2, index[:, None, :].expand(-1, maps.shape[1], -1))
+
+
+def _bilinear(anchor: AnchorLayers, layer: int, x: torch.Tensor, y: torch.Tensor, expected: torch.Tensor,
+              plane_tolerance: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Depth-aware bilinear lookup at continuous pixel indices x, y (B, M): colour, point, tap weight."""
+    _, _, _, height, width = anchor.rgb.shape
+    rgb = anchor.rgb[:, layer].flatten(2).double()
+    points = anchor.points[:, layer].flatten(2)
+    normals = anchor.normals[:, layer].flatten(2)
+    mask = anchor.mask[:, layer].flatten(2)[:, 0]
+    x0, y0 = torch.floor(x.detach()), torch.floor(y.detach())
+    fx, fy = x - x0, y - y0
+    colour = point = total = 0.0
+    for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        xi, yi = x0 + dx, y0 + dy
+        inside = (xi >= 0) & (xi < width) & (yi >= 0) & (yi < height)
+        index = (yi.clamp(0, height - 1) * width + xi.clamp(0, width - 1)).long()
+        tap_points = _gather(points, index)
+        # the expected point must lie on the tap's surface plane (relative tolerance in depth)
+        off_plane = ((expected - tap_points) * _gather(normals, index)).sum(1).abs()
+        same_surface = inside & torch.gather(mask, 1, index) & (off_plane <= plane_tolerance * expected[:, 2].abs())
+        weight = (fx if dx else 1 - fx) * (fy if dy else 1 - fy) * same_surface
+        colour = colour + weight[:, None] * _gather(rgb, index)
+        point = point + weight[:, None] * tap_points
+        total = total + weight
+    return colour, point, total
+
+
+def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor, plane_tolerance: float):
+    """Depth-aware samples of one layer at hi-res pixel coordinates q (B, M, 2).
+
+    Values come from one bilinear lookup (exact when q falls on anchor pixel centres, as with
+    A = P); gradients only from the mean of four lookups half a hi-res pixel away diagonally,
+    because a single lookup's derivative at a pixel centre is a one-sided difference and theirs
+    is central.
+
+    Returns colour (B, 3, M) and point (B, 3, M), normalised, and the valid tap weight (B, M) of
+    the value lookup (0 where no tap is on the expected surface).
+    """
+    x, y = q[..., 0] - 0.5, q[..., 1] - 0.5  # continuous pixel index (centres at +0.5)
+    colour, point, total = _bilinear(anchor, layer, x, y, expected, plane_tolerance)
+    symmetric = [_bilinear(anchor, layer, x + ox, y + oy, expected, plane_tolerance)
+                 for ox in (-0.5, 0.5) for oy in (-0.5, 0.5)]
+    weight = sum(t for _, _, t in symmetric).clamp_min(1e-12)[:, None]
+    smooth_colour = sum(c for c, _, _ in symmetric) / weight
+    smooth_point = sum(p for _, p, _ in symmetric) / weight
+    value_weight = total.detach().clamp_min(1e-12)[:, None]
+    colour = (colour / value_weight).detach() + smooth_colour - smooth_colour.detach()
+    point = (point / value_weight).detach() + smooth_point - smooth_point.detach()
+    return colour, point, total.detach()
+
+
+def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, A_T_P: torch.Tensor, K: torch.Tensor,
+              depth_tolerance: float = 0.01, plane_tolerance: float = 0.02) -> Reprojection:
+    """Warp the anchor into current views.
+
+    Args:
+        anchor: anchor layers.
+        depth: (B, 1, H, W) exact z-depth of the current views (detached; 0 = invalid).
+        normals: (B, 3, H, W) current-camera-frame geometric normals of the surfaces seen; the
+            sub-pixel samples of a pixel lie on that triangle's plane.
+        A_T_P: (B, 4, 4) current-to-anchor camera transform, differentiable in the pose.
+        K: (3, 3) or (B, 3, 3) intrinsics of the current views.
+        depth_tolerance: relative disagreement between warped and exact depth above which a
+            pixel is invalid.
+        plane_tolerance: relative distance from a tap's surface plane above which the tap is
+            taken to belong to another surface.
+    """
+    batch, _, height, width = depth.shape
+    s = anchor.supersample
+    K = torch.as_tensor(K, dtype=torch.float64).expand(batch, 3, 3)
+    depth = depth.detach().double()
+    valid_pixel = (depth[:, 0] > 0).reshape(batch, height * width)
+    # Pixels without a surface get a stand-in depth so that no NaN enters the graph; they stay invalid.
+    depth = torch.where(depth > 0, depth, torch.ones_like(depth))
+    # kornia's meshgrid puts pixel (i, j) at (j, i); kadv's centres are at +0.5: shift the principal point.
+    points_P = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False)  # (B, H, W, 3)
+    offsets = (torch.arange(s, dtype=torch.float64) + 0.5) / s - 0.5  # sub-pixel centres, current pixels
+    sub = torch.stack(torch.meshgrid(offsets, offsets, indexing="xy"), dim=-1).reshape(-1, 2)  # (S, 2) as (dx, dy)
+    # Sub-pixel rays meet the plane of the pixel's triangle (constant depth where it is grazing).
+    rays = points_P[:, :, :, None, :] / depth[:, 0, :, :, None, None].clamp_min(1e-12)
+    focal = torch.stack([K[:, 0, 0], K[:, 1, 1]], dim=-1)[:, None, None, None, :]
+    shift = sub[None, None, None] / focal  # (B, 1, 1, S, 2) in normalised image coordinates
+    sub_rays = rays + torch.cat([shift, torch.zeros_like(shift[..., :1])], dim=-1)  # (B, H, W, S, 3)
+    n = normals.detach().double().permute(0, 2, 3, 1)[:, :, :, None, :]
+    numerator = (n * points_P[:, :, :, None, :]).sum(-1, keepdim=True)
+    denominator = (n * sub_rays).sum(-1, keepdim=True)
+    grazing = denominator.abs() < 1e-3 * sub_rays.norm(dim=-1, keepdim=True)
+    t = torch.where(grazing, depth[:, 0, :, :, None, None].expand_as(numerator), numerator / torch.where(grazing, 1.0, denominator))
+    sub_points_P = sub_rays * t  # (B, H, W, S, 3)
+    sub_points_A = transform_points(A_T_P[:, None, None].double(), sub_points_P.reshape(batch, height, -1, 3))
+    sub_points_A = sub_points_A.reshape(batch, height, width, -1, 3)
+    q = project_points(sub_points_A, anchor.K[:, None, None, None])  # hi-res anchor pixel coordinates
+    M = height * width * sub.shape[0]
+    q = q.reshape(batch, M, 2)
+    q = torch.where(torch.isfinite(q), q, torch.full_like(q, -1e6))  # behind the anchor camera: outside
+    expected = sub_points_A.reshape(batch, M, 3).transpose(1, 2)
+    colour = torch.zeros(batch, 3, height * width, dtype=torch.float64)
+    found = torch.zeros(batch, height * width, dtype=torch.bool)
+    layer_used = torch.full((batch, height * width), -1, dtype=torch.int64)
+    P_T_A = torch.linalg.inv(A_T_P.double())
+    depth_flat = depth.reshape(batch, -1)
+    warped_depth = torch.zeros(batch, height * width, dtype=torch.float64)
+    for layer in range(anchor.num_layers):
+        c, p, total = _sample_layer(anchor, layer, q, expected, plane_tolerance)
+        total = total.reshape(batch, height * width, -1)
+        # every sub-sample must find its surface: a pixel straddling an occlusion edge is left to
+        # the silhouette term rather than represented by one side's average
+        ok = (total > 1e-9).all(-1)
+        c = c.reshape(batch, 3, height * width, -1).mean(-1)
+        sub_z = transform_points(P_T_A[:, None], p.transpose(1, 2))[..., 2].reshape(batch, height * width, -1)
+        # 1/z is affine across a plane's image, so the harmonic mean is the pixel-centre depth
+        z = sub_z.shape[-1] / (1.0 / torch.where(ok[..., None], sub_z, torch.ones_like(sub_z)).clamp_min(1e-9)).sum(-1)
+        agree = ok & valid_pixel & ((z - depth_flat).abs() <= depth_tolerance * depth_flat)
+        take = agree & ~found
+        colour = torch.where(take[:, None], c, colour)
+        warped_depth = torch.where(take, z, warped_depth)
+        layer_used = torch.where(take, torch.full_like(layer_used, layer), layer_used)
+        found = found | take
+    shape = (batch, 1, height, width)
+    return Reprojection(
+        rgb=torch.where(found[:, None], colour, torch.zeros_like(colour)).reshape(batch, 3, height, width).float(),
+        depth=warped_depth.reshape(shape).float(),
+        valid=found.reshape(shape),
+        layer=layer_used.reshape(shape),
+    )
+
+
+def _shift_half_pixel(K: torch.Tensor) -> torch.Tensor:
+    shifted = K.clone()
+    shifted[:, 0, 2] -= 0.5
+    shifted[:, 1, 2] -= 0.5
+    return shifted

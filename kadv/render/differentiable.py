@@ -1,0 +1,212 @@
+"""DifferentiableRenderer: exact values (or warped ones) with gradients in the camera pose.
+
+One call: pose parameters (omega, delta) -> world_T_cam -> exact ray cast (no gradient) and a
+kornia reprojection of the anchor layers (gradient) -> straight-through combination, plus the
+silhouette term at occlusion edges. The anchor is refreshed by policy; every call reports how
+well the warp agrees with the exact render.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from kadv.geometry.pose import perturb_world_T_cam
+from kadv.render.dibr import reproject
+from kadv.render.layers import AnchorLayers, render_anchor
+from kadv.render.raycast import ExactRenderer, RenderOutput
+from kadv.render.silhouette import find_edge_pairs, silhouette_term
+
+__all__ = ["DiffRenderConfig", "DiffRenderOutput", "DifferentiableRenderer"]
+
+
+@dataclass(frozen=True)
+class DiffRenderConfig:
+    """Options of :class:`DifferentiableRenderer` (``conf/render/``).
+
+    Attributes:
+        values: "exact" (values of the exact render, gradients of the warp) or "warp" (values
+            of the warp; the exact render only validates and refreshes).
+        refresh: "always", "on_drift" (when coverage or errors pass the tolerances) or "every_k".
+        every_k: steps between refreshes for "every_k".
+        min_coverage: on_drift refreshes when the valid warped fraction of hit pixels drops below.
+        max_rgb_error: on_drift tolerance on mean |rgb_warp - rgb_exact| over valid pixels.
+        max_depth_error: on_drift tolerance on mean relative depth error over valid pixels.
+        layers: anchor depth layers.
+        guard_band: extra anchor pixels on each side.
+        supersample: s x s samples per pixel for the anchor, the exact RGB and the warp's box filter.
+        silhouette: add the occlusion-edge term.
+        depth_tolerance: relative warped-vs-exact depth disagreement that invalidates a pixel.
+    """
+
+    values: str = "exact"
+    refresh: str = "always"
+    every_k: int = 5
+    min_coverage: float = 0.9
+    max_rgb_error: float = 0.02
+    max_depth_error: float = 0.01
+    layers: int = 1
+    guard_band: int = 16
+    supersample: int = 2
+    silhouette: bool = True
+    depth_tolerance: float = 0.01
+
+    def __post_init__(self) -> None:
+        if self.values not in ("exact", "warp"):
+            raise ValueError(f"render.values must be 'exact' or 'warp', got {self.values!r}")
+        if self.refresh not in ("always", "on_drift", "every_k"):
+            raise ValueError(f"render.refresh must be 'always', 'on_drift' or 'every_k', got {self.refresh!r}")
+        if self.layers < 1 or self.supersample < 1 or self.guard_band < 0 or self.every_k < 1:
+            raise ValueError("render.layers, supersample and every_k must be >= 1 and guard_band >= 0")
+
+
+@dataclass
+class DiffRenderOutput:
+    """Differentiable render of B views.
+
+    Attributes:
+        rgb: (B, 3, H, W); depth: (B, 1, H, W) z-depth (0 invalid); mask: (B, 1, H, W) bool.
+        exact: the exact render at the current poses (no gradient).
+        world_T_cam: (B, 4, 4) current poses (differentiable).
+        coverage: (B,) fraction of hit pixels with a valid warp.
+        rgb_error: (B,) mean |rgb_warp - rgb_exact| over valid pixels.
+        depth_error: (B,) mean |depth_warp - depth_exact| / depth_exact over valid pixels.
+        refreshed: whether the anchor was re-rendered at the current poses in this call.
+    """
+
+    rgb: torch.Tensor
+    depth: torch.Tensor
+    mask: torch.Tensor
+    exact: RenderOutput
+    world_T_cam: torch.Tensor
+    coverage: torch.Tensor
+    rgb_error: torch.Tensor
+    depth_error: torch.Tensor
+    refreshed: bool
+
+
+class DifferentiableRenderer:
+    """Renders images and depth differentiable in the pose parameters (omega, delta).
+
+    Args:
+        exact: the scene's exact renderer.
+        config: options.
+    """
+
+    def __init__(self, exact: ExactRenderer, config: DiffRenderConfig | None = None) -> None:
+        self.exact = exact
+        self.config = config or DiffRenderConfig()
+        self.anchor: AnchorLayers | None = None
+        self._anchor_key: tuple | None = None
+        self._steps_since_refresh = 0
+
+    def reset(self) -> None:
+        """Forget the anchor (the next call renders a new one)."""
+        self.anchor = None
+        self._anchor_key = None
+
+    def _refresh(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> None:
+        c = self.config
+        self.anchor = render_anchor(self.exact, world_T_cam, K, height, width, c.layers, c.guard_band, c.supersample)
+        self._anchor_key = (world_T_cam.shape[0], height, width, tuple(torch.as_tensor(K).flatten().tolist()))
+        self._steps_since_refresh = 0
+
+    def __call__(self, pose_params: torch.Tensor, base_world_T_cam: torch.Tensor, K: torch.Tensor, height: int,
+                 width: int) -> DiffRenderOutput:
+        return self.forward(pose_params, base_world_T_cam, K, height, width)
+
+    def forward(self, pose_params: torch.Tensor, base_world_T_cam: torch.Tensor, K: torch.Tensor, height: int,
+                width: int) -> DiffRenderOutput:
+        """Render at poses ``base_world_T_cam`` perturbed by ``pose_params``.
+
+        Args:
+            pose_params: (B, 6) = (omega, delta): rotation vector in the camera frame and centre
+                offset in world metres; usually ``requires_grad``.
+            base_world_T_cam: (B, 4, 4) poses at pose_params = 0.
+            K: (3, 3) or (B, 3, 3) intrinsics.
+            height, width: image size.
+        """
+        if pose_params.ndim != 2 or pose_params.shape[1] != 6:
+            raise ValueError(f"pose_params: expected (B, 6), got {tuple(pose_params.shape)}")
+        if not bool(torch.isfinite(pose_params.detach()).all()):
+            raise ValueError("pose_params: contain NaN or inf")
+        c = self.config
+        base = torch.as_tensor(base_world_T_cam, dtype=torch.float64).reshape(-1, 4, 4)
+        world_T_cam = perturb_world_T_cam(base, pose_params[:, :3].double(), pose_params[:, 3:].double())
+        K = torch.as_tensor(K, dtype=torch.float64).expand(base.shape[0], 3, 3)
+        current = world_T_cam.detach()
+        exact = self.exact.render(current, K, height, width, supersample=c.supersample)
+        key = (base.shape[0], height, width, tuple(K.flatten().tolist()))
+        refreshed = False
+        due = (self.anchor is None or key != self._anchor_key or c.refresh == "always"
+               or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k))
+        if due:
+            self._refresh(current, K, height, width)
+            refreshed = True
+        normals = self._camera_normals(exact, current)
+        warp = self._warp(exact, normals, world_T_cam, K)
+        stats = _agreement(warp, exact)
+        if c.refresh == "on_drift" and not refreshed and _drifted(stats, c):
+            self._refresh(current, K, height, width)
+            refreshed = True
+            warp = self._warp(exact, normals, world_T_cam, K)
+            stats = _agreement(warp, exact)
+        self._steps_since_refresh += 1
+        valid = warp.valid
+        if c.values == "exact":
+            rgb = exact.rgb + torch.where(valid, warp.rgb - warp.rgb.detach(), torch.zeros_like(warp.rgb))
+            depth = exact.depth + torch.where(valid, warp.depth - warp.depth.detach(), torch.zeros_like(warp.depth))
+        else:
+            rgb = torch.where(valid, warp.rgb, exact.rgb)
+            depth = torch.where(valid, warp.depth, exact.depth)
+        if c.silhouette:
+            rgb, depth = self._add_silhouettes(rgb, depth, exact, world_T_cam, K, height, width)
+        return DiffRenderOutput(rgb, depth, exact.mask, exact, world_T_cam, *stats, refreshed)
+
+    def _add_silhouettes(self, rgb: torch.Tensor, depth: torch.Tensor, exact: RenderOutput, world_T_cam: torch.Tensor,
+                         K: torch.Tensor, height: int, width: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Add the occlusion-edge term, including edges entering the frame from a one-pixel ring around it."""
+        K_ring = K.clone()
+        K_ring[:, 0, 2] += 1
+        K_ring[:, 1, 2] += 1
+        ring = self.exact.render(world_T_cam.detach(), K_ring, height + 2, width + 2)
+        pairs = find_edge_pairs(self.exact, ring, world_T_cam.detach(), K_ring)
+        inside = (slice(None), slice(None), slice(1, -1), slice(1, -1))
+        for values, target in ((exact.rgb, "rgb"), (exact.depth, "depth")):
+            padded = (ring.rgb if target == "rgb" else ring.depth).clone()
+            padded[inside] = values  # the frame's own (supersampled) values, the ring's beyond
+            term = silhouette_term(self.exact, pairs, world_T_cam, K_ring, padded)[inside]
+            if target == "rgb":
+                rgb = rgb + term
+            else:
+                depth = depth + term
+        return rgb, depth
+
+    def _camera_normals(self, exact: RenderOutput, world_T_cam: torch.Tensor) -> torch.Tensor:
+        """(B, 3, H, W) camera-frame geometric normals of the triangles the exact render hit."""
+        ids = exact.triangle_ids[:, 0].numpy()
+        face = self.exact.scene.face_normals[np.maximum(ids, 0)].astype(np.float64)  # (B, H, W, 3)
+        normals = torch.einsum("bji,bhwj->bihw", world_T_cam[:, :3, :3], torch.from_numpy(face))
+        return torch.where(exact.mask, normals, torch.zeros_like(normals))
+
+    def _warp(self, exact: RenderOutput, normals: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor):
+        A_T_P = torch.linalg.inv(self.anchor.world_T_cam) @ world_T_cam
+        return reproject(self.anchor, exact.depth, normals, A_T_P, K, depth_tolerance=self.config.depth_tolerance)
+
+
+def _agreement(warp, exact: RenderOutput) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    valid = warp.valid.detach()
+    hit = exact.mask.sum(dim=(1, 2, 3)).clamp_min(1)
+    count = valid.sum(dim=(1, 2, 3)).clamp_min(1)
+    coverage = valid.sum(dim=(1, 2, 3)) / hit
+    rgb_error = ((warp.rgb.detach() - exact.rgb).abs().mean(1, keepdim=True) * valid).sum(dim=(1, 2, 3)) / count
+    relative = (warp.depth.detach() - exact.depth).abs() / exact.depth.clamp_min(1e-6)
+    depth_error = (relative * valid).sum(dim=(1, 2, 3)) / count
+    return coverage.double(), rgb_error.double(), depth_error.double()
+
+
+def _drifted(stats: tuple[torch.Tensor, torch.Tensor, torch.Tensor], config: DiffRenderConfig) -> bool:
+    coverage, rgb_error, depth_error = stats
+    return bool((coverage < config.min_coverage).any() or (rgb_error > config.max_rgb_error).any()
+                or (depth_error > config.max_depth_error).any())

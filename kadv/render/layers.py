@@ -1,0 +1,136 @@
+"""Anchor RGB-D layers: exact renders at a pose, kept for differentiable reprojection.
+
+Layer 0 is the visible surface; layer k the (k+1)-th surface along each ray (depth peeling with
+Open3D's ``list_intersections``, sorted per ray), so pixels hidden at the anchor can still be
+found when the camera moves. An optional guard band widens the field of view (same centre,
+same focal length) so that samples near the current view's border have real content.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import open3d as o3d
+import torch
+
+from kadv.geometry.camera import pixel_rays
+from kadv.geometry.pose import check_world_T_cam
+from kadv.render.raycast import ExactRenderer, RayHits, pixel_angle
+
+__all__ = ["AnchorLayers", "guard_band_intrinsics", "render_anchor"]
+
+
+@dataclass
+class AnchorLayers:
+    """L layers of B anchor views at resolution (Hs, Ws) = supersample x (H + 2g, W + 2g).
+
+    Attributes:
+        world_T_cam: (B, 4, 4) anchor poses.
+        K: (B, 3, 3) intrinsics of the hi-res anchor images.
+        supersample: s, sub-pixels per current-view pixel along each axis.
+        guard_band: g, extra current-view pixels on each side.
+        rgb: (B, L, 3, Hs, Ws) shaded colour, background where invalid.
+        points: (B, L, 3, Hs, Ws) camera-frame points (z = depth), 0 where invalid.
+        normals: (B, L, 3, Hs, Ws) camera-frame geometric (face) normals.
+        triangle_ids: (B, L, 1, Hs, Ws) int64, -1 where invalid.
+        mask: (B, L, 1, Hs, Ws) bool.
+    """
+
+    world_T_cam: torch.Tensor
+    K: torch.Tensor
+    supersample: int
+    guard_band: int
+    rgb: torch.Tensor
+    points: torch.Tensor
+    normals: torch.Tensor
+    triangle_ids: torch.Tensor
+    mask: torch.Tensor
+
+    @property
+    def num_layers(self) -> int:
+        return self.rgb.shape[1]
+
+
+def guard_band_intrinsics(K: torch.Tensor, guard_band: int, supersample: int) -> torch.Tensor:
+    """Intrinsics (B, 3, 3) of the anchor image: principal point shifted by the band, all scaled by s."""
+    K = torch.as_tensor(K, dtype=torch.float64).clone()
+    K[..., 0, 2] += guard_band
+    K[..., 1, 2] += guard_band
+    K[..., :2, :] *= supersample
+    return K
+
+
+def _peel(renderer: ExactRenderer, origins: np.ndarray, directions: np.ndarray, layers: int) -> list[RayHits]:
+    """The first ``layers`` opaque surfaces along each ray, nearest first."""
+    o, d = origins.reshape(-1, 3), directions.reshape(-1, 3)
+    n = len(o)
+    rays = o3d.core.Tensor(np.concatenate([o, d], axis=1).astype(np.float32))
+    result = renderer.raycasting_scene.list_intersections(rays)
+    ray_ids = result["ray_ids"].numpy().astype(np.int64)
+    t = result["t_hit"].numpy().astype(np.float64)
+    ids = result["primitive_ids"].numpy().astype(np.int64)
+    bary = result["primitive_uvs"].numpy().astype(np.float64)
+    if len(t):
+        opaque = ~renderer.see_through(ids, bary)
+        ray_ids, t, ids, bary = ray_ids[opaque], t[opaque], ids[opaque], bary[opaque]
+        # Coplanar duplicates (z-fighting) would fill several layers with one surface.
+        order = np.lexsort((t, ray_ids))
+        ray_ids, t, ids, bary = ray_ids[order], t[order], ids[order], bary[order]
+        keep = np.ones(len(t), bool)
+        keep[1:] = ~((ray_ids[1:] == ray_ids[:-1]) & (np.abs(t[1:] - t[:-1]) <= 1e-5 * np.maximum(t[1:], 1e-6)))
+        ray_ids, t, ids, bary = ray_ids[keep], t[keep], ids[keep], bary[keep]
+    first = np.searchsorted(ray_ids, np.arange(n))
+    rank = np.arange(len(ray_ids)) - first[ray_ids] if len(ray_ids) else np.zeros(0, np.int64)
+    out = []
+    for layer in range(layers):
+        selected = rank == layer
+        hits = RayHits(np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 2)))
+        hits.t[ray_ids[selected]] = t[selected]
+        hits.triangle_ids[ray_ids[selected]] = ids[selected]
+        hits.barycentrics[ray_ids[selected]] = bary[selected]
+        out.append(hits)
+    return out
+
+
+def render_anchor(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
+                  layers: int = 1, guard_band: int = 0, supersample: int = 1) -> AnchorLayers:
+    """Render anchor layers for views of size (height, width) at ``world_T_cam`` (B, 4, 4).
+
+    Args:
+        renderer: the scene's exact renderer.
+        world_T_cam: anchor poses; detached (anchors carry no gradient).
+        K: intrinsics (3, 3) or (B, 3, 3) of the current views.
+        layers: number of depth layers (1 = visible surface only).
+        guard_band: extra pixels of field of view on each side.
+        supersample: anchor resolution per current-view pixel along each axis.
+    """
+    pose = check_world_T_cam(world_T_cam).detach().double()
+    batch = pose.shape[0]
+    K = torch.as_tensor(K, dtype=torch.float64).expand(batch, 3, 3)
+    K_anchor = guard_band_intrinsics(K, guard_band, supersample)
+    h, w = supersample * (height + 2 * guard_band), supersample * (width + 2 * guard_band)
+    origins, directions = pixel_rays(pose, K_anchor, h, w)
+    hits_per_layer = [renderer.cast(origins, directions)] if layers == 1 else _peel(renderer, origins, directions, layers)
+    rotation_T = pose[:, :3, :3].transpose(1, 2).numpy()
+    maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
+    for hits in hits_per_layer:
+        shaded = renderer.shade_hits(hits, origins, directions, pixel_angle(K_anchor))
+        world = shaded["points"].reshape(batch, -1, 3).astype(np.float64) - pose[:, None, :3, 3].numpy()
+        points = np.einsum("bij,bnj->bni", rotation_T, world)
+        face = renderer.scene.face_normals[np.maximum(hits.triangle_ids, 0)].reshape(batch, -1, 3).astype(np.float64)
+        normals = np.einsum("bij,bnj->bni", rotation_T, face)
+        valid = hits.hit.reshape(batch, -1)
+        maps["rgb"].append(shaded["rgb"].reshape(batch, -1, 3))
+        maps["points"].append(np.where(valid[..., None], points, 0.0))
+        maps["normals"].append(np.where(valid[..., None], normals, 0.0))
+        maps["ids"].append(hits.triangle_ids.reshape(batch, -1, 1))
+        maps["mask"].append(valid[..., None])
+
+    def stack(key: str, dtype: torch.dtype) -> torch.Tensor:
+        array = np.stack(maps[key], axis=1)  # (B, L, N, C)
+        tensor = torch.from_numpy(np.ascontiguousarray(array)).to(dtype)
+        return tensor.reshape(batch, len(hits_per_layer), h, w, -1).permute(0, 1, 4, 2, 3).contiguous()
+
+    return AnchorLayers(pose, K_anchor, supersample, guard_band, stack("rgb", torch.float32),
+                        stack("points", torch.float64), stack("normals", torch.float64), stack("ids", torch.int64),
+                        stack("mask", torch.bool))

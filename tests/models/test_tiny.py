@@ -1,0 +1,42 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+
+from kadv.models import TinyDepthNet, load_kadv_tiny, load_model, save_kadv_tiny
+from kadv.models.tiny import TINY_WEIGHTS
+
+
+def test_shipped_weights_are_small_and_load_without_network(monkeypatch) -> None:
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    assert TINY_WEIGHTS.stat().st_size <= 15 * 2**20
+    model = load_model("kadv_tiny")
+    assert model.output_kind == "disparity" and not model.training
+    assert not any(p.requires_grad for p in model.parameters())
+
+
+@pytest.mark.parametrize("size", [(64, 64), (90, 160), (37, 53)])
+def test_output_size_and_input_gradient(size) -> None:
+    model = load_kadv_tiny()
+    rgb = torch.rand(2, 3, *size, requires_grad=True)
+    out = model(rgb)
+    assert out.shape == (2, 1, *size) and (out > 0).all()
+    out.mean().backward()
+    assert torch.isfinite(rgb.grad).all() and rgb.grad.abs().sum() > 0
+
+
+def test_save_load_round_trip(tmp_path: Path) -> None:
+    torch.manual_seed(0)
+    network = TinyDepthNet((8, 8, 16, 16, 16))
+    path = save_kadv_tiny(network, tmp_path / "w.safetensors", metadata={"note": "test"})
+    first, second = load_kadv_tiny(path), load_kadv_tiny(path)
+    rgb = torch.rand(1, 3, 64, 96)
+    assert torch.equal(first(rgb), second(rgb))
+    assert first.network.channels == (8, 8, 16, 16, 16)
+
+
+def test_missing_weights_file(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="kadv-train-tiny"):
+        load_kadv_tiny(tmp_path / "none.safetensors")

@@ -1,0 +1,72 @@
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from kadv.geometry import intrinsics_from_fov, look_at
+from kadv.render import ExactRenderer, find_edge_pairs, render_anchor
+from kadv.render.layers import guard_band_intrinsics
+from kadv.render.silhouette import _crossings
+from kadv.scenes import Material, assemble_scene
+from kadv.scenes.box_room import quad_part
+
+
+def _panel_before_wall() -> ExactRenderer:
+    """A 1 m panel at z = 2 in front of a wall at z = 4 (camera at the origin looking down +z)."""
+    materials = [Material("panel", base_color=[1.0, 0.0, 0.0]), Material("wall", base_color=[0.0, 0.0, 1.0])]
+    parts = [quad_part(np.array([[-0.5, -0.5, 2], [0.5, -0.5, 2], [0.5, 0.5, 2], [-0.5, 0.5, 2]], float), 0, "panel"),
+             quad_part(np.array([[-5, -5, 4], [5, -5, 4], [5, 5, 4], [-5, 5, 4]], float), 1, "wall")]
+    return ExactRenderer(assemble_scene(parts, materials, name="panel"))
+
+
+POSE = look_at(torch.tensor([0.0, 0.0, 0.0]), torch.tensor([0.0, 0.0, 1.0])).double()
+
+
+def test_depth_peeling_layers_are_sorted_and_complete() -> None:
+    renderer = _panel_before_wall()
+    K = intrinsics_from_fov(60.0, 16, 16)
+    anchor = render_anchor(renderer, POSE, K, 16, 16, layers=3)
+    centre_depths = anchor.points[0, :, 2, 8, 8]
+    assert torch.allclose(centre_depths, torch.tensor([2.0, 4.0, 0.0], dtype=torch.float64), atol=1e-6)  # panel, wall, none
+    assert anchor.mask[0, :, 0, 8, 8].tolist() == [True, True, False]
+    corner = anchor.points[0, :, 2, 0, 0].tolist()  # outside the panel: the wall only
+    assert abs(corner[0] - 4.0) < 1e-6 and not anchor.mask[0, 1, 0, 0, 0]
+
+
+def test_guard_band_widens_the_view_around_the_same_centre() -> None:
+    renderer = _panel_before_wall()
+    K = intrinsics_from_fov(60.0, 16, 16)
+    anchor = render_anchor(renderer, POSE, K, 16, 16, guard_band=4, supersample=2)
+    assert anchor.rgb.shape[-2:] == (48, 48)
+    assert torch.allclose(anchor.K[0], guard_band_intrinsics(K, 4, 2))
+    assert float(anchor.K[0, 0, 2]) == 2 * (8 + 4)
+    # the hi-res pixels around the centre of the current view still see the panel's centre
+    assert torch.allclose(anchor.points[0, 0, :, 23:25, 23:25].mean(dim=(1, 2)), torch.tensor([0.0, 0.0, 2.0], dtype=torch.float64),
+                          atol=0.05)
+
+
+def test_edge_pairs_sit_on_the_panel_outline_with_exact_crossings() -> None:
+    renderer = _panel_before_wall()
+    height = width = 32
+    K = intrinsics_from_fov(60.0, height, width)
+    exact = renderer.render(POSE, K, height, width)
+    pairs = find_edge_pairs(renderer, exact, POSE, K)
+    assert len(pairs.a) > 0 and set(pairs.horizontal.tolist()) == {True, False}
+    focal = float(K[0, 0])
+    # the panel's outline projects to u = cx +- focal * 0.5 / 2 (and likewise in v)
+    for a, horizontal, t in zip(pairs.a, pairs.horizontal, pairs.t):
+        row, col = divmod(int(a), width)
+        coordinate = (col if horizontal else row) + 0.5 + t
+        assert min(abs(coordinate - (16 + s * focal * 0.25)) for s in (-1, 1)) < 1e-2
+
+
+def test_crossing_of_a_known_edge() -> None:
+    # vertical edge x = 0.2 at depth 2 between pixel centres u = 10.5 and 11.5 of a focal-10 camera (cx = 10)
+    K = torch.tensor([[10.0, 0, 10], [0, 10.0, 10], [0, 0, 1]], dtype=torch.float64)
+    edge = torch.tensor([[[0.2, -1.0, 2.0], [0.2, 1.0, 2.0]]], dtype=torch.float64, requires_grad=True)
+    uv_a, uv_b = torch.tensor([[10.5, 10.5]], dtype=torch.float64), torch.tensor([[11.5, 10.5]], dtype=torch.float64)
+    rays = [torch.linalg.inv(K) @ torch.tensor([u[0, 0], u[0, 1], 1.0], dtype=torch.float64) for u in (uv_a, uv_b)]
+    t, genuine = _crossings(edge, rays[0][None], rays[1][None], K[None], uv_a, uv_b)
+    assert bool(genuine[0]) and float(t.detach()) == float(10 + 10 * 0.2 / 2 - 10.5)  # u = 11 -> t = 0.5
+    t.sum().backward()  # dt/dx of the edge = focal / depth = 5 per vertex pair
+    assert np.isclose(float(edge.grad[0, :, 0].sum()), 5.0)
