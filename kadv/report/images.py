@@ -43,7 +43,10 @@ def save_rgb_png(path: str | Path, rgb: torch.Tensor) -> Path:
 
 def save_depth_png(path: str | Path, depth: torch.Tensor, mask: torch.Tensor | None = None,
                    label: str = "depth [m]") -> Path:
-    """Save a depth map (1, H, W) colour-mapped with a colour bar; invalid pixels are grey."""
+    """Save a depth map (1, H, W) colour-mapped with a colour bar; invalid pixels are grey.
+
+    The colour range spans the 1st to 99th percentile of valid depths; values beyond take the end colours.
+    """
     values = depth.detach()[0].cpu().numpy().astype(np.float64)
     valid = values > 0 if mask is None else mask.detach()[0].cpu().numpy().astype(bool)
     shown = np.ma.masked_where(~valid, values)
@@ -52,9 +55,11 @@ def save_depth_png(path: str | Path, depth: torch.Tensor, mask: torch.Tensor | N
     figure, axis = plt.subplots(figsize=(width / dpi * 1.25 + 0.6, height / dpi + 0.3), dpi=dpi)
     cmap = plt.get_cmap("turbo").copy()
     cmap.set_bad((0.5, 0.5, 0.5))
-    image = axis.imshow(shown, cmap=cmap, interpolation="nearest")
+    # a few far pixels (sky through a window, an outdoor ground plane) would flatten the room's range
+    low, high = np.percentile(values[valid], [1, 99]) if valid.any() else (0.0, 1.0)
+    image = axis.imshow(shown, cmap=cmap, interpolation="nearest", vmin=low, vmax=max(high, low + 1e-6))
     axis.set_axis_off()
-    figure.colorbar(image, ax=axis, fraction=0.046, pad=0.02, label=label)
+    figure.colorbar(image, ax=axis, fraction=0.046, pad=0.02, label=label, extend="both")
 
     def write(tmp: Path) -> None:
         figure.savefig(tmp, format="png", bbox_inches="tight")
