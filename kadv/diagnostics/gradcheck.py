@@ -18,6 +18,7 @@ from kadv.datasets import random_valid_poses
 from kadv.geometry.camera import intrinsics_from_fov, pixel_rays
 from kadv.geometry.pose import perturb_world_T_cam
 from kadv.render.differentiable import DiffRenderConfig, DifferentiableRenderer
+from kadv.render.layers import guard_band_intrinsics
 from kadv.render.raycast import ExactRenderer, RenderOutput, pixel_angle
 
 __all__ = ["FUNCTIONALS", "GradientCheck", "check_pose", "gradient_check_poses", "occlusion_edge_mask",
@@ -84,7 +85,7 @@ def _blocks(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 
 def check_pose(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
                configs: dict[str, DiffRenderConfig], *, weight_seed: int = 0, reference_supersample: int = 4,
-               rotation_step: float = 2e-3, translation_step: float = 4e-3) -> GradientCheck:
+               rotation_step: float = 2e-3, translation_step: float = 4e-3) -> dict[str, GradientCheck]:
     """Compare analytic and finite-difference gradients of the four functionals at one pose.
 
     Returns one :class:`GradientCheck` per renderer configuration (the reference is shared); its
@@ -94,9 +95,7 @@ def check_pose(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tens
     K = torch.as_tensor(K, dtype=torch.float64)
     w_rgb, w_depth = smooth_weights(weight_seed, 3, height, width), smooth_weights(weight_seed + 1, 1, height, width)
     # edges just outside the frame enter it when the camera moves: detect them on a one-pixel ring
-    K_ring = K.clone()
-    K_ring[0, 2] += 1
-    K_ring[1, 2] += 1
+    K_ring = guard_band_intrinsics(K, 1, 1)
     interior = (~occlusion_edge_mask(renderer.render(base, K_ring, height + 2, width + 2))).double()[..., 1:-1, 1:-1]
     weights = {"rgb_interior": (w_rgb * interior, None), "depth_interior": (None, w_depth * interior),
                "rgb_full": (w_rgb, None), "depth_full": (None, w_depth)}

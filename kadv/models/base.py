@@ -12,10 +12,10 @@ from torch import nn
 __all__ = ["DepthModel", "Preprocess", "constrain_to_multiple", "resized_shape"]
 
 
-def constrain_to_multiple(value: float, multiple: int, min_value: int = 0) -> int:
-    """Round to the nearest multiple (never below ``min_value``), as Hugging Face's DPT processor does."""
+def constrain_to_multiple(value: float, multiple: int) -> int:
+    """Round to the nearest multiple (never to 0), as Hugging Face's DPT processor does."""
     rounded = round(value / multiple) * multiple
-    return int(rounded if rounded >= max(min_value, multiple) else math.ceil(value / multiple) * multiple)
+    return int(rounded if rounded >= multiple else math.ceil(value / multiple) * multiple)
 
 
 def resized_shape(height: int, width: int, size: tuple[int, int], keep_aspect_ratio: bool, multiple: int) -> tuple[int, int]:

@@ -83,15 +83,14 @@ def load_huggingface(source: str, name: str | None = None, hub_id: str | None = 
     """
     name = name or source
     local_dir = Path(source).expanduser()
+    location = str(local_dir) if local_dir.is_dir() else source
     attempts = [True] if local_dir.is_dir() or hub_offline() else [True, False]
     last_error: Exception | None = None
     for local_only in attempts:
         try:
-            config = AutoConfig.from_pretrained(str(local_dir) if local_dir.is_dir() else source, local_files_only=local_only)
-            network = AutoModelForDepthEstimation.from_pretrained(
-                str(local_dir) if local_dir.is_dir() else source, local_files_only=local_only
-            )
-            preprocess = _preprocess(str(local_dir) if local_dir.is_dir() else source, config.model_type, local_only)
+            config = AutoConfig.from_pretrained(location, local_files_only=local_only)
+            network = AutoModelForDepthEstimation.from_pretrained(location, local_files_only=local_only)
+            preprocess = _preprocess(location, config.model_type, local_only)
             return HuggingFaceDepthModel(network, preprocess, _output_kind(config), name)
         except OSError as error:
             last_error = error

@@ -76,10 +76,8 @@ def probe_directions_hits(renderer: ExactRenderer, centres: np.ndarray, directio
     origins = np.broadcast_to(centres[:, None, :], (len(centres), len(directions), 3))
     rays = np.broadcast_to(directions[None], origins.shape)
     hits = renderer.cast(origins, rays)
-    hit = hits.hit.reshape(len(centres), len(directions))
-    normals = renderer.scene.face_normals[np.maximum(hits.triangle_ids, 0)].reshape(*hit.shape, 3)
-    back = hit & (np.einsum("bnc,bnc->bn", normals, rays) > 0)
-    return ~hit, back
+    shape = (len(centres), len(directions))
+    return ~hits.hit.reshape(shape), renderer.back_facing(hits, rays).reshape(shape)
 
 
 def view_validity(
@@ -114,8 +112,7 @@ def view_validity(
     hits = renderer.cast(origins, directions)
     batch = len(centres)
     hit = hits.hit.reshape(batch, -1)
-    normals = renderer.scene.face_normals[np.maximum(hits.triangle_ids, 0)].reshape(batch, -1, 3)
-    view_back = hit & (np.einsum("bnc,bnc->bn", normals, directions.reshape(batch, -1, 3)) > 0)
+    view_back = renderer.back_facing(hits, directions).reshape(batch, -1)
     near_hit = hit & (hits.t.reshape(batch, -1) < near)
     probe_miss, probe_back = probe_directions_hits(renderer, centres, fibonacci_sphere(probe_rays))
     distance = distance_to_surface(renderer, torch.from_numpy(centres)).numpy()

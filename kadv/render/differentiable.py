@@ -14,7 +14,7 @@ import torch
 
 from kadv.geometry.pose import perturb_world_T_cam
 from kadv.render.dibr import reproject
-from kadv.render.layers import AnchorLayers, render_anchor
+from kadv.render.layers import AnchorLayers, guard_band_intrinsics, render_anchor
 from kadv.render.raycast import ExactRenderer, RenderOutput
 from kadv.render.silhouette import find_edge_pairs, silhouette_term
 
@@ -136,7 +136,14 @@ class DifferentiableRenderer:
         world_T_cam = perturb_world_T_cam(base, pose_params[:, :3].double(), pose_params[:, 3:].double())
         K = torch.as_tensor(K, dtype=torch.float64).expand(base.shape[0], 3, 3)
         current = world_T_cam.detach()
-        exact = self.exact.render(current, K, height, width, supersample=c.supersample)
+        if c.silhouette:
+            # edges entering the frame are found on a one-pixel ring around it; the frame's own
+            # render is the ring render's interior (the same rays)
+            K_ring = guard_band_intrinsics(K, 1, 1)
+            ring = self.exact.render(current, K_ring, height + 2, width + 2, supersample=c.supersample)
+            exact = ring.cropped(1)
+        else:
+            exact = self.exact.render(current, K, height, width, supersample=c.supersample)
         key = (base.shape[0], height, width, tuple(K.flatten().tolist()))
         refreshed = False
         due = (self.anchor is None or key != self._anchor_key or c.refresh == "always"
@@ -161,27 +168,11 @@ class DifferentiableRenderer:
             rgb = torch.where(valid, warp.rgb, exact.rgb)
             depth = torch.where(valid, warp.depth, exact.depth)
         if c.silhouette:
-            rgb, depth = self._add_silhouettes(rgb, depth, exact, world_T_cam, K, height, width)
+            pairs = find_edge_pairs(self.exact, ring, current, K_ring)
+            inside = (..., slice(1, -1), slice(1, -1))
+            rgb = rgb + silhouette_term(self.exact, pairs, world_T_cam, K_ring, ring.rgb)[inside]
+            depth = depth + silhouette_term(self.exact, pairs, world_T_cam, K_ring, ring.depth)[inside]
         return DiffRenderOutput(rgb, depth, exact.mask, exact, world_T_cam, *stats, refreshed)
-
-    def _add_silhouettes(self, rgb: torch.Tensor, depth: torch.Tensor, exact: RenderOutput, world_T_cam: torch.Tensor,
-                         K: torch.Tensor, height: int, width: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """Add the occlusion-edge term, including edges entering the frame from a one-pixel ring around it."""
-        K_ring = K.clone()
-        K_ring[:, 0, 2] += 1
-        K_ring[:, 1, 2] += 1
-        ring = self.exact.render(world_T_cam.detach(), K_ring, height + 2, width + 2)
-        pairs = find_edge_pairs(self.exact, ring, world_T_cam.detach(), K_ring)
-        inside = (slice(None), slice(None), slice(1, -1), slice(1, -1))
-        for values, target in ((exact.rgb, "rgb"), (exact.depth, "depth")):
-            padded = (ring.rgb if target == "rgb" else ring.depth).clone()
-            padded[inside] = values  # the frame's own (supersampled) values, the ring's beyond
-            term = silhouette_term(self.exact, pairs, world_T_cam, K_ring, padded)[inside]
-            if target == "rgb":
-                rgb = rgb + term
-            else:
-                depth = depth + term
-        return rgb, depth
 
     def _camera_normals(self, exact: RenderOutput, world_T_cam: torch.Tensor) -> torch.Tensor:
         """(B, 3, H, W) camera-frame geometric normals of the triangles the exact render hit."""

@@ -5,7 +5,7 @@ Values are exact and bit-identical across runs; nothing here carries a gradient.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import open3d as o3d
@@ -45,6 +45,11 @@ class RenderOutput:
     triangle_ids: torch.Tensor
     points: torch.Tensor
     back_face: torch.Tensor
+
+    def cropped(self, border: int) -> RenderOutput:
+        """The same maps without ``border`` pixels on each side."""
+        inner = (..., slice(border, -border), slice(border, -border))
+        return RenderOutput(**{f.name: getattr(self, f.name)[inner] for f in fields(self)})
 
 
 @dataclass
@@ -132,6 +137,11 @@ class ExactRenderer:
             see_through[np.flatnonzero(selected)[alpha < _ALPHA_CUTOFF]] = True
         return see_through
 
+    def back_facing(self, hits: RayHits, directions: np.ndarray) -> np.ndarray:
+        """(N,) True where a ray (directions (..., 3), N in all) hit the back of a triangle; False on misses."""
+        normals = self.scene.face_normals[np.maximum(hits.triangle_ids, 0)]
+        return hits.hit & (np.einsum("nc,nc->n", normals, directions.reshape(-1, 3)) > 0)
+
     @staticmethod
     def _interpolate(per_corner: np.ndarray, triangle_ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
         """Interpolate per-corner attributes (F, 3, C) at barycentrics (N, 2) (Open3D's (u, v))."""
@@ -139,7 +149,7 @@ class ExactRenderer:
         return np.einsum("nk,nkc->nc", weights, per_corner[triangle_ids].astype(np.float64))
 
     def shade_hits(self, hits: RayHits, origins: np.ndarray, directions: np.ndarray,
-                    pixel_angle: float | None = None) -> dict[str, np.ndarray]:
+                   pixel_angle: float) -> dict[str, np.ndarray]:
         """Shade hits; ``pixel_angle`` (radians per sample) selects the texture mip level."""
         n = len(hits.t)
         ids = hits.triangle_ids[hits.hit]
@@ -147,19 +157,17 @@ class ExactRenderer:
         dirs = directions.reshape(-1, 3)[hits.hit]
         points = origins.reshape(-1, 3)[hits.hit] + dirs * hits.t[hits.hit, None]
         face_normals = self.scene.face_normals[ids].astype(np.float64)
-        back = np.einsum("nc,nc->n", face_normals, dirs) > 0
+        back = self.back_facing(hits, directions)[hits.hit]
         normals = self._interpolate(self.scene.normals, ids, bary)
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
         normals[back] *= -1
         uv = self._interpolate(self.scene.uvs, ids, bary)
-        footprint = None
-        if pixel_angle is not None:
-            distance = hits.t[hits.hit] * np.linalg.norm(dirs, axis=1)
-            incidence = np.abs(np.einsum("nc,nc->n", face_normals, dirs)) / np.linalg.norm(dirs, axis=1)
-            # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
-            footprint = distance * pixel_angle / np.sqrt(np.maximum(incidence, 0.05))
+        length = np.linalg.norm(dirs, axis=1)
+        incidence = np.abs(np.einsum("nc,nc->n", face_normals, dirs)) / length
+        # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
+        footprint = hits.t[hits.hit] * length * pixel_angle / np.sqrt(np.maximum(incidence, 0.05))
         base = albedo(self.scene, ids, uv, footprint, self._pyramids, self._uv_density)
-        rgb = shade(self.scene, self.shading, self.lights, ids, uv, points, normals, base)
+        rgb = shade(self.shading, self.lights, points, normals, base)
         out = {
             "rgb": np.tile(np.asarray(self.shading.background, np.float32), (n, 1)),
             "points": np.zeros((n, 3), np.float32),

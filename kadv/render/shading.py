@@ -96,13 +96,13 @@ def uv_density(scene: Scene) -> np.ndarray:
     return np.sqrt(uv_area / np.maximum(world, 1e-20))
 
 
-def albedo(scene: Scene, triangle_ids: np.ndarray, uv: np.ndarray, footprint: np.ndarray | None = None,
-           pyramids: dict[int, list[np.ndarray]] | None = None, density: np.ndarray | None = None) -> np.ndarray:
+def albedo(scene: Scene, triangle_ids: np.ndarray, uv: np.ndarray, footprint: np.ndarray,
+           pyramids: dict[int, list[np.ndarray]], density: np.ndarray) -> np.ndarray:
     """Base colour (N, 3) of surface points given their triangles (N,) and texture coordinates (N, 2).
 
-    With ``footprint`` (N,) (metres of surface one sample covers), ``pyramids`` and per-triangle
-    UV ``density``, textures are prefiltered (mip-mapped) to the sample's footprint so renders are
-    band-limited and smooth in the camera pose; otherwise they are sampled bilinearly.
+    Textures are prefiltered (mip-mapped, from ``pyramids`` per material index) to each sample's
+    ``footprint`` (N,) (metres of surface one sample covers) using the per-triangle UV ``density``,
+    so renders are band-limited and smooth in the camera pose.
     """
     material_ids = scene.material_ids[triangle_ids]
     colour = np.empty((len(triangle_ids), 3), np.float32)
@@ -111,20 +111,16 @@ def albedo(scene: Scene, triangle_ids: np.ndarray, uv: np.ndarray, footprint: np
         selected = material_ids == index
         colour[selected] = material.base_color
         if material.texture is not None:
-            coordinates = uv[selected] * material.uv_scale
-            if footprint is None or pyramids is None or density is None:
-                colour[selected] *= sample_texture(material.texture, coordinates)
-            else:
-                texels = np.sqrt(material.texture.shape[0] * material.texture.shape[1])
-                scale = float(np.sqrt(np.prod(material.uv_scale)))
-                texel_footprint = footprint[selected] * density[triangle_ids[selected]] * scale * texels
-                level = np.log2(np.maximum(texel_footprint, 1.0))
-                colour[selected] *= sample_texture_filtered(pyramids[index], coordinates, level)
+            texels = np.sqrt(material.texture.shape[0] * material.texture.shape[1])
+            scale = float(np.sqrt(np.prod(material.uv_scale)))
+            texel_footprint = footprint[selected] * density[triangle_ids[selected]] * scale * texels
+            level = np.log2(np.maximum(texel_footprint, 1.0))
+            colour[selected] *= sample_texture_filtered(pyramids[index], uv[selected] * material.uv_scale, level)
     return colour
 
 
-def shade(scene: Scene, shading: Shading, lights: np.ndarray, triangle_ids: np.ndarray, uv: np.ndarray,
-          points: np.ndarray, normals: np.ndarray, base_colour: np.ndarray) -> np.ndarray:
+def shade(shading: Shading, lights: np.ndarray, points: np.ndarray, normals: np.ndarray,
+          base_colour: np.ndarray) -> np.ndarray:
     """Shaded RGB (N, 3) in [0, 1] of surface points with unit normals facing the viewer side."""
     to_lights = lights[None, :, :] - points[:, None, :]
     to_lights /= np.maximum(np.linalg.norm(to_lights, axis=-1, keepdims=True), 1e-9)
