@@ -18,7 +18,7 @@ from kadv.models.base import DepthModel, Preprocess
 __all__ = ["TINY_WEIGHTS", "TinyDepthNet", "KadvTiny", "load_kadv_tiny", "save_kadv_tiny"]
 
 TINY_WEIGHTS = Path(__file__).parent / "weights" / "kadv_tiny.safetensors"
-DEFAULT_CHANNELS = (16, 32, 64, 96, 128)
+DEFAULT_CHANNELS = (16, 32, 64, 128, 256)
 # Working resolution (the training resolution): images are resized, keeping aspect, near 128 x 160.
 TINY_PREPROCESS = Preprocess(size=(128, 160), keep_aspect_ratio=True, multiple=32, interpolation="bilinear")
 

@@ -11,34 +11,62 @@ from tqdm import tqdm
 
 from kadv.datasets import ViewBatch, render_procedural_views
 from kadv.losses import align_scale_shift, depth_metrics, to_comparison_space
-from kadv.models.tiny import DEFAULT_CHANNELS, TINY_PREPROCESS, KadvTiny, TinyDepthNet
+from kadv.models.tiny import DEFAULT_CHANNELS, TINY_PREPROCESS, KadvTiny, TinyDepthNet, load_kadv_tiny
 
-__all__ = ["TinyTrainConfig", "ssi_loss", "train_tiny"]
+__all__ = ["TinyTrainConfig", "evaluate", "fit", "ssi_loss", "train_tiny"]
 
 
 @dataclass
 class TinyTrainConfig:
-    """Everything that determines a kadv-tiny training run (same config, same weights)."""
+    """Everything that determines a kadv-tiny training run (same config, same weights).
+
+    ``init_weights`` continues from an earlier run's weights file (its channels win over
+    ``channels``), so a long training can be done, and reproduced, in stages.
+    """
 
     seed: int = 0
     train_views: int = 4000
     val_views: int = 200
     val_seed: int = 1
-    steps: int = 6000
+    steps: int = 18000
     batch_size: int = 16
     lr: float = 2e-3
     weight_decay: float = 1e-4
+    gradient_weight: float = 0.5
     channels: tuple[int, ...] = DEFAULT_CHANNELS
+    init_weights: str | None = None
 
 
-def ssi_loss(prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-    """Mean |align(pred) - d| / mean(d) with d the ground-truth disparity (MiDaS-style, invariant to scale and shift)."""
+def _gradient_matching(residual: torch.Tensor, mask: torch.Tensor, scales: int) -> torch.Tensor:
+    """Mean |d/dx| + |d/dy| of the residual over pairs of valid pixels, summed over dyadic scales; (B,)."""
+    total = residual.new_zeros(residual.shape[0])
+    for level in range(scales):
+        step = 2**level
+        r, m = residual[..., ::step, ::step], mask[..., ::step, ::step].to(residual.dtype)
+        pairs_x, pairs_y = m[..., 1:] * m[..., :-1], m[..., 1:, :] * m[..., :-1, :]
+        gradient = (pairs_x * (r[..., 1:] - r[..., :-1]).abs()).sum(dim=(1, 2, 3))
+        gradient = gradient + (pairs_y * (r[..., 1:, :] - r[..., :-1, :]).abs()).sum(dim=(1, 2, 3))
+        total = total + gradient / (pairs_x.sum(dim=(1, 2, 3)) + pairs_y.sum(dim=(1, 2, 3))).clamp_min(1.0)
+    return total
+
+
+def ssi_loss(prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor, gradient_weight: float = 0.0,
+             scales: int = 4) -> torch.Tensor:
+    """MiDaS-style scale-and-shift-invariant loss in disparity space.
+
+    With d the ground-truth disparity and r = (align(pred) - d) / mean(d): mean |r| plus
+    ``gradient_weight`` times the multi-scale gradient-matching term of MiDaS on r, which rewards
+    sharp, well placed discontinuities that the mean error alone barely notices.
+    """
     target = to_comparison_space(gt_depth, "depth", "disparity", mask)
     weight = mask.to(prediction.dtype)
     count = weight.sum(dim=(1, 2, 3)).clamp_min(1.0)
-    scale = (weight * target).sum(dim=(1, 2, 3)) / count
-    error = (weight * (align_scale_shift(prediction, target, mask) - target).abs()).sum(dim=(1, 2, 3)) / count
-    return (error / scale.clamp_min(1e-6)).mean()
+    scale = ((weight * target).sum(dim=(1, 2, 3)) / count).clamp_min(1e-6)
+    residual = weight * (align_scale_shift(prediction, target, mask) - target) / scale[:, None, None, None]
+    loss = residual.abs().sum(dim=(1, 2, 3)) / count
+    if gradient_weight > 0:
+        loss = loss + gradient_weight * _gradient_matching(residual, mask, scales)
+    return loss.mean()
 
 
 def _normalised(rgb: torch.Tensor) -> torch.Tensor:
@@ -64,34 +92,46 @@ def evaluate(model: KadvTiny, views: ViewBatch, batch_size: int = 32) -> float:
     return float(torch.cat(scores).mean())
 
 
-def train_tiny(config: TinyTrainConfig, progress: bool = True) -> tuple[TinyDepthNet, dict[str, object]]:
-    """Render the data, train, and return the network with a log (losses, delta1, timings)."""
-    torch.manual_seed(config.seed)
-    np.random.seed(config.seed)
-    height, width = TINY_PREPROCESS.size
-    start = time.perf_counter()
-    train = render_procedural_views(config.train_views, config.seed, height, width, progress=progress)
-    val = render_procedural_views(config.val_views, config.val_seed, height, width, progress=progress)
-    render_seconds = time.perf_counter() - start
-    network = TinyDepthNet(tuple(config.channels))
+def fit(network: TinyDepthNet, train: ViewBatch, config: TinyTrainConfig, progress: bool = True) -> list[float]:
+    """Optimise ``network`` in place on ``train`` for ``config.steps`` steps; returns the loss per step."""
+    # channels-last convolutions train about 30% faster on CPU (oneDNN).
+    network.train().to(memory_format=torch.channels_last)
     optimiser = torch.optim.AdamW(network.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, max_lr=config.lr, total_steps=config.steps)
     generator = torch.Generator().manual_seed(config.seed)
-    losses = []
-    start = time.perf_counter()
+    losses: list[float] = []
     bar = tqdm(range(config.steps), desc="training kadv-tiny", disable=not progress)
     for _ in bar:
         index = torch.randint(len(train.rgb), (config.batch_size,), generator=generator)
         rgb, depth, mask = _augment(train.rgb[index], train.depth[index], train.mask[index], generator)
-        loss = ssi_loss(network(_normalised(rgb)), depth, mask)
+        pixels = _normalised(rgb).contiguous(memory_format=torch.channels_last)
+        loss = ssi_loss(network(pixels), depth, mask, config.gradient_weight)
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
         schedule.step()
         losses.append(loss.item())
         bar.set_postfix(loss=f"{np.mean(losses[-50:]):.4f}")
-    train_seconds = time.perf_counter() - start
     network.eval()
+    return losses
+
+
+def train_tiny(config: TinyTrainConfig, progress: bool = True) -> tuple[TinyDepthNet, dict[str, object]]:
+    """Render the data, train, and return the network with a log (losses, delta1, timings)."""
+    height, width = TINY_PREPROCESS.size
+    start = time.perf_counter()
+    train = render_procedural_views(config.train_views, config.seed, height, width, progress=progress)
+    val = render_procedural_views(config.val_views, config.val_seed, height, width, progress=progress)
+    render_seconds = time.perf_counter() - start
+    torch.manual_seed(config.seed)  # here, so the initial weights do not depend on what rendering drew
+    if config.init_weights is None:
+        network = TinyDepthNet(tuple(config.channels))
+    else:
+        network = load_kadv_tiny(config.init_weights).network
+        network.requires_grad_(True)
+    start = time.perf_counter()
+    losses = fit(network, train, config, progress)
+    train_seconds = time.perf_counter() - start
     log = {
         "config": asdict(config),
         "render_seconds": render_seconds,

@@ -1,0 +1,59 @@
+from __future__ import annotations
+
+import torch
+
+from kadv.datasets import render_procedural_views
+from kadv.models import TinyDepthNet, load_kadv_tiny, save_kadv_tiny
+from kadv.models.train_tiny import TinyTrainConfig, _gradient_matching, fit, ssi_loss, train_tiny
+
+
+def _views():
+    torch.manual_seed(0)
+    depth = 0.5 + 4 * torch.rand(3, 1, 8, 10, dtype=torch.float64)
+    mask = torch.rand(3, 1, 8, 10) > 0.2
+    return depth, mask
+
+
+def test_ssi_loss_is_zero_for_any_positive_affine_disparity() -> None:
+    depth, mask = _views()
+    for gradient_weight in (0.0, 0.5):
+        assert ssi_loss(3.0 / depth + 0.7, depth, mask, gradient_weight) < 1e-12
+
+
+def test_ssi_loss_is_invariant_to_the_ground_truth_scale() -> None:
+    depth, mask = _views()
+    prediction = torch.rand_like(depth)
+    assert torch.allclose(ssi_loss(prediction, depth, mask, 0.5), ssi_loss(prediction, 7.0 * depth, mask, 0.5))
+
+
+def test_gradient_matching_by_hand() -> None:
+    residual = torch.tensor([[[[0.0, 1.0, 3.0], [0.0, 0.0, 0.0]]]])
+    mask = torch.ones_like(residual, dtype=torch.bool)
+    # x pairs |1| + |2| + 0 + 0, y pairs 0 + |1| + |3|: 7 over 7 pairs.
+    assert torch.allclose(_gradient_matching(residual, mask, 1), torch.tensor([1.0]))
+    mask[..., 0, 2] = False  # drops the x pair (1, 3) and the y pair (3, 0): 2 over 5 pairs
+    assert torch.allclose(_gradient_matching(residual, mask, 1), torch.tensor([0.4]))
+
+
+def test_fit_is_deterministic_and_learns() -> None:
+    views = render_procedural_views(8, seed=3, height=32, width=64, progress=False)
+    config = TinyTrainConfig(steps=100, batch_size=4, lr=5e-3, channels=(8, 8, 8, 8, 8))
+    weights = []
+    for _ in range(2):
+        torch.manual_seed(0)
+        network = TinyDepthNet(config.channels)
+        losses = fit(network, views, config, progress=False)
+        weights.append(torch.cat([p.detach().flatten() for p in network.parameters()]))
+    assert torch.equal(weights[0], weights[1])
+    assert sum(losses[-10:]) < 0.7 * sum(losses[:10]), losses
+
+
+def test_train_tiny_continues_from_init_weights(tmp_path) -> None:
+    torch.manual_seed(1)
+    start = save_kadv_tiny(TinyDepthNet((8, 8, 8, 8, 16)), tmp_path / "start.safetensors")
+    config = TinyTrainConfig(train_views=8, val_views=8, steps=3, batch_size=2, init_weights=str(start))
+    network, log = train_tiny(config, progress=False)
+    assert network.channels == (8, 8, 8, 8, 16)  # the file's architecture, not config.channels
+    initial = load_kadv_tiny(start).network.state_dict()
+    changed = [not torch.equal(initial[k], v) for k, v in network.state_dict().items()]
+    assert any(changed) and 0.0 <= log["val_delta1"] <= 1.0 and len(log["losses"]) == 3
