@@ -43,6 +43,10 @@ class Preprocess:
     std: tuple[float, float, float] = (0.229, 0.224, 0.225)
     interpolation: str = "bicubic"
 
+    def normalize(self, rgb: torch.Tensor) -> torch.Tensor:
+        """(rgb - mean) / std per channel for rgb (B, 3, h, w) in [0, 1]."""
+        return normalize(rgb, torch.tensor(self.mean, dtype=rgb.dtype), torch.tensor(self.std, dtype=rgb.dtype))
+
 
 class DepthModel(nn.Module):
     """rgb (B, 3, H, W) in [0, 1] -> (B, 1, H, W) prediction at the input size, differentiable in rgb.
@@ -86,8 +90,7 @@ class DepthModel(nn.Module):
         p = self.preprocess
         shape = resized_shape(height, width, p.size, p.keep_aspect_ratio, p.multiple)
         x = resize(rgb, shape, interpolation=p.interpolation, align_corners=False) if shape != (height, width) else rgb
-        x = normalize(x, torch.tensor(p.mean, dtype=x.dtype), torch.tensor(p.std, dtype=x.dtype))
-        out = self.predict(x)
+        out = self.predict(p.normalize(x))
         if out.ndim == 3:
             out = out.unsqueeze(1)
         return resize(out, (height, width), interpolation="bilinear", align_corners=False)

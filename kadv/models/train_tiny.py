@@ -6,7 +6,6 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 import torch
-from kornia.enhance import normalize
 from tqdm import tqdm
 
 from kadv.datasets import ViewBatch, render_procedural_views
@@ -69,10 +68,6 @@ def ssi_loss(prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tenso
     return loss.mean()
 
 
-def _normalised(rgb: torch.Tensor) -> torch.Tensor:
-    return normalize(rgb, torch.tensor(TINY_PREPROCESS.mean), torch.tensor(TINY_PREPROCESS.std))
-
-
 def _augment(rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor, generator: torch.Generator):
     flip = torch.rand(rgb.shape[0], generator=generator) < 0.5
     rgb, depth, mask = (torch.where(flip[:, None, None, None], x.flip(-1), x) for x in (rgb, depth, mask))
@@ -104,7 +99,7 @@ def fit(network: TinyDepthNet, train: ViewBatch, config: TinyTrainConfig, progre
     for _ in bar:
         index = torch.randint(len(train.rgb), (config.batch_size,), generator=generator)
         rgb, depth, mask = _augment(train.rgb[index], train.depth[index], train.mask[index], generator)
-        pixels = _normalised(rgb).contiguous(memory_format=torch.channels_last)
+        pixels = TINY_PREPROCESS.normalize(rgb).contiguous(memory_format=torch.channels_last)
         loss = ssi_loss(network(pixels), depth, mask, config.gradient_weight)
         optimiser.zero_grad()
         loss.backward()

@@ -9,12 +9,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import torch
 
 from kadv.geometry.pose import perturb_world_T_cam
 from kadv.render.dibr import reproject
-from kadv.render.layers import AnchorLayers, guard_band_intrinsics, render_anchor
+from kadv.render.layers import AnchorLayers, camera_face_normals, guard_band_intrinsics, render_anchor
 from kadv.render.raycast import ExactRenderer, RenderOutput
 from kadv.render.silhouette import find_edge_pairs, silhouette_term
 
@@ -109,7 +108,7 @@ class DifferentiableRenderer:
     def _refresh(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> None:
         c = self.config
         self.anchor = render_anchor(self.exact, world_T_cam, K, height, width, c.layers, c.guard_band, c.supersample)
-        self._anchor_key = (world_T_cam.shape[0], height, width, tuple(torch.as_tensor(K).flatten().tolist()))
+        self._anchor_key = _view_key(K, height, width)
         self._steps_since_refresh = 0
 
     def __call__(self, pose_params: torch.Tensor, base_world_T_cam: torch.Tensor, K: torch.Tensor, height: int,
@@ -144,14 +143,14 @@ class DifferentiableRenderer:
             exact = ring.cropped(1)
         else:
             exact = self.exact.render(current, K, height, width, supersample=c.supersample)
-        key = (base.shape[0], height, width, tuple(K.flatten().tolist()))
         refreshed = False
-        due = (self.anchor is None or key != self._anchor_key or c.refresh == "always"
+        due = (self.anchor is None or _view_key(K, height, width) != self._anchor_key or c.refresh == "always"
                or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k))
         if due:
             self._refresh(current, K, height, width)
             refreshed = True
-        normals = self._camera_normals(exact, current)
+        ids = exact.triangle_ids[:, 0].numpy()
+        normals = torch.from_numpy(camera_face_normals(self.exact.scene, ids, current)).permute(0, 3, 1, 2)
         warp = self._warp(exact, normals, world_T_cam, K)
         stats = _agreement(warp, exact)
         if c.refresh == "on_drift" and not refreshed and _drifted(stats, c):
@@ -174,16 +173,14 @@ class DifferentiableRenderer:
             depth = depth + silhouette_term(self.exact, pairs, world_T_cam, K_ring, ring.depth)[inside]
         return DiffRenderOutput(rgb, depth, exact.mask, exact, world_T_cam, *stats, refreshed)
 
-    def _camera_normals(self, exact: RenderOutput, world_T_cam: torch.Tensor) -> torch.Tensor:
-        """(B, 3, H, W) camera-frame geometric normals of the triangles the exact render hit."""
-        ids = exact.triangle_ids[:, 0].numpy()
-        face = self.exact.scene.face_normals[np.maximum(ids, 0)].astype(np.float64)  # (B, H, W, 3)
-        normals = torch.einsum("bji,bhwj->bihw", world_T_cam[:, :3, :3], torch.from_numpy(face))
-        return torch.where(exact.mask, normals, torch.zeros_like(normals))
-
     def _warp(self, exact: RenderOutput, normals: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor):
         A_T_P = torch.linalg.inv(self.anchor.world_T_cam) @ world_T_cam
         return reproject(self.anchor, exact.depth, normals, A_T_P, K, depth_tolerance=self.config.depth_tolerance)
+
+
+def _view_key(K: torch.Tensor, height: int, width: int) -> tuple:
+    """What an anchor was rendered for, besides the pose: batch size, image size and intrinsics (B, 3, 3)."""
+    return K.shape[0], height, width, tuple(K.flatten().tolist())
 
 
 def _agreement(warp, exact: RenderOutput) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

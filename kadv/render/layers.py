@@ -16,8 +16,9 @@ import torch
 from kadv.geometry.camera import pixel_rays
 from kadv.geometry.pose import check_world_T_cam
 from kadv.render.raycast import ExactRenderer, RayHits, pixel_angle
+from kadv.scenes.scene import Scene
 
-__all__ = ["AnchorLayers", "guard_band_intrinsics", "render_anchor"]
+__all__ = ["AnchorLayers", "camera_face_normals", "guard_band_intrinsics", "render_anchor"]
 
 
 @dataclass
@@ -58,6 +59,14 @@ def guard_band_intrinsics(K: torch.Tensor, guard_band: int, supersample: int) ->
     K[..., 1, 2] += guard_band
     K[..., :2, :] *= supersample
     return K
+
+
+def camera_face_normals(scene: Scene, triangle_ids: np.ndarray, world_T_cam: torch.Tensor) -> np.ndarray:
+    """Camera-frame geometric normals (B, ..., 3) of triangles ``triangle_ids`` (B, ...); 0 where an id is -1."""
+    face = scene.face_normals[np.maximum(triangle_ids, 0)].astype(np.float64)
+    rotation = world_T_cam[:, :3, :3].detach().double().numpy()
+    normals = np.einsum("bji,bnj->bni", rotation, face.reshape(len(rotation), -1, 3)).reshape(face.shape)
+    return np.where((triangle_ids >= 0)[..., None], normals, 0.0)
 
 
 def _peel(renderer: ExactRenderer, origins: np.ndarray, directions: np.ndarray, layers: int) -> list[RayHits]:
@@ -117,12 +126,10 @@ def render_anchor(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.T
         shaded = renderer.shade_hits(hits, origins, directions, pixel_angle(K_anchor))
         world = shaded["points"].reshape(batch, -1, 3).astype(np.float64) - pose[:, None, :3, 3].numpy()
         points = np.einsum("bij,bnj->bni", rotation_T, world)
-        face = renderer.scene.face_normals[np.maximum(hits.triangle_ids, 0)].reshape(batch, -1, 3).astype(np.float64)
-        normals = np.einsum("bij,bnj->bni", rotation_T, face)
         valid = hits.hit.reshape(batch, -1)
         maps["rgb"].append(shaded["rgb"].reshape(batch, -1, 3))
         maps["points"].append(np.where(valid[..., None], points, 0.0))
-        maps["normals"].append(np.where(valid[..., None], normals, 0.0))
+        maps["normals"].append(camera_face_normals(renderer.scene, hits.triangle_ids.reshape(batch, -1), pose))
         maps["ids"].append(hits.triangle_ids.reshape(batch, -1, 1))
         maps["mask"].append(valid[..., None])
 
