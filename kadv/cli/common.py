@@ -1,4 +1,7 @@
-"""Turning config nodes into library objects (the edge where Hydra meets the library)."""
+"""Turning config nodes into library objects, and reporting a user's mistakes in one line.
+
+This is the edge where Hydra meets the library; nothing under ``kadv/`` but ``cli/`` imports Hydra.
+"""
 from __future__ import annotations
 
 import os
@@ -6,16 +9,65 @@ import os
 # torch's OpenMP threads spin after each op and steal cores from Embree's ray casting.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+import functools  # noqa: E402
+import math  # noqa: E402
+import re  # noqa: E402
+import sys  # noqa: E402
+from collections.abc import Callable  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 import torch  # noqa: E402
 from omegaconf import DictConfig, OmegaConf  # noqa: E402
+from omegaconf.errors import OmegaConfBaseException  # noqa: E402
 
+from kadv.errors import WeightsUnavailable  # noqa: E402
 from kadv.geometry import look_at  # noqa: E402
 from kadv.render import Shading  # noqa: E402
 from kadv.scenes import Scene, box_room, load_scene  # noqa: E402
 
-__all__ = ["camera_from_config", "scene_from_config", "shading_from_config"]
+__all__ = [
+    "camera_from_config",
+    "check_render_config",
+    "dirname",
+    "reports_user_errors",
+    "scene_from_config",
+    "shading_from_config",
+]
+
+# A user's mistake (a bad value, a missing file, unavailable weights) is reported in one line;
+# anything else is a bug and keeps its traceback.
+USER_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, WeightsUnavailable, OmegaConfBaseException)
+
+
+def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]], Callable[[DictConfig], Any]]:
+    """Decorate a Hydra task so that a user error prints ``<command>: error: <message>`` and exits 2.
+
+    ``HYDRA_FULL_ERROR=1`` re-raises it with its traceback.
+    """
+    def decorate(task: Callable[[DictConfig], Any]) -> Callable[[DictConfig], Any]:
+        @functools.wraps(task)
+        def wrapped(cfg: DictConfig) -> Any:
+            try:
+                return task(cfg)
+            except USER_ERRORS as error:
+                if os.environ.get("HYDRA_FULL_ERROR") == "1":
+                    raise
+                message = " ".join(str(error).split())
+                print(f"{command}: error: {message}", file=sys.stderr)
+                sys.exit(2)
+        return wrapped
+    return decorate
+
+
+def dirname(overrides: str) -> str:
+    """A folder name from Hydra's ``override_dirname``: "default" when empty, path separators and
+    other unsafe characters replaced, so the same overrides always give the same folder."""
+    name = re.sub(r"[^A-Za-z0-9._=,+-]", "_", overrides)
+    return name[:200] or "default"
+
+
+OmegaConf.register_new_resolver("kadv_dirname", dirname, replace=True)
 
 
 def scene_from_config(cfg: DictConfig) -> Scene:
@@ -38,15 +90,35 @@ def shading_from_config(cfg: DictConfig) -> Shading:
     )
 
 
+def check_render_config(cfg: DictConfig) -> tuple[int, int, int]:
+    """(height, width, supersample) of a ``render/`` node, each checked to be a positive integer."""
+    values = []
+    for key in ("height", "width", "supersample"):
+        value = cfg[key]
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            raise ValueError(f"render.{key} must be a positive integer, got {value!r}")
+        values.append(value)
+    return tuple(values)
+
+
+def _vector(cfg: DictConfig, key: str) -> torch.Tensor:
+    value = cfg[key]
+    try:
+        numbers = [float(v) for v in value]
+    except (TypeError, ValueError):
+        numbers = []
+    if len(numbers) != 3 or not all(math.isfinite(v) for v in numbers):
+        raise ValueError(f"camera.{key} must be three finite numbers [x, y, z], got {OmegaConf.to_yaml(value).strip()}")
+    return torch.tensor(numbers, dtype=torch.float64)
+
+
 def camera_from_config(cfg: DictConfig, scene: Scene) -> tuple[torch.Tensor, float]:
     """(world_T_cam (4, 4), fov_x_deg) from an explicit pose, a look-at, or a file camera index."""
     fov = cfg.get("fov_x_deg")
     if cfg.get("world_T_cam") is not None:
         pose = torch.tensor(OmegaConf.to_container(cfg.world_T_cam), dtype=torch.float64)
     elif cfg.get("eye") is not None:
-        pose = look_at(torch.tensor(list(cfg.eye), dtype=torch.float64),
-                       torch.tensor(list(cfg.target), dtype=torch.float64),
-                       torch.tensor(list(cfg.up), dtype=torch.float64))
+        pose = look_at(_vector(cfg, "eye"), _vector(cfg, "target"), _vector(cfg, "up"))
     else:
         if not scene.cameras:
             raise ValueError(f"scene {scene.name!r} defines no camera: give camera.world_T_cam or camera.eye/target")

@@ -2,8 +2,8 @@
 from __future__ import annotations
 
 from kadv.losses.align import align_scale_shift, minmax_normalize, to_comparison_space
-from kadv.losses.metrics import depth_metrics
-from kadv.losses.perceptual import PerceptualLoss, ssim_loss
+from kadv.losses.metrics import aligned_depth, depth_metrics
+from kadv.losses.perceptual import PerceptualLoss, depth_loss, ssim_loss
 from kadv.losses.vgg import VGG16_TAPS, VGG16_URL, load_vgg16_state_dict, vgg16_features
 
 __all__ = [
@@ -11,6 +11,8 @@ __all__ = [
     "VGG16_URL",
     "PerceptualLoss",
     "align_scale_shift",
+    "aligned_depth",
+    "depth_loss",
     "depth_metrics",
     "load_vgg16_state_dict",
     "minmax_normalize",

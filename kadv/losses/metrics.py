@@ -5,7 +5,22 @@ import torch
 
 from kadv.losses.align import align_scale_shift, to_comparison_space
 
-__all__ = ["depth_metrics"]
+__all__ = ["aligned_depth", "depth_metrics"]
+
+
+def aligned_depth(prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor,
+                  prediction_kind: str = "disparity") -> torch.Tensor:
+    """The prediction as metric depth (B, 1, H, W): converted to disparity, aligned to the ground
+    truth's disparity by least squares on ``mask``, and converted back.
+
+    Aligned disparities below 1/max(gt) are clamped there, so a prediction that needs a negative
+    depth comes out as the farthest ground-truth depth rather than being dropped.
+    """
+    gt_disparity = to_comparison_space(gt_depth, "depth", "disparity", mask)
+    pred_disparity = to_comparison_space(prediction, prediction_kind, "disparity", mask)
+    aligned = align_scale_shift(pred_disparity, gt_disparity, mask)
+    floor = 1.0 / torch.where(mask, gt_depth, torch.zeros_like(gt_depth)).amax(dim=(1, 2, 3), keepdim=True)
+    return 1.0 / torch.maximum(aligned, floor)
 
 
 def depth_metrics(
@@ -14,9 +29,8 @@ def depth_metrics(
 ) -> dict[str, torch.Tensor]:
     """delta1/2/3, abs_rel and rmse per map (B,) on valid pixels.
 
-    The prediction is converted to disparity, aligned to the ground-truth disparity by least
-    squares, and converted back to depth; aligned disparities below 1/max(gt) are clamped there, so
-    a prediction that needs a negative depth counts as wrong rather than being dropped.
+    The prediction is aligned as :func:`aligned_depth` does, so a prediction that needs a negative
+    depth counts as wrong rather than being dropped.
 
     Args:
         prediction: (B, 1, H, W) model output.
@@ -26,11 +40,7 @@ def depth_metrics(
         min_depth: ground truth below this is treated as invalid.
     """
     mask = mask & (gt_depth > min_depth)
-    gt_disparity = to_comparison_space(gt_depth, "depth", "disparity", mask)
-    pred_disparity = to_comparison_space(prediction, prediction_kind, "disparity", mask)
-    aligned = align_scale_shift(pred_disparity, gt_disparity, mask)
-    floor = 1.0 / torch.where(mask, gt_depth, torch.zeros_like(gt_depth)).amax(dim=(1, 2, 3), keepdim=True)
-    pred_depth = 1.0 / torch.maximum(aligned, floor)
+    pred_depth = aligned_depth(prediction, gt_depth, mask, prediction_kind)
     weight = mask.to(gt_depth.dtype)
     count = weight.sum(dim=(1, 2, 3)).clamp_min(1.0)
     safe_gt = torch.where(mask, gt_depth, torch.ones_like(gt_depth))

@@ -1,7 +1,8 @@
 """L_depth: perceptual distance between normalised depth maps, and a weight-free SSIM variant."""
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 
 import torch
@@ -11,7 +12,7 @@ from torch import nn
 
 from kadv.losses.vgg import VGG16_TAPS, load_vgg16_state_dict, vgg16_features
 
-__all__ = ["IMAGENET_MEAN", "IMAGENET_STD", "PerceptualLoss", "ssim_loss"]
+__all__ = ["IMAGENET_MEAN", "IMAGENET_STD", "PerceptualLoss", "depth_loss", "ssim_loss"]
 
 IMAGENET_MEAN = torch.tensor([0.485, 0.456, 0.406])
 IMAGENET_STD = torch.tensor([0.229, 0.224, 0.225])
@@ -62,3 +63,19 @@ def ssim_loss(a: torch.Tensor, b: torch.Tensor, window_size: int = 11) -> torch.
     """Per-sample structural dissimilarity (1 - SSIM) / 2 (B,) of normalised maps (B, 1, H, W)."""
     per_pixel = kornia_ssim_loss(a, b, window_size=window_size, max_val=1.0, reduction="none")
     return per_pixel.mean(dim=(1, 2, 3))
+
+
+def depth_loss(kind: str, vgg_weights: str | Path | None = None, window_size: int = 11
+               ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+    """The L_depth discrepancy a ``loss/`` config names: "perceptual" (VGG-16) or "ssim".
+
+    Raises:
+        ValueError: an unknown kind or a bad window size.
+    """
+    if kind == "perceptual":
+        return PerceptualLoss.vgg16(vgg_weights)
+    if kind == "ssim":
+        if window_size < 3 or window_size % 2 == 0:
+            raise ValueError(f"loss.window_size must be an odd integer >= 3, got {window_size}")
+        return partial(ssim_loss, window_size=window_size)
+    raise ValueError(f"loss.kind must be 'perceptual' or 'ssim', got {kind!r}")

@@ -10,6 +10,8 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from kadv.errors import WeightsUnavailable
+
 __all__ = ["VGG16_FILENAME", "VGG16_TAPS", "VGG16_URL", "load_vgg16_state_dict", "vgg16_features"]
 
 VGG16_URL = "https://download.pytorch.org/models/vgg16-397923af.pth"
@@ -39,7 +41,7 @@ def load_vgg16_state_dict(path: str | Path | None = None) -> dict[str, torch.Ten
 
     Raises:
         FileNotFoundError: an explicit ``path`` that does not exist.
-        RuntimeError: no local copy and the download failed (offline), saying how to provide it.
+        WeightsUnavailable: no local copy and the download failed (offline), saying how to provide it.
     """
     if path is not None:
         path = Path(path)
@@ -55,7 +57,7 @@ def load_vgg16_state_dict(path: str | Path | None = None) -> dict[str, torch.Ten
             try:
                 state = torch.hub.load_state_dict_from_url(VGG16_URL, map_location="cpu", progress=False)
             except Exception as error:  # urllib raises several kinds when offline
-                raise RuntimeError(
+                raise WeightsUnavailable(
                     f"VGG-16 weights for the perceptual loss are not available: no file at {cached} and the "
                     f"download from {VGG16_URL} failed ({type(error).__name__}). Copy {VGG16_FILENAME} there, "
                     "pass loss.vgg_weights=/path/to/file, or use the weight-free loss (loss=ssim)."

@@ -12,6 +12,7 @@ import torch
 from transformers import AutoConfig, AutoModelForDepthEstimation
 from transformers.utils import cached_file
 
+from kadv.errors import WeightsUnavailable
 from kadv.models.base import DepthModel, Preprocess
 
 __all__ = ["HuggingFaceDepthModel", "ModelWeightsUnavailable", "hub_offline", "load_huggingface"]
@@ -25,7 +26,7 @@ _DEFAULTS = {
 }
 
 
-class ModelWeightsUnavailable(RuntimeError):
+class ModelWeightsUnavailable(WeightsUnavailable):
     """The weights of a model cannot be found locally and cannot be downloaded."""
 
 

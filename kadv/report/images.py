@@ -1,9 +1,6 @@
 """PNG artefacts, written atomically so an interrupted run never leaves a truncated file."""
 from __future__ import annotations
 
-import os
-import tempfile
-from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib
@@ -14,25 +11,9 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from PIL import Image  # noqa: E402
 
-__all__ = ["atomic_write", "save_depth_png", "save_rgb_png"]
+from kadv.io import atomic_write  # noqa: E402
 
-
-def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
-    """Call ``write(tmp_path)`` and move the result to ``path`` in one rename.
-
-    The temporary file sits in the destination folder so the rename stays on one filesystem.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    handle, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(handle)
-    try:
-        write(Path(tmp))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+__all__ = ["save_depth_png", "save_rgb_png"]
 
 
 def save_rgb_png(path: str | Path, rgb: torch.Tensor) -> Path:

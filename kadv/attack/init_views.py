@@ -1,0 +1,266 @@
+"""Init views (the study's "init-params"): benign starting views where the model is accurate.
+
+Sources: the scene file's cameras (moved along their optical axis until clear of surfaces), an
+automatic seeded sampler that keeps the candidates the model predicts best, or an
+``init_params.json`` written by an earlier run.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from kadv.attack.objective import PenaltyConfig
+from kadv.geometry import axis_angle_to_matrix, check_world_T_cam, intrinsics_from_fov, look_at
+from kadv.io import write_json
+from kadv.losses import depth_metrics
+from kadv.models import DepthModel
+from kadv.penalties import distance_to_surface, step_guard, view_validity
+from kadv.render import ExactRenderer
+
+__all__ = [
+    "InitView",
+    "InitViewConfig",
+    "InitViewError",
+    "check_init_views",
+    "clear_file_camera",
+    "file_init_views",
+    "load_init_params",
+    "sample_init_views",
+    "save_init_params",
+    "score_views",
+]
+
+
+class InitViewError(ValueError):
+    """An init view that cannot serve: inside an object, outside the scene, or stuck at a surface."""
+
+
+@dataclass(frozen=True)
+class InitView:
+    """A starting view.
+
+    Attributes:
+        name: a label ("file0", "sampled3", ...).
+        source: "file", "sampled" or "given".
+        world_T_cam: (4, 4) float64 pose.
+        fov_x_deg: horizontal field of view.
+        delta1: the model's accuracy there (None until scored).
+        note: how the view was obtained (e.g. how far a file camera was moved).
+    """
+
+    name: str
+    source: str
+    world_T_cam: torch.Tensor
+    fov_x_deg: float
+    delta1: float | None = None
+    note: str = ""
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["world_T_cam"] = self.world_T_cam.tolist()
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict) -> InitView:
+        return cls(**{**data, "world_T_cam": torch.tensor(data["world_T_cam"], dtype=torch.float64)})
+
+
+@dataclass(frozen=True)
+class InitViewConfig:
+    """How init views are chosen (``attack.init_*`` keys).
+
+    Attributes:
+        count: init views in all: the file's cameras first (if ``file_cameras``), then sampled ones.
+        file_cameras: start from the scene file's cameras.
+        candidates: M, sampled candidates to score with the model.
+        clearance: minimum distance of a sampled centre to any surface; None: 2 * penalty.d_th.
+        eye_height: range of the centre's height above the scene's floor (lowest point), metres.
+        pitch_deg, roll_deg: ranges of the view's pitch (positive: up) and roll.
+        fov_x_deg: horizontal field of view of sampled views.
+        min_hit_fraction: a sampled view must see a surface in at least this fraction of pixels.
+    """
+
+    count: int = 3
+    file_cameras: bool = True
+    candidates: int = 32
+    clearance: float | None = None
+    eye_height: tuple[float, float] = (1.0, 1.8)
+    pitch_deg: tuple[float, float] = (-25.0, 10.0)
+    roll_deg: tuple[float, float] = (-5.0, 5.0)
+    fov_x_deg: float = 70.0
+    min_hit_fraction: float = 0.9
+
+    def __post_init__(self) -> None:
+        if self.count < 1:
+            raise ValueError(f"attack.init_views must be >= 1, got {self.count}")
+        if self.candidates < 1:
+            raise ValueError(f"attack.init_candidates must be >= 1, got {self.candidates}")
+        for name in ("eye_height", "pitch_deg", "roll_deg"):
+            low, high = getattr(self, name)
+            if not low <= high:
+                raise ValueError(f"attack.init_{name}: expected [low, high] with low <= high, got {[low, high]}")
+        if not 0.0 <= self.min_hit_fraction <= 1.0:
+            raise ValueError(f"attack.init_min_hit_fraction must be in [0, 1], got {self.min_hit_fraction}")
+        intrinsics_from_fov(self.fov_x_deg, 1, 1)
+
+
+def clear_file_camera(renderer: ExactRenderer, world_T_cam: torch.Tensor, margin: float,
+                      max_move: float = 1.0) -> tuple[torch.Tensor, float]:
+    """Move a camera along its optical axis until its centre is at least ``margin`` from every surface.
+
+    It moves the way the nearest surface's normal points (forward when a wall is behind it, back
+    when one is in front), in steps the step guard accepts.
+
+    Returns:
+        The pose (4, 4) and the signed distance moved along the optical axis (metres).
+
+    Raises:
+        InitViewError: if no clear position lies within ``max_move``.
+    """
+    pose = world_T_cam.double().clone()
+    centre = pose[:3, 3].clone()
+    axis = pose[:3, 2]
+    distance = float(distance_to_surface(renderer, centre[None])[0])
+    if distance >= margin:
+        return pose, 0.0
+    # the distance's gradient points away from the nearest surface; follow its component on the axis
+    probe = centre[None].clone().requires_grad_(True)
+    distance_to_surface(renderer, probe).sum().backward()
+    sign = 1.0 if float(probe.grad[0] @ axis) >= 0 else -1.0
+    moved = 0.0
+    while distance < margin:
+        step = max(margin - distance, 0.005) * 1.05
+        proposed = centre + sign * step * axis
+        check = step_guard(renderer, centre[None], proposed[None], margin=0.0)
+        if not bool(check.allowed[0]) or abs(moved) + step > max_move:
+            raise InitViewError(f"a camera {distance:.3f} m from a surface cannot be moved clear along its "
+                                f"optical axis within {max_move} m")
+        centre, moved = proposed, moved + sign * step
+        distance = float(distance_to_surface(renderer, centre[None])[0])
+    pose[:3, 3] = centre
+    return pose, moved
+
+
+def file_init_views(renderer: ExactRenderer, margin: float) -> list[InitView]:
+    """The scene file's cameras as init views, each moved clear of surfaces by ``margin``."""
+    views = []
+    for index, camera in enumerate(renderer.scene.cameras):
+        pose, moved = clear_file_camera(renderer, camera.world_T_cam, margin)
+        note = f"moved {moved:+.3f} m along the optical axis to clear {margin} m" if moved else "as in the file"
+        views.append(InitView(f"file{index}", "file", pose, float(camera.fov_x_deg), note=note))
+    return views
+
+
+def score_views(model: DepthModel, renderer: ExactRenderer, poses: torch.Tensor, fov_x_deg: torch.Tensor,
+                height: int, width: int, batch_size: int = 8) -> torch.Tensor:
+    """delta1 (N,) of the model at N poses (N, 4, 4) with fields of view (N,), at the given size."""
+    scores = []
+    with torch.no_grad():
+        for start in range(0, len(poses), batch_size):
+            chunk = slice(start, start + batch_size)
+            K = torch.stack([intrinsics_from_fov(float(f), height, width) for f in fov_x_deg[chunk]])
+            out = renderer.render(poses[chunk], K, height, width)
+            prediction = model(out.rgb)
+            scores.append(depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)["delta1"])
+    return torch.cat(scores)
+
+
+def _candidate_poses(renderer: ExactRenderer, config: InitViewConfig, count: int, rng: np.random.Generator,
+                     clearance: float) -> torch.Tensor:
+    lo, hi = renderer.scene.bounds
+    floor = lo[1]
+    low = np.array([lo[0] + clearance, max(floor + config.eye_height[0], lo[1] + clearance), lo[2] + clearance])
+    high = np.array([hi[0] - clearance, min(floor + config.eye_height[1], hi[1] - clearance), hi[2] - clearance])
+    high = np.maximum(high, low)
+    centres = rng.uniform(low, high, size=(count, 3))
+    yaw = rng.uniform(0.0, 2.0 * math.pi, count)
+    pitch = np.radians(rng.uniform(*config.pitch_deg, count))
+    roll = np.radians(rng.uniform(*config.roll_deg, count))
+    forward = np.stack([np.cos(pitch) * np.cos(yaw), np.sin(pitch), np.cos(pitch) * np.sin(yaw)], axis=1)
+    poses = look_at(torch.from_numpy(centres), torch.from_numpy(centres + forward)).double()
+    zeros = torch.zeros(count, dtype=torch.float64)
+    rolled = axis_angle_to_matrix(torch.stack([zeros, zeros, torch.from_numpy(roll)], dim=1))
+    poses[:, :3, :3] = poses[:, :3, :3] @ rolled
+    return poses
+
+
+def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, seed: int, config: InitViewConfig,
+                      penalty: PenaltyConfig, height: int, width: int) -> list[InitView]:
+    """Draw ``config.candidates`` seeded candidate views and keep the ``count`` the model predicts best.
+
+    A candidate's centre is in free space with clearance above ``config.clearance`` (default
+    2 * d_th), its height, pitch and roll within the configured ranges; its view must be valid
+    and hit a surface in at least ``min_hit_fraction`` of its pixels.
+
+    Raises:
+        InitViewError: if fewer than ``count`` acceptable candidates turn up.
+    """
+    if count <= 0:
+        return []
+    rng = np.random.default_rng([seed, 7919])
+    clearance = 2.0 * penalty.d_th if config.clearance is None else config.clearance
+    small_h, small_w = max(8, height // 4), max(8, width // 4)
+    K = intrinsics_from_fov(config.fov_x_deg, small_h, small_w)
+    accepted: list[torch.Tensor] = []
+    for _ in range(50):
+        needed = config.candidates - len(accepted)
+        if needed <= 0:
+            break
+        poses = _candidate_poses(renderer, config, 4 * needed, rng, clearance)
+        distance = distance_to_surface(renderer, poses[:, :3, 3])
+        validity = view_validity(renderer, poses, K, small_h, small_w, **penalty.validity_options())
+        keep = validity.valid & (distance > clearance) & (1.0 - validity.miss_fraction >= config.min_hit_fraction)
+        accepted += list(poses[keep][:needed])
+    if len(accepted) < count:
+        raise InitViewError(f"scene {renderer.scene.name!r}: only {len(accepted)} of {count} sampled init views are "
+                            f"valid with clearance {clearance} m (check attack.init_eye_height and the scene's scale)")
+    poses = torch.stack(accepted)
+    fov = torch.full((len(poses),), config.fov_x_deg, dtype=torch.float64)
+    scores = score_views(model, renderer, poses, fov, height, width)
+    order = sorted(range(len(poses)), key=lambda i: -float(scores[i]))[:count]
+    return [InitView(f"sampled{rank}", "sampled", poses[i], config.fov_x_deg, float(scores[i]),
+                     note=f"best {rank + 1} of {len(poses)} candidates by delta1") for rank, i in enumerate(order)]
+
+
+def check_init_views(renderer: ExactRenderer, views: list[InitView], penalty: PenaltyConfig, height: int,
+                     width: int) -> None:
+    """Raise :class:`InitViewError` naming the first init view whose view is not valid."""
+    for view in views:
+        K = intrinsics_from_fov(view.fov_x_deg, height, width)
+        result = view_validity(renderer, view.world_T_cam, K, height, width, **penalty.validity_options())
+        if not bool(result.valid[0]):
+            raise InitViewError(f"init view {view.name!r} at {[round(v, 3) for v in view.world_T_cam[:3, 3].tolist()]} "
+                                f"is {result.verdicts[0]}: {result.reasons[0]}")
+
+
+def save_init_params(path: str | Path, views: list[InitView]) -> Path:
+    """Write init views to ``init_params.json`` (atomically)."""
+    return write_json(path, {"init_views": [v.to_dict() for v in views]})
+
+
+def load_init_params(path: str | Path) -> list[InitView]:
+    """Read init views from an ``init_params.json``.
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: the file is not an init_params file (names the file and the problem).
+    """
+    path = Path(path).expanduser()
+    if not path.is_file():
+        raise FileNotFoundError(f"init params file not found: {path}")
+    try:
+        data = json.loads(path.read_text())
+        views = [InitView.from_dict(v) for v in data["init_views"]]
+        for view in views:
+            check_world_T_cam(view.world_T_cam, f"{view.name}.world_T_cam")
+            intrinsics_from_fov(view.fov_x_deg, 1, 1)
+    except (ValueError, KeyError, TypeError) as error:
+        raise ValueError(f"{path}: not a valid init_params file ({error})") from error
+    if not views:
+        raise ValueError(f"{path}: holds no init views")
+    return views

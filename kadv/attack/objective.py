@@ -1,0 +1,145 @@
+"""The attack objective: L_depth between ground truth and prediction, minus the shortcut penalty.
+
+Per sample (B,), so that the restarts of one init view go through renderer, model and loss as
+one batch.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+
+from kadv.losses import depth_metrics, minmax_normalize, to_comparison_space
+from kadv.models import DepthModel
+from kadv.penalties import distance_to_surface, shortcut_penalty
+from kadv.render import ExactRenderer
+
+__all__ = ["Objective", "ObjectiveTerms", "PenaltyConfig"]
+
+
+@dataclass(frozen=True)
+class PenaltyConfig:
+    """Shortcut penalty, step guard and view validity settings (``conf/penalty/``), metres.
+
+    Attributes:
+        d_th: L_dist = 1/d - 1/d_th below this distance to the nearest surface.
+        weight: lambda in L_depth - lambda * L_dist.
+        margin: step guard: a step may not end (or pass) closer than this to a surface.
+        near: near plane of the view-validity check.
+        min_distance: an optical centre nearer than this to a surface makes a view "too close".
+        probe_rays: directions of the spherical inside/outside probe.
+        outside_threshold: probe escape fraction above which a centre is outside the scene.
+        inside_threshold: probe back-face fraction above which a centre is inside an object.
+    """
+
+    d_th: float = 0.2
+    weight: float = 1.0
+    margin: float = 0.1
+    near: float = 0.05
+    min_distance: float = 0.05
+    probe_rays: int = 512
+    outside_threshold: float = 0.3
+    inside_threshold: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("d_th", "margin", "near", "min_distance"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"penalty.{name} must be positive, got {getattr(self, name)}")
+        if self.weight < 0:
+            raise ValueError(f"penalty.weight must be >= 0, got {self.weight}")
+        if self.probe_rays < 16:
+            raise ValueError(f"penalty.probe_rays must be >= 16, got {self.probe_rays}")
+        for name in ("outside_threshold", "inside_threshold"):
+            if not 0 < getattr(self, name) < 1:
+                raise ValueError(f"penalty.{name} must be in (0, 1), got {getattr(self, name)}")
+
+    def validity_options(self) -> dict[str, float | int]:
+        """Keyword arguments of :func:`kadv.penalties.view_validity`."""
+        return {"near": self.near, "min_distance": self.min_distance, "probe_rays": self.probe_rays,
+                "outside_threshold": self.outside_threshold, "inside_threshold": self.inside_threshold}
+
+
+@dataclass
+class ObjectiveTerms:
+    """The objective's parts for B views; tensors (B,) unless said otherwise.
+
+    Attributes:
+        objective: L_depth - lambda * L_dist (to maximise), differentiable.
+        l_depth: depth discrepancy, differentiable.
+        l_dist: shortcut penalty, differentiable.
+        distance: optical centre to nearest surface, metres.
+        delta1, abs_rel: the prediction's accuracy after scale-and-shift alignment (no gradient).
+        prediction: (B, 1, H, W) the model's raw output (no gradient).
+    """
+
+    objective: torch.Tensor
+    l_depth: torch.Tensor
+    l_dist: torch.Tensor
+    distance: torch.Tensor
+    delta1: torch.Tensor
+    abs_rel: torch.Tensor
+    prediction: torch.Tensor
+
+
+class Objective:
+    """L_depth(D, phi(I)) - lambda * L_dist(c) for a differentiable render.
+
+    Ground truth and prediction go into one comparison space (a metric model's depth is converted),
+    each is min-max normalised to [0, 1] over the valid pixels, and ``loss`` compares them;
+    gradients flow through both maps.
+
+    Args:
+        model: the depth model under attack.
+        loss: per-sample discrepancy (B,) of two normalised maps (B, 1, H, W).
+        renderer: the scene's exact renderer (for the distance to the nearest surface).
+        penalty: d_th and lambda.
+        space: "disparity" or "depth".
+    """
+
+    def __init__(self, model: DepthModel, loss: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+                 renderer: ExactRenderer, penalty: PenaltyConfig, space: str = "disparity") -> None:
+        if space not in ("disparity", "depth"):
+            raise ValueError(f"loss.space must be 'disparity' or 'depth', got {space!r}")
+        self.model = model
+        self.loss = loss
+        self.renderer = renderer
+        self.penalty = penalty
+        self.space = space
+
+    def l_depth(self, depth: torch.Tensor, prediction: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """L_depth (B,) between ground-truth z-depth and a prediction, both (B, 1, H, W)."""
+        mask = mask & (depth > 0)
+        gt = minmax_normalize(to_comparison_space(depth, "depth", self.space, mask), mask)
+        pred = minmax_normalize(to_comparison_space(prediction, self.model.output_kind, self.space, mask), mask)
+        return self.loss(gt.float(), pred.float()).double()
+
+    def __call__(self, rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
+                 world_T_cam: torch.Tensor) -> ObjectiveTerms:
+        return self.forward(rgb, depth, mask, world_T_cam)
+
+    def forward(self, rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
+                world_T_cam: torch.Tensor) -> ObjectiveTerms:
+        """Evaluate B views.
+
+        Args:
+            rgb: (B, 3, H, W) rendered images in [0, 1].
+            depth: (B, 1, H, W) ground-truth z-depth in metres (0 invalid).
+            mask: (B, 1, H, W) bool, valid ground truth.
+            world_T_cam: (B, 4, 4) the views' poses; the penalty's gradient flows to their centres.
+        """
+        prediction = self.model(rgb.float())
+        l_depth = self.l_depth(depth, prediction, mask)
+        distance = distance_to_surface(self.renderer, world_T_cam[:, :3, 3])
+        l_dist = shortcut_penalty(distance, self.penalty.d_th)
+        with torch.no_grad():
+            metrics = depth_metrics(prediction.double(), depth.double(), mask, self.model.output_kind)
+        return ObjectiveTerms(
+            objective=l_depth - self.penalty.weight * l_dist,
+            l_depth=l_depth,
+            l_dist=l_dist,
+            distance=distance.detach(),
+            delta1=metrics["delta1"],
+            abs_rel=metrics["abs_rel"],
+            prediction=prediction.detach(),
+        )

@@ -1,0 +1,135 @@
+"""What an attack returns: one record per evaluated view, per-init-view results, the budget.
+
+Every search method (gradient, random, CMA-ES) returns the same types, so reports treat them alike.
+For the gradient method ``restart`` is the restart's index; for the black-box methods it is the
+lane within the evaluated batch. Step 0, restart 0 is always the init view itself.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+
+import torch
+
+from kadv.attack.init_views import InitView
+from kadv.geometry import axis_angle_to_matrix, perturb_world_T_cam
+
+__all__ = ["AttackResult", "Budget", "InitViewResult", "ViewRecord", "select_top_views", "separated"]
+
+
+@dataclass
+class ViewRecord:
+    """One evaluated view.
+
+    Attributes:
+        step, restart: where it sits on the trajectory (see the module docstring).
+        params: (omega (3), delta (3)): rotation vector in the camera frame and centre offset in
+            world metres, relative to the init view's pose.
+        theta: absolute axis-angle of the camera's orientation (3).
+        centre: optical centre in world metres (3).
+        l_depth, l_dist, objective: the objective's terms.
+        delta1, abs_rel: the prediction's accuracy after scale-and-shift alignment.
+        verdict: ``view_validity``'s verdict ("valid", "inside an object", ...).
+        guard_fraction: fraction of the proposed move that the step guard let through (1: all).
+        coverage, rgb_error, depth_error, refreshed: the differentiable renderer's agreement with
+            the exact render (NaN and False for black-box methods, which render exactly).
+    """
+
+    step: int
+    restart: int
+    params: list[float]
+    theta: list[float]
+    centre: list[float]
+    l_depth: float
+    l_dist: float
+    objective: float
+    delta1: float
+    abs_rel: float
+    verdict: str
+    guard_fraction: float = 1.0
+    coverage: float = math.nan
+    rgb_error: float = math.nan
+    depth_error: float = math.nan
+    refreshed: bool = False
+
+    @property
+    def valid(self) -> bool:
+        return self.verdict == "valid"
+
+    def world_T_cam(self, init_world_T_cam: torch.Tensor) -> torch.Tensor:
+        """The view's pose (4, 4), recomputed exactly from the init pose and the parameters."""
+        params = torch.tensor(self.params, dtype=torch.float64)[None]
+        return perturb_world_T_cam(init_world_T_cam.double()[None], params[:, :3], params[:, 3:])[0]
+
+
+@dataclass
+class Budget:
+    """Cost of a search: model forward passes, backward passes, and wall-clock seconds."""
+
+    forward: int = 0
+    backward: int = 0
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+
+@dataclass
+class InitViewResult:
+    """The search from one init view.
+
+    Attributes:
+        init: the init view.
+        records: every evaluated view in order of evaluation.
+        best_restart: the gradient restart whose valid views reach the largest L_depth (None for
+            black-box methods, whose lanes are not separate runs).
+        top: the adversarial views, highest L_depth first.
+        budget: what the search cost.
+    """
+
+    init: InitView
+    records: list[ViewRecord]
+    best_restart: int | None
+    top: list[ViewRecord]
+    budget: Budget
+
+    @property
+    def init_record(self) -> ViewRecord:
+        return next(r for r in self.records if r.step == 0 and r.restart == 0)
+
+
+@dataclass
+class AttackResult:
+    """Results of one search method over all init views."""
+
+    method: str
+    views: list[InitViewResult] = field(default_factory=list)
+
+
+def _angle_between(theta_a: list[float], theta_b: list[float]) -> float:
+    """Rotation angle in radians between two orientations given as axis-angles."""
+    rotations = axis_angle_to_matrix(torch.tensor([theta_a, theta_b], dtype=torch.float64))
+    relative = rotations[0].T @ rotations[1]
+    return float(torch.arccos(((torch.trace(relative) - 1) / 2).clamp(-1.0, 1.0)))
+
+
+def separated(a: ViewRecord, b: ViewRecord, min_distance: float, min_angle_deg: float) -> bool:
+    """Two views are distinct when their centres are ``min_distance`` apart or their orientations
+    differ by ``min_angle_deg``."""
+    distance = math.dist(a.centre, b.centre)
+    return distance >= min_distance or math.degrees(_angle_between(a.theta, b.theta)) >= min_angle_deg
+
+
+def select_top_views(records: list[ViewRecord], count: int, min_distance: float,
+                     min_angle_deg: float) -> list[ViewRecord]:
+    """Up to ``count`` valid views of highest L_depth, each separated from those chosen before it.
+
+    Greedy in order of L_depth (ties keep evaluation order), so the result is deterministic.
+    """
+    chosen: list[ViewRecord] = []
+    for record in sorted((r for r in records if r.valid), key=lambda r: -r.l_depth):
+        if len(chosen) == count:
+            break
+        if all(separated(record, other, min_distance, min_angle_deg) for other in chosen):
+            chosen.append(record)
+    return chosen

@@ -1,0 +1,68 @@
+"""``attack``: run one search method from every init view, resumably."""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+from tqdm import tqdm
+
+from kadv.attack.blackbox import cma_search, random_search
+from kadv.attack.gradient import gradient_search
+from kadv.attack.init_views import InitView
+from kadv.attack.objective import Objective
+from kadv.attack.records import AttackResult, InitViewResult
+from kadv.attack.search import AttackConfig, SearchContext
+from kadv.render import DifferentiableRenderer
+
+__all__ = ["attack"]
+
+SearchMethod = Callable[[SearchContext, AttackConfig, np.random.Generator, tqdm], InitViewResult]
+_METHODS: dict[str, SearchMethod] = {"gradient": gradient_search, "random": random_search, "cma": cma_search}
+
+
+def attack(objective: Objective, differentiable: DifferentiableRenderer, init_views: list[InitView], height: int,
+           width: int, config: AttackConfig, seed: int, margin: float, validity_options: dict | None = None,
+           completed: dict[int, InitViewResult] | None = None,
+           on_result: Callable[[int, InitViewResult], None] | None = None, progress: bool = True) -> AttackResult:
+    """Search for adversarial views from every init view with ``config.method``.
+
+    Each init view's search is seeded by (seed, its index) alone, so a run resumed after an
+    interruption (``completed`` holds the init views already done) gives the same results.
+
+    Args:
+        objective: what to maximise.
+        differentiable: the differentiable renderer (the gradient method's; black-box methods use
+            its exact renderer and supersampling).
+        init_views: starting views.
+        height, width: image size.
+        config: search settings.
+        seed: the run's seed.
+        margin: the step guard's margin (``penalty.margin``).
+        validity_options: keyword arguments of ``view_validity``.
+        completed: results already computed, by init-view index; they are not recomputed.
+        on_result: called with (index, result) as each init view finishes (to save it).
+        progress: show a tqdm bar.
+    """
+    method = _METHODS[config.method]
+    completed = dict(completed or {})
+    result = AttackResult(config.method)
+    per_view = config.steps + 1 if config.method == "gradient" else math.ceil(config.evaluations / config.population)
+    with tqdm(total=len(init_views) * per_view, desc=f"{config.method} attack", disable=not progress,
+              unit="step", dynamic_ncols=True) as bar:
+        for index, init in enumerate(init_views):
+            if index in completed:
+                bar.update(per_view)
+                result.views.append(completed[index])
+                continue
+            bar.set_description(f"{config.method} attack, init view {index + 1}/{len(init_views)}")
+            differentiable.reset()
+            context = SearchContext(objective, differentiable, init, height, width, margin, validity_options or {})
+            started = time.perf_counter()
+            view_result = method(context, config, np.random.default_rng([seed, index]), bar)
+            view_result.budget.seconds = time.perf_counter() - started
+            result.views.append(view_result)
+            if on_result is not None:
+                on_result(index, view_result)
+    return result

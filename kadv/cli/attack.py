@@ -1,0 +1,116 @@
+"""``kadv-attack``: find camera views where a depth model fails; writes the run directory."""
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import fields
+from pathlib import Path
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from omegaconf import DictConfig, OmegaConf
+
+from kadv.attack import (
+    AttackConfig,
+    InitViewConfig,
+    Objective,
+    PenaltyConfig,
+    attack,
+    check_init_views,
+    file_init_views,
+    load_init_params,
+    sample_init_views,
+    save_init_params,
+)
+from kadv.cli.common import check_render_config, reports_user_errors, scene_from_config, shading_from_config
+from kadv.io import atomic_write
+from kadv.losses import depth_loss
+from kadv.models import load_model
+from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
+from kadv.report.run import SUMMARY, is_complete, load_partial_results, save_partial_result, write_run
+
+log = logging.getLogger(__name__)
+
+INIT_PARAMS = "init_params.json"
+_INIT_KEYS = {"init_views": "count", "init_file_cameras": "file_cameras", "init_candidates": "candidates",
+              "init_clearance": "clearance", "init_eye_height": "eye_height", "init_pitch_deg": "pitch_deg",
+              "init_roll_deg": "roll_deg", "init_fov_x_deg": "fov_x_deg", "init_min_hit_fraction": "min_hit_fraction"}
+
+
+def _settings(cfg: DictConfig) -> tuple[AttackConfig, InitViewConfig]:
+    """The ``attack`` node split into the search's and the init views' settings; unknown keys are errors."""
+    node = OmegaConf.to_container(cfg, resolve=True)
+    node.pop("init_params", None)
+    search_keys = {f.name for f in fields(AttackConfig)}
+    unknown = sorted(set(node) - search_keys - set(_INIT_KEYS))
+    if unknown:
+        raise ValueError(f"unknown key(s) attack.{', attack.'.join(unknown)}")
+    init = {_INIT_KEYS[k]: tuple(v) if isinstance(v, list) else v for k, v in node.items() if k in _INIT_KEYS}
+    return AttackConfig(**{k: v for k, v in node.items() if k in search_keys}), InitViewConfig(**init)
+
+
+def _init_views(cfg: DictConfig, run_dir: Path, renderer: ExactRenderer, model, penalty: PenaltyConfig,
+                init_config: InitViewConfig, height: int, width: int) -> list:
+    """The run's init views: those saved in the run directory (a resumed run), a given file, or chosen now."""
+    saved = run_dir / INIT_PARAMS
+    if saved.is_file():
+        return load_init_params(saved)
+    if cfg.attack.get("init_params"):
+        views = load_init_params(cfg.attack.init_params)
+    else:
+        views = file_init_views(renderer, penalty.margin)[: init_config.count] if init_config.file_cameras else []
+        views += sample_init_views(renderer, model, init_config.count - len(views), int(cfg.seed), init_config,
+                                   penalty, height, width)
+    check_init_views(renderer, views, penalty, height, width)
+    save_init_params(saved, views)
+    return views
+
+
+def _table(summary: dict) -> str:
+    lines = ["| init view | L_depth init | L_depth adv | delta1 init | delta1 adv |", "|---|---|---|---|---|"]
+    for view in summary["init_views"]:
+        adv = view["adversarial_mean"]
+        lines.append(f"| {view['name']} | {view['init']['l_depth']:.4f} | {adv['l_depth']:.4f} | "
+                     f"{view['init']['delta1']:.3f} | {adv['delta1']:.3f} |")
+    return "\n".join(lines)
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_attack")
+@reports_user_errors("kadv-attack")
+def main(cfg: DictConfig) -> float:
+    """Run the configured attack; returns the mean adversarial L_depth (for Hydra sweepers)."""
+    run_dir = Path(HydraConfig.get().runtime.output_dir)
+    if is_complete(run_dir):
+        summary = json.loads((run_dir / SUMMARY).read_text())
+        print(f"already complete, skipped: {run_dir}\n{_table(summary)}")
+        return float(summary["adversarial_l_depth"])
+    if cfg.device != "cpu":
+        raise ValueError(f"device={cfg.device!r}: this version runs on the CPU only (device=cpu)")
+    height, width, supersample = check_render_config(cfg.render)
+    attack_config, init_config = _settings(cfg.attack)
+    penalty = PenaltyConfig(**OmegaConf.to_container(cfg.penalty, resolve=True))
+    diff_config = DiffRenderConfig(supersample=supersample,
+                                   **OmegaConf.to_container(cfg.render.differentiable, resolve=True))
+    scene = scene_from_config(cfg.scene)
+    renderer = ExactRenderer(scene, shading_from_config(cfg.render.shading))
+    model = load_model(cfg.model.name, cfg.model.get("weights"))
+    loss = depth_loss(cfg.loss.kind, cfg.loss.get("vgg_weights"), int(cfg.loss.get("window_size", 11)))
+    objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space)
+    config_text = OmegaConf.to_yaml(cfg, resolve=True)
+    atomic_write(run_dir / "config.yaml", lambda tmp: tmp.write_text(config_text))
+    views = _init_views(cfg, run_dir, renderer, model, penalty, init_config, height, width)
+    completed = load_partial_results(run_dir)
+    if completed:
+        log.info("resuming: %d of %d init views already done", len(completed), len(views))
+    result = attack(objective, DifferentiableRenderer(renderer, diff_config), views, height, width, attack_config,
+                    int(cfg.seed), penalty.margin, penalty.validity_options(), completed=completed,
+                    on_result=lambda index, view: save_partial_result(run_dir, index, view), progress=cfg.progress)
+    info = {"scene": scene.name, "model": model.name, "loss": cfg.loss.kind, "seed": int(cfg.seed),
+            "device": cfg.device, "height": height, "width": width, "resumed_init_views": sorted(completed)}
+    summary = write_run(run_dir, result, objective, height, width, supersample, info, video=cfg.video)
+    print(f"run directory: {run_dir}\n{_table(summary)}")
+    return float(summary["adversarial_l_depth"])
+
+
+if __name__ == "__main__":
+    main()

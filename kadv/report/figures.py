@@ -1,0 +1,189 @@
+"""Figures of an attack run: four-panel views, L_depth curves, the scene map, the trajectory video."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import imageio.v2 as imageio
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import PolyCollection
+from PIL import Image, ImageDraw
+
+from kadv.attack.records import InitViewResult
+from kadv.io import atomic_write
+from kadv.scenes import Scene
+
+__all__ = ["annotate", "colourise", "save_curves", "save_four_panel", "save_map", "save_video"]
+
+_CMAP = "turbo"
+
+
+def _save_figure(path: Path, figure: plt.Figure) -> Path:
+    try:
+        return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100, bbox_inches="tight"))
+    finally:
+        plt.close(figure)
+
+
+def _depth_range(depth: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+    """1st-99th percentile of the valid depths, so a few far pixels do not flatten the room."""
+    if not mask.any():
+        return 0.0, 1.0
+    low, high = np.percentile(depth[mask], [1, 99])
+    return float(low), float(max(high, low + 1e-6))
+
+
+def colourise(values: np.ndarray, mask: np.ndarray, low: float, high: float) -> np.ndarray:
+    """(H, W) values -> (H, W, 3) uint8 with the turbo colour map; grey where ``mask`` is False."""
+    scaled = np.clip((values - low) / max(high - low, 1e-12), 0.0, 1.0)
+    rgb = plt.get_cmap(_CMAP)(scaled)[..., :3]
+    rgb[~mask] = 0.5
+    return (rgb * 255 + 0.5).astype(np.uint8)
+
+
+def save_four_panel(path: str | Path, rgb: np.ndarray, depth: np.ndarray, prediction: np.ndarray, mask: np.ndarray,
+                    title: str) -> Path:
+    """Image | ground-truth depth | aligned prediction | relative error, as one PNG.
+
+    Args:
+        rgb: (H, W, 3) in [0, 1]; depth, prediction: (H, W) metres (the prediction aligned to the
+            ground truth), sharing one colour map; mask: (H, W) valid ground truth.
+        title: the figure's title (the view's metrics).
+    """
+    low, high = _depth_range(depth, mask)
+    error = np.where(mask, np.abs(prediction - depth) / np.maximum(depth, 1e-6), np.nan)
+    figure, axes = plt.subplots(1, 4, figsize=(4 * 3.4, 3.4 * rgb.shape[0] / rgb.shape[1] + 1.0), layout="constrained")
+    axes[0].imshow(np.clip(rgb, 0, 1))
+    axes[0].set_title("rendered image")
+    shown = [np.ma.masked_where(~mask, depth), np.ma.masked_where(~mask, prediction)]
+    cmap = plt.get_cmap(_CMAP).copy()
+    cmap.set_bad((0.5, 0.5, 0.5))
+    for axis, values, name in zip(axes[1:3], shown, ("ground-truth depth", "prediction (aligned)")):
+        image = axis.imshow(values, cmap=cmap, vmin=low, vmax=high, interpolation="nearest")
+        axis.set_title(name)
+    figure.colorbar(image, ax=axes[1:3].tolist(), fraction=0.03, pad=0.02, label="depth [m], grey: no surface")
+    errors = axes[3].imshow(np.ma.masked_invalid(error), cmap="magma", vmin=0.0, vmax=0.5, interpolation="nearest")
+    axes[3].set_title("|pred - gt| / gt")
+    figure.colorbar(errors, ax=axes[3], fraction=0.046, pad=0.02, extend="max")
+    for axis in axes:
+        axis.set_axis_off()
+    figure.suptitle(title, fontsize=10)
+    return _save_figure(Path(path), figure)
+
+
+def _grid(count: int) -> tuple[int, int]:
+    columns = min(count, 3)
+    return math.ceil(count / columns), columns
+
+
+def save_curves(path: str | Path, results: list[InitViewResult]) -> Path:
+    """L_depth per step for each restart (gradient) or each evaluation batch (black-box), per init view,
+    with the init view's value and the chosen adversarial views marked."""
+    rows, columns = _grid(len(results))
+    figure, axes = plt.subplots(rows, columns, figsize=(4.6 * columns, 3.2 * rows), squeeze=False)
+    for axis, result in zip(axes.flat, results):
+        lanes = sorted({r.restart for r in result.records})
+        if result.best_restart is not None:
+            for lane in lanes:
+                records = [r for r in result.records if r.restart == lane]
+                axis.plot([r.step for r in records], [r.l_depth for r in records], lw=2.0 if lane == result.best_restart else 1.0,
+                          label=f"restart {lane}" + (" (best)" if lane == result.best_restart else ""))
+        else:
+            axis.scatter([r.step for r in result.records], [r.l_depth for r in result.records], s=6, alpha=0.5,
+                         label="evaluated views")
+            best = np.maximum.accumulate([r.l_depth for r in result.records])
+            axis.plot([r.step for r in result.records], best, color="k", lw=1.5, label="best so far")
+        invalid = [r for r in result.records if not r.valid]
+        if invalid:
+            axis.scatter([r.step for r in invalid], [r.l_depth for r in invalid], marker="x", color="grey",
+                         label="invalid view")
+        axis.axhline(result.init_record.l_depth, color="k", ls="--", lw=1, label="init view")
+        axis.scatter([r.step for r in result.top], [r.l_depth for r in result.top], marker="*", s=120, color="red",
+                     zorder=5, label="adversarial views")
+        axis.set_title(f"{result.init.name}")
+        axis.set_xlabel("step")
+        axis.set_ylabel("L_depth")
+        axis.legend(fontsize=7)
+    for axis in list(axes.flat)[len(results):]:
+        axis.set_axis_off()
+    figure.tight_layout()
+    return _save_figure(Path(path), figure)
+
+
+def _plan_polygons(scene: Scene, cut_height: float) -> np.ndarray:
+    """Triangles (N, 3, 2) in the floor plane (x, z) between just above the floor and ``cut_height``,
+    as an architectural plan cuts a building (the floor and ceiling would cover everything)."""
+    corners = scene.vertices[scene.faces]
+    heights = corners[:, :, 1].mean(axis=1)
+    floor = scene.bounds[0, 1]
+    keep = (heights > floor + 0.05) & (heights < cut_height)
+    return corners[keep][:, :, [0, 2]]
+
+
+def _arrow(axis: plt.Axes, pose: np.ndarray, length: float, **style) -> None:
+    forward = pose[:3, 2]
+    axis.annotate("", xy=(pose[0, 3] + length * forward[0], pose[2, 3] + length * forward[2]),
+                  xytext=(pose[0, 3], pose[2, 3]), arrowprops={"arrowstyle": "->", **style})
+
+
+def save_map(path: str | Path, scene: Scene, results: list[InitViewResult]) -> Path:
+    """Top-down plan with each restart's camera path coloured by L_depth, the init view (black) and the
+    adversarial views (red) with their view directions, one panel per init view."""
+    poses = np.array([r.init.world_T_cam.numpy() for r in results])
+    cut = float(poses[:, 1, 3].max()) + 0.3
+    polygons = _plan_polygons(scene, cut)
+    lo, hi = scene.bounds
+    size = float(max(hi[0] - lo[0], hi[2] - lo[2]))
+    values = [r.l_depth for result in results for r in result.records]
+    norm = plt.Normalize(min(values), max(values))
+    rows, columns = _grid(len(results))
+    figure, axes = plt.subplots(rows, columns, figsize=(4.6 * columns, 4.2 * rows), squeeze=False)
+    for axis, result in zip(axes.flat, results):
+        axis.add_collection(PolyCollection(polygons, facecolors="0.6", edgecolors="0.45", linewidths=0.3))
+        for lane in sorted({r.restart for r in result.records}):
+            records = [r for r in result.records if r.restart == lane]
+            xz = np.array([[r.centre[0], r.centre[2]] for r in records])
+            if result.best_restart is not None:
+                axis.plot(xz[:, 0], xz[:, 1], color="0.3", lw=0.6)
+            points = axis.scatter(xz[:, 0], xz[:, 1], c=[r.l_depth for r in records], cmap="viridis", norm=norm, s=8)
+        init = result.init.world_T_cam.numpy()
+        axis.plot(init[0, 3], init[2, 3], "k*", ms=12, label="init view")
+        _arrow(axis, init, 0.1 * size, color="k", lw=1.5)
+        for rank, record in enumerate(result.top):
+            pose = record.world_T_cam(result.init.world_T_cam).numpy()
+            axis.plot(pose[0, 3], pose[2, 3], "r^", ms=7, label="adversarial views" if rank == 0 else None)
+            _arrow(axis, pose, 0.08 * size, color="red", lw=1.2)
+        axis.set_xlim(lo[0] - 0.05 * size, hi[0] + 0.05 * size)
+        axis.set_ylim(hi[2] + 0.05 * size, lo[2] - 0.05 * size)
+        axis.set_aspect("equal")
+        axis.set_xlabel("x [m]")
+        axis.set_ylabel("z [m]")
+        axis.set_title(result.init.name)
+        axis.legend(fontsize=7, loc="upper right")
+        figure.colorbar(points, ax=axis, fraction=0.046, pad=0.02, label="L_depth")
+    for axis in list(axes.flat)[len(results):]:
+        axis.set_axis_off()
+    figure.tight_layout()
+    return _save_figure(Path(path), figure)
+
+
+def save_video(path: str | Path, frames: list[np.ndarray], fps: int = 8) -> Path:
+    """Write uint8 frames (H, W, 3) as an H.264 MP4 (imageio-ffmpeg ships the encoder)."""
+    height, width = frames[0].shape[:2]
+    pad = ((0, height % 2), (0, width % 2), (0, 0))  # H.264 wants even sizes
+    even = [np.pad(frame, pad) for frame in frames]
+
+    def write(tmp: Path) -> None:
+        imageio.mimwrite(tmp, even, fps=fps, format="FFMPEG", codec="libx264", macro_block_size=2)
+
+    return atomic_write(path, write)
+
+
+def annotate(frame: np.ndarray, text: str) -> np.ndarray:
+    """The frame with a line of text on a dark band at its top."""
+    image = Image.fromarray(frame)
+    draw = ImageDraw.Draw(image)
+    draw.rectangle((0, 0, image.width, 12), fill=(0, 0, 0))
+    draw.text((3, 0), text, fill=(255, 255, 255))
+    return np.asarray(image)

@@ -1,0 +1,217 @@
+"""The run directory of an attack: partial results, trajectory, views, figures, video, summary.
+
+Every file is written atomically; ``summary.json`` is written last, so a run directory holding it
+is complete. Each init view's result is saved under ``partial/`` as soon as it is done, so an
+interrupted run resumes without recomputing (or rewriting) it.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import platform
+from dataclasses import asdict, fields
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from kadv.attack import AttackResult, InitView, InitViewResult, Objective, ViewRecord
+from kadv.attack.records import Budget
+from kadv.geometry import intrinsics_from_fov
+from kadv.io import atomic_write, write_json
+from kadv.losses import aligned_depth
+from kadv.report.figures import annotate, colourise, save_curves, save_four_panel, save_map, save_video
+
+__all__ = ["SUMMARY", "is_complete", "load_partial_results", "save_partial_result", "trajectory_rows", "write_run"]
+
+SUMMARY = "summary.json"
+_PARTIAL = "partial"
+_PACKAGES = ("kadv", "torch", "kornia", "open3d-cpu", "trimesh", "transformers", "numpy", "cma")
+_MAX_VIDEO_FRAMES = 200
+
+
+def is_complete(run_dir: str | Path) -> bool:
+    """Whether the run directory holds a finished run (its ``summary.json``)."""
+    return (Path(run_dir) / SUMMARY).is_file()
+
+
+def save_partial_result(run_dir: str | Path, index: int, result: InitViewResult) -> Path:
+    """Save one init view's search result (``partial/init<index>.json``)."""
+    data = {
+        "init": result.init.to_dict(),
+        "records": [asdict(r) for r in result.records],
+        "best_restart": result.best_restart,
+        "top": [[r.step, r.restart] for r in result.top],
+        "budget": result.budget.to_dict(),
+    }
+    return write_json(Path(run_dir) / _PARTIAL / f"init{index}.json", data)
+
+
+def load_partial_results(run_dir: str | Path) -> dict[int, InitViewResult]:
+    """The init views' results an earlier (possibly interrupted) run saved, by index."""
+    results = {}
+    for path in sorted((Path(run_dir) / _PARTIAL).glob("init*.json")):
+        data = json.loads(path.read_text())
+        records = [ViewRecord(**r) for r in data["records"]]
+        by_key = {(r.step, r.restart): r for r in records}
+        results[int(path.stem.removeprefix("init"))] = InitViewResult(
+            InitView.from_dict(data["init"]), records, data["best_restart"],
+            [by_key[tuple(key)] for key in data["top"]], Budget(**data["budget"]))
+    return results
+
+
+def trajectory_rows(result: AttackResult) -> list[dict]:
+    """One row per evaluated view: where, the objective's terms, validity, guard and renderer agreement."""
+    rows = []
+    for index, view in enumerate(result.views):
+        for r in view.records:
+            row = {"init_view": index, "step": r.step, "restart": r.restart}
+            row.update({f"theta_{a}": v for a, v in zip("xyz", r.theta)})
+            row.update({f"c_{a}": v for a, v in zip("xyz", r.centre)})
+            row.update({f"omega_{a}": v for a, v in zip("xyz", r.params[:3])})
+            row.update({f"delta_{a}": v for a, v in zip("xyz", r.params[3:])})
+            row.update({f.name: getattr(r, f.name) for f in fields(r)
+                        if f.name not in ("step", "restart", "params", "theta", "centre")})
+            rows.append(row)
+    return rows
+
+
+def _write_csv(path: Path, rows: list[dict]) -> Path:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows({k: repr(v) if isinstance(v, float) else v for k, v in row.items()} for row in rows)
+    text = buffer.getvalue()
+    return atomic_write(path, lambda tmp: tmp.write_text(text))
+
+
+class _ViewRenderer:
+    """Re-renders recorded views exactly and predicts on them, for pictures."""
+
+    def __init__(self, objective: Objective, height: int, width: int, supersample: int) -> None:
+        self.objective, self.height, self.width, self.supersample = objective, height, width, supersample
+
+    def __call__(self, init: InitView, records: list[ViewRecord]) -> dict[str, np.ndarray]:
+        poses = torch.stack([r.world_T_cam(init.world_T_cam) for r in records])
+        K = intrinsics_from_fov(init.fov_x_deg, self.height, self.width)
+        with torch.no_grad():
+            out = self.objective.renderer.render(poses, K, self.height, self.width, supersample=self.supersample)
+            prediction = self.objective.model(out.rgb)
+            aligned = aligned_depth(prediction.double(), out.depth.double(), out.mask, self.objective.model.output_kind)
+        return {"rgb": out.rgb.permute(0, 2, 3, 1).numpy(), "depth": out.depth[:, 0].numpy(),
+                "prediction": prediction[:, 0].numpy(), "aligned": aligned[:, 0].float().numpy(),
+                "mask": out.mask[:, 0].numpy(), "world_T_cam": poses.numpy(), "K": K.numpy()}
+
+
+def _title(label: str, record: ViewRecord) -> str:
+    return (f"{label}: L_depth {record.l_depth:.4f}, delta1 {record.delta1:.3f}, AbsRel {record.abs_rel:.3f} "
+            f"(step {record.step}, restart {record.restart})")
+
+
+def _save_views(views_dir: Path, index: int, view: InitViewResult, render: _ViewRenderer) -> list[str]:
+    records = [view.init_record, *view.top]
+    names = [f"init{index}"] + [f"init{index}_adv{rank}" for rank in range(len(view.top))]
+    maps = render(view.init, records)
+    for b, (name, record) in enumerate(zip(names, records)):
+        label = "init view" if b == 0 else f"adversarial view {b}"
+        save_four_panel(views_dir / f"{name}.png", maps["rgb"][b], maps["depth"][b], maps["aligned"][b],
+                        maps["mask"][b], _title(label, record))
+        arrays = {k: v[b] for k, v in maps.items() if k != "K"} | {"K": maps["K"]}
+        atomic_write(views_dir / f"{name}.npz", lambda tmp, a=arrays: np.savez_compressed(str(tmp), **a))
+    return [f"views/{name}.png" for name in names]
+
+
+def _video_frames(view: InitViewResult, render: _ViewRenderer) -> list[np.ndarray]:
+    """The best restart's path (gradient) or the successive best views (black-box), image | prediction."""
+    if view.best_restart is not None:
+        path = [r for r in view.records if r.restart == view.best_restart]
+    else:
+        path, best = [], -np.inf
+        for record in view.records:
+            if record.valid and record.l_depth > best:
+                path.append(record)
+                best = record.l_depth
+    path = path[:: max(1, len(path) // _MAX_VIDEO_FRAMES + (len(path) % _MAX_VIDEO_FRAMES > 0))]
+    frames = []
+    for start in range(0, len(path), 16):
+        chunk = path[start:start + 16]
+        maps = render(view.init, chunk)
+        for b, record in enumerate(chunk):
+            mask = maps["mask"][b]
+            low, high = np.percentile(maps["depth"][b][mask], [1, 99]) if mask.any() else (0.0, 1.0)
+            rgb = (np.clip(maps["rgb"][b], 0, 1) * 255 + 0.5).astype(np.uint8)
+            frame = np.concatenate([rgb, colourise(maps["depth"][b], mask, low, high),
+                                    colourise(maps["aligned"][b], mask, low, high)], axis=1)
+            frames.append(annotate(frame, f"step {record.step}  L_depth {record.l_depth:.4f}  "
+                                          f"delta1 {record.delta1:.3f}   image | depth | prediction"))
+    return frames
+
+
+def _versions() -> dict[str, str]:
+    versions = {"python": platform.python_version()}
+    for package in _PACKAGES:
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            continue
+    return versions
+
+
+def _metrics(record: ViewRecord) -> dict:
+    return {"l_depth": record.l_depth, "l_dist": record.l_dist, "objective": record.objective,
+            "delta1": record.delta1, "abs_rel": record.abs_rel, "theta": record.theta, "centre": record.centre,
+            "step": record.step, "restart": record.restart}
+
+
+def write_run(run_dir: str | Path, result: AttackResult, objective: Objective, height: int, width: int,
+              supersample: int, info: dict, video: bool = True) -> dict:
+    """Write the run's artefacts and, last, ``summary.json``; returns the summary.
+
+    Args:
+        run_dir: the run directory.
+        result: the attack's result.
+        objective: the objective (its renderer and model re-render the views for pictures).
+        height, width, supersample: the attack's image size and supersampling.
+        info: extra summary fields (scene, model, loss, seed, device, ...).
+        video: also write ``trajectory.mp4`` of the run with the largest gain.
+    """
+    run_dir = Path(run_dir)
+    render = _ViewRenderer(objective, height, width, supersample)
+    _write_csv(run_dir / "trajectory.csv", trajectory_rows(result))
+    per_view = []
+    for index, view in enumerate(result.views):
+        pictures = _save_views(run_dir / "views", index, view, render)
+        init = view.init_record
+        adversarial = [_metrics(r) | {"png": png} for r, png in zip(view.top, pictures[1:])]
+        gain = (view.top[0].l_depth - init.l_depth) if view.top else 0.0
+        per_view.append({
+            "index": index, "name": view.init.name, "source": view.init.source, "note": view.init.note,
+            "fov_x_deg": view.init.fov_x_deg, "init_world_T_cam": view.init.world_T_cam.tolist(),
+            "init": _metrics(init) | {"png": pictures[0]},
+            "adversarial": adversarial,
+            "adversarial_mean": {k: float(np.mean([a[k] for a in adversarial])) if adversarial else None
+                                 for k in ("l_depth", "delta1", "abs_rel")},
+            "best_restart": view.best_restart,
+            "l_depth_gain": gain,
+            "evaluations": len(view.records),
+            "invalid_views": sum(not r.valid for r in view.records),
+            "guarded_steps": sum(r.guard_fraction < 1.0 for r in view.records),
+            "budget": view.budget.to_dict(),
+        })
+    save_curves(run_dir / "loss.png", result.views)
+    save_map(run_dir / "map.png", objective.renderer.scene, result.views)
+    if video:
+        best = max(result.views, key=lambda v: (v.top[0].l_depth - v.init_record.l_depth) if v.top else -np.inf)
+        save_video(run_dir / "trajectory.mp4", _video_frames(best, render))
+    means = {f"{stage}_{key}": float(np.mean([v[stage if stage == "init" else "adversarial_mean"][key]
+                                             for v in per_view if v["adversarial_mean"]["l_depth"] is not None]))
+             for stage in ("init", "adversarial") for key in ("l_depth", "delta1")}
+    summary = {
+        "complete": True, "method": result.method, **info, **means,
+        "budget": {k: sum(v["budget"][k] for v in per_view) for k in ("forward", "backward", "seconds")},
+        "versions": _versions(), "init_views": per_view,
+    }
+    write_json(run_dir / SUMMARY, summary)
+    return summary
