@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 	touch $@
 
 demo: $(STAMP)
-	$(BIN)/kadv-render
+	$(BIN)/kadv-attack
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

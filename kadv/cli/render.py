@@ -9,7 +9,13 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig
 
-from kadv.cli.common import camera_from_config, scene_from_config, shading_from_config
+from kadv.cli.common import (
+    camera_from_config,
+    check_render_config,
+    reports_user_errors,
+    scene_from_config,
+    shading_from_config,
+)
 from kadv.geometry import intrinsics_from_fov
 from kadv.render import ExactRenderer
 from kadv.report import atomic_write, save_depth_png, save_rgb_png
@@ -18,15 +24,16 @@ log = logging.getLogger(__name__)
 
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_render")
+@reports_user_errors("kadv-render")
 def main(cfg: DictConfig) -> None:
     """Render the configured scene from the configured camera."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     scene = scene_from_config(cfg.scene)
     world_T_cam, fov = camera_from_config(cfg.camera, scene)
-    height, width = int(cfg.render.height), int(cfg.render.width)
+    height, width, supersample = check_render_config(cfg.render)
     renderer = ExactRenderer(scene, shading_from_config(cfg.render.shading))
     out = renderer.render(world_T_cam, intrinsics_from_fov(fov, height, width), height, width,
-                          supersample=int(cfg.render.supersample))
+                          supersample=supersample)
     save_rgb_png(out_dir / "rgb.png", out.rgb[0])
     save_depth_png(out_dir / "depth.png", out.depth[0], out.mask[0])
     summary = {

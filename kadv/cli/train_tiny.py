@@ -9,7 +9,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-import kadv.cli.common  # noqa: F401  (sets OMP_WAIT_POLICY before torch spins up threads)
+from kadv.cli.common import reports_user_errors
 from kadv.models.tiny import TINY_WEIGHTS, save_kadv_tiny
 from kadv.models.train_tiny import TinyTrainConfig, train_tiny
 from kadv.report import atomic_write
@@ -18,6 +18,7 @@ log = logging.getLogger(__name__)
 
 
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_train_tiny")
+@reports_user_errors("kadv-train-tiny")
 def main(cfg: DictConfig) -> None:
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     config = TinyTrainConfig(**OmegaConf.to_container(cfg.train, resolve=True))

@@ -1,0 +1,89 @@
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+
+from kadv import ExactRenderer, look_at
+from kadv.attack import (
+    InitViewConfig,
+    InitViewError,
+    PenaltyConfig,
+    check_init_views,
+    clear_file_camera,
+    file_init_views,
+    load_init_params,
+    sample_init_views,
+    save_init_params,
+)
+from kadv.penalties import distance_to_surface, view_validity
+from tests.conftest import cached_real_scene
+
+PENALTY = PenaltyConfig()
+
+
+@pytest.mark.parametrize("facing, sign", [(1.0, 1.0), (-1.0, -1.0)])
+def test_a_camera_at_a_wall_moves_along_its_axis_away_from_it(tiny_objective, facing, sign) -> None:
+    renderer = tiny_objective.renderer
+    eye = torch.tensor([1.5, 1.5, 0.02], dtype=torch.float64)  # 2 cm from the wall z = 0
+    pose = look_at(eye, eye + torch.tensor([0.0, 0.0, facing], dtype=torch.float64)).double()
+    cleared, moved = clear_file_camera(renderer, pose, PENALTY.margin)
+    assert moved * sign > 0  # forward when the wall is behind, backward when it is in front
+    assert float(distance_to_surface(renderer, cleared[None, :3, 3])[0]) >= PENALTY.margin
+    assert torch.equal(cleared[:3, :3], pose[:3, :3])
+    assert torch.allclose(cleared[:3, 3] - pose[:3, 3], moved * pose[:3, 2])
+
+
+@pytest.mark.parametrize("name", ["grey_white_room", "japanese_classroom"])
+def test_real_file_cameras_next_to_a_wall_are_moved_clear_and_valid(name) -> None:
+    renderer = ExactRenderer(cached_real_scene(name))
+    camera = renderer.scene.cameras[0]
+    assert float(distance_to_surface(renderer, camera.world_T_cam[None, :3, 3])[0]) < PENALTY.margin
+    view = file_init_views(renderer, PENALTY.margin)[0]
+    assert float(distance_to_surface(renderer, view.world_T_cam[None, :3, 3])[0]) >= PENALTY.margin
+    assert 0.0 < abs(float((view.world_T_cam[:3, 3] - camera.world_T_cam[:3, 3]).norm())) < 0.2
+    check_init_views(renderer, [view], PENALTY, 60, 80)
+
+
+def test_sampled_views_are_valid_clear_in_range_and_ranked(tiny_objective) -> None:
+    renderer, model = tiny_objective.renderer, tiny_objective.model
+    config = InitViewConfig(candidates=12, eye_height=(1.2, 1.6), pitch_deg=(-20.0, 0.0), roll_deg=(0.0, 0.0))
+    views = sample_init_views(renderer, model, 4, 3, config, PENALTY, 48, 64)
+    assert len(views) == 4 and all(v.source == "sampled" for v in views)
+    scores = [v.delta1 for v in views]
+    assert scores == sorted(scores, reverse=True)
+    poses = torch.stack([v.world_T_cam for v in views])
+    assert (distance_to_surface(renderer, poses[:, :3, 3]) > 2 * PENALTY.d_th).all()
+    floor = renderer.scene.bounds[0, 1]
+    assert ((poses[:, 1, 3] >= floor + 1.2) & (poses[:, 1, 3] <= floor + 1.6)).all()
+    pitch = torch.rad2deg(torch.asin(poses[:, 1, 2]))  # the optical axis' upward component (world y up)
+    assert ((pitch >= -20.0 - 1e-6) & (pitch <= 1e-6)).all()
+    K = views[0].world_T_cam.new_tensor([[32.0, 0, 32], [0, 32.0, 24], [0, 0, 1]])
+    assert view_validity(renderer, poses, K, 48, 64).valid.all()
+    again = sample_init_views(renderer, model, 4, 3, config, PENALTY, 48, 64)
+    assert all(torch.equal(a.world_T_cam, b.world_T_cam) for a, b in zip(views, again))
+
+
+def test_init_params_round_trip_and_bad_files_name_themselves(tiny_objective, tmp_path) -> None:
+    views = file_init_views(tiny_objective.renderer, PENALTY.margin)
+    path = save_init_params(tmp_path / "init_params.json", views)
+    loaded = load_init_params(path)
+    assert [v.name for v in loaded] == [v.name for v in views]
+    assert all(torch.equal(a.world_T_cam, b.world_T_cam) for a, b in zip(loaded, views))
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"init_views": [{**views[0].to_dict(), "world_T_cam": [[1, 0], [0, 1]]}]}))
+    with pytest.raises(ValueError, match="bad.json"):
+        load_init_params(bad)
+    with pytest.raises(FileNotFoundError, match="missing.json"):
+        load_init_params(tmp_path / "missing.json")
+
+
+def test_an_init_view_inside_a_box_is_refused(tiny_objective) -> None:
+    renderer = tiny_objective.renderer
+    box = renderer.scene.vertices[renderer.scene.faces[renderer.scene.material_ids == 6]]
+    centre = torch.from_numpy(box.reshape(-1, 3).mean(axis=0))
+    views = file_init_views(renderer, PENALTY.margin)
+    inside = type(views[0])("boxed", "given", look_at(centre, centre + torch.tensor([1.0, 0, 0], dtype=torch.float64)).double(), 70.0)
+    with pytest.raises(InitViewError, match="boxed.*inside an object"):
+        check_init_views(renderer, [inside], PENALTY, 24, 32)

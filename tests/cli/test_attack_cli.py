@@ -1,0 +1,153 @@
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from kadv import box_room
+
+BIN = Path(sys.executable).parent
+SMALL = ["render.height=48", "render.width=64", "attack.steps=4", "attack.restarts=2", "attack.init_views=2",
+         "attack.init_candidates=8", "progress=false"]
+
+
+def _command(tool: str, run_dir: Path, *overrides: str) -> list[str]:
+    return [str(BIN / tool), f"hydra.run.dir={run_dir}", *overrides]
+
+
+def _run(tool: str, cwd: Path, run_dir: str, *overrides: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(_command(tool, cwd / run_dir, *overrides), cwd=cwd, capture_output=True, text=True,
+                          timeout=600, env={**os.environ, **(env or {})})
+
+
+@pytest.fixture(scope="module")
+def demo_runs(tmp_path_factory) -> Path:
+    """Two runs of one config (one with its video), to compare."""
+    root = tmp_path_factory.mktemp("attack")
+    for name, video in (("first", "video=true"), ("second", "video=false")):
+        result = _run("kadv-attack", root, name, *SMALL, video)
+        assert result.returncode == 0, result.stderr
+    return root
+
+
+def test_two_runs_of_one_config_write_identical_trajectories(demo_runs: Path) -> None:
+    first = (demo_runs / "first" / "trajectory.csv").read_bytes()
+    assert first == (demo_runs / "second" / "trajectory.csv").read_bytes()
+    rows = first.decode().splitlines()
+    assert len(rows) == 1 + 2 * 2 * 5  # header + init views x restarts x (steps + 1)
+    header = rows[0].split(",")
+    for column in ("step", "restart", "theta_x", "c_z", "l_depth", "l_dist", "objective", "delta1", "abs_rel",
+                   "verdict", "guard_fraction", "coverage", "rgb_error", "depth_error", "refreshed"):
+        assert column in header
+
+
+def test_run_directory_holds_every_artefact(demo_runs: Path) -> None:
+    run = demo_runs / "first"
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["complete"] and summary["seed"] == 0 and summary["device"] == "cpu"
+    assert {"torch", "kornia", "kadv"} <= set(summary["versions"])
+    assert len(summary["init_views"]) == 2
+    init_params = json.loads((run / "init_params.json").read_text())["init_views"]
+    assert [v["name"] for v in init_params] == [v["name"] for v in summary["init_views"]]
+    for view in summary["init_views"]:
+        assert view["budget"]["forward"] == 10 and view["budget"]["backward"] == 8
+        for entry in [view["init"], *view["adversarial"]]:
+            with Image.open(run / entry["png"]) as image:
+                assert image.size[0] > 4 * 64
+            arrays = np.load(run / entry["png"].replace(".png", ".npz"))
+            assert arrays["rgb"].shape == (48, 64, 3) and arrays["depth"].shape == (48, 64)
+            assert arrays["world_T_cam"].shape == (4, 4) and arrays["K"].shape == (3, 3)
+            assert np.allclose(arrays["world_T_cam"][:3, 3], entry["centre"])
+        assert all(a["l_depth"] >= b["l_depth"] for a, b in zip(view["adversarial"], view["adversarial"][1:]))
+    for picture in ("loss.png", "map.png"):
+        with Image.open(run / picture) as image:
+            assert min(image.size) > 200
+    assert (run / "trajectory.mp4").stat().st_size > 1000
+    assert not (demo_runs / "second" / "trajectory.mp4").exists()
+    assert "attack" in (run / "config.yaml").read_text()
+
+
+def test_a_complete_run_is_skipped(demo_runs: Path) -> None:
+    run = demo_runs / "second"
+    before = {p: p.stat().st_mtime_ns for p in run.rglob("*") if p.is_file() and ".hydra" not in p.parts}
+    result = _run("kadv-attack", demo_runs, "second", *SMALL, "video=false")
+    assert result.returncode == 0 and "already complete" in result.stdout
+    assert before == {p: p.stat().st_mtime_ns for p in run.rglob("*") if p.is_file() and ".hydra" not in p.parts}
+
+
+def test_a_killed_run_resumes_without_redoing_finished_init_views(demo_runs: Path, tmp_path: Path) -> None:
+    overrides = [*SMALL, "video=false"]
+    process = subprocess.Popen(_command("kadv-attack", tmp_path / "run", *overrides), cwd=tmp_path,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    part = tmp_path / "run" / "partial" / "init0.json"
+    deadline = time.monotonic() + 300
+    while not part.exists() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    assert part.exists() and not (tmp_path / "run" / "summary.json").exists()
+    written = part.stat().st_mtime_ns
+    result = _run("kadv-attack", tmp_path, "run", *overrides)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["resumed_init_views"] == [0]
+    assert part.stat().st_mtime_ns == written
+    assert sorted(p.name for p in (tmp_path / "run" / "partial").iterdir()) == ["init0.json", "init1.json"]
+    assert (tmp_path / "run" / "trajectory.csv").read_bytes() == (demo_runs / "first" / "trajectory.csv").read_bytes()
+
+
+def test_help_says_what_the_command_does_and_writes() -> None:
+    result = subprocess.run([str(BIN / "kadv-attack"), "--help"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0
+    assert result.stdout.startswith("kadv-attack: finds camera views")
+    for name in ("trajectory.csv", "summary.json", "init_params.json", "views/", "map.png"):
+        assert name in result.stdout
+
+
+def _inside_box_params(tmp_path: Path) -> Path:
+    scene = box_room(seed=0)
+    box = scene.vertices[scene.faces[scene.material_ids == 6]].reshape(-1, 3).mean(axis=0)
+    pose = np.eye(4)
+    pose[:3, 3] = box
+    path = tmp_path / "inside.json"
+    path.write_text(json.dumps({"init_views": [{"name": "boxed", "source": "given", "world_T_cam": pose.tolist(),
+                                                "fov_x_deg": 70.0, "delta1": None, "note": ""}]}))
+    return path
+
+
+BAD_INPUTS = [
+    ("kadv-attack", ["scene=file", "scene.path=/no/such/scene.xml"], "/no/such/scene.xml"),
+    ("kadv-attack", ["scene=file", "scene.path={corrupt}"], "corrupt.xml"),
+    ("kadv-attack", ["attack.steps=-3"], "attack.steps"),
+    ("kadv-attack", ["model.name=no_such_model"], "no_such_model"),
+    ("kadv-attack", ["render.supersample=0"], "render.supersample"),
+    ("kadv-attack", ["model=depth_anything_v2_small"], "depth_anything_v2_small"),
+    ("kadv-attack", ["attack.init_params={inside}"], "inside an object"),
+    ("kadv-attack", ["attack.init_params=/no/such/init_params.json"], "/no/such/init_params.json"),
+    ("kadv-render", ["camera.eye=[1,1.5]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),
+    ("kadv-render", ["camera.eye=[nan,1.5,1]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),
+    ("kadv-render", ["render.supersample=0"], "render.supersample"),
+    ("kadv-render", ["scene=file", "scene.path=/no/such/room.glb"], "/no/such/room.glb"),
+]
+
+
+@pytest.mark.parametrize("tool, overrides, named", BAD_INPUTS, ids=[" ".join(o) for _, o, _ in BAD_INPUTS])
+def test_bad_input_gives_one_line_and_exit_status_2(tool, overrides, named, tmp_path: Path) -> None:
+    corrupt = tmp_path / "corrupt.xml"
+    corrupt.write_text("<scene version='0.6.0'><shape type='obj'>")
+    values = {"corrupt": corrupt, "inside": _inside_box_params(tmp_path)}
+    overrides = [o.format(**values) for o in overrides]
+    offline = {"HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf"), "HYDRA_FULL_ERROR": "0"}
+    result = _run(tool, tmp_path, "run", *SMALL[:2], *overrides, env=offline)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
+    assert lines[0].startswith(f"{tool}: error: ") and named in lines[0], lines[0]
