@@ -22,7 +22,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)
-	cd benchmarks && for b in render penalty gradcheck tiny_accuracy; do ../$(BIN)/python $$b.py || exit 1; done
+	cd benchmarks && for b in render penalty gradcheck tiny_accuracy attack_step attack_vs_baselines; do ../$(BIN)/python $$b.py || exit 1; done
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache

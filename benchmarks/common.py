@@ -33,3 +33,8 @@ def median_seconds(fn: Callable[[], object], repeats: int = 7, warmup: int = 1) 
         fn()
         times.append(time.perf_counter() - start)
     return statistics.median(times)
+
+
+def load_bench_scene(name: str) -> Scene:
+    """A real scene by name, or the procedural box room for "box_room"."""
+    return box_room(seed=0) if name == "box_room" else load_scene(scenes_root() / name / "scene.xml")

@@ -99,7 +99,7 @@ def load_huggingface(source: str, name: str | None = None, hub_id: str | None = 
     reason = "the hub is offline (HF_HUB_OFFLINE=1)" if hub_offline() else "the download failed"
     raise ModelWeightsUnavailable(
         f"model {name!r}: weights not found in {where} and {reason}. Provide them by passing a local "
-        f"directory in save_pretrained layout (load_model('/path/to/dir') or model.path=/path/to/dir), or download "
+        f"directory in save_pretrained layout (load_model('/path/to/dir') or model.weights=/path/to/dir), or download "
         f"'{hub_id or source}' into the Hugging Face cache on a machine with internet (huggingface-cli download "
         f"{hub_id or source}) and copy the cache (HF_HOME) here."
     ) from last_error
