@@ -51,10 +51,9 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
     params = torch.zeros(1, 6, dtype=torch.float64)
     penalty = objective.penalty
     config = AttackConfig(steps=STEPS, restarts=1)
-    attack(objective, differentiable, [view], HEIGHT, WIDTH, AttackConfig(steps=1, restarts=1), 0, penalty.margin,
-           penalty.validity_options(), progress=False)  # warm-up: first calls allocate and pick kernels
-    run = attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, penalty.margin,
-                 penalty.validity_options(), progress=False)
+    attack(objective, differentiable, [view], HEIGHT, WIDTH, AttackConfig(steps=1, restarts=1), 0,
+           progress=False)  # warm-up: first calls allocate and pick kernels
+    run = attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
     parts = {"step": run.views[0].budget.seconds / (STEPS + 1)}
 
     def render_forward():

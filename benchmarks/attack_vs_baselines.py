@@ -47,7 +47,7 @@ def main() -> None:
         views += sample_init_views(renderer, model, 2, 0, InitViewConfig(), penalty, HEIGHT, WIDTH)
         for view in views:
             run = lambda config: attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0,  # noqa: E731
-                                        penalty.margin, penalty.validity_options(), progress=False).views[0]
+                                        progress=False).views[0]
             results = {"gradient": run(GRADIENT)}
             seconds = results["gradient"].budget.seconds
             for method in ("random", "cma"):

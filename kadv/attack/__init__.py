@@ -13,7 +13,8 @@ from kadv.attack.init_views import (
     save_init_params,
     score_views,
 )
-from kadv.attack.objective import Objective, ObjectiveTerms, PenaltyConfig
+from kadv.attack.objective import Objective, ObjectiveTerms
+from kadv.penalties import PenaltyConfig
 from kadv.attack.records import AttackResult, Budget, InitViewResult, ViewRecord, select_top_views, separated
 from kadv.attack.runner import attack
 from kadv.attack.search import METHODS, AttackConfig, SearchContext

@@ -14,12 +14,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from kadv.attack.objective import PenaltyConfig
 from kadv.geometry import axis_angle_to_matrix, check_world_T_cam, intrinsics_from_fov, look_at
 from kadv.io import write_json
 from kadv.losses import depth_metrics
 from kadv.models import DepthModel
-from kadv.penalties import distance_to_surface, step_guard, view_validity
+from kadv.penalties import PenaltyConfig, distance_to_surface, step_guard, view_validity
 from kadv.render import ExactRenderer
 
 __all__ = [

@@ -12,52 +12,10 @@ import torch
 
 from kadv.losses import depth_metrics, minmax_normalize, to_comparison_space
 from kadv.models import DepthModel
-from kadv.penalties import distance_to_surface, shortcut_penalty
+from kadv.penalties import PenaltyConfig, distance_to_surface, shortcut_penalty
 from kadv.render import ExactRenderer
 
-__all__ = ["Objective", "ObjectiveTerms", "PenaltyConfig"]
-
-
-@dataclass(frozen=True)
-class PenaltyConfig:
-    """Shortcut penalty, step guard and view validity settings (``conf/penalty/``), metres.
-
-    Attributes:
-        d_th: L_dist = 1/d - 1/d_th below this distance to the nearest surface.
-        weight: lambda in L_depth - lambda * L_dist.
-        margin: step guard: a step may not end (or pass) closer than this to a surface.
-        near: near plane of the view-validity check.
-        min_distance: an optical centre nearer than this to a surface makes a view "too close".
-        probe_rays: directions of the spherical inside/outside probe.
-        outside_threshold: probe escape fraction above which a centre is outside the scene.
-        inside_threshold: probe back-face fraction above which a centre is inside an object.
-    """
-
-    d_th: float = 0.2
-    weight: float = 1.0
-    margin: float = 0.1
-    near: float = 0.05
-    min_distance: float = 0.05
-    probe_rays: int = 512
-    outside_threshold: float = 0.3
-    inside_threshold: float = 0.5
-
-    def __post_init__(self) -> None:
-        for name in ("d_th", "margin", "near", "min_distance"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"penalty.{name} must be positive, got {getattr(self, name)}")
-        if self.weight < 0:
-            raise ValueError(f"penalty.weight must be >= 0, got {self.weight}")
-        if self.probe_rays < 16:
-            raise ValueError(f"penalty.probe_rays must be >= 16, got {self.probe_rays}")
-        for name in ("outside_threshold", "inside_threshold"):
-            if not 0 < getattr(self, name) < 1:
-                raise ValueError(f"penalty.{name} must be in (0, 1), got {getattr(self, name)}")
-
-    def validity_options(self) -> dict[str, float | int]:
-        """Keyword arguments of :func:`kadv.penalties.view_validity`."""
-        return {"near": self.near, "min_distance": self.min_distance, "probe_rays": self.probe_rays,
-                "outside_threshold": self.outside_threshold, "inside_threshold": self.inside_threshold}
+__all__ = ["Objective", "ObjectiveTerms"]
 
 
 @dataclass

@@ -23,8 +23,7 @@ _METHODS: dict[str, SearchMethod] = {"gradient": gradient_search, "random": rand
 
 
 def attack(objective: Objective, differentiable: DifferentiableRenderer, init_views: list[InitView], height: int,
-           width: int, config: AttackConfig, seed: int, margin: float, validity_options: dict | None = None,
-           completed: dict[int, InitViewResult] | None = None,
+           width: int, config: AttackConfig, seed: int, completed: dict[int, InitViewResult] | None = None,
            on_result: Callable[[int, InitViewResult], None] | None = None, progress: bool = True) -> AttackResult:
     """Search for adversarial views from every init view with ``config.method``.
 
@@ -32,15 +31,13 @@ def attack(objective: Objective, differentiable: DifferentiableRenderer, init_vi
     interruption (``completed`` holds the init views already done) gives the same results.
 
     Args:
-        objective: what to maximise.
+        objective: what to maximise; its penalty settings also rule the step guard and view validity.
         differentiable: the differentiable renderer (the gradient method's; black-box methods use
             its exact renderer and supersampling).
         init_views: starting views.
         height, width: image size.
         config: search settings.
         seed: the run's seed.
-        margin: the step guard's margin (``penalty.margin``).
-        validity_options: keyword arguments of ``view_validity``.
         completed: results already computed, by init-view index; they are not recomputed.
         on_result: called with (index, result) as each init view finishes (to save it).
         progress: show a tqdm bar.
@@ -58,7 +55,7 @@ def attack(objective: Objective, differentiable: DifferentiableRenderer, init_vi
                 continue
             bar.set_description(f"{config.method} attack, init view {index + 1}/{len(init_views)}")
             differentiable.reset()
-            context = SearchContext(objective, differentiable, init, height, width, margin, validity_options or {})
+            context = SearchContext(objective, differentiable, init, height, width)
             started = time.perf_counter()
             view_result = method(context, config, np.random.default_rng([seed, index]), bar)
             view_result.budget.seconds = time.perf_counter() - started

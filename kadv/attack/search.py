@@ -114,20 +114,18 @@ class SearchContext:
         differentiable: the differentiable renderer (its exact renderer must be the objective's).
         init: the init view.
         height, width: image size.
-        margin: the step guard's margin.
-        validity_options: keyword arguments of ``view_validity``.
     """
 
     def __init__(self, objective: Objective, differentiable: DifferentiableRenderer, init: InitView, height: int,
-                 width: int, margin: float, validity_options: dict) -> None:
+                 width: int) -> None:
         self.objective = objective
         self.differentiable = differentiable
         self.renderer = differentiable.exact
         self.init = init
         self.height, self.width = height, width
         self.K = intrinsics_from_fov(init.fov_x_deg, height, width)
-        self.margin = margin
-        self.validity_options = validity_options
+        self.margin = objective.penalty.margin
+        self.validity_options = objective.penalty.validity_options()
 
     def base(self, batch: int) -> torch.Tensor:
         return self.init.world_T_cam.double()[None].expand(batch, 4, 4)

@@ -103,7 +103,7 @@ def main(cfg: DictConfig) -> float:
     if completed:
         log.info("resuming: %d of %d init views already done", len(completed), len(views))
     result = attack(objective, DifferentiableRenderer(renderer, diff_config), views, height, width, attack_config,
-                    int(cfg.seed), penalty.margin, penalty.validity_options(), completed=completed,
+                    int(cfg.seed), completed=completed,
                     on_result=lambda index, view: save_partial_result(run_dir, index, view), progress=cfg.progress)
     info = {"scene": scene.name, "model": model.name, "loss": cfg.loss.kind, "seed": int(cfg.seed),
             "device": cfg.device, "height": height, "width": width, "resumed_init_views": sorted(completed)}

@@ -1,11 +1,13 @@
 """Keeping the camera honest: distance to surfaces, the shortcut penalty, step guard, view validity."""
 from __future__ import annotations
 
+from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface, shortcut_penalty
 from kadv.penalties.guard import StepCheck, step_guard
 from kadv.penalties.validity import ViewValidity, fibonacci_sphere, probe_directions_hits, view_validity
 
 __all__ = [
+    "PenaltyConfig",
     "StepCheck",
     "ViewValidity",
     "distance_to_surface",

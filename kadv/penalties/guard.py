@@ -6,6 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface
 from kadv.render.raycast import ExactRenderer
 
@@ -39,7 +40,7 @@ def _perpendicular_basis(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return first, np.cross(direction, first)
 
 
-def step_guard(renderer: ExactRenderer, c_old: torch.Tensor, c_new: torch.Tensor, margin: float = 0.02) -> StepCheck:
+def step_guard(renderer: ExactRenderer, c_old: torch.Tensor, c_new: torch.Tensor, margin: float = PenaltyConfig.margin) -> StepCheck:
     """Check the straight moves c_old -> c_new (B, 3) against the scene's surfaces.
 
     A step is refused when its segment crosses a surface, passes within ``margin`` of the first

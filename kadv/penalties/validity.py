@@ -25,6 +25,7 @@ import torch
 
 from kadv.geometry.camera import pixel_rays
 from kadv.geometry.pose import check_world_T_cam
+from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface
 from kadv.render.raycast import ExactRenderer
 
@@ -87,11 +88,11 @@ def view_validity(
     height: int,
     width: int,
     *,
-    near: float = 0.05,
-    min_distance: float = 0.05,
-    probe_rays: int = 512,
-    outside_threshold: float = 0.3,
-    inside_threshold: float = 0.5,
+    near: float = PenaltyConfig.near,
+    min_distance: float = PenaltyConfig.min_distance,
+    probe_rays: int = PenaltyConfig.probe_rays,
+    outside_threshold: float = PenaltyConfig.outside_threshold,
+    inside_threshold: float = PenaltyConfig.inside_threshold,
 ) -> ViewValidity:
     """Classify B camera views.
 

@@ -6,16 +6,14 @@ import time
 import pytest
 import torch
 
-from kadv.attack import AttackConfig, PenaltyConfig, ViewRecord, attack, select_top_views, separated
+from kadv.attack import AttackConfig, ViewRecord, attack, select_top_views, separated
 
 H, W = 48, 64
 
 
 def _run(objective, differentiable, views, size=(H, W), **overrides):
-    penalty = PenaltyConfig()
     config = AttackConfig(**{"steps": 10, "restarts": 2, **overrides})
-    return attack(objective, differentiable, views, *size, config, seed=0, margin=penalty.margin,
-                  validity_options=penalty.validity_options(), progress=False)
+    return attack(objective, differentiable, views, *size, config, seed=0, progress=False)
 
 
 def test_ten_gradient_steps_raise_l_depth_on_every_restart(tiny_objective, differentiable, file_view) -> None:
