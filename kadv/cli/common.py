@@ -10,6 +10,7 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import functools  # noqa: E402
+import logging  # noqa: E402
 import math  # noqa: E402
 import re  # noqa: E402
 import sys  # noqa: E402
@@ -18,15 +19,19 @@ from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import torch  # noqa: E402
+from hydra.core.hydra_config import HydraConfig  # noqa: E402
+from hydra.types import RunMode  # noqa: E402
 from omegaconf import DictConfig, OmegaConf  # noqa: E402
 from omegaconf.errors import OmegaConfBaseException  # noqa: E402
 
 from kadv.errors import WeightsUnavailable  # noqa: E402
 from kadv.geometry import look_at  # noqa: E402
+from kadv.io import write_json  # noqa: E402
 from kadv.render import Shading  # noqa: E402
 from kadv.scenes import Scene, box_room, load_scene  # noqa: E402
 
 __all__ = [
+    "FAILURE",
     "camera_from_config",
     "check_render_config",
     "dirname",
@@ -40,22 +45,40 @@ __all__ = [
 USER_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, WeightsUnavailable, OmegaConfBaseException)
 
 
+FAILURE = "failure.json"
+
+
+def _one_line(error: BaseException) -> str:
+    return " ".join(str(error).split()) or type(error).__name__
+
+
 def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]], Callable[[DictConfig], Any]]:
     """Decorate a Hydra task so that a user error prints ``<command>: error: <message>`` and exits 2.
 
-    ``HYDRA_FULL_ERROR=1`` re-raises it with its traceback.
+    In a multirun, a failing job must not stop the others: any error is logged with its traceback,
+    written to the job's ``failure.json`` (the sweep's callback gathers them into ``failures.json``)
+    and the job returns. ``HYDRA_FULL_ERROR=1`` re-raises errors with their traceback.
     """
     def decorate(task: Callable[[DictConfig], Any]) -> Callable[[DictConfig], Any]:
         @functools.wraps(task)
         def wrapped(cfg: DictConfig) -> Any:
+            hydra_config = HydraConfig.get()
+            multirun = hydra_config.mode == RunMode.MULTIRUN
+            failure = Path(hydra_config.runtime.output_dir) / FAILURE
+            failure.unlink(missing_ok=True)
             try:
                 return task(cfg)
-            except USER_ERRORS as error:
-                if os.environ.get("HYDRA_FULL_ERROR") == "1":
+            except Exception as error:
+                if os.environ.get("HYDRA_FULL_ERROR") == "1" or not (multirun or isinstance(error, USER_ERRORS)):
                     raise
-                message = " ".join(str(error).split())
-                print(f"{command}: error: {message}", file=sys.stderr)
-                sys.exit(2)
+                message = f"{command}: error: {_one_line(error)}"
+                print(message, file=sys.stderr)
+                if not multirun:
+                    sys.exit(2)
+                logging.getLogger(command).error("job failed", exc_info=error)
+                write_json(failure, {"job": hydra_config.job.num, "overrides": list(hydra_config.overrides.task),
+                                     "error": message})
+                return None
         return wrapped
     return decorate
 

@@ -1,0 +1,174 @@
+"""Reading a sweep's run directories and turning them into the study's tables and more.
+
+Table 2: adversarial L_depth and delta1 per model x scene with averages; Table 3: the change from
+the init views (adversarial - init for L_depth, init - adversarial for delta1); the method table
+(each method's gain, evaluations and seconds per model x scene); the transfer matrix.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import statistics
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from kadv.io import atomic_write
+from kadv.report.run import SUMMARY
+
+__all__ = ["RunRecord", "Table", "collect_runs", "method_table", "primary_method", "table2", "table3"]
+
+
+@dataclass
+class RunRecord:
+    """One complete run directory: its summary, its resolved config and where it is."""
+
+    path: Path
+    summary: dict
+    config: dict
+
+    @property
+    def model(self) -> str:
+        return self.summary["model"]
+
+    @property
+    def scene(self) -> str:
+        return self.summary["scene"]
+
+    @property
+    def method(self) -> str:
+        return self.summary["method"]
+
+
+@dataclass
+class Table:
+    """A table with a header row; cells are strings or numbers."""
+
+    title: str
+    header: list[str]
+    rows: list[list] = field(default_factory=list)
+
+    def markdown(self, digits: int = 4) -> str:
+        def cell(value) -> str:
+            return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
+
+        lines = [f"| {' | '.join(self.header)} |", f"|{'---|' * len(self.header)}"]
+        lines += [f"| {' | '.join(cell(v) for v in row)} |" for row in self.rows]
+        return "\n".join(lines) + "\n"
+
+    def csv(self) -> str:
+        buffer = io.StringIO()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(self.header)
+        writer.writerows(self.rows)
+        return buffer.getvalue()
+
+    def write(self, folder: Path, stem: str) -> list[Path]:
+        markdown, text = f"## {self.title}\n\n{self.markdown()}", self.csv()
+        return [atomic_write(folder / f"{stem}.md", lambda tmp: tmp.write_text(markdown)),
+                atomic_write(folder / f"{stem}.csv", lambda tmp: tmp.write_text(text))]
+
+
+def collect_runs(paths: list[str | Path]) -> list[RunRecord]:
+    """Complete runs under the given sweep or run directories (those holding ``summary.json``).
+
+    Raises:
+        FileNotFoundError: a path that does not exist.
+        ValueError: no complete run under any of the paths.
+    """
+    runs, seen = [], set()
+    for path in map(Path, paths):
+        if not path.exists():
+            raise FileNotFoundError(f"no such run or sweep directory: {path}")
+        for summary in sorted([path / SUMMARY] if (path / SUMMARY).is_file() else path.rglob(SUMMARY)):
+            run_dir = summary.parent.resolve()
+            if run_dir in seen:
+                continue
+            seen.add(run_dir)
+            config_file = run_dir / "config.yaml"
+            config = yaml.safe_load(config_file.read_text()) if config_file.is_file() else {}
+            runs.append(RunRecord(run_dir, json.loads(summary.read_text()), config))
+    if not runs:
+        raise ValueError(f"no complete run (a folder with {SUMMARY}) under {', '.join(map(str, paths))}")
+    return runs
+
+
+def primary_method(runs: list[RunRecord]) -> str:
+    methods = {r.method for r in runs}
+    return "gradient" if "gradient" in methods else sorted(methods)[0]
+
+
+def _grid(runs: list[RunRecord], value) -> tuple[list[str], list[str], dict[tuple[str, str], float]]:
+    """Mean of ``value(run)`` per (model, scene) over the runs of the primary method."""
+    method = primary_method(runs)
+    cells: dict[tuple[str, str], list[float]] = defaultdict(list)
+    for run in runs:
+        if run.method == method:
+            cells[run.model, run.scene].append(value(run))
+    models = sorted({m for m, _ in cells})
+    scenes = sorted({s for _, s in cells})
+    return models, scenes, {key: statistics.mean(values) for key, values in cells.items()}
+
+
+def _paired_table(title: str, runs: list[RunRecord], first: tuple[str, object], second: tuple[str, object]) -> Table:
+    """Models as rows; per scene a column pair (first, second); then their averages over scenes."""
+    grids = [_grid(runs, getter) for _, getter in (first, second)]
+    models, scenes = grids[0][0], grids[0][1]
+    header = ["model"] + [f"{scene} {name}" for scene in scenes for name in (first[0], second[0])]
+    header += [f"Avg {first[0]}", f"Avg {second[0]}"]
+    table = Table(title, header)
+    for model in models:
+        row: list = [model]
+        averages: list[list[float]] = [[], []]
+        for scene in scenes:
+            for k, (_, _, values) in enumerate(grids):
+                value = values.get((model, scene))
+                row.append(value if value is not None else "")
+                if value is not None:
+                    averages[k].append(value)
+        row += [statistics.mean(a) if a else "" for a in averages]
+        table.rows.append(row)
+    footer: list = ["Avg"]
+    for column in range(1, len(header)):
+        values = [row[column] for row in table.rows if isinstance(row[column], float)]
+        footer.append(statistics.mean(values) if values else "")
+    table.rows.append(footer)
+    return table
+
+
+def table2(runs: list[RunRecord]) -> Table:
+    """The study's Table 2: adversarial L_depth (higher: worse for the model) and delta1 (lower: worse)."""
+    return _paired_table(f"Table 2: adversarial views ({primary_method(runs)} attack)", runs,
+                         ("L_depth", lambda r: r.summary["adversarial_l_depth"]),
+                         ("delta1", lambda r: r.summary["adversarial_delta1"]))
+
+
+def table3(runs: list[RunRecord]) -> Table:
+    """The study's Table 3: adversarial - init for L_depth, init - adversarial for delta1."""
+    return _paired_table(f"Table 3: change from the init views ({primary_method(runs)} attack)", runs,
+                         ("dL_depth", lambda r: r.summary["adversarial_l_depth"] - r.summary["init_l_depth"]),
+                         ("ddelta1", lambda r: r.summary["init_delta1"] - r.summary["adversarial_delta1"]))
+
+
+def method_table(runs: list[RunRecord]) -> Table | None:
+    """Per model x scene x method: L_depth gain, evaluations and seconds per init view (None with one method)."""
+    if len({r.method for r in runs}) < 2:
+        return None
+    cells: dict[tuple[str, str, str], list[RunRecord]] = defaultdict(list)
+    for run in runs:
+        cells[run.model, run.scene, run.method].append(run)
+    table = Table("Methods at equal budget", ["model", "scene", "method", "L_depth gain", "delta1 drop",
+                                              "evaluations / init view", "seconds / init view"])
+    for (model, scene, method), group in sorted(cells.items()):
+        views = [v for run in group for v in run.summary["init_views"]]
+        table.rows.append([
+            model, scene, method,
+            statistics.mean(r.summary["adversarial_l_depth"] - r.summary["init_l_depth"] for r in group),
+            statistics.mean(r.summary["init_delta1"] - r.summary["adversarial_delta1"] for r in group),
+            statistics.mean(v["budget"]["forward"] for v in views),
+            statistics.mean(v["budget"]["seconds"] for v in views),
+        ])
+    return table

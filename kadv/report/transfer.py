@@ -1,0 +1,71 @@
+"""Transfer: each model's adversarial views, re-rendered from their saved poses, scored by every model."""
+from __future__ import annotations
+
+import statistics
+from collections import defaultdict
+from collections.abc import Callable
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from kadv.attack import Objective
+from kadv.losses import depth_metrics
+from kadv.models import DepthModel
+from kadv.penalties import PenaltyConfig
+from kadv.render import ExactRenderer
+from kadv.report.sweep import RunRecord, Table, primary_method
+
+__all__ = ["transfer_tables"]
+
+
+def _adversarial_poses(run: RunRecord) -> tuple[torch.Tensor, torch.Tensor]:
+    """The run's adversarial poses (N, 4, 4) and intrinsics (N, 3, 3), from the views' .npz files."""
+    poses, Ks = [], []
+    for view in run.summary["init_views"]:
+        for adversarial in view["adversarial"]:
+            arrays = np.load(run.path / adversarial["png"].replace(".png", ".npz"))
+            poses.append(torch.from_numpy(arrays["world_T_cam"]).double())
+            Ks.append(torch.from_numpy(arrays["K"]).double())
+    return torch.stack(poses), torch.stack(Ks)
+
+
+def transfer_tables(runs: list[RunRecord], renderer_of: Callable[[RunRecord], ExactRenderer],
+                    model_of: Callable[[RunRecord], DepthModel],
+                    loss: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], space: str = "disparity",
+                    progress: bool = True) -> tuple[Table, Table]:
+    """delta1 and L_depth of every model (columns) on every model's adversarial views (rows).
+
+    Each run's adversarial poses are re-rendered exactly at the run's size and scored by each model
+    in the sweep; cells average over scenes and views. The diagonal reproduces the runs' own scores.
+    """
+    method = primary_method(runs)
+    runs = [r for r in runs if r.method == method]
+    models = {r.model: r for r in runs}
+    names = sorted(models)
+    scores: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: {"delta1": [], "l_depth": []})
+    with tqdm(total=len(runs) * len(names), desc="transfer: re-rendering views", disable=not progress) as bar:
+        for run in runs:
+            renderer = renderer_of(run)
+            poses, Ks = _adversarial_poses(run)
+            height, width = run.summary["height"], run.summary["width"]
+            supersample = int(run.config.get("render", {}).get("supersample", 1))
+            with torch.no_grad():
+                out = renderer.render(poses, Ks, height, width, supersample=supersample)
+                for name in names:
+                    model = model_of(models[name])
+                    objective = Objective(model, loss, renderer, PenaltyConfig(), space)
+                    prediction = model(out.rgb)
+                    l_depth = objective.l_depth(out.depth.double(), prediction.double(), out.mask)
+                    delta1 = depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)["delta1"]
+                    scores[run.model, name]["delta1"] += delta1.tolist()
+                    scores[run.model, name]["l_depth"] += l_depth.tolist()
+                    bar.update(1)
+    tables = []
+    for key, title in (("delta1", "Transfer: delta1 of each model (columns) on each model's adversarial views (rows)"),
+                       ("l_depth", "Transfer: L_depth of each model (columns) on each model's adversarial views (rows)")):
+        table = Table(title, ["views of \\ scored by", *names])
+        for source in names:
+            table.rows.append([source] + [statistics.mean(scores[source, target][key]) for target in names])
+        tables.append(table)
+    return tables[0], tables[1]
