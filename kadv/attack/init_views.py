@@ -35,6 +35,11 @@ __all__ = [
 ]
 
 
+# Candidates are drawn in rounds until enough pass; a scene whose bounds are mostly outdoors or
+# solid needs several rounds, one with no free space at eye height needs all of them.
+_SAMPLING_ROUNDS = 30
+
+
 class InitViewError(ValueError):
     """An init view that cannot serve: inside an object, outside the scene, or stuck at a surface."""
 
@@ -78,7 +83,7 @@ class InitViewConfig:
         file_cameras: start from the scene file's cameras.
         candidates: M, sampled candidates to score with the model.
         clearance: minimum distance of a sampled centre to any surface; None: 2 * penalty.d_th.
-        eye_height: range of the centre's height above the scene's floor (lowest point), metres.
+        eye_height: range of the centre's height above the surface straight below it, metres.
         pitch_deg, roll_deg: ranges of the view's pitch (positive: up) and roll.
         fov_x_deg: horizontal field of view of sampled views.
         min_hit_fraction: a sampled view must see a surface in at least this fraction of pixels.
@@ -92,7 +97,7 @@ class InitViewConfig:
     pitch_deg: tuple[float, float] = (-25.0, 10.0)
     roll_deg: tuple[float, float] = (-5.0, 5.0)
     fov_x_deg: float = 70.0
-    min_hit_fraction: float = 0.9
+    min_hit_fraction: float = 0.8
 
     def __post_init__(self) -> None:
         if self.count < 1:
@@ -156,9 +161,10 @@ def file_init_views(renderer: ExactRenderer, margin: float) -> list[InitView]:
 
 
 def score_views(model: DepthModel, renderer: ExactRenderer, poses: torch.Tensor, fov_x_deg: torch.Tensor,
-                height: int, width: int, batch_size: int = 8) -> torch.Tensor:
-    """delta1 (N,) of the model at N poses (N, 4, 4) with fields of view (N,), at the given size."""
-    scores = []
+                height: int, width: int, batch_size: int = 8) -> tuple[torch.Tensor, torch.Tensor]:
+    """delta1 (N,) of the model at N poses (N, 4, 4) with fields of view (N,), at the given size,
+    and each view's depth range log(max / min) over its valid pixels (N,)."""
+    scores, spreads = [], []
     with torch.no_grad():
         for start in range(0, len(poses), batch_size):
             chunk = slice(start, start + batch_size)
@@ -166,17 +172,27 @@ def score_views(model: DepthModel, renderer: ExactRenderer, poses: torch.Tensor,
             out = renderer.render(poses[chunk], K, height, width)
             prediction = model(out.rgb)
             scores.append(depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)["delta1"])
-    return torch.cat(scores)
+            depth = out.depth.double()
+            far = torch.where(out.mask, depth, torch.zeros_like(depth)).amax(dim=(1, 2, 3))
+            near = torch.where(out.mask, depth, torch.full_like(depth, torch.inf)).amin(dim=(1, 2, 3))
+            spreads.append(torch.log(far.clamp_min(1e-6) / near.clamp_min(1e-6)))
+    return torch.cat(scores), torch.cat(spreads)
 
 
 def _candidate_poses(renderer: ExactRenderer, config: InitViewConfig, count: int, rng: np.random.Generator,
                      clearance: float) -> torch.Tensor:
+    """Up to ``count`` candidate poses; their centres stand at eye height above the surface found
+    straight below a random point of the bounds (a scene's bounds may hold far more than its rooms:
+    a garden, a street), so rooms at any level of any scene get candidates."""
     lo, hi = renderer.scene.bounds
-    floor = lo[1]
-    low = np.array([lo[0] + clearance, max(floor + config.eye_height[0], lo[1] + clearance), lo[2] + clearance])
-    high = np.array([hi[0] - clearance, min(floor + config.eye_height[1], hi[1] - clearance), hi[2] - clearance])
-    high = np.maximum(high, low)
-    centres = rng.uniform(low, high, size=(count, 3))
+    points = rng.uniform(lo + clearance, np.maximum(hi - clearance, lo + clearance), size=(count, 3))
+    down = np.broadcast_to(np.array([0.0, -1.0, 0.0]), points.shape)
+    below = renderer.cast(points, down)
+    floor = points[:, 1] - np.where(below.hit, below.t, np.nan)
+    centres = points.copy()
+    centres[:, 1] = floor + rng.uniform(*config.eye_height, count)
+    centres = centres[below.hit & (centres[:, 1] < hi[1] - clearance)]
+    count = len(centres)
     yaw = rng.uniform(0.0, 2.0 * math.pi, count)
     pitch = np.radians(rng.uniform(*config.pitch_deg, count))
     roll = np.radians(rng.uniform(*config.roll_deg, count))
@@ -194,7 +210,8 @@ def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, se
 
     A candidate's centre is in free space with clearance above ``config.clearance`` (default
     2 * d_th), its height, pitch and roll within the configured ranges; its view must be valid
-    and hit a surface in at least ``min_hit_fraction`` of its pixels.
+    and hit a surface in at least ``min_hit_fraction`` of its pixels. Candidates are ranked by
+    delta1 (to two decimals), ties by the view's depth range, so a bare wall does not win.
 
     Raises:
         InitViewError: if fewer than ``count`` acceptable candidates turn up.
@@ -206,11 +223,11 @@ def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, se
     small_h, small_w = max(8, height // 4), max(8, width // 4)
     K = intrinsics_from_fov(config.fov_x_deg, small_h, small_w)
     accepted: list[torch.Tensor] = []
-    for _ in range(50):
+    for _ in range(_SAMPLING_ROUNDS):
         needed = config.candidates - len(accepted)
         if needed <= 0:
             break
-        poses = _candidate_poses(renderer, config, 4 * needed, rng, clearance)
+        poses = _candidate_poses(renderer, config, 8 * needed, rng, clearance)
         distance = distance_to_surface(renderer, poses[:, :3, 3])
         validity = view_validity(renderer, poses, K, small_h, small_w, **penalty.validity_options())
         keep = validity.valid & (distance > clearance) & (1.0 - validity.miss_fraction >= config.min_hit_fraction)
@@ -220,8 +237,9 @@ def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, se
                             f"valid with clearance {clearance} m (check attack.init_eye_height and the scene's scale)")
     poses = torch.stack(accepted)
     fov = torch.full((len(poses),), config.fov_x_deg, dtype=torch.float64)
-    scores = score_views(model, renderer, poses, fov, height, width)
-    order = sorted(range(len(poses)), key=lambda i: -float(scores[i]))[:count]
+    scores, spreads = score_views(model, renderer, poses, fov, height, width)
+    # many views of a bare wall are predicted perfectly; among equally accurate views, prefer depth variety
+    order = sorted(range(len(poses)), key=lambda i: (-round(float(scores[i]), 2), -float(spreads[i])))[:count]
     return [InitView(f"sampled{rank}", "sampled", poses[i], config.fov_x_deg, float(scores[i]),
                      note=f"best {rank + 1} of {len(poses)} candidates by delta1") for rank, i in enumerate(order)]
 
