@@ -1,0 +1,79 @@
+"""Every option of every config group composes, and the YAML defaults equal the library's."""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_module
+from omegaconf import OmegaConf
+
+from kadv.attack import AttackConfig, InitViewConfig
+from kadv.cli.attack import _settings
+from kadv.cli.common import shading_from_config
+from kadv.models import PRESETS
+from kadv.models.train_tiny import TinyTrainConfig
+from kadv.penalties import PenaltyConfig
+from kadv.render import DiffRenderConfig, Shading
+
+CONF = Path(__file__).resolve().parents[2] / "conf"
+
+
+def _options(group: str) -> list[str]:
+    return sorted(p.stem for p in (CONF / group).glob("*.yaml"))
+
+
+def _compose(config: str, *overrides: str):
+    with initialize_config_module(config_module="kadv.conf", version_base="1.3"):
+        return compose(config_name=config, overrides=list(overrides))
+
+
+def _defaults(cls) -> dict:
+    return {f.name: f.default for f in dataclasses.fields(cls)}
+
+
+def test_every_group_option_composes_into_valid_settings() -> None:
+    for group in ("scene", "model", "loss", "render", "penalty", "attack", "experiment"):
+        for option in _options(group):
+            cfg = _compose("kadv_attack", f"{group}={option}")
+            attack, init = _settings(cfg.attack)
+            PenaltyConfig(**OmegaConf.to_container(cfg.penalty))
+            DiffRenderConfig(supersample=cfg.render.supersample, **OmegaConf.to_container(cfg.render.differentiable))
+            shading_from_config(cfg.render.shading)
+            assert cfg.loss.kind in ("ssim", "perceptual") and cfg.loss.space in ("disparity", "depth")
+            assert OmegaConf.is_missing(cfg.model, "name") or cfg.model.name in {*PRESETS, "kadv_tiny"}
+            assert cfg.scene.kind in ("box_room", "file")
+            if group == "attack":
+                assert attack.method == option
+
+
+def test_yaml_defaults_equal_the_library_defaults() -> None:
+    cfg = _compose("kadv_attack", "~experiment")
+    attack, init = _settings(cfg.attack)
+    assert attack == AttackConfig() and init == InitViewConfig()
+    assert OmegaConf.to_container(cfg.penalty) == _defaults(PenaltyConfig)
+    diff = OmegaConf.to_container(cfg.render.differentiable)
+    assert DiffRenderConfig(supersample=cfg.render.supersample, **diff) == DiffRenderConfig()
+    shading = shading_from_config(cfg.render.shading)
+    assert (shading.ambient, shading.diffuse, shading.lights) == (Shading().ambient, Shading().diffuse, Shading().lights)
+    train = OmegaConf.to_container(_compose("kadv_train_tiny").train)
+    assert TinyTrainConfig(**{**train, "channels": tuple(train["channels"])}) == TinyTrainConfig()
+
+
+@pytest.mark.parametrize("experiment, steps, restarts, views, loss", [("demo", 40, 3, 2, "ssim"),
+                                                                     ("paper", 400, 5, 10, "perceptual")])
+def test_experiment_presets(experiment, steps, restarts, views, loss) -> None:
+    cfg = _compose("kadv_attack", f"experiment={experiment}")
+    attack, init = _settings(cfg.attack)
+    assert (attack.steps, attack.restarts, init.count, cfg.loss.kind) == (steps, restarts, views, loss)
+
+
+def test_paper_sweep_is_the_study_grid() -> None:
+    with initialize_config_module(config_module="kadv.conf", version_base="1.3"):
+        cfg = compose(config_name="kadv_attack", overrides=["experiment=paper_sweep"], return_hydra_config=True)
+    params = cfg.hydra.sweeper.params
+    assert params.model.split(",") == ["midas_dpt_large", "zoedepth_nk", "depth_anything_v1_large",
+                                       "depth_anything_v2_large"]
+    assert set(params.scene.split(",")) == {"grey_white_room", "modern_hall", "japanese_classroom"}
+    attack, init = _settings(cfg.attack)
+    assert (attack.steps, attack.restarts, init.count, cfg.loss.kind) == (400, 5, 10, "perceptual")

@@ -1,0 +1,53 @@
+"""The cluster path on a real single-node Slurm: a sweep through Hydra's submitit_slurm launcher."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.cli.slurm import INSTALL, missing_binaries, slurm_cluster
+
+BIN = Path(sys.executable).parent
+TINY = ["render.height=24", "render.width=32", "attack.steps=2", "attack.restarts=2", "attack.init_views=1",
+        "attack.init_candidates=4", "progress=false", "video=false"]
+LAUNCHER = ["hydra/launcher=submitit_slurm", "hydra.launcher.partition=debug", "hydra.launcher.timeout_min=10",
+            "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=1", "hydra.launcher.gpus_per_node=0"]
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory) -> dict[str, str]:
+    missing = missing_binaries()
+    if missing:
+        pytest.fail(f"Slurm is not installed ({', '.join(missing)} missing); install it with: {INSTALL}")
+    if os.geteuid() != 0:
+        pytest.fail("the Slurm test starts munged, slurmctld and slurmd and must run as root")
+    with slurm_cluster(tmp_path_factory.mktemp("slurm")) as env:
+        yield env
+
+
+def _sweep(cluster: dict[str, str], cwd: Path, *overrides: str) -> subprocess.CompletedProcess:
+    command = [str(BIN / "kadv-attack"), "-m", "hydra.sweep.dir=sweep", *LAUNCHER, *TINY, *overrides]
+    return subprocess.run(command, cwd=cwd, env=cluster, capture_output=True, text=True, timeout=300)
+
+
+def test_a_two_job_sweep_runs_on_slurm(cluster, tmp_path: Path) -> None:
+    result = _sweep(cluster, tmp_path, "scene.seed=0,1")
+    assert result.returncode == 0, result.stderr[-3000:]
+    summaries = sorted((tmp_path / "sweep").glob("*/summary.json"))
+    assert len(summaries) == 2
+    scenes = sorted(json.loads(p.read_text())["scene"] for p in summaries)
+    assert scenes == ["box_room_0", "box_room_1"]
+    # the jobs ran through sbatch: submitit keeps their Slurm logs
+    assert list((tmp_path / "sweep" / ".submitit").rglob("*_log.out"))
+
+
+def test_a_job_that_fails_on_slurm_is_reported(cluster, tmp_path: Path) -> None:
+    result = _sweep(cluster, tmp_path, "attack.steps=2,-1")
+    assert result.returncode != 0
+    failures = json.loads((tmp_path / "sweep" / "failures.json").read_text())
+    assert len(failures) == 1 and "attack.steps=-1" in failures[0]["overrides"]
+    assert len(list((tmp_path / "sweep").glob("*/summary.json"))) == 1
