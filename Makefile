@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	  else echo "Open3D needs libusb. Run:  sudo apt-get install -y libusb-1.0-0   then retry."; exit 1; fi; \
 	fi
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet torch==2.13.0 -e ".[test]"
+	$(BIN)/pip install --quiet torch==2.13.0 -e ".[test,reference]"
 	touch $@
 
 demo: $(STAMP)
@@ -22,7 +22,7 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)
-	cd benchmarks && for b in render penalty gradcheck tiny_accuracy attack_step attack_vs_baselines; do ../$(BIN)/python $$b.py || exit 1; done
+	cd benchmarks && for b in render penalty gradcheck tiny_accuracy attack_step attack_vs_baselines reference_render; do ../$(BIN)/python $$b.py || exit 1; done
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache

@@ -1,5 +1,8 @@
 """Gradient check of DifferentiableRenderer against finite differences of supersampled exact renders.
 
+It checks the configurations the attack runs with: ``conf/render/exact.yaml`` (the default, the
+library's DiffRenderConfig()), ``conf/render/warp.yaml``, and the default without silhouettes.
+
 Per scene: 10 seeded poses (>= 0.3 m from any surface, >= 90% of pixels hit, reference confirmed
 by halving its step to cos >= 0.99), functionals sum(W * rgb) and sum(W * depth), interior and
 full, cosine of analytic vs reference 6-vectors (the smaller of the rotation and translation
@@ -8,19 +11,34 @@ Run: .venv/bin/python benchmarks/gradcheck.py [poses] [height] [width]
 """
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
+import yaml
 from common import scenes_root
 
 from kadv.diagnostics import FUNCTIONALS, gradient_check_poses
 from kadv.render import DiffRenderConfig, ExactRenderer
 from kadv.scenes import box_room, load_scene
 
+
+
+def render_preset(name: str) -> DiffRenderConfig:
+    """The DiffRenderConfig a ``render=<name>`` preset in conf/render/ gives the attack."""
+    folder = Path(__file__).resolve().parents[1] / "conf" / "render"
+    preset = yaml.safe_load((folder / f"{name}.yaml").read_text())
+    base = yaml.safe_load((folder / "exact.yaml").read_text())
+    options = {**base["differentiable"], **preset.get("differentiable", {})}
+    return DiffRenderConfig(supersample=preset.get("supersample", base["supersample"]), **options)
+
+
 CONFIGS = {
-    "plain warp": DiffRenderConfig(silhouette=False, supersample=4),
-    "warp + silhouette": DiffRenderConfig(silhouette=True, supersample=4),
+    "no silhouettes": dataclasses.replace(render_preset("exact"), silhouette=False),
+    "render=exact": render_preset("exact"),
+    "render=warp": render_preset("warp"),
 }
 
 
@@ -37,10 +55,10 @@ def main(poses: int = 10, height: int = 96, width: int = 128) -> None:
             medians[scene_name, method] = {f: float(np.median([c.score(f) for c in checks])) for f in FUNCTIONALS}
             row = " ".join(f"{medians[scene_name, method][f]:>15.3f}" for f in FUNCTIONALS)
             print(f"{scene_name:<16} {method:<18} {row}   {seconds:7.0f}")
-    final = "warp + silhouette"
-    interior = min(medians[s, final][f] for s in scenes for f in ("rgb_interior", "depth_interior"))
-    full_box = min(medians["box_room", final][f] for f in ("rgb_full", "depth_full"))
-    full_real = min(medians["grey_white_room", final][f] for f in ("rgb_full", "depth_full"))
+    checked = [m for m in CONFIGS if m != "no silhouettes"]
+    interior = min(medians[s, m][f] for s in scenes for m in checked for f in ("rgb_interior", "depth_interior"))
+    full_box = min(medians["box_room", m][f] for m in checked for f in ("rgb_full", "depth_full"))
+    full_real = min(medians["grey_white_room", m][f] for m in checked for f in ("rgb_full", "depth_full"))
     print(f"gradcheck interior_median_cos={interior:.3f} full_box_median_cos={full_box:.3f} "
           f"full_real_median_cos={full_real:.3f}")
 

@@ -46,30 +46,9 @@ def _gather(maps: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
     return torch.gather(maps, 2, index[:, None, :].expand(-1, maps.shape[1], -1))
 
 
-def _bilinear(anchor: AnchorLayers, layer: int, x: torch.Tensor, y: torch.Tensor, expected: torch.Tensor,
-              plane_tolerance: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Depth-aware bilinear lookup at continuous pixel indices x, y (B, M): colour, point, tap weight."""
-    _, _, _, height, width = anchor.rgb.shape
-    rgb = anchor.rgb[:, layer].flatten(2).double()
-    points = anchor.points[:, layer].flatten(2)
-    normals = anchor.normals[:, layer].flatten(2)
-    mask = anchor.mask[:, layer].flatten(2)[:, 0]
-    x0, y0 = torch.floor(x.detach()), torch.floor(y.detach())
-    fx, fy = x - x0, y - y0
-    colour = point = total = 0.0
-    for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
-        xi, yi = x0 + dx, y0 + dy
-        inside = (xi >= 0) & (xi < width) & (yi >= 0) & (yi < height)
-        index = (yi.clamp(0, height - 1) * width + xi.clamp(0, width - 1)).long()
-        tap_points = _gather(points, index)
-        # the expected point must lie on the tap's surface plane (relative tolerance in depth)
-        off_plane = ((expected - tap_points) * _gather(normals, index)).sum(1).abs()
-        same_surface = inside & torch.gather(mask, 1, index) & (off_plane <= plane_tolerance * expected[:, 2].abs())
-        weight = (fx if dx else 1 - fx) * (fy if dy else 1 - fy) * same_surface
-        colour = colour + weight[:, None] * _gather(rgb, index)
-        point = point + weight[:, None] * tap_points
-        total = total + weight
-    return colour, point, total
+def _hat(offset: torch.Tensor) -> torch.Tensor:
+    """Bilinear weight of a tap ``offset`` pixels away along one axis: max(0, 1 - |offset|)."""
+    return (1.0 - offset.abs()).clamp_min(0.0)
 
 
 def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor, plane_tolerance: float):
@@ -78,22 +57,50 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
     Values come from one bilinear lookup (exact when q falls on anchor pixel centres, as with
     A = P); gradients only from the mean of four lookups half a hi-res pixel away diagonally,
     because a single lookup's derivative at a pixel centre is a one-sided difference and theirs
-    is central.
+    is central. All five lookups read the same 3 x 3 taps, so each tap is fetched and tested
+    against the expected surface once. A tap counts only if the expected point X_A lies on the
+    tap's own surface (within ``plane_tolerance`` of its triangle's plane, relative to depth).
 
     Returns colour (B, 3, M) and point (B, 3, M), normalised, and the valid tap weight (B, M) of
     the value lookup (0 where no tap is on the expected surface).
     """
+    _, _, _, height, width = anchor.rgb.shape
+    # one gather per tap fetches colour, point, normal and mask together
+    maps = torch.cat([anchor.rgb[:, layer].double(), anchor.points[:, layer], anchor.normals[:, layer],
+                      anchor.mask[:, layer].double()], dim=1).flatten(2)
     x, y = q[..., 0] - 0.5, q[..., 1] - 0.5  # continuous pixel index (centres at +0.5)
-    colour, point, total = _bilinear(anchor, layer, x, y, expected, plane_tolerance)
-    symmetric = [_bilinear(anchor, layer, x + ox, y + oy, expected, plane_tolerance)
-                 for ox in (-0.5, 0.5) for oy in (-0.5, 0.5)]
-    weight = sum(t for _, _, t in symmetric).clamp_min(1e-12)[:, None]
-    smooth_colour = sum(c for c, _, _ in symmetric) / weight
-    smooth_point = sum(p for _, p, _ in symmetric) / weight
-    value_weight = total.detach().clamp_min(1e-12)[:, None]
-    colour = (colour / value_weight).detach() + smooth_colour - smooth_colour.detach()
-    point = (point / value_weight).detach() + smooth_point - smooth_point.detach()
-    return colour, point, total.detach()
+    x0, y0 = torch.floor(x.detach() - 0.5), torch.floor(y.detach() - 0.5)  # the taps: x0 + {0, 1, 2}
+    tolerance = plane_tolerance * expected[:, 2].abs()
+    # the four diagonal lookups' weights on tap column i add up to hat(x - 0.5 - x_i) + hat(x + 0.5 - x_i)
+    value_x = [_hat(x.detach() - (x0 + i)) for i in range(3)]
+    value_y = [_hat(y.detach() - (y0 + j)) for j in range(3)]
+    smooth_x = [_hat(x - 0.5 - (x0 + i)) + _hat(x + 0.5 - (x0 + i)) for i in range(3)]
+    smooth_y = [_hat(y - 0.5 - (y0 + j)) + _hat(y + 0.5 - (y0 + j)) for j in range(3)]
+    colour = point = total = smooth_colour = smooth_point = smooth_total = 0.0
+    for j in range(3):
+        for i in range(3):
+            xi, yi = x0 + i, y0 + j
+            inside = (xi >= 0) & (xi < width) & (yi >= 0) & (yi < height)
+            index = (yi.clamp(0, height - 1) * width + xi.clamp(0, width - 1)).long()
+            tap = _gather(maps, index)
+            tap_rgb, tap_points, tap_normals = tap[:, 0:3], tap[:, 3:6], tap[:, 6:9]
+            off_plane = ((expected - tap_points) * tap_normals).sum(1).abs()
+            same_surface = inside & (tap[:, 9] > 0) & (off_plane <= tolerance)
+            weight = value_x[i] * value_y[j] * same_surface
+            smooth = smooth_x[i] * smooth_y[j] * same_surface
+            with torch.no_grad():
+                colour = colour + weight[:, None] * tap_rgb
+                point = point + weight[:, None] * tap_points
+                total = total + weight
+            smooth_colour = smooth_colour + smooth[:, None] * tap_rgb
+            smooth_point = smooth_point + smooth[:, None] * tap_points
+            smooth_total = smooth_total + smooth
+    smooth_total = smooth_total.clamp_min(1e-12)[:, None]
+    smooth_colour, smooth_point = smooth_colour / smooth_total, smooth_point / smooth_total
+    value_weight = total.clamp_min(1e-12)[:, None]
+    colour = colour / value_weight + smooth_colour - smooth_colour.detach()
+    point = point / value_weight + smooth_point - smooth_point.detach()
+    return colour, point, total
 
 
 def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, A_T_P: torch.Tensor, K: torch.Tensor,

@@ -135,20 +135,18 @@ class DifferentiableRenderer:
         world_T_cam = perturb_world_T_cam(base, pose_params[:, :3].double(), pose_params[:, 3:].double())
         K = torch.as_tensor(K, dtype=torch.float64).expand(base.shape[0], 3, 3)
         current = world_T_cam.detach()
+        refreshed = (self.anchor is None or _view_key(K, height, width) != self._anchor_key or c.refresh == "always"
+                     or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k))
+        if refreshed:
+            self._refresh(current, K, height, width)
         if c.silhouette:
             # edges entering the frame are found on a one-pixel ring around it; the frame's own
             # render is the ring render's interior (the same rays)
             K_ring = guard_band_intrinsics(K, 1, 1)
-            ring = self.exact.render(current, K_ring, height + 2, width + 2, supersample=c.supersample)
+            ring = self._exact_render(current, K_ring, height + 2, width + 2, 1, refreshed)
             exact = ring.cropped(1)
         else:
-            exact = self.exact.render(current, K, height, width, supersample=c.supersample)
-        refreshed = False
-        due = (self.anchor is None or _view_key(K, height, width) != self._anchor_key or c.refresh == "always"
-               or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k))
-        if due:
-            self._refresh(current, K, height, width)
-            refreshed = True
+            exact = self._exact_render(current, K, height, width, 0, refreshed)
         ids = exact.triangle_ids[:, 0].numpy()
         normals = torch.from_numpy(camera_face_normals(self.exact.scene, ids, current)).permute(0, 3, 1, 2)
         warp = self._warp(exact, normals, world_T_cam, K)
@@ -172,6 +170,17 @@ class DifferentiableRenderer:
             rgb = rgb + silhouette_term(self.exact, pairs, world_T_cam, K_ring, ring.rgb)[inside]
             depth = depth + silhouette_term(self.exact, pairs, world_T_cam, K_ring, ring.depth)[inside]
         return DiffRenderOutput(rgb, depth, exact.mask, exact, world_T_cam, *stats, refreshed)
+
+    def _exact_render(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, border: int,
+                      anchored_here: bool) -> RenderOutput:
+        """The exact render of the frame plus ``border`` pixels; when the anchor was just rendered at
+        this pose, its supersampled colours are those of the frame's sub-pixel rays and are reused."""
+        s, g = self.config.supersample, self.config.guard_band
+        sub_rgb = None
+        if anchored_here and s > 1 and g >= border:
+            start = s * (g - border)
+            sub_rgb = self.anchor.rgb[:, 0, :, start:start + s * height, start:start + s * width]
+        return self.exact.render(world_T_cam, K, height, width, supersample=s, sub_rgb=sub_rgb)
 
     def _warp(self, exact: RenderOutput, normals: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor):
         A_T_P = torch.linalg.inv(self.anchor.world_T_cam) @ world_T_cam

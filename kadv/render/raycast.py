@@ -149,8 +149,12 @@ class ExactRenderer:
         return np.einsum("nk,nkc->nc", weights, per_corner[triangle_ids].astype(np.float64))
 
     def shade_hits(self, hits: RayHits, origins: np.ndarray, directions: np.ndarray,
-                   pixel_angle: float) -> dict[str, np.ndarray]:
-        """Shade hits; ``pixel_angle`` (radians per sample) selects the texture mip level."""
+                   pixel_angle: float, colour: bool = True) -> dict[str, np.ndarray]:
+        """Shade hits; ``pixel_angle`` (radians per sample) selects the texture mip level.
+
+        With ``colour`` False only the geometry (points, normals, back faces) is computed and "rgb"
+        is the background: the caller takes colour from other rays.
+        """
         n = len(hits.t)
         ids = hits.triangle_ids[hits.hit]
         bary = hits.barycentrics[hits.hit]
@@ -161,27 +165,28 @@ class ExactRenderer:
         normals = self._interpolate(self.scene.normals, ids, bary)
         normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
         normals[back] *= -1
-        uv = self._interpolate(self.scene.uvs, ids, bary)
-        length = np.linalg.norm(dirs, axis=1)
-        incidence = np.abs(np.einsum("nc,nc->n", face_normals, dirs)) / length
-        # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
-        footprint = hits.t[hits.hit] * length * pixel_angle / np.sqrt(np.maximum(incidence, 0.05))
-        base = albedo(self.scene, ids, uv, footprint, self._pyramids, self._uv_density)
-        rgb = shade(self.shading, self.lights, points, normals, base)
         out = {
             "rgb": np.tile(np.asarray(self.shading.background, np.float32), (n, 1)),
             "points": np.zeros((n, 3), np.float32),
             "normals": np.zeros((n, 3), np.float32),
             "back_face": np.zeros(n, bool),
         }
-        out["rgb"][hits.hit] = rgb
+        if colour:
+            uv = self._interpolate(self.scene.uvs, ids, bary)
+            length = np.linalg.norm(dirs, axis=1)
+            incidence = np.abs(np.einsum("nc,nc->n", face_normals, dirs)) / length
+            # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
+            footprint = hits.t[hits.hit] * length * pixel_angle / np.sqrt(np.maximum(incidence, 0.05))
+            base = albedo(self.scene, ids, uv, footprint, self._pyramids, self._uv_density)
+            out["rgb"][hits.hit] = shade(self.shading, self.lights, points, normals, base)
         out["points"][hits.hit] = points
         out["normals"][hits.hit] = normals
         out["back_face"][hits.hit] = back
         return out
 
     def render(
-        self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int = 1
+        self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int = 1,
+        sub_rgb: torch.Tensor | None = None,
     ) -> RenderOutput:
         """Render B cameras in one cast.
 
@@ -191,20 +196,27 @@ class ExactRenderer:
             height, width: image size.
             supersample: s; RGB averages s x s rays per pixel, depth and the other maps come from the
                 pixel-centre ray.
+            sub_rgb: (B, 3, s * height, s * width) colours of those s x s rays, when the caller has
+                already shaded them (an anchor render at this pose covers them): they are not cast again.
 
         Raises:
             ValueError: on a NaN or non-rigid pose, bad intrinsics or a bad size.
         """
         origins, directions = pixel_rays(world_T_cam, K, height, width)
-        batch = origins.shape[0]
+        batch, s = origins.shape[0], supersample
         hits = self.cast(origins, directions)
         angle = pixel_angle(K)
-        maps = self.shade_hits(hits, origins, directions, angle)
-        if supersample > 1:
-            sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, supersample)
-            sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / supersample)
-            s = supersample
-            maps["rgb"] = sub["rgb"].reshape(batch, height, s, width, s, 3).mean(axis=(2, 4)).reshape(-1, 3)
+        maps = self.shade_hits(hits, origins, directions, angle, colour=s == 1)
+        if sub_rgb is not None:
+            if s == 1 or tuple(sub_rgb.shape) != (batch, 3, s * height, s * width):
+                raise ValueError(f"sub_rgb: expected ({batch}, 3, {s * height}, {s * width}) with supersample > 1, "
+                                 f"got {tuple(sub_rgb.shape)}")
+            sub = sub_rgb.permute(0, 2, 3, 1).numpy()
+        elif s > 1:
+            sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s)
+            sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s)["rgb"]
+        if s > 1:
+            maps["rgb"] = sub.reshape(batch, height, s, width, s, 3).mean(axis=(2, 4)).reshape(-1, 3)
 
         def image(values: np.ndarray, channels: int) -> torch.Tensor:
             return torch.from_numpy(np.ascontiguousarray(

@@ -14,12 +14,13 @@ from kadv.attack.records import InitViewResult
 from kadv.io import atomic_write
 from kadv.scenes import Scene
 
-__all__ = ["annotate", "colourise", "save_curves", "save_four_panel", "save_map", "save_video"]
+__all__ = ["annotate", "colourise", "save_curves", "save_figure", "save_four_panel", "save_map", "save_video"]
 
 _CMAP = "turbo"
 
 
-def _save_figure(path: Path, figure: plt.Figure) -> Path:
+def save_figure(path: Path, figure: plt.Figure) -> Path:
+    """Write ``figure`` as a PNG atomically and close it."""
     try:
         return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100, bbox_inches="tight"))
     finally:
@@ -69,7 +70,7 @@ def save_four_panel(path: str | Path, rgb: np.ndarray, depth: np.ndarray, predic
     for axis in axes:
         axis.set_axis_off()
     figure.suptitle(title, fontsize=10)
-    return _save_figure(Path(path), figure)
+    return save_figure(Path(path), figure)
 
 
 def _grid(count: int) -> tuple[int, int]:
@@ -108,7 +109,7 @@ def save_curves(path: str | Path, results: list[InitViewResult]) -> Path:
     for axis in list(axes.flat)[len(results):]:
         axis.set_axis_off()
     figure.tight_layout()
-    return _save_figure(Path(path), figure)
+    return save_figure(Path(path), figure)
 
 
 def _plan_polygons(scene: Scene, cut_height: float) -> np.ndarray:
@@ -165,7 +166,7 @@ def save_map(path: str | Path, scene: Scene, results: list[InitViewResult]) -> P
     for axis in list(axes.flat)[len(results):]:
         axis.set_axis_off()
     figure.tight_layout()
-    return _save_figure(Path(path), figure)
+    return save_figure(Path(path), figure)
 
 
 def save_video(path: str | Path, frames: list[np.ndarray], fps: int = 8) -> Path:
