@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import torch
 
+from kadv.device import resolve_device
 from kadv.losses import depth_metrics, minmax_normalize, to_comparison_space
 from kadv.models import DepthModel
 from kadv.penalties import PenaltyConfig, distance_to_surface, shortcut_penalty
@@ -53,14 +54,18 @@ class Objective:
         renderer: the scene's exact renderer (for the distance to the nearest surface).
         penalty: d_th and lambda.
         space: "disparity" or "depth".
+        device: where the model and the loss run (see :mod:`kadv.device`); they are moved there.
+            Inputs may live anywhere; the terms come back on the CPU, where the pose is.
     """
 
     def __init__(self, model: DepthModel, loss: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
-                 renderer: ExactRenderer, penalty: PenaltyConfig, space: str = "disparity") -> None:
+                 renderer: ExactRenderer, penalty: PenaltyConfig, space: str = "disparity",
+                 device: str | torch.device = "cpu") -> None:
         if space not in ("disparity", "depth"):
             raise ValueError(f"loss.space must be 'disparity' or 'depth', got {space!r}")
-        self.model = model
-        self.loss = loss
+        self.device = resolve_device(device)
+        self.model = model.to(self.device)
+        self.loss = loss.to(self.device) if isinstance(loss, torch.nn.Module) else loss
         self.renderer = renderer
         self.penalty = penalty
         self.space = space
@@ -86,8 +91,9 @@ class Objective:
             mask: (B, 1, H, W) bool, valid ground truth.
             world_T_cam: (B, 4, 4) the views' poses; the penalty's gradient flows to their centres.
         """
+        rgb, depth, mask = rgb.to(self.device), depth.to(self.device), mask.to(self.device)
         prediction = self.model(rgb.float())
-        l_depth = self.l_depth(depth, prediction, mask)
+        l_depth = self.l_depth(depth, prediction, mask).cpu()
         distance = distance_to_surface(self.renderer, world_T_cam[:, :3, 3])
         l_dist = shortcut_penalty(distance, self.penalty.d_th)
         with torch.no_grad():
@@ -97,7 +103,7 @@ class Objective:
             l_depth=l_depth,
             l_dist=l_dist,
             distance=distance.detach(),
-            delta1=metrics["delta1"],
-            abs_rel=metrics["abs_rel"],
-            prediction=prediction.detach(),
+            delta1=metrics["delta1"].cpu(),
+            abs_rel=metrics["abs_rel"].cpu(),
+            prediction=prediction.detach().cpu(),
         )

@@ -23,6 +23,7 @@ from kadv.attack import (
     save_init_params,
 )
 from kadv.cli.common import check_render_config, reports_user_errors, scene_from_config, shading_from_config
+from kadv.device import resolve_device
 from kadv.io import atomic_write
 from kadv.losses import depth_loss
 from kadv.models import load_model
@@ -84,8 +85,7 @@ def main(cfg: DictConfig) -> float:
         summary = json.loads((run_dir / SUMMARY).read_text())
         print(f"already complete, skipped: {run_dir}\n{_table(summary)}")
         return float(summary["adversarial_l_depth"])
-    if cfg.device != "cpu":
-        raise ValueError(f"device={cfg.device!r}: this version runs on the CPU only (device=cpu)")
+    device = resolve_device(cfg.device)
     height, width, supersample = check_render_config(cfg.render)
     attack_config, init_config = _settings(cfg.attack)
     penalty = PenaltyConfig(**OmegaConf.to_container(cfg.penalty, resolve=True))
@@ -95,18 +95,18 @@ def main(cfg: DictConfig) -> float:
     renderer = ExactRenderer(scene, shading_from_config(cfg.render.shading))
     model = load_model(cfg.model.name, cfg.model.get("weights"))
     loss = depth_loss(cfg.loss.kind, cfg.loss.get("vgg_weights"), int(cfg.loss.get("window_size", 11)))
-    objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space)
+    objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space, device=device)
     config_text = OmegaConf.to_yaml(cfg, resolve=True)
     atomic_write(run_dir / "config.yaml", lambda tmp: tmp.write_text(config_text))
     views = _init_views(cfg, run_dir, renderer, model, penalty, init_config, height, width)
     completed = load_partial_results(run_dir)
     if completed:
         log.info("resuming: %d of %d init views already done", len(completed), len(views))
-    result = attack(objective, DifferentiableRenderer(renderer, diff_config), views, height, width, attack_config,
+    result = attack(objective, DifferentiableRenderer(renderer, diff_config, device), views, height, width, attack_config,
                     int(cfg.seed), completed=completed,
                     on_result=lambda index, view: save_partial_result(run_dir, index, view), progress=cfg.progress)
     info = {"scene": scene.name, "model": model.name, "loss": cfg.loss.kind, "seed": int(cfg.seed),
-            "device": cfg.device, "height": height, "width": width, "resumed_init_views": sorted(completed)}
+            "device": str(device), "height": height, "width": width, "resumed_init_views": sorted(completed)}
     summary = write_run(run_dir, result, objective, height, width, supersample, info, video=cfg.video)
     print(f"run directory: {run_dir}\n{_table(summary)}")
     return float(summary["adversarial_l_depth"])

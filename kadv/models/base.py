@@ -45,7 +45,8 @@ class Preprocess:
 
     def normalize(self, rgb: torch.Tensor) -> torch.Tensor:
         """(rgb - mean) / std per channel for rgb (B, 3, h, w) in [0, 1]."""
-        return normalize(rgb, torch.tensor(self.mean, dtype=rgb.dtype), torch.tensor(self.std, dtype=rgb.dtype))
+        as_tensor = lambda values: torch.tensor(values, dtype=rgb.dtype, device=rgb.device)  # noqa: E731
+        return normalize(rgb, as_tensor(self.mean), as_tensor(self.std))
 
 
 class DepthModel(nn.Module):
@@ -84,13 +85,16 @@ class DepthModel(nn.Module):
         raise NotImplementedError
 
     def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        """Prediction (B, 1, H, W) for images (B, 3, H, W) in [0, 1]; it runs where the model's
+        parameters are and comes back on ``rgb``'s device."""
         if rgb.ndim != 4 or rgb.shape[1] != 3:
             raise ValueError(f"rgb: expected (B, 3, H, W), got {tuple(rgb.shape)}")
         height, width = rgb.shape[-2:]
         p = self.preprocess
+        x = rgb.to(next(self.parameters()).device)
         shape = resized_shape(height, width, p.size, p.keep_aspect_ratio, p.multiple)
-        x = resize(rgb, shape, interpolation=p.interpolation, align_corners=False) if shape != (height, width) else rgb
+        x = resize(x, shape, interpolation=p.interpolation, align_corners=False) if shape != (height, width) else x
         out = self.predict(p.normalize(x))
         if out.ndim == 3:
             out = out.unsqueeze(1)
-        return resize(out, (height, width), interpolation="bilinear", align_corners=False)
+        return resize(out, (height, width), interpolation="bilinear", align_corners=False).to(rgb.device)

@@ -33,7 +33,8 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
 
     Raises:
         ModelWeightsUnavailable: weights neither given, cached nor downloadable.
-        ValueError: an empty name.
+        FileNotFoundError: a path (starting with /, ./, ../ or ~) that is not a directory.
+        ValueError: an empty name or an unknown model.
     """
     name = str(name_or_path)
     if not name:
@@ -44,6 +45,8 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
         return load_huggingface(str(weights), name=name, hub_id=PRESETS.get(name, name))
     if Path(name).expanduser().is_dir():
         return load_huggingface(name, name=Path(name).name)
+    if name.startswith(("/", "./", "../", "~")):
+        raise FileNotFoundError(f"no such model directory: {name}")
     if name in PRESETS:
         return load_huggingface(PRESETS[name], name=name, hub_id=PRESETS[name])
     if "/" not in name:

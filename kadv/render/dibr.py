@@ -23,6 +23,10 @@ from kadv.render.layers import AnchorLayers
 
 __all__ = ["Reprojection", "reproject"]
 
+# Per-sample arithmetic (a few hundred thousand sub-pixel samples) runs in float32, which halves its
+# memory traffic; the pose algebra stays in float64. benchmarks/gradcheck.py holds either way.
+_DTYPE = torch.float32
+
 
 @dataclass
 class Reprojection:
@@ -66,8 +70,8 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
     """
     _, _, _, height, width = anchor.rgb.shape
     # one gather per tap fetches colour, point, normal and mask together
-    maps = torch.cat([anchor.rgb[:, layer].double(), anchor.points[:, layer], anchor.normals[:, layer],
-                      anchor.mask[:, layer].double()], dim=1).flatten(2)
+    maps = torch.cat([anchor.rgb[:, layer], anchor.points[:, layer], anchor.normals[:, layer],
+                      anchor.mask[:, layer]], dim=1).to(_DTYPE).flatten(2)
     x, y = q[..., 0] - 0.5, q[..., 1] - 0.5  # continuous pixel index (centres at +0.5)
     x0, y0 = torch.floor(x.detach() - 0.5), torch.floor(y.detach() - 0.5)  # the taps: x0 + {0, 1, 2}
     tolerance = plane_tolerance * expected[:, 2].abs()
@@ -113,6 +117,7 @@ def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, 
         normals: (B, 3, H, W) current-camera-frame geometric normals of the surfaces seen; the
             sub-pixel samples of a pixel lie on that triangle's plane.
         A_T_P: (B, 4, 4) current-to-anchor camera transform, differentiable in the pose.
+            The work runs on ``depth``'s device, where the anchor's maps must be.
         K: (3, 3) or (B, 3, 3) intrinsics of the current views.
         depth_tolerance: relative disagreement between warped and exact depth above which a
             pixel is invalid.
@@ -120,40 +125,40 @@ def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, 
             taken to belong to another surface.
     """
     batch, _, height, width = depth.shape
-    s = anchor.supersample
-    K = torch.as_tensor(K, dtype=torch.float64).expand(batch, 3, 3)
-    depth = depth.detach().double()
+    s, device = anchor.supersample, depth.device
+    K = torch.as_tensor(K, dtype=torch.float64).expand(batch, 3, 3).to(device, _DTYPE)
+    depth = depth.detach().to(_DTYPE)
     valid_pixel = (depth[:, 0] > 0).reshape(batch, height * width)
     # Pixels without a surface get a stand-in depth so that no NaN enters the graph; they stay invalid.
     depth = torch.where(depth > 0, depth, torch.ones_like(depth))
     # kornia's meshgrid puts pixel (i, j) at (j, i); kadv's centres are at +0.5: shift the principal point.
     points_P = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False)  # (B, H, W, 3)
-    offsets = (torch.arange(s, dtype=torch.float64) + 0.5) / s - 0.5  # sub-pixel centres, current pixels
+    offsets = (torch.arange(s, dtype=_DTYPE, device=device) + 0.5) / s - 0.5  # sub-pixel centres, current pixels
     sub = torch.stack(torch.meshgrid(offsets, offsets, indexing="xy"), dim=-1).reshape(-1, 2)  # (S, 2) as (dx, dy)
     # Sub-pixel rays meet the plane of the pixel's triangle (constant depth where it is grazing).
     rays = points_P[:, :, :, None, :] / depth[:, 0, :, :, None, None].clamp_min(1e-12)
     focal = torch.stack([K[:, 0, 0], K[:, 1, 1]], dim=-1)[:, None, None, None, :]
     shift = sub[None, None, None] / focal  # (B, 1, 1, S, 2) in normalised image coordinates
     sub_rays = rays + torch.cat([shift, torch.zeros_like(shift[..., :1])], dim=-1)  # (B, H, W, S, 3)
-    n = normals.detach().double().permute(0, 2, 3, 1)[:, :, :, None, :]
+    n = normals.detach().to(_DTYPE).permute(0, 2, 3, 1)[:, :, :, None, :]
     numerator = (n * points_P[:, :, :, None, :]).sum(-1, keepdim=True)
     denominator = (n * sub_rays).sum(-1, keepdim=True)
     grazing = denominator.abs() < 1e-3 * sub_rays.norm(dim=-1, keepdim=True)
     t = torch.where(grazing, depth[:, 0, :, :, None, None].expand_as(numerator), numerator / torch.where(grazing, 1.0, denominator))
     sub_points_P = sub_rays * t  # (B, H, W, S, 3)
-    sub_points_A = transform_points(A_T_P[:, None, None].double(), sub_points_P.reshape(batch, height, -1, 3))
+    sub_points_A = transform_points(A_T_P[:, None, None].to(device, _DTYPE), sub_points_P.reshape(batch, height, -1, 3))
     sub_points_A = sub_points_A.reshape(batch, height, width, -1, 3)
-    q = project_points(sub_points_A, anchor.K[:, None, None, None])  # hi-res anchor pixel coordinates
+    q = project_points(sub_points_A, anchor.K[:, None, None, None].to(device, _DTYPE))  # hi-res anchor pixel coordinates
     M = height * width * sub.shape[0]
     q = q.reshape(batch, M, 2)
     q = torch.where(torch.isfinite(q), q, torch.full_like(q, -1e6))  # behind the anchor camera: outside
     expected = sub_points_A.reshape(batch, M, 3).transpose(1, 2)
-    colour = torch.zeros(batch, 3, height * width, dtype=torch.float64)
-    found = torch.zeros(batch, height * width, dtype=torch.bool)
-    layer_used = torch.full((batch, height * width), -1, dtype=torch.int64)
-    P_T_A = torch.linalg.inv(A_T_P.double())
+    colour = torch.zeros(batch, 3, height * width, dtype=_DTYPE, device=device)
+    found = torch.zeros(batch, height * width, dtype=torch.bool, device=device)
+    layer_used = torch.full((batch, height * width), -1, dtype=torch.int64, device=device)
+    P_T_A = torch.linalg.inv(A_T_P.double()).to(device, _DTYPE)
     depth_flat = depth.reshape(batch, -1)
-    warped_depth = torch.zeros(batch, height * width, dtype=torch.float64)
+    warped_depth = torch.zeros(batch, height * width, dtype=_DTYPE, device=device)
     for layer in range(anchor.num_layers):
         c, p, total = _sample_layer(anchor, layer, q, expected, plane_tolerance)
         total = total.reshape(batch, height * width, -1)

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import torch
 
+from kadv.device import resolve_device
 from kadv.geometry.pose import perturb_world_T_cam
 from kadv.render.dibr import reproject
 from kadv.render.layers import AnchorLayers, camera_face_normals, guard_band_intrinsics, render_anchor
@@ -65,9 +66,10 @@ class DiffRenderOutput:
     """Differentiable render of B views.
 
     Attributes:
-        rgb: (B, 3, H, W); depth: (B, 1, H, W) z-depth (0 invalid); mask: (B, 1, H, W) bool.
-        exact: the exact render at the current poses (no gradient).
-        world_T_cam: (B, 4, 4) current poses (differentiable).
+        rgb: (B, 3, H, W); depth: (B, 1, H, W) z-depth (0 invalid); mask: (B, 1, H, W) bool; on
+            the renderer's device.
+        exact: the exact render at the current poses (no gradient), on the CPU.
+        world_T_cam: (B, 4, 4) current poses (differentiable), on the CPU.
         coverage: (B,) fraction of hit pixels with a valid warp.
         rgb_error: (B,) mean |rgb_warp - rgb_exact| over valid pixels.
         depth_error: (B,) mean |depth_warp - depth_exact| / depth_exact over valid pixels.
@@ -91,11 +93,15 @@ class DifferentiableRenderer:
     Args:
         exact: the scene's exact renderer.
         config: options.
+        device: where the reprojection and the silhouette term run (see :mod:`kadv.device`); the
+            ray casts stay on the CPU.
     """
 
-    def __init__(self, exact: ExactRenderer, config: DiffRenderConfig | None = None) -> None:
+    def __init__(self, exact: ExactRenderer, config: DiffRenderConfig | None = None,
+                 device: str | torch.device = "cpu") -> None:
         self.exact = exact
         self.config = config or DiffRenderConfig()
+        self.device = resolve_device(device)
         self.anchor: AnchorLayers | None = None
         self._anchor_key: tuple | None = None
         self._steps_since_refresh = 0
@@ -105,11 +111,14 @@ class DifferentiableRenderer:
         self.anchor = None
         self._anchor_key = None
 
-    def _refresh(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> None:
+    def _refresh(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> AnchorLayers:
+        """Render a new anchor at ``world_T_cam``; returns it on the CPU and keeps it on the device."""
         c = self.config
-        self.anchor = render_anchor(self.exact, world_T_cam, K, height, width, c.layers, c.guard_band, c.supersample)
+        anchor = render_anchor(self.exact, world_T_cam, K, height, width, c.layers, c.guard_band, c.supersample)
+        self.anchor = anchor.to(self.device)
         self._anchor_key = _view_key(K, height, width)
         self._steps_since_refresh = 0
+        return anchor
 
     def __call__(self, pose_params: torch.Tensor, base_world_T_cam: torch.Tensor, K: torch.Tensor, height: int,
                  width: int) -> DiffRenderOutput:
@@ -137,54 +146,58 @@ class DifferentiableRenderer:
         current = world_T_cam.detach()
         refreshed = (self.anchor is None or _view_key(K, height, width) != self._anchor_key or c.refresh == "always"
                      or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k))
-        if refreshed:
-            self._refresh(current, K, height, width)
+        anchor = self._refresh(current, K, height, width) if refreshed else None
         if c.silhouette:
             # edges entering the frame are found on a one-pixel ring around it; the frame's own
             # render is the ring render's interior (the same rays)
             K_ring = guard_band_intrinsics(K, 1, 1)
-            ring = self._exact_render(current, K_ring, height + 2, width + 2, 1, refreshed)
+            ring = self._exact_render(current, K_ring, height + 2, width + 2, 1, anchor)
             exact = ring.cropped(1)
         else:
-            exact = self._exact_render(current, K, height, width, 0, refreshed)
+            exact = self._exact_render(current, K, height, width, 0, anchor)
         ids = exact.triangle_ids[:, 0].numpy()
         normals = torch.from_numpy(camera_face_normals(self.exact.scene, ids, current)).permute(0, 3, 1, 2)
-        warp = self._warp(exact, normals, world_T_cam, K)
-        stats = _agreement(warp, exact)
+        normals = normals.to(self.device)
+        # what the device needs of the exact render, moved once
+        rgb_exact, depth_exact, mask = (exact.rgb.to(self.device), exact.depth.to(self.device),
+                                        exact.mask.to(self.device))
+        warp = self._warp(depth_exact, normals, world_T_cam, K)
+        stats = _agreement(warp, rgb_exact, depth_exact, mask)
         if c.refresh == "on_drift" and not refreshed and _drifted(stats, c):
             self._refresh(current, K, height, width)
             refreshed = True
-            warp = self._warp(exact, normals, world_T_cam, K)
-            stats = _agreement(warp, exact)
+            warp = self._warp(depth_exact, normals, world_T_cam, K)
+            stats = _agreement(warp, rgb_exact, depth_exact, mask)
         self._steps_since_refresh += 1
         valid = warp.valid
         if c.values == "exact":
-            rgb = exact.rgb + torch.where(valid, warp.rgb - warp.rgb.detach(), torch.zeros_like(warp.rgb))
-            depth = exact.depth + torch.where(valid, warp.depth - warp.depth.detach(), torch.zeros_like(warp.depth))
+            rgb = rgb_exact + torch.where(valid, warp.rgb - warp.rgb.detach(), torch.zeros_like(warp.rgb))
+            depth = depth_exact + torch.where(valid, warp.depth - warp.depth.detach(), torch.zeros_like(warp.depth))
         else:
-            rgb = torch.where(valid, warp.rgb, exact.rgb)
-            depth = torch.where(valid, warp.depth, exact.depth)
+            rgb = torch.where(valid, warp.rgb, rgb_exact)
+            depth = torch.where(valid, warp.depth, depth_exact)
         if c.silhouette:
             pairs = find_edge_pairs(self.exact, ring, current, K_ring)
             inside = (..., slice(1, -1), slice(1, -1))
-            rgb = rgb + silhouette_term(self.exact, pairs, world_T_cam, K_ring, ring.rgb)[inside]
-            depth = depth + silhouette_term(self.exact, pairs, world_T_cam, K_ring, ring.depth)[inside]
-        return DiffRenderOutput(rgb, depth, exact.mask, exact, world_T_cam, *stats, refreshed)
+            for_device = (ring.rgb.to(self.device), ring.depth.to(self.device))
+            rgb = rgb + silhouette_term(self.exact, pairs, world_T_cam, K_ring, for_device[0])[inside]
+            depth = depth + silhouette_term(self.exact, pairs, world_T_cam, K_ring, for_device[1])[inside]
+        return DiffRenderOutput(rgb, depth, mask, exact, world_T_cam, *(s.cpu() for s in stats), refreshed)
 
     def _exact_render(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, border: int,
-                      anchored_here: bool) -> RenderOutput:
-        """The exact render of the frame plus ``border`` pixels; when the anchor was just rendered at
-        this pose, its supersampled colours are those of the frame's sub-pixel rays and are reused."""
+                      anchor: AnchorLayers | None) -> RenderOutput:
+        """The exact render of the frame plus ``border`` pixels; an anchor (CPU) just rendered at this
+        pose holds the colours of the frame's sub-pixel rays, which are then not cast again."""
         s, g = self.config.supersample, self.config.guard_band
         sub_rgb = None
-        if anchored_here and s > 1 and g >= border:
+        if anchor is not None and s > 1 and g >= border:
             start = s * (g - border)
-            sub_rgb = self.anchor.rgb[:, 0, :, start:start + s * height, start:start + s * width]
+            sub_rgb = anchor.rgb[:, 0, :, start:start + s * height, start:start + s * width]
         return self.exact.render(world_T_cam, K, height, width, supersample=s, sub_rgb=sub_rgb)
 
-    def _warp(self, exact: RenderOutput, normals: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor):
+    def _warp(self, depth: torch.Tensor, normals: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor):
         A_T_P = torch.linalg.inv(self.anchor.world_T_cam) @ world_T_cam
-        return reproject(self.anchor, exact.depth, normals, A_T_P, K, depth_tolerance=self.config.depth_tolerance)
+        return reproject(self.anchor, depth, normals, A_T_P, K, depth_tolerance=self.config.depth_tolerance)
 
 
 def _view_key(K: torch.Tensor, height: int, width: int) -> tuple:
@@ -192,13 +205,14 @@ def _view_key(K: torch.Tensor, height: int, width: int) -> tuple:
     return K.shape[0], height, width, tuple(K.flatten().tolist())
 
 
-def _agreement(warp, exact: RenderOutput) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _agreement(warp, rgb: torch.Tensor, depth: torch.Tensor,
+               mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     valid = warp.valid.detach()
-    hit = exact.mask.sum(dim=(1, 2, 3)).clamp_min(1)
+    hit = mask.sum(dim=(1, 2, 3)).clamp_min(1)
     count = valid.sum(dim=(1, 2, 3)).clamp_min(1)
     coverage = valid.sum(dim=(1, 2, 3)) / hit
-    rgb_error = ((warp.rgb.detach() - exact.rgb).abs().mean(1, keepdim=True) * valid).sum(dim=(1, 2, 3)) / count
-    relative = (warp.depth.detach() - exact.depth).abs() / exact.depth.clamp_min(1e-6)
+    rgb_error = ((warp.rgb.detach() - rgb).abs().mean(1, keepdim=True) * valid).sum(dim=(1, 2, 3)) / count
+    relative = (warp.depth.detach() - depth).abs() / depth.clamp_min(1e-6)
     depth_error = (relative * valid).sum(dim=(1, 2, 3)) / count
     return coverage.double(), rgb_error.double(), depth_error.double()
 

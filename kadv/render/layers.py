@@ -51,6 +51,11 @@ class AnchorLayers:
     def num_layers(self) -> int:
         return self.rgb.shape[1]
 
+    def to(self, device: torch.device | str) -> AnchorLayers:
+        """The same layers with every map on ``device``; the pose and intrinsics stay where they are."""
+        maps = {name: getattr(self, name).to(device) for name in ("rgb", "points", "normals", "triangle_ids", "mask")}
+        return AnchorLayers(self.world_T_cam, self.K, self.supersample, self.guard_band, **maps)
+
 
 def guard_band_intrinsics(K: torch.Tensor, guard_band: int, supersample: int) -> torch.Tensor:
     """Intrinsics (B, 3, 3) of the anchor image: principal point shifted by the band, all scaled by s."""

@@ -46,6 +46,10 @@ class RenderOutput:
     points: torch.Tensor
     back_face: torch.Tensor
 
+    def to(self, device: torch.device | str) -> RenderOutput:
+        """The same maps on ``device``."""
+        return RenderOutput(**{f.name: getattr(self, f.name).to(device) for f in fields(self)})
+
     def cropped(self, border: int) -> RenderOutput:
         """The same maps without ``border`` pixels on each side."""
         inner = (..., slice(border, -border), slice(border, -border))

@@ -162,12 +162,15 @@ def silhouette_term(renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torc
         pairs: from :func:`find_edge_pairs` on the exact render at ``world_T_cam``.
         world_T_cam: (B, 4, 4) current poses, differentiable.
         K: intrinsics (3, 3) or (B, 3, 3).
-        values: (B, C, H, W) exact per-pixel values (detached) whose jumps the edges carry.
+        values: (B, C, H, W) exact per-pixel values (detached) whose jumps the edges carry; the
+            term is built on their device.
     """
     batch, channels, height, width = values.shape
-    term = torch.zeros(batch * height * width, channels, dtype=torch.float64)
+    device = values.device
+    term = torch.zeros(batch * height * width, channels, dtype=torch.float64, device=device)
     if len(pairs.batch) == 0:
-        return term.view(batch, height, width, channels).permute(0, 3, 1, 2).to(values.dtype) + 0 * world_T_cam.sum()
+        return (term.view(batch, height, width, channels).permute(0, 3, 1, 2).to(values.dtype)
+                + (0 * world_T_cam.sum()).to(device))
     K = torch.as_tensor(K, dtype=torch.float64).expand(batch, 3, 3)
     bi = torch.from_numpy(pairs.batch)
     R, c = world_T_cam[bi, :3, :3].double(), world_T_cam[bi, :3, 3].double()
@@ -180,12 +183,14 @@ def silhouette_term(renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torc
     rays_a = (K_inv @ torch.cat([uv_a, torch.ones(len(bi), 1, dtype=torch.float64)], 1)[..., None])[..., 0]
     rays_b = (K_inv @ torch.cat([uv_b, torch.ones(len(bi), 1, dtype=torch.float64)], 1)[..., None])[..., 0]
     t, genuine = _crossings(vertices_cam, rays_a, rays_b, K[bi], uv_a, uv_b)
-    flat = values.detach().double().permute(0, 2, 3, 1).reshape(batch, -1, channels)
-    va, vb = flat[bi, torch.from_numpy(pairs.a)], flat[bi, torch.from_numpy(pairs.b)]
     far_b = torch.from_numpy(pairs.t > 0.5)
     # the pixel beyond the crossing's half is partly covered by its neighbour's surface
-    coefficient = torch.where(far_b, t - 0.5, 0.5 - t) * genuine
+    coefficient = (torch.where(far_b, t - 0.5, 0.5 - t) * genuine).to(device)
+    # per pair on the CPU (the pose algebra), per pixel on the values' device
+    flat = values.detach().double().permute(0, 2, 3, 1).reshape(batch, -1, channels)
+    bi, far_b = bi.to(device), far_b.to(device)
+    va, vb = flat[bi, torch.from_numpy(pairs.a).to(device)], flat[bi, torch.from_numpy(pairs.b).to(device)]
     blend = coefficient[:, None] * torch.where(far_b[:, None], va - vb, vb - va)
-    target = bi * height * width + torch.from_numpy(np.where(pairs.t > 0.5, pairs.b, pairs.a))
+    target = bi * height * width + torch.from_numpy(np.where(pairs.t > 0.5, pairs.b, pairs.a)).to(device)
     term = term.index_add(0, target, blend - blend.detach())
     return term.view(batch, height, width, channels).permute(0, 3, 1, 2).to(values.dtype)

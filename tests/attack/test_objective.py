@@ -1,7 +1,5 @@
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import pytest
 import torch
 
@@ -9,9 +7,18 @@ from kadv.attack import Objective, PenaltyConfig
 from kadv.losses import depth_loss
 
 
+class _OutputKind:
+    """Stands in for a model where only its output kind matters (l_depth of given maps)."""
+
+    def __init__(self, kind: str) -> None:
+        self.output_kind = kind
+
+    def to(self, device: torch.device) -> _OutputKind:
+        return self
+
+
 def _objective(tiny_objective, kind: str) -> Objective:
-    model = SimpleNamespace(output_kind=kind)
-    return Objective(model, depth_loss("ssim"), tiny_objective.renderer, PenaltyConfig())
+    return Objective(_OutputKind(kind), depth_loss("ssim"), tiny_objective.renderer, PenaltyConfig())
 
 
 def _depth() -> tuple[torch.Tensor, torch.Tensor]:

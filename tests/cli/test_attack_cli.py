@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from PIL import Image
 
 from kadv import box_room
@@ -132,6 +133,8 @@ BAD_INPUTS = [
     ("kadv-attack", ["model=depth_anything_v2_small"], "depth_anything_v2_small"),
     ("kadv-attack", ["attack.init_params={inside}"], "inside an object"),
     ("kadv-attack", ["attack.init_params=/no/such/init_params.json"], "/no/such/init_params.json"),
+    ("kadv-attack", ["device=tpu"], "device='tpu'"),
+    *([("kadv-attack", ["device=cuda"], "no CUDA device")] if not torch.cuda.is_available() else []),
     ("kadv-render", ["camera.eye=[1,1.5]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),
     ("kadv-render", ["camera.eye=[nan,1.5,1]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),
     ("kadv-render", ["render.supersample=0"], "render.supersample"),

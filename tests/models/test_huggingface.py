@@ -140,3 +140,9 @@ def test_offline_without_weights_raises_the_documented_error_quickly(tmp_path: P
 def test_unknown_model_name() -> None:
     with pytest.raises(ValueError, match="unknown model 'not_a_model'"):
         load_model("not_a_model")
+
+
+@pytest.mark.parametrize("path", ["/tmp/does/not/exist", "./no_such_model", "~/no_such_model_dir"])
+def test_a_missing_path_is_reported_as_a_missing_directory_not_a_hub_id(path: str) -> None:
+    with pytest.raises(FileNotFoundError, match="no such model directory"):
+        load_model(path)
