@@ -3,19 +3,23 @@ grey_white_room: the Depth Anything V2 Small architecture (random weights) with 
 (random VGG-16 weights), and kadv-tiny with SSIM.
 
 Every part is timed in this one run. overhead = (step - networks) / networks for the first
-configuration, networks = model forward+backward + loss forward+backward.
+configuration, networks = model forward+backward + loss forward+backward; overhead_tiny the same
+for the second. Then the time per restart-step for batches of B = 1, 2, 4, 8 restarts.
 
-Run: .venv/bin/python benchmarks/attack_step.py
+Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto]
 """
 from __future__ import annotations
 
+import argparse
 import tempfile
+from collections.abc import Callable
 
 import torch
 from common import load_bench_scene, median_seconds
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
 from kadv.attack import AttackConfig, Objective, PenaltyConfig, attack, file_init_views
+from kadv.device import resolve_device
 from kadv.geometry import intrinsics_from_fov
 from kadv.losses import VGG16_TAPS, PerceptualLoss, depth_loss, vgg16_features
 from kadv.models import DepthModel, load_model
@@ -24,6 +28,7 @@ from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
 
 HEIGHT, WIDTH = 240, 320
 STEPS = 3
+BATCHES = (1, 2, 4, 8)
 
 
 def depth_anything_v2_small(folder: str) -> DepthModel:
@@ -44,8 +49,28 @@ def random_perceptual_loss() -> PerceptualLoss:
     return PerceptualLoss(vgg16_features(), VGG16_TAPS)
 
 
+def synchronised(fn: Callable[[], object], device: torch.device) -> Callable[[], None]:
+    """``fn`` followed by a wait for the device, so that its kernels are inside the timing."""
+    def run() -> None:
+        fn()
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+    return run
+
+
+def per_restart_step(objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[int, float]:
+    """Seconds per restart per step of a gradient run, for batches of B restarts."""
+    seconds = {}
+    for batch in BATCHES:
+        config = AttackConfig(steps=1, restarts=batch)
+        attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)  # warm-up at this size
+        run = attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
+        seconds[batch] = run.views[0].budget.seconds / (config.steps + 1) / batch
+    return seconds
+
+
 def measure(label: str, objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[str, float]:
-    renderer = objective.renderer
+    renderer, device = objective.renderer, objective.device
     K = intrinsics_from_fov(view.fov_x_deg, HEIGHT, WIDTH)
     base = view.world_T_cam[None]
     params = torch.zeros(1, 6, dtype=torch.float64)
@@ -65,8 +90,8 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
 
     parts["exact render (s=2, ring)"] = median_seconds(
         lambda: renderer.render(base, K, HEIGHT + 2, WIDTH + 2, supersample=differentiable.config.supersample), 3)
-    parts["render fwd (exact+warp+silhouettes)"] = median_seconds(render_forward, 3)
-    parts["render fwd+bwd"] = median_seconds(render_forward_backward, 3)
+    parts["render fwd (exact+warp+silhouettes)"] = median_seconds(synchronised(render_forward, device), 3)
+    parts["render fwd+bwd"] = median_seconds(synchronised(render_forward_backward, device), 3)
     out = render_forward()
     rgb = out.rgb.detach().float().requires_grad_(True)
 
@@ -89,21 +114,27 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
         shortcut_penalty(distance_to_surface(renderer, c), penalty.d_th).sum().backward()
         step_guard(renderer, centre, centre + 0.01, penalty.margin)
 
-    parts["model fwd+bwd"] = median_seconds(model_step, 3)
-    parts["loss fwd+bwd"] = median_seconds(loss_step, 3)
+    parts["model fwd+bwd"] = median_seconds(synchronised(model_step, device), 3)
+    parts["loss fwd+bwd"] = median_seconds(synchronised(loss_step, device), 3)
     parts["penalty + guard"] = median_seconds(penalty_guard, 3)
     parts["view validity"] = median_seconds(
         lambda: view_validity(renderer, base, K, HEIGHT, WIDTH, **penalty.validity_options()), 3)
     accounted = parts["render fwd+bwd"] + parts["model fwd+bwd"] + parts["loss fwd+bwd"] + parts["penalty + guard"] \
         + parts["view validity"]
     parts["optimiser, metrics, records, rest"] = parts["step"] - accounted
-    print(f"\n{label} at {HEIGHT}x{WIDTH}, one restart (ms)")
+    print(f"\n{label} at {HEIGHT}x{WIDTH} on {device}, one restart (ms)")
     for name, seconds in parts.items():
         print(f"  {name:<40} {seconds * 1e3:>9.1f}")
+    scaling = per_restart_step(objective, differentiable, view)
+    print("  per restart-step with B restarts batched: "
+          + ", ".join(f"B={b} {seconds * 1e3:.0f} ms" for b, seconds in scaling.items()))
     return parts
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description="Time one gradient attack step, part by part.")
+    parser.add_argument("--device", default="cpu", help="auto, cpu or cuda (the networks and the warp)")
+    device = resolve_device(parser.parse_args().device)
     scene = load_bench_scene("grey_white_room")
     renderer = ExactRenderer(scene)
     penalty = PenaltyConfig()
@@ -116,15 +147,16 @@ def main() -> None:
             "kadv-tiny + SSIM": (load_model("kadv_tiny"), depth_loss("ssim")),
         }
         for label, (model, loss) in configurations.items():
-            objective = Objective(model, loss, renderer, penalty)
-            results[label] = measure(label, objective, DifferentiableRenderer(renderer, DiffRenderConfig()), view)
+            objective = Objective(model, loss, renderer, penalty, device=device)
+            results[label] = measure(label, objective, DifferentiableRenderer(renderer, DiffRenderConfig(), device),
+                                     view)
     overheads = []
     for parts in results.values():
         networks = parts["model fwd+bwd"] + parts["loss fwd+bwd"]
         overheads.append(((parts["step"] - networks) / networks, parts["render fwd+bwd"], networks))
     (overhead, render, networks), (overhead_tiny, _, _) = overheads
-    print(f"\nkadv-tiny + SSIM: overhead_tiny={overhead_tiny:.2f}")
-    print(f"attack_step overhead={overhead:.2f} render_ms={render * 1e3:.0f} networks_ms={networks * 1e3:.0f}")
+    print(f"\nattack_step overhead={overhead:.2f} render_ms={render * 1e3:.0f} networks_ms={networks * 1e3:.0f} "
+          f"overhead_tiny={overhead_tiny:.2f} device={device.type}")
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ Per scene: 10 seeded poses (>= 0.3 m from any surface, >= 90% of pixels hit, ref
 by halving its step to cos >= 0.99), functionals sum(W * rgb) and sum(W * depth), interior and
 full, cosine of analytic vs reference 6-vectors (the smaller of the rotation and translation
 blocks). Prints a table of medians for the plain warp and the final method (warp + silhouettes).
-Run: .venv/bin/python benchmarks/gradcheck.py [poses] [height] [width]
+Run: .venv/bin/python benchmarks/gradcheck.py [poses] [height] [width] [device]
 """
 from __future__ import annotations
 
@@ -42,14 +42,14 @@ CONFIGS = {
 }
 
 
-def main(poses: int = 10, height: int = 96, width: int = 128) -> None:
+def main(poses: int = 10, height: int = 96, width: int = 128, device: str = "cpu") -> None:
     scenes = {"box_room": box_room(seed=0), "grey_white_room": load_scene(scenes_root() / "grey_white_room" / "scene.xml")}
     medians: dict[tuple[str, str], dict[str, float]] = {}
     print(f"{'scene':<16} {'method':<18} " + " ".join(f"{f:>15}" for f in FUNCTIONALS) + "   seconds")
     for scene_name, scene in scenes.items():
         start = time.perf_counter()
         results = gradient_check_poses(ExactRenderer(scene), poses, seed=0, fov_x_deg=70.0, height=height,
-                                       width=width, configs=CONFIGS, reference_supersample=8)
+                                       width=width, configs=CONFIGS, reference_supersample=8, device=device)
         seconds = time.perf_counter() - start
         for method, checks in results.items():
             medians[scene_name, method] = {f: float(np.median([c.score(f) for c in checks])) for f in FUNCTIONALS}
@@ -64,4 +64,4 @@ def main(poses: int = 10, height: int = 96, width: int = 128) -> None:
 
 
 if __name__ == "__main__":
-    main(*(int(v) for v in sys.argv[1:]))
+    main(*(int(v) for v in sys.argv[1:4]), *sys.argv[4:5])

@@ -1,4 +1,12 @@
-"""``kadv-render``: render a scene to ``rgb.png`` and ``depth.png`` in the run directory."""
+"""``kadv-render``: render one view of a scene into the run directory.
+
+Writes ``rgb.png``, ``depth.npy`` (float32 z-depth in metres, 0 where no surface), ``mask.png``
+(white where a ray hit a surface), ``depth_vis.png`` (the depth colour-mapped with a colour bar;
+grey: no surface) and ``render.json`` (pose, K, depth range, hit fraction, the view's validity).
+A view that is not valid (the eye inside an object, outside the scene, or on a surface) is refused
+unless ``camera.allow_invalid=true``; a file camera nearer to a surface than ``penalty.margin`` is
+first moved along its optical axis until it is clear, as the attack's init views are.
+"""
 from __future__ import annotations
 
 import json
@@ -6,9 +14,11 @@ import logging
 from pathlib import Path
 
 import hydra
+import numpy as np
 from hydra.core.hydra_config import HydraConfig
-from omegaconf import DictConfig
+from omegaconf import DictConfig, OmegaConf
 
+from kadv.attack import PenaltyConfig, clear_file_camera
 from kadv.cli.common import (
     camera_from_config,
     check_render_config,
@@ -17,8 +27,10 @@ from kadv.cli.common import (
     shading_from_config,
 )
 from kadv.geometry import intrinsics_from_fov
+from kadv.io import atomic_write
+from kadv.penalties import view_validity
 from kadv.render import ExactRenderer
-from kadv.report import atomic_write, save_depth_png, save_rgb_png
+from kadv.report import save_depth_png, save_rgb_png
 
 log = logging.getLogger(__name__)
 
@@ -31,21 +43,43 @@ def main(cfg: DictConfig) -> None:
     scene = scene_from_config(cfg.scene)
     world_T_cam, fov = camera_from_config(cfg.camera, scene)
     height, width, supersample = check_render_config(cfg.render)
+    penalty = PenaltyConfig(**OmegaConf.to_container(cfg.penalty, resolve=True))
     renderer = ExactRenderer(scene, shading_from_config(cfg.render.shading))
-    out = renderer.render(world_T_cam, intrinsics_from_fov(fov, height, width), height, width,
-                          supersample=supersample)
+    note = "as given"
+    if cfg.camera.world_T_cam is None and cfg.camera.eye is None:
+        world_T_cam, moved = clear_file_camera(renderer, world_T_cam, penalty.margin)
+        note = f"file camera {int(cfg.camera.index)}" + (
+            f", moved {moved:+.3f} m along its optical axis to clear {penalty.margin} m" if moved else "")
+    K = intrinsics_from_fov(fov, height, width)
+    validity = view_validity(renderer, world_T_cam, K, height, width, **penalty.validity_options())
+    verdict, reason = validity.verdicts[0], validity.reasons[0]
+    if verdict != "valid" and not cfg.camera.allow_invalid:
+        raise ValueError(f"camera: the view is {verdict} ({reason}); "
+                         "move the camera, or render it anyway with camera.allow_invalid=true")
+    out = renderer.render(world_T_cam, K, height, width, supersample=supersample)
+    depth = out.depth[0, 0].numpy()
+    mask = out.mask[0, 0].numpy()
     save_rgb_png(out_dir / "rgb.png", out.rgb[0])
-    save_depth_png(out_dir / "depth.png", out.depth[0], out.mask[0])
+    atomic_write(out_dir / "depth.npy", lambda tmp: np.save(tmp, depth, allow_pickle=False))
+    save_rgb_png(out_dir / "mask.png", out.mask[0].float().expand(3, -1, -1))
+    save_depth_png(out_dir / "depth_vis.png", out.depth[0], out.mask[0], label="depth [m], grey: no surface")
     summary = {
         "scene": scene.name,
         "triangles": scene.num_triangles,
         "world_T_cam": world_T_cam.tolist(),
+        "camera": note,
+        "K": K.tolist(),
         "fov_x_deg": fov,
         "height": height,
         "width": width,
-        "hit_fraction": float(out.mask.float().mean()),
+        "supersample": supersample,
+        "hit_fraction": float(mask.mean()),
+        "depth_range_m": [float(depth[mask].min()), float(depth[mask].max())] if mask.any() else None,
+        "validity": {"verdict": verdict, "reason": reason},
     }
-    atomic_write(out_dir / "render.json", lambda tmp: tmp.write_text(json.dumps(summary, indent=2)))
+    text = json.dumps(summary, indent=2)
+    atomic_write(out_dir / "render.json", lambda tmp: tmp.write_text(text))
+    print(f"view: {verdict} ({reason}); camera: {note}")
     log.info("rendered %s (%d triangles, %.3f of pixels hit) to %s", scene.name, scene.num_triangles,
              summary["hit_fraction"], out_dir)
 

@@ -85,8 +85,12 @@ def _blocks(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 
 def check_pose(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
                configs: dict[str, DiffRenderConfig], *, weight_seed: int = 0, reference_supersample: int = 4,
-               rotation_step: float = 2e-3, translation_step: float = 4e-3) -> dict[str, GradientCheck]:
+               rotation_step: float = 2e-3, translation_step: float = 4e-3,
+               device: str | torch.device = "cpu") -> dict[str, GradientCheck]:
     """Compare analytic and finite-difference gradients of the four functionals at one pose.
+
+    The analytic gradients come from a DifferentiableRenderer on ``device``; the reference is exact
+    renders on the CPU.
 
     Returns one :class:`GradientCheck` per renderer configuration (the reference is shared); its
     ``step_agreement`` < 0.99 says the reference is not trustworthy there (resample the pose).
@@ -120,8 +124,8 @@ def check_pose(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tens
     results = {}
     for name, config in configs.items():
         params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
-        output = DifferentiableRenderer(renderer, config)(params, base, K, height, width)
-        values = functionals(output.rgb.double(), output.depth.double())
+        output = DifferentiableRenderer(renderer, config, device)(params, base, K, height, width)
+        values = functionals(output.rgb.double().cpu(), output.depth.double().cpu())
         analytic = np.stack([torch.autograd.grad(v, params, retain_graph=True)[0][0].numpy() for v in values])
         cosines = {f_name: _blocks(analytic[f], half[f]) for f, f_name in enumerate(FUNCTIONALS)}
         results[name] = GradientCheck(cosines, agreements)

@@ -22,6 +22,7 @@ _INVALID_ID = np.uint32(2**32 - 1)
 # dense foliage rarely needs more than a few layers.
 _MAX_ALPHA_LAYERS = 8
 _ALPHA_CUTOFF = 0.5
+_MIN_HIT_DEPTH = 1e-6  # metres
 
 
 @dataclass
@@ -31,7 +32,7 @@ class RenderOutput:
     Attributes:
         rgb: (B, 3, H, W) float32 in [0, 1].
         depth: (B, 1, H, W) float32 z-depth in metres, 0 where invalid.
-        mask: (B, 1, H, W) bool, True where a ray hit a surface.
+        mask: (B, 1, H, W) bool, True where a ray hit a surface (beyond a micrometre of the eye).
         normals: (B, 3, H, W) float32 world-frame unit normals facing the camera side, 0 if invalid.
         triangle_ids: (B, 1, H, W) int64, -1 where invalid.
         points: (B, 3, H, W) float32 world-frame hit points, 0 where invalid.
@@ -226,7 +227,9 @@ class ExactRenderer:
             return torch.from_numpy(np.ascontiguousarray(
                 values.reshape(batch, height, width, channels).transpose(0, 3, 1, 2)))
 
-        mask = hits.hit
+        # a ray that meets a surface within a micrometre of the eye starts on it (the eye lies on the
+        # surface): it measures no depth, so it is no hit in the mask
+        mask = hits.hit & (hits.t > _MIN_HIT_DEPTH)
         depth = np.where(mask, hits.t, 0.0).astype(np.float32)
         return RenderOutput(
             rgb=image(maps["rgb"].astype(np.float32), 3),

@@ -1,29 +1,46 @@
+"""kadv-render as a subprocess: its files, the README's examples, and views it must refuse."""
 from __future__ import annotations
 
 import json
+import os
+import re
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+import pytest
 from PIL import Image
 
+from tests.conftest import scenes_root
+
 SCRIPT = Path(sys.executable).parent / "kadv-render"
+README = Path(__file__).resolve().parents[2] / "README.md"
 
 
 def _run(cwd: Path, *overrides: str) -> subprocess.CompletedProcess:
+    env = {**os.environ, "KADV_SCENES": str(scenes_root()), "HYDRA_FULL_ERROR": "0"}
     return subprocess.run([str(SCRIPT), "hydra.run.dir=run", *overrides], cwd=cwd, capture_output=True, text=True,
-                          timeout=300)
+                          timeout=300, env=env)
 
 
-def test_installed_script_finds_its_configs_outside_the_source_tree(tmp_path: Path) -> None:
+def test_installed_script_writes_aligned_images_raw_depth_and_a_summary(tmp_path: Path) -> None:
     result = _run(tmp_path, "render.height=60", "render.width=80")
     assert result.returncode == 0, result.stderr
-    with Image.open(tmp_path / "run" / "rgb.png") as rgb:
-        assert rgb.size == (80, 60) and rgb.mode == "RGB"
-    with Image.open(tmp_path / "run" / "depth.png") as depth:
-        assert depth.size[0] > 80  # the colour bar widens the figure
-    summary = json.loads((tmp_path / "run" / "render.json").read_text())
+    run = tmp_path / "run"
+    with Image.open(run / "rgb.png") as rgb, Image.open(run / "mask.png") as mask:
+        assert rgb.size == mask.size == (80, 60) and rgb.mode == "RGB"
+        mask_array = np.asarray(mask)[..., 0] > 127
+    with Image.open(run / "depth_vis.png") as figure:
+        assert figure.size[0] > 80  # the colour bar widens the figure
+    depth = np.load(run / "depth.npy")
+    assert depth.shape == (60, 80) and depth.dtype == np.float32
+    assert np.array_equal(depth > 0, mask_array)
+    summary = json.loads((run / "render.json").read_text())
     assert summary["hit_fraction"] == 1.0 and summary["scene"] == "box_room_0"
+    assert summary["validity"]["verdict"] == "valid" and "valid" in result.stdout
+    assert summary["depth_range_m"] == pytest.approx([float(depth.min()), float(depth.max())])
+    assert np.asarray(summary["K"]).shape == (3, 3) and np.asarray(summary["world_T_cam"]).shape == (4, 4)
 
 
 def test_look_at_override_and_clear_error_for_bad_index(tmp_path: Path) -> None:
@@ -31,4 +48,49 @@ def test_look_at_override_and_clear_error_for_bad_index(tmp_path: Path) -> None:
               "camera.fov_x_deg=90")
     assert ok.returncode == 0, ok.stderr
     bad = _run(tmp_path, "camera.index=5")
-    assert bad.returncode != 0 and "camera.index=5" in bad.stderr + bad.stdout
+    assert bad.returncode == 2 and "camera.index=5" in bad.stderr
+
+
+def _readme_render_examples() -> list[list[str]]:
+    lines = re.findall(r"^\.venv/bin/kadv-render(.*?)(?:#.*)?$", README.read_text(), re.MULTILINE)
+    # the README names the scenes where a checkout finds them; tests honour KADV_TEST_SCENES
+    return [line.replace("../shared/scenes", str(scenes_root())).split() for line in lines]
+
+
+@pytest.mark.parametrize("overrides", _readme_render_examples(), ids=lambda o: " ".join(o)[:60])
+def test_readme_examples_render_valid_views(overrides: list[str], tmp_path: Path) -> None:
+    small = [o for o in overrides if not o.startswith(("render.width", "render.height"))]
+    result = _run(tmp_path, *small, "render.height=24", "render.width=32")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((tmp_path / "run" / "render.json").read_text())
+    assert summary["validity"]["verdict"] == "valid" and summary["hit_fraction"] > 0.5
+
+
+def test_the_file_camera_beside_a_wall_is_moved_clear(tmp_path: Path) -> None:
+    result = _run(tmp_path, "scene=grey_white_room", "render.height=24", "render.width=32")
+    assert result.returncode == 0, result.stderr
+    assert "moved" in json.loads((tmp_path / "run" / "render.json").read_text())["camera"]
+
+
+@pytest.mark.parametrize("eye, verdict", [("[3,1.5,-4]", "outside the scene"), ("[2.5,0.3,2.3]", "inside an object")])
+def test_an_impossible_eye_is_refused_unless_allowed(eye: str, verdict: str, tmp_path: Path) -> None:
+    camera = [f"camera.eye={eye}", "camera.target=[3,1,3.5]", "camera.fov_x_deg=70", "render.height=24",
+              "render.width=32"]
+    refused = _run(tmp_path, *camera)
+    assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1, refused.stderr
+    assert verdict in refused.stderr and "camera.allow_invalid=true" in refused.stderr
+    assert not (tmp_path / "run" / "rgb.png").exists()
+    allowed = _run(tmp_path, *camera, "camera.allow_invalid=true")
+    assert allowed.returncode == 0, allowed.stderr
+    assert json.loads((tmp_path / "run" / "render.json").read_text())["validity"]["verdict"] == verdict
+
+
+def test_an_eye_on_a_wall_has_no_hits_in_its_mask(tmp_path: Path) -> None:
+    """The box room's wall x = 0: an eye on its plane sees no depth, and the mask says so."""
+    result = _run(tmp_path, "camera.eye=[0.0,1.5,2.0]", "camera.target=[-1,1.5,2.0]", "camera.fov_x_deg=70",
+                  "render.height=24", "render.width=32", "camera.allow_invalid=true")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((tmp_path / "run" / "render.json").read_text())
+    depth = np.load(tmp_path / "run" / "depth.npy")
+    assert summary["validity"]["verdict"] != "valid"
+    assert summary["hit_fraction"] == pytest.approx(float((depth > 0).mean()))
