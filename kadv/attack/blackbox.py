@@ -27,9 +27,9 @@ def _evaluate(context: SearchContext, step: int, params: torch.Tensor, budget: B
     """Guard the move from the init view to each pose (B, 6), render exactly, and record."""
     reached, fraction = context.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
     params = torch.cat([params[:, :3], reached], dim=1)
-    pose, terms = context.evaluate_exact(params)
+    pose, terms, render = context.evaluate_exact(params)
     budget.forward += len(params)
-    return context.records(step, params, pose, terms, fraction)
+    return context.records(step, params, pose, terms, fraction, render=render)
 
 
 def _left(config: AttackConfig, budget: Budget, started: float) -> int:

@@ -47,7 +47,7 @@ def gradient_search(context: SearchContext, config: AttackConfig, rng: np.random
         terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam)
         budget.forward += batch
         records += context.records(step, params, out.world_T_cam, terms, fraction,
-                                   (out.coverage, out.rgb_error, out.depth_error), out.refreshed)
+                                   (out.coverage, out.rgb_error, out.depth_error), out.refreshed, render=out.exact)
         bar.set_postfix(L_depth=f"{float(terms.l_depth.detach().max()):.4f}", refresh=False)
         bar.update(1)
         if step == config.steps:

@@ -13,7 +13,7 @@ from kadv.attack.objective import Objective, ObjectiveTerms
 from kadv.attack.records import ViewRecord
 from kadv.geometry import intrinsics_from_fov, matrix_to_axis_angle, perturb_world_T_cam
 from kadv.penalties import step_guard, view_validity
-from kadv.render import DifferentiableRenderer
+from kadv.render import DifferentiableRenderer, RenderOutput
 
 __all__ = ["METHODS", "AttackConfig", "SearchContext"]
 
@@ -149,10 +149,13 @@ class SearchContext:
 
     def records(self, step: int, params: torch.Tensor, world_T_cam: torch.Tensor, terms: ObjectiveTerms,
                 guard_fraction: torch.Tensor, stats: tuple[torch.Tensor, ...] | None = None,
-                refreshed: bool = False, lanes: range | None = None) -> list[ViewRecord]:
-        """One :class:`ViewRecord` per view, with the view's validity verdict."""
+                refreshed: bool = False, lanes: range | None = None,
+                render: RenderOutput | None = None) -> list[ViewRecord]:
+        """One :class:`ViewRecord` per view, with the view's validity verdict (from ``render``, the
+        views' exact render, when given)."""
         pose = world_T_cam.detach()
-        validity = view_validity(self.renderer, pose, self.K, self.height, self.width, **self.validity_options)
+        validity = view_validity(self.renderer, pose, self.K, self.height, self.width, render=render,
+                                 **self.validity_options)
         theta = matrix_to_axis_angle(pose[:, :3, :3])
         lanes = lanes or range(len(pose))
         rows = []
@@ -166,10 +169,10 @@ class SearchContext:
                 rgb_error=rgb_error, depth_error=depth_error, refreshed=refreshed))
         return rows
 
-    def evaluate_exact(self, params: torch.Tensor) -> tuple[torch.Tensor, ObjectiveTerms]:
-        """Poses (B, 4, 4) and objective terms of views rendered exactly (no gradient)."""
+    def evaluate_exact(self, params: torch.Tensor) -> tuple[torch.Tensor, ObjectiveTerms, RenderOutput]:
+        """Poses (B, 4, 4), objective terms and exact renders of views (no gradient)."""
         with torch.no_grad():
             pose = perturb_world_T_cam(self.base(len(params)), params[:, :3], params[:, 3:])
             out = self.renderer.render(pose, self.K, self.height, self.width,
                                        supersample=self.differentiable.config.supersample)
-            return pose, self.objective(out.rgb, out.depth, out.mask, pose)
+            return pose, self.objective(out.rgb, out.depth, out.mask, pose), out

@@ -26,9 +26,9 @@ def main(cfg: DictConfig) -> None:
     summary = {k: v for k, v in training_log.items() if k != "losses"}
     weights = save_kadv_tiny(network, out_dir / "kadv_tiny.safetensors", metadata=summary)
     atomic_write(out_dir / "train_log.json", lambda tmp: tmp.write_text(json.dumps(training_log, indent=1)))
-    if cfg.install:
+    if cfg.replace_shipped_weights:
         save_kadv_tiny(network, TINY_WEIGHTS, metadata=summary)
-        log.info("installed weights into %s", TINY_WEIGHTS)
+        log.info("replaced the shipped weights: %s", TINY_WEIGHTS)
     log.info("kadv-tiny: val delta1 %.3f, render %.0f s, train %.0f s -> %s", summary["val_delta1"],
              summary["render_seconds"], summary["train_seconds"], weights)
 

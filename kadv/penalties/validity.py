@@ -27,7 +27,7 @@ from kadv.geometry.camera import pixel_rays
 from kadv.geometry.pose import check_world_T_cam
 from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface
-from kadv.render.raycast import ExactRenderer
+from kadv.render.raycast import ExactRenderer, RenderOutput
 
 __all__ = ["ViewValidity", "fibonacci_sphere", "probe_directions_hits", "view_validity"]
 
@@ -93,6 +93,7 @@ def view_validity(
     probe_rays: int = PenaltyConfig.probe_rays,
     outside_threshold: float = PenaltyConfig.outside_threshold,
     inside_threshold: float = PenaltyConfig.inside_threshold,
+    render: RenderOutput | None = None,
 ) -> ViewValidity:
     """Classify B camera views.
 
@@ -106,15 +107,24 @@ def view_validity(
         probe_rays: directions of the spherical probe.
         outside_threshold: probe miss fraction above which the centre is outside the scene.
         inside_threshold: probe back-face fraction above which the centre is inside an object.
+        render: the views' exact render at these poses, K and size, when the caller has one: its
+            pixel-centre hits are used instead of casting them again.
     """
     pose = check_world_T_cam(world_T_cam)
     centres = pose[:, :3, 3].detach().double().numpy()
-    origins, directions = pixel_rays(pose, K, height, width)
-    hits = renderer.cast(origins, directions)
     batch = len(centres)
-    hit = hits.hit.reshape(batch, -1)
-    view_back = renderer.back_facing(hits, directions).reshape(batch, -1)
-    near_hit = hit & (hits.t.reshape(batch, -1) < near)
+    if render is None:
+        origins, directions = pixel_rays(pose, K, height, width)
+        hits = renderer.cast(origins, directions)
+        hit = hits.hit.reshape(batch, -1)
+        view_back = renderer.back_facing(hits, directions).reshape(batch, -1)
+        near_hit = hit & (hits.t.reshape(batch, -1) < near)
+    else:
+        if tuple(render.depth.shape) != (batch, 1, height, width):
+            raise ValueError(f"render: expected depth ({batch}, 1, {height}, {width}), got {tuple(render.depth.shape)}")
+        hit = (render.triangle_ids >= 0).reshape(batch, -1).numpy()
+        view_back = render.back_face.reshape(batch, -1).numpy()
+        near_hit = hit & (render.depth.reshape(batch, -1).double().numpy() < near)
     probe_miss, probe_back = probe_directions_hits(renderer, centres, fibonacci_sphere(probe_rays))
     distance = distance_to_surface(renderer, torch.from_numpy(centres)).numpy()
     verdicts, reasons = [], []

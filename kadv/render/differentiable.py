@@ -34,7 +34,9 @@ class DiffRenderConfig:
         max_rgb_error: on_drift tolerance on mean |rgb_warp - rgb_exact| over valid pixels.
         max_depth_error: on_drift tolerance on mean relative depth error over valid pixels.
         layers: anchor depth layers.
-        guard_band: extra anchor pixels on each side.
+        guard_band: extra anchor pixels on each side, for samples that leave the frame when the
+            camera has moved since the anchor; with refresh "always" the anchor is only sampled at
+            its own pose, within a pixel of the frame, so one pixel is rendered.
         supersample: s x s samples per pixel for the anchor, the exact RGB and the warp's box filter.
         silhouette: add the occlusion-edge term.
         depth_tolerance: relative warped-vs-exact depth disagreement that invalidates a pixel.
@@ -106,6 +108,10 @@ class DifferentiableRenderer:
         self._anchor_key: tuple | None = None
         self._steps_since_refresh = 0
 
+    @property
+    def _guard_band(self) -> int:
+        return min(self.config.guard_band, 1) if self.config.refresh == "always" else self.config.guard_band
+
     def reset(self) -> None:
         """Forget the anchor (the next call renders a new one)."""
         self.anchor = None
@@ -114,7 +120,7 @@ class DifferentiableRenderer:
     def _refresh(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> AnchorLayers:
         """Render a new anchor at ``world_T_cam``; returns it on the CPU and keeps it on the device."""
         c = self.config
-        anchor = render_anchor(self.exact, world_T_cam, K, height, width, c.layers, c.guard_band, c.supersample)
+        anchor = render_anchor(self.exact, world_T_cam, K, height, width, c.layers, self._guard_band, c.supersample)
         self.anchor = anchor.to(self.device)
         self._anchor_key = _view_key(K, height, width)
         self._steps_since_refresh = 0
@@ -188,7 +194,7 @@ class DifferentiableRenderer:
                       anchor: AnchorLayers | None) -> RenderOutput:
         """The exact render of the frame plus ``border`` pixels; an anchor (CPU) just rendered at this
         pose holds the colours of the frame's sub-pixel rays, which are then not cast again."""
-        s, g = self.config.supersample, self.config.guard_band
+        s, g = self.config.supersample, self._guard_band
         sub_rgb = None
         if anchor is not None and s > 1 and g >= border:
             start = s * (g - border)

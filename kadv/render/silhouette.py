@@ -95,14 +95,22 @@ def find_edge_pairs(renderer: ExactRenderer, exact: RenderOutput, world_T_cam: t
         with np.errstate(invalid="ignore"):  # both rays missing: inf - inf
             candidate = (ia != ib) & np.isfinite(near) & (~np.isfinite(far) | ((far - near) > _MIN_JUMP * near))
         bi, yi, xi = np.nonzero(candidate)
-        if not len(bi):
-            continue
         a = yi * width + xi
         b = a + (1 if horizontal else width)
         uv_a = np.c_[xi + 0.5, yi + 0.5]
         uv_b = uv_a + ([1.0, 0.0] if horizontal else [0.0, 1.0])
         R, c = pose[bi, :3, :3], pose[bi, :3, 3]
         flat_ids, flat_z = ids.reshape(batch, -1), z.reshape(batch, -1)
+        # Neighbours on one continuous surface (a grazing floor's triangles) are no edge: the plane of
+        # either one's triangle, extended to the other's ray, meets it at its depth. Dropping them here
+        # spares the bisection most candidates; it would find no occlusion between them either.
+        with np.errstate(invalid="ignore"):
+            b_on_a = np.abs(_plane_depth(renderer, flat_ids[bi, a], _rays(K_inv, bi, uv_b), R, c) - flat_z[bi, b])
+            a_on_b = np.abs(_plane_depth(renderer, flat_ids[bi, b], _rays(K_inv, bi, uv_a), R, c) - flat_z[bi, a])
+            edge = ~((b_on_a <= _CONTINUITY * flat_z[bi, b]) & (a_on_b <= _CONTINUITY * flat_z[bi, a]))
+        bi, a, b, uv_a, uv_b, R, c = bi[edge], a[edge], b[edge], uv_a[edge], uv_b[edge], R[edge], c[edge]
+        if not len(bi):
+            continue
         a_is_fg = flat_z[bi, a] <= flat_z[bi, b]
         fg_id = np.where(a_is_fg, flat_ids[bi, a], flat_ids[bi, b])
         bg_id = np.where(a_is_fg, flat_ids[bi, b], flat_ids[bi, a])

@@ -40,6 +40,21 @@ def test_box_room_inside_outside_free(room_renderer: ExactRenderer) -> None:
     assert _verdict(room_renderer, [0.02, 1.5, 1.0]) == "too close"
 
 
+def test_a_given_render_gives_the_same_verdicts_as_casting_again(room_renderer: ExactRenderer) -> None:
+    lo, hi = _box_bounds(room_renderer, 0)
+    centres = [(lo + hi) / 2, room_renderer.scene.bounds[1] + [1.0, 0.5, 1.0],
+               room_renderer.scene.cameras[0].world_T_cam[:3, 3].numpy(), [0.02, 1.5, 1.0], [0.3, 1.5, 0.06]]
+    poses = torch.stack([look_at(torch.tensor(c, dtype=torch.float64),
+                                 torch.tensor(c, dtype=torch.float64) + torch.tensor([1.0, -0.1, 0.7], dtype=torch.float64))
+                         for c in centres])
+    cast = view_validity(room_renderer, poses, K, 12, 16)
+    given = view_validity(room_renderer, poses, K, 12, 16, render=room_renderer.render(poses, K, 12, 16, supersample=2))
+    assert given.verdicts == cast.verdicts and given.reasons == cast.reasons
+    assert len(set(cast.verdicts)) == 4  # inside, outside, valid, too close
+    with pytest.raises(ValueError, match="render"):
+        view_validity(room_renderer, poses, K, 24, 32, render=room_renderer.render(poses, K, 12, 16))
+
+
 def test_statistics_shapes_and_back_faces_seen_from_inside_a_box(room_renderer: ExactRenderer) -> None:
     lo, hi = _box_bounds(room_renderer, 0)
     inside = look_at(torch.tensor((lo + hi) / 2), torch.tensor((lo + hi) / 2 + [1.0, 0.0, 0.0]))
