@@ -3,7 +3,9 @@ from __future__ import annotations
 
 import os
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+from kadv.runtime import configure_runtime  # noqa: E402  (before torch loads)
+
+configure_runtime()
 
 import statistics  # noqa: E402
 import time  # noqa: E402

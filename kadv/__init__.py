@@ -1,25 +1,37 @@
-"""kadv: adversarial camera viewpoints for monocular depth estimation models."""
+"""kadv: adversarial camera viewpoints for monocular depth estimation models.
+
+The names below load on first use, so that ``import kadv.runtime`` runs before torch is imported.
+"""
 from __future__ import annotations
 
-from kadv.geometry import Camera, intrinsics_from_fov, look_at
-from kadv.models import DepthModel, load_model
-from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer, RenderOutput, Shading
-from kadv.scenes import Material, Scene, box_room, load_scene
+import importlib
 
-__all__ = [
-    "Camera",
-    "DepthModel",
-    "DiffRenderConfig",
-    "DifferentiableRenderer",
-    "ExactRenderer",
-    "Material",
-    "RenderOutput",
-    "Scene",
-    "Shading",
-    "box_room",
-    "intrinsics_from_fov",
-    "load_model",
-    "load_scene",
-    "look_at",
-]
+_EXPORTS = {
+    "Camera": "kadv.geometry",
+    "DepthModel": "kadv.models",
+    "DiffRenderConfig": "kadv.render",
+    "DifferentiableRenderer": "kadv.render",
+    "ExactRenderer": "kadv.render",
+    "Material": "kadv.scenes",
+    "RenderOutput": "kadv.render",
+    "Scene": "kadv.scenes",
+    "Shading": "kadv.render",
+    "box_room": "kadv.scenes",
+    "intrinsics_from_fov": "kadv.geometry",
+    "load_model": "kadv.models",
+    "load_scene": "kadv.scenes",
+    "look_at": "kadv.geometry",
+}
+
+__all__ = sorted(_EXPORTS)
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str) -> object:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'kadv' has no attribute {name!r}")
+    return getattr(importlib.import_module(_EXPORTS[name]), name)
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

@@ -120,7 +120,7 @@ class SearchContext:
                  width: int) -> None:
         self.objective = objective
         self.differentiable = differentiable
-        self.renderer = differentiable.exact
+        self.renderer = differentiable.renderer
         self.init = init
         self.height, self.width = height, width
         self.K = intrinsics_from_fov(init.fov_x_deg, height, width)

@@ -29,6 +29,7 @@ from kadv.losses import depth_loss
 from kadv.models import load_model
 from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
 from kadv.report.run import SUMMARY, is_complete, load_partial_results, save_partial_result, write_run
+from kadv.runtime import configure_runtime
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +39,7 @@ _INIT_KEYS = {"init_views": "count", "init_file_cameras": "file_cameras", "init_
               "init_roll_deg": "roll_deg", "init_fov_x_deg": "fov_x_deg", "init_min_hit_fraction": "min_hit_fraction"}
 
 
-def _settings(cfg: DictConfig) -> tuple[AttackConfig, InitViewConfig]:
+def attack_settings(cfg: DictConfig) -> tuple[AttackConfig, InitViewConfig]:
     """The ``attack`` node split into the search's and the init views' settings; unknown keys are errors."""
     node = OmegaConf.to_container(cfg, resolve=True)
     node.pop("init_params", None)
@@ -80,6 +81,7 @@ def _table(summary: dict) -> str:
 @reports_user_errors("kadv-attack")
 def main(cfg: DictConfig) -> float:
     """Run the configured attack; returns the mean adversarial L_depth (for Hydra sweepers)."""
+    configure_runtime()
     run_dir = Path(HydraConfig.get().runtime.output_dir)
     if is_complete(run_dir):
         summary = json.loads((run_dir / SUMMARY).read_text())
@@ -87,7 +89,7 @@ def main(cfg: DictConfig) -> float:
         return float(summary["adversarial_l_depth"])
     device = resolve_device(cfg.device)
     height, width, supersample = check_render_config(cfg.render)
-    attack_config, init_config = _settings(cfg.attack)
+    attack_config, init_config = attack_settings(cfg.attack)
     penalty = PenaltyConfig(**OmegaConf.to_container(cfg.penalty, resolve=True))
     diff_config = DiffRenderConfig(supersample=supersample,
                                    **OmegaConf.to_container(cfg.render.differentiable, resolve=True))

@@ -4,31 +4,27 @@ This is the edge where Hydra meets the library; nothing under ``kadv/`` but ``cl
 """
 from __future__ import annotations
 
+import functools
 import os
+import logging
+import math
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
 
-# torch's OpenMP threads spin after each op and steal cores from Embree's ray casting.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+import torch
+from hydra.core.hydra_config import HydraConfig
+from hydra.types import RunMode
+from omegaconf import DictConfig, OmegaConf
+from omegaconf.errors import OmegaConfBaseException
 
-import functools  # noqa: E402
-import logging  # noqa: E402
-import math  # noqa: E402
-import re  # noqa: E402
-import sys  # noqa: E402
-from collections.abc import Callable  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
-
-import torch  # noqa: E402
-from hydra.core.hydra_config import HydraConfig  # noqa: E402
-from hydra.types import RunMode  # noqa: E402
-from omegaconf import DictConfig, OmegaConf  # noqa: E402
-from omegaconf.errors import OmegaConfBaseException  # noqa: E402
-
-from kadv.errors import WeightsUnavailable  # noqa: E402
-from kadv.geometry import look_at  # noqa: E402
-from kadv.io import write_json  # noqa: E402
-from kadv.render import Shading  # noqa: E402
-from kadv.scenes import Scene, box_room, load_scene  # noqa: E402
+from kadv.errors import WeightsUnavailable
+from kadv.geometry import look_at
+from kadv.io import write_json
+from kadv.render import Shading
+from kadv.scenes import Scene, box_room, load_scene
 
 __all__ = [
     "FAILURE",

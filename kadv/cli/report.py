@@ -14,6 +14,7 @@ from kadv.render import ExactRenderer
 from kadv.report.html import save_mean_curves, write_html
 from kadv.report.sweep import RunRecord, collect_runs, method_table, table2, table3
 from kadv.report.transfer import transfer_tables
+from kadv.runtime import configure_runtime
 
 DESCRIPTION = """kadv-report: turns kadv-attack run directories into the study's tables and more.
 Writes to OUT (default: <first path>/report): table2.{md,csv} (adversarial L_depth and delta1 per
@@ -71,6 +72,8 @@ def report(paths: list[str], out: Path | None, transfer: bool = True, progress: 
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Write the report of the runs named on the command line."""
+    configure_runtime()
     args = _parser().parse_args(argv)
     try:
         written = report(args.paths, args.out, transfer=not args.no_transfer, progress=not args.no_progress)

@@ -13,6 +13,7 @@ from kadv.cli.common import reports_user_errors
 from kadv.models.tiny import TINY_WEIGHTS, save_kadv_tiny
 from kadv.models.train_tiny import TinyTrainConfig, train_tiny
 from kadv.report import atomic_write
+from kadv.runtime import configure_runtime
 
 log = logging.getLogger(__name__)
 
@@ -20,6 +21,8 @@ log = logging.getLogger(__name__)
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_train_tiny")
 @reports_user_errors("kadv-train-tiny")
 def main(cfg: DictConfig) -> None:
+    """Train kadv-tiny; weights and the training log go into the run directory."""
+    configure_runtime()
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     config = TinyTrainConfig(**OmegaConf.to_container(cfg.train, resolve=True))
     network, training_log = train_tiny(config)

@@ -1,6 +1,6 @@
 """Synthetic training and evaluation data rendered from procedural rooms."""
 from __future__ import annotations
 
-from kadv.datasets.procedural import ViewBatch, random_valid_poses, render_procedural_views
+from kadv.datasets.procedural import ViewBatch, render_procedural_views
 
-__all__ = ["ViewBatch", "random_valid_poses", "render_procedural_views"]
+__all__ = ["ViewBatch", "render_procedural_views"]

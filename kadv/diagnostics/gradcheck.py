@@ -14,11 +14,11 @@ import torch
 from kornia.geometry.transform import resize
 from torch.nn import functional as F
 
-from kadv.datasets import random_valid_poses
+from kadv.penalties import random_valid_poses
 from kadv.geometry.camera import intrinsics_from_fov, pixel_rays
 from kadv.geometry.pose import perturb_world_T_cam
 from kadv.render.differentiable import DiffRenderConfig, DifferentiableRenderer
-from kadv.render.layers import guard_band_intrinsics
+from kadv.render.layers import RING, ring_view
 from kadv.render.raycast import ExactRenderer, RenderOutput, pixel_angle
 
 __all__ = ["FUNCTIONALS", "GradientCheck", "check_pose", "gradient_check_poses", "occlusion_edge_mask",
@@ -98,9 +98,9 @@ def check_pose(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tens
     base = world_T_cam.double().reshape(1, 4, 4)
     K = torch.as_tensor(K, dtype=torch.float64)
     w_rgb, w_depth = smooth_weights(weight_seed, 3, height, width), smooth_weights(weight_seed + 1, 1, height, width)
-    # edges just outside the frame enter it when the camera moves: detect them on a one-pixel ring
-    K_ring = guard_band_intrinsics(K, 1, 1)
-    interior = (~occlusion_edge_mask(renderer.render(base, K_ring, height + 2, width + 2))).double()[..., 1:-1, 1:-1]
+    # edges just outside the frame enter it when the camera moves: detect them on the ring too
+    edges = occlusion_edge_mask(renderer.render(base, *ring_view(K, height, width)))[..., RING:-RING, RING:-RING]
+    interior = (~edges).double()
     weights = {"rgb_interior": (w_rgb * interior, None), "depth_interior": (None, w_depth * interior),
                "rgb_full": (w_rgb, None), "depth_full": (None, w_depth)}
 

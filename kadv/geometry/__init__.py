@@ -1,7 +1,7 @@
 """Poses and cameras (OpenCV convention: x right, y down, z forward; metres)."""
 from __future__ import annotations
 
-from kadv.geometry.camera import Camera, intrinsics_from_fov, pixel_rays, to_open3d_pinhole
+from kadv.geometry.camera import Camera, batched_intrinsics, intrinsics_from_fov, pixel_rays, to_open3d_pinhole
 from kadv.geometry.pose import (
     axis_angle_to_matrix,
     check_world_T_cam,
@@ -15,6 +15,7 @@ from kadv.geometry.pose import (
 __all__ = [
     "Camera",
     "axis_angle_to_matrix",
+    "batched_intrinsics",
     "check_world_T_cam",
     "intrinsics_from_fov",
     "look_at",

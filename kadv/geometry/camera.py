@@ -10,7 +10,7 @@ import torch
 
 from kadv.geometry.pose import check_world_T_cam
 
-__all__ = ["Camera", "intrinsics_from_fov", "pixel_rays", "to_open3d_pinhole"]
+__all__ = ["Camera", "batched_intrinsics", "intrinsics_from_fov", "pixel_rays", "to_open3d_pinhole"]
 
 
 def intrinsics_from_fov(fov_x_deg: float, height: int, width: int) -> torch.Tensor:
@@ -60,7 +60,12 @@ class Camera:
         return intrinsics_from_fov(self.fov_x_deg, height, width)
 
 
-def _batched_intrinsics(K: torch.Tensor, batch: int) -> torch.Tensor:
+def batched_intrinsics(K: torch.Tensor, batch: int) -> torch.Tensor:
+    """Intrinsics (batch, 3, 3) float64 from (3, 3) (shared by the batch) or (batch, 3, 3).
+
+    Raises:
+        ValueError: on another shape, NaN/inf entries or a focal length that is not positive.
+    """
     K = torch.as_tensor(K, dtype=torch.float64)
     if K.shape == (3, 3):
         K = K.expand(batch, 3, 3)
@@ -90,7 +95,7 @@ def pixel_rays(
     """
     pose = check_world_T_cam(world_T_cam).detach().double()
     batch = pose.shape[0]
-    K = _batched_intrinsics(K, batch)
+    K = batched_intrinsics(K, batch)
     s = int(supersample)
     if s < 1:
         raise ValueError(f"supersample must be >= 1, got {supersample}")

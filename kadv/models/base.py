@@ -9,6 +9,8 @@ from kornia.enhance import normalize
 from kornia.geometry.transform import resize
 from torch import nn
 
+from kadv.checks import check_shape
+
 __all__ = ["DepthModel", "Preprocess", "constrain_to_multiple", "resized_shape"]
 
 
@@ -87,8 +89,7 @@ class DepthModel(nn.Module):
     def forward(self, rgb: torch.Tensor) -> torch.Tensor:
         """Prediction (B, 1, H, W) for images (B, 3, H, W) in [0, 1]; it runs where the model's
         parameters are and comes back on ``rgb``'s device."""
-        if rgb.ndim != 4 or rgb.shape[1] != 3:
-            raise ValueError(f"rgb: expected (B, 3, H, W), got {tuple(rgb.shape)}")
+        check_shape(rgb, "B 3 H W", "rgb")
         height, width = rgb.shape[-2:]
         p = self.preprocess
         x = rgb.to(next(self.parameters()).device)

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 from pathlib import Path
+from urllib.parse import urlparse
 
 import torch
 from transformers import AutoConfig, AutoModelForDepthEstimation
@@ -32,6 +34,20 @@ class ModelWeightsUnavailable(WeightsUnavailable):
 
 def hub_offline() -> bool:
     return any(os.environ.get(k, "").lower() in ("1", "true", "yes", "on") for k in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE"))
+
+
+def hub_reachable(timeout: float = 3.0) -> bool:
+    """Whether the hub's host answers a TCP connection within ``timeout`` seconds.
+
+    Asked once before a download, so that a machine without network fails in seconds instead of
+    waiting out the hub client's retries (about half a minute).
+    """
+    host = urlparse(os.environ.get("HF_ENDPOINT", "https://huggingface.co")).hostname or "huggingface.co"
+    try:
+        socket.create_connection((host, 443), timeout=timeout).close()
+    except OSError:
+        return False
+    return True
 
 
 def _preprocess(source: str, model_type: str, local_only: bool) -> Preprocess:
@@ -86,8 +102,12 @@ def load_huggingface(source: str, name: str | None = None, hub_id: str | None = 
     local_dir = Path(source).expanduser()
     location = str(local_dir) if local_dir.is_dir() else source
     attempts = [True] if local_dir.is_dir() or hub_offline() else [True, False]
+    unreachable = False
     last_error: Exception | None = None
     for local_only in attempts:
+        if not local_only and not hub_reachable():
+            unreachable = True
+            break
         try:
             config = AutoConfig.from_pretrained(location, local_files_only=local_only)
             network = AutoModelForDepthEstimation.from_pretrained(location, local_files_only=local_only)
@@ -96,7 +116,8 @@ def load_huggingface(source: str, name: str | None = None, hub_id: str | None = 
         except OSError as error:
             last_error = error
     where = f"the directory {local_dir}" if local_dir.is_dir() else f"the Hugging Face cache ({hub_id or source})"
-    reason = "the hub is offline (HF_HUB_OFFLINE=1)" if hub_offline() else "the download failed"
+    reason = ("the hub is offline (HF_HUB_OFFLINE=1)" if hub_offline()
+              else "the hub cannot be reached from here" if unreachable else "the download failed")
     raise ModelWeightsUnavailable(
         f"model {name!r}: weights not found in {where} and {reason}. Provide them by passing a local "
         f"directory in save_pretrained layout (load_model('/path/to/dir') or model.weights=/path/to/dir), or download "

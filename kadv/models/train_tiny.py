@@ -9,10 +9,11 @@ import torch
 from tqdm import tqdm
 
 from kadv.datasets import ViewBatch, render_procedural_views
-from kadv.losses import align_scale_shift, depth_metrics, to_comparison_space
+from kadv.losses import ssi_loss
+from kadv.models.evaluation import evaluate
 from kadv.models.tiny import DEFAULT_CHANNELS, TINY_PREPROCESS, KadvTiny, TinyDepthNet, load_kadv_tiny
 
-__all__ = ["TinyTrainConfig", "evaluate", "fit", "ssi_loss", "train_tiny"]
+__all__ = ["TinyTrainConfig", "fit", "train_tiny"]
 
 
 @dataclass
@@ -36,55 +37,12 @@ class TinyTrainConfig:
     init_weights: str | None = None
 
 
-def _gradient_matching(residual: torch.Tensor, mask: torch.Tensor, scales: int) -> torch.Tensor:
-    """Mean |d/dx| + |d/dy| of the residual over pairs of valid pixels, summed over dyadic scales; (B,)."""
-    total = residual.new_zeros(residual.shape[0])
-    for level in range(scales):
-        step = 2**level
-        r, m = residual[..., ::step, ::step], mask[..., ::step, ::step].to(residual.dtype)
-        pairs_x, pairs_y = m[..., 1:] * m[..., :-1], m[..., 1:, :] * m[..., :-1, :]
-        gradient = (pairs_x * (r[..., 1:] - r[..., :-1]).abs()).sum(dim=(1, 2, 3))
-        gradient = gradient + (pairs_y * (r[..., 1:, :] - r[..., :-1, :]).abs()).sum(dim=(1, 2, 3))
-        total = total + gradient / (pairs_x.sum(dim=(1, 2, 3)) + pairs_y.sum(dim=(1, 2, 3))).clamp_min(1.0)
-    return total
-
-
-def ssi_loss(prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor, gradient_weight: float = 0.0,
-             scales: int = 4) -> torch.Tensor:
-    """MiDaS-style scale-and-shift-invariant loss in disparity space.
-
-    With d the ground-truth disparity and r = (align(pred) - d) / mean(d): mean |r| plus
-    ``gradient_weight`` times the multi-scale gradient-matching term of MiDaS on r, which rewards
-    sharp, well placed discontinuities that the mean error alone barely notices.
-    """
-    target = to_comparison_space(gt_depth, "depth", "disparity", mask)
-    weight = mask.to(prediction.dtype)
-    count = weight.sum(dim=(1, 2, 3)).clamp_min(1.0)
-    scale = ((weight * target).sum(dim=(1, 2, 3)) / count).clamp_min(1e-6)
-    residual = weight * (align_scale_shift(prediction, target, mask) - target) / scale[:, None, None, None]
-    loss = residual.abs().sum(dim=(1, 2, 3)) / count
-    if gradient_weight > 0:
-        loss = loss + gradient_weight * _gradient_matching(residual, mask, scales)
-    return loss.mean()
-
-
 def _augment(rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor, generator: torch.Generator):
     flip = torch.rand(rgb.shape[0], generator=generator) < 0.5
     rgb, depth, mask = (torch.where(flip[:, None, None, None], x.flip(-1), x) for x in (rgb, depth, mask))
     gain = 0.7 + 0.6 * torch.rand(rgb.shape[0], 1, 1, 1, generator=generator)
     bias = 0.1 * (torch.rand(rgb.shape[0], 3, 1, 1, generator=generator) - 0.5)
     return (rgb * gain + bias).clamp(0, 1), depth, mask
-
-
-def evaluate(model: KadvTiny, views: ViewBatch, batch_size: int = 32) -> float:
-    """Mean delta1 (after alignment) of ``model`` on ``views``."""
-    scores = []
-    with torch.no_grad():
-        for start in range(0, len(views.rgb), batch_size):
-            part = slice(start, start + batch_size)
-            prediction = model(views.rgb[part])
-            scores.append(depth_metrics(prediction, views.depth[part], views.mask[part])["delta1"])
-    return float(torch.cat(scores).mean())
 
 
 def fit(network: TinyDepthNet, train: ViewBatch, config: TinyTrainConfig, progress: bool = True) -> list[float]:

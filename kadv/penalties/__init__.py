@@ -4,6 +4,7 @@ from __future__ import annotations
 from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface, shortcut_penalty
 from kadv.penalties.guard import StepCheck, step_guard
+from kadv.penalties.sampling import random_valid_poses
 from kadv.penalties.validity import ViewValidity, fibonacci_sphere, probe_directions_hits, view_validity
 
 __all__ = [
@@ -13,6 +14,7 @@ __all__ = [
     "distance_to_surface",
     "fibonacci_sphere",
     "probe_directions_hits",
+    "random_valid_poses",
     "shortcut_penalty",
     "step_guard",
     "view_validity",

@@ -5,6 +5,7 @@ import numpy as np
 import open3d as o3d
 import torch
 
+from kadv.checks import check_shape
 from kadv.render.raycast import ExactRenderer
 
 __all__ = ["distance_to_surface", "shortcut_penalty"]
@@ -40,8 +41,7 @@ def distance_to_surface(renderer: ExactRenderer, centres: torch.Tensor) -> torch
     Raises:
         ValueError: on a wrong shape or NaN/inf centres.
     """
-    if centres.ndim != 2 or centres.shape[1] != 3:
-        raise ValueError(f"centres: expected shape (B, 3), got {tuple(centres.shape)}")
+    check_shape(centres, "B 3", "centres")
     if not bool(torch.isfinite(centres.detach()).all()):
         raise ValueError("centres: contain NaN or inf")
     return _SurfaceDistance.apply(centres, renderer)

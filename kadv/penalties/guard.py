@@ -6,6 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from kadv.checks import check_shape
 from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface
 from kadv.render.raycast import ExactRenderer
@@ -50,8 +51,7 @@ def step_guard(renderer: ExactRenderer, c_old: torch.Tensor, c_new: torch.Tensor
     Raises:
         ValueError: on mismatched shapes or NaN/inf centres.
     """
-    if c_old.shape != c_new.shape or c_old.ndim != 2 or c_old.shape[1] != 3:
-        raise ValueError(f"c_old and c_new: expected equal shapes (B, 3), got {tuple(c_old.shape)}, {tuple(c_new.shape)}")
+    check_shape(c_new, "B 3", "c_new", check_shape(c_old, "B 3", "c_old"))
     old = c_old.detach().double().cpu().numpy()
     new = c_new.detach().double().cpu().numpy()
     if not (np.isfinite(old).all() and np.isfinite(new).all()):

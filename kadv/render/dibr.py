@@ -19,6 +19,7 @@ from kornia.geometry.camera.perspective import project_points
 from kornia.geometry.depth import depth_to_3d_v2
 from kornia.geometry.linalg import transform_points
 
+from kadv.geometry.camera import batched_intrinsics
 from kadv.render.layers import AnchorLayers
 
 __all__ = ["Reprojection", "reproject"]
@@ -107,6 +108,48 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
     return colour, point, total
 
 
+# below this cosine between a sub-pixel ray and its pixel's plane, the ray grazes the plane and
+# keeps the pixel-centre depth instead of meeting the plane far away
+_GRAZING_COSINE = 1e-3
+_MIN_TAP_WEIGHT = 1e-9  # a sub-sample whose taps all lie on other surfaces found nothing
+
+
+def _sub_pixel_points(depth: torch.Tensor, normals: torch.Tensor, K: torch.Tensor, s: int) -> torch.Tensor:
+    """Current-frame points (B, H, W, s*s, 3) of the s x s sub-pixel samples of each pixel.
+
+    Sub-pixel rays meet the plane of the pixel's triangle (``normals`` (B, 3, H, W), current
+    camera frame) at the pixel's exact depth (B, 1, H, W), positive everywhere.
+    """
+    # kornia's meshgrid puts pixel (i, j) at (j, i); kadv's centres are at +0.5: shift the principal point.
+    points = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False)[:, :, :, None, :]
+    offsets = (torch.arange(s, dtype=depth.dtype, device=depth.device) + 0.5) / s - 0.5
+    sub = torch.stack(torch.meshgrid(offsets, offsets, indexing="xy"), dim=-1).reshape(-1, 2)  # (S, 2) as (dx, dy)
+    rays = points / depth[:, 0, :, :, None, None].clamp_min(1e-12)
+    focal = torch.stack([K[:, 0, 0], K[:, 1, 1]], dim=-1)[:, None, None, None, :]
+    shift = sub[None, None, None] / focal  # (B, 1, 1, S, 2) in normalised image coordinates
+    sub_rays = rays + torch.cat([shift, torch.zeros_like(shift[..., :1])], dim=-1)  # (B, H, W, S, 3)
+    n = normals.detach().to(depth.dtype).permute(0, 2, 3, 1)[:, :, :, None, :]
+    numerator = (n * points).sum(-1, keepdim=True)
+    denominator = (n * sub_rays).sum(-1, keepdim=True)
+    grazing = denominator.abs() < _GRAZING_COSINE * sub_rays.norm(dim=-1, keepdim=True)
+    t = torch.where(grazing, depth[:, 0, :, :, None, None].expand_as(numerator),
+                    numerator / torch.where(grazing, 1.0, denominator))
+    return sub_rays * t
+
+
+def _project_to_anchor(anchor: AnchorLayers, sub_points_P: torch.Tensor,
+                       A_T_P: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Anchor-frame points (B, 3, M) and hi-res anchor pixel coordinates q (B, M, 2) of the
+    sub-pixel points (B, H, W, S, 3), M = H * W * S; points behind the anchor land far outside."""
+    batch, height = sub_points_P.shape[:2]
+    device = sub_points_P.device
+    sub_points_A = transform_points(A_T_P[:, None, None].to(device, _DTYPE), sub_points_P.reshape(batch, height, -1, 3))
+    sub_points_A = sub_points_A.reshape(sub_points_P.shape)
+    q = project_points(sub_points_A, anchor.K[:, None, None, None].to(device, _DTYPE)).reshape(batch, -1, 2)
+    q = torch.where(torch.isfinite(q), q, torch.full_like(q, -1e6))
+    return sub_points_A.reshape(batch, -1, 3).transpose(1, 2), q
+
+
 def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, A_T_P: torch.Tensor, K: torch.Tensor,
               depth_tolerance: float = 0.01, plane_tolerance: float = 0.02) -> Reprojection:
     """Warp the anchor into current views.
@@ -125,51 +168,40 @@ def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, 
             taken to belong to another surface.
     """
     batch, _, height, width = depth.shape
-    s, device = anchor.supersample, depth.device
-    K = torch.as_tensor(K, dtype=torch.float64).expand(batch, 3, 3).to(device, _DTYPE)
+    device = depth.device
     depth = depth.detach().to(_DTYPE)
     valid_pixel = (depth[:, 0] > 0).reshape(batch, height * width)
     # Pixels without a surface get a stand-in depth so that no NaN enters the graph; they stay invalid.
     depth = torch.where(depth > 0, depth, torch.ones_like(depth))
-    # kornia's meshgrid puts pixel (i, j) at (j, i); kadv's centres are at +0.5: shift the principal point.
-    points_P = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False)  # (B, H, W, 3)
-    offsets = (torch.arange(s, dtype=_DTYPE, device=device) + 0.5) / s - 0.5  # sub-pixel centres, current pixels
-    sub = torch.stack(torch.meshgrid(offsets, offsets, indexing="xy"), dim=-1).reshape(-1, 2)  # (S, 2) as (dx, dy)
-    # Sub-pixel rays meet the plane of the pixel's triangle (constant depth where it is grazing).
-    rays = points_P[:, :, :, None, :] / depth[:, 0, :, :, None, None].clamp_min(1e-12)
-    focal = torch.stack([K[:, 0, 0], K[:, 1, 1]], dim=-1)[:, None, None, None, :]
-    shift = sub[None, None, None] / focal  # (B, 1, 1, S, 2) in normalised image coordinates
-    sub_rays = rays + torch.cat([shift, torch.zeros_like(shift[..., :1])], dim=-1)  # (B, H, W, S, 3)
-    n = normals.detach().to(_DTYPE).permute(0, 2, 3, 1)[:, :, :, None, :]
-    numerator = (n * points_P[:, :, :, None, :]).sum(-1, keepdim=True)
-    denominator = (n * sub_rays).sum(-1, keepdim=True)
-    grazing = denominator.abs() < 1e-3 * sub_rays.norm(dim=-1, keepdim=True)
-    t = torch.where(grazing, depth[:, 0, :, :, None, None].expand_as(numerator), numerator / torch.where(grazing, 1.0, denominator))
-    sub_points_P = sub_rays * t  # (B, H, W, S, 3)
-    sub_points_A = transform_points(A_T_P[:, None, None].to(device, _DTYPE), sub_points_P.reshape(batch, height, -1, 3))
-    sub_points_A = sub_points_A.reshape(batch, height, width, -1, 3)
-    q = project_points(sub_points_A, anchor.K[:, None, None, None].to(device, _DTYPE))  # hi-res anchor pixel coordinates
-    M = height * width * sub.shape[0]
-    q = q.reshape(batch, M, 2)
-    q = torch.where(torch.isfinite(q), q, torch.full_like(q, -1e6))  # behind the anchor camera: outside
-    expected = sub_points_A.reshape(batch, M, 3).transpose(1, 2)
-    colour = torch.zeros(batch, 3, height * width, dtype=_DTYPE, device=device)
-    found = torch.zeros(batch, height * width, dtype=torch.bool, device=device)
-    layer_used = torch.full((batch, height * width), -1, dtype=torch.int64, device=device)
-    P_T_A = torch.linalg.inv(A_T_P.double()).to(device, _DTYPE)
-    depth_flat = depth.reshape(batch, -1)
-    warped_depth = torch.zeros(batch, height * width, dtype=_DTYPE, device=device)
+    sub_points_P = _sub_pixel_points(depth, normals, batched_intrinsics(K, batch).to(device, _DTYPE), anchor.supersample)
+    expected, q = _project_to_anchor(anchor, sub_points_P, A_T_P)
+    return _composite_layers(anchor, q, expected, torch.linalg.inv(A_T_P.double()).to(device, _DTYPE),
+                             depth.reshape(batch, -1), valid_pixel, (height, width), depth_tolerance, plane_tolerance)
+
+
+def _composite_layers(anchor: AnchorLayers, q: torch.Tensor, expected: torch.Tensor, P_T_A: torch.Tensor,
+                      depth: torch.Tensor, valid_pixel: torch.Tensor, size: tuple[int, int], depth_tolerance: float,
+                      plane_tolerance: float) -> Reprojection:
+    """Each pixel takes the first anchor layer whose samples all find the expected surface and whose
+    depth agrees with the exact depth (B, H*W)."""
+    batch, pixels = depth.shape
+    height, width = size
+    device = depth.device
+    colour = torch.zeros(batch, 3, pixels, dtype=_DTYPE, device=device)
+    found = torch.zeros(batch, pixels, dtype=torch.bool, device=device)
+    layer_used = torch.full((batch, pixels), -1, dtype=torch.int64, device=device)
+    warped_depth = torch.zeros(batch, pixels, dtype=_DTYPE, device=device)
     for layer in range(anchor.num_layers):
         c, p, total = _sample_layer(anchor, layer, q, expected, plane_tolerance)
-        total = total.reshape(batch, height * width, -1)
+        total = total.reshape(batch, pixels, -1)
         # every sub-sample must find its surface: a pixel straddling an occlusion edge is left to
         # the silhouette term rather than represented by one side's average
-        ok = (total > 1e-9).all(-1)
-        c = c.reshape(batch, 3, height * width, -1).mean(-1)
-        sub_z = transform_points(P_T_A[:, None], p.transpose(1, 2))[..., 2].reshape(batch, height * width, -1)
+        ok = (total > _MIN_TAP_WEIGHT).all(-1)
+        c = c.reshape(batch, 3, pixels, -1).mean(-1)
+        sub_z = transform_points(P_T_A[:, None], p.transpose(1, 2))[..., 2].reshape(batch, pixels, -1)
         # 1/z is affine across a plane's image, so the harmonic mean is the pixel-centre depth
         z = sub_z.shape[-1] / (1.0 / torch.where(ok[..., None], sub_z, torch.ones_like(sub_z)).clamp_min(1e-9)).sum(-1)
-        agree = ok & valid_pixel & ((z - depth_flat).abs() <= depth_tolerance * depth_flat)
+        agree = ok & valid_pixel & ((z - depth).abs() <= depth_tolerance * depth)
         take = agree & ~found
         colour = torch.where(take[:, None], c, colour)
         warped_depth = torch.where(take, z, warped_depth)

@@ -11,14 +11,16 @@ from dataclasses import dataclass
 
 import torch
 
+from kadv.checks import check_shape
 from kadv.device import resolve_device
+from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import perturb_world_T_cam
 from kadv.render.dibr import reproject
-from kadv.render.layers import AnchorLayers, camera_face_normals, guard_band_intrinsics, render_anchor
+from kadv.render.layers import RING, AnchorLayers, camera_face_normals, render_anchor, ring_view
 from kadv.render.raycast import ExactRenderer, RenderOutput
 from kadv.render.silhouette import find_edge_pairs, silhouette_term
 
-__all__ = ["DiffRenderConfig", "DiffRenderOutput", "DifferentiableRenderer"]
+__all__ = ["DiffRenderConfig", "DiffRenderOutput", "DifferentiableRenderer", "WarpAgreement"]
 
 
 @dataclass(frozen=True)
@@ -93,15 +95,15 @@ class DifferentiableRenderer:
     """Renders images and depth differentiable in the pose parameters (omega, delta).
 
     Args:
-        exact: the scene's exact renderer.
+        renderer: the scene's exact renderer.
         config: options.
         device: where the reprojection and the silhouette term run (see :mod:`kadv.device`); the
             ray casts stay on the CPU.
     """
 
-    def __init__(self, exact: ExactRenderer, config: DiffRenderConfig | None = None,
+    def __init__(self, renderer: ExactRenderer, config: DiffRenderConfig | None = None,
                  device: str | torch.device = "cpu") -> None:
-        self.exact = exact
+        self.renderer = renderer
         self.config = config or DiffRenderConfig()
         self.device = resolve_device(device)
         self.anchor: AnchorLayers | None = None
@@ -120,7 +122,7 @@ class DifferentiableRenderer:
     def _refresh(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> AnchorLayers:
         """Render a new anchor at ``world_T_cam``; returns it on the CPU and keeps it on the device."""
         c = self.config
-        anchor = render_anchor(self.exact, world_T_cam, K, height, width, c.layers, self._guard_band, c.supersample)
+        anchor = render_anchor(self.renderer, world_T_cam, K, height, width, c.layers, self._guard_band, c.supersample)
         self.anchor = anchor.to(self.device)
         self._anchor_key = _view_key(K, height, width)
         self._steps_since_refresh = 0
@@ -141,39 +143,36 @@ class DifferentiableRenderer:
             K: (3, 3) or (B, 3, 3) intrinsics.
             height, width: image size.
         """
-        if pose_params.ndim != 2 or pose_params.shape[1] != 6:
-            raise ValueError(f"pose_params: expected (B, 6), got {tuple(pose_params.shape)}")
+        check_shape(pose_params, "B 6", "pose_params")
         if not bool(torch.isfinite(pose_params.detach()).all()):
             raise ValueError("pose_params: contain NaN or inf")
         c = self.config
         base = torch.as_tensor(base_world_T_cam, dtype=torch.float64).reshape(-1, 4, 4)
         world_T_cam = perturb_world_T_cam(base, pose_params[:, :3].double(), pose_params[:, 3:].double())
-        K = torch.as_tensor(K, dtype=torch.float64).expand(base.shape[0], 3, 3)
+        K = batched_intrinsics(K, base.shape[0])
         current = world_T_cam.detach()
         refreshed = (self.anchor is None or _view_key(K, height, width) != self._anchor_key or c.refresh == "always"
                      or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k))
         anchor = self._refresh(current, K, height, width) if refreshed else None
         if c.silhouette:
-            # edges entering the frame are found on a one-pixel ring around it; the frame's own
-            # render is the ring render's interior (the same rays)
-            K_ring = guard_band_intrinsics(K, 1, 1)
-            ring = self._exact_render(current, K_ring, height + 2, width + 2, 1, anchor)
-            exact = ring.cropped(1)
+            K_ring, ring_height, ring_width = ring_view(K, height, width)
+            ring = self._exact_render(current, K_ring, ring_height, ring_width, RING, anchor)
+            exact = ring.cropped(RING)
         else:
             exact = self._exact_render(current, K, height, width, 0, anchor)
         ids = exact.triangle_ids[:, 0].numpy()
-        normals = torch.from_numpy(camera_face_normals(self.exact.scene, ids, current)).permute(0, 3, 1, 2)
+        normals = torch.from_numpy(camera_face_normals(self.renderer.scene, ids, current)).permute(0, 3, 1, 2)
         normals = normals.to(self.device)
         # what the device needs of the exact render, moved once
         rgb_exact, depth_exact, mask = (exact.rgb.to(self.device), exact.depth.to(self.device),
                                         exact.mask.to(self.device))
         warp = self._warp(depth_exact, normals, world_T_cam, K)
-        stats = _agreement(warp, rgb_exact, depth_exact, mask)
-        if c.refresh == "on_drift" and not refreshed and _drifted(stats, c):
+        agreement = WarpAgreement.of(warp, rgb_exact, depth_exact, mask)
+        if c.refresh == "on_drift" and not refreshed and agreement.drifted(c):
             self._refresh(current, K, height, width)
             refreshed = True
             warp = self._warp(depth_exact, normals, world_T_cam, K)
-            stats = _agreement(warp, rgb_exact, depth_exact, mask)
+            agreement = WarpAgreement.of(warp, rgb_exact, depth_exact, mask)
         self._steps_since_refresh += 1
         valid = warp.valid
         if c.values == "exact":
@@ -183,12 +182,14 @@ class DifferentiableRenderer:
             rgb = torch.where(valid, warp.rgb, rgb_exact)
             depth = torch.where(valid, warp.depth, depth_exact)
         if c.silhouette:
-            pairs = find_edge_pairs(self.exact, ring, current, K_ring)
-            inside = (..., slice(1, -1), slice(1, -1))
+            pairs = find_edge_pairs(self.renderer, ring, current, K_ring)
+            inside = (..., slice(RING, -RING), slice(RING, -RING))
             for_device = (ring.rgb.to(self.device), ring.depth.to(self.device))
-            rgb = rgb + silhouette_term(self.exact, pairs, world_T_cam, K_ring, for_device[0])[inside]
-            depth = depth + silhouette_term(self.exact, pairs, world_T_cam, K_ring, for_device[1])[inside]
-        return DiffRenderOutput(rgb, depth, mask, exact, world_T_cam, *(s.cpu() for s in stats), refreshed)
+            rgb = rgb + silhouette_term(self.renderer, pairs, world_T_cam, K_ring, for_device[0])[inside]
+            depth = depth + silhouette_term(self.renderer, pairs, world_T_cam, K_ring, for_device[1])[inside]
+        return DiffRenderOutput(rgb=rgb, depth=depth, mask=mask, exact=exact, world_T_cam=world_T_cam,
+                                coverage=agreement.coverage.cpu(), rgb_error=agreement.rgb_error.cpu(),
+                                depth_error=agreement.depth_error.cpu(), refreshed=refreshed)
 
     def _exact_render(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, border: int,
                       anchor: AnchorLayers | None) -> RenderOutput:
@@ -199,7 +200,7 @@ class DifferentiableRenderer:
         if anchor is not None and s > 1 and g >= border:
             start = s * (g - border)
             sub_rgb = anchor.rgb[:, 0, :, start:start + s * height, start:start + s * width]
-        return self.exact.render(world_T_cam, K, height, width, supersample=s, sub_rgb=sub_rgb)
+        return self.renderer.render(world_T_cam, K, height, width, supersample=s, sub_rgb=sub_rgb)
 
     def _warp(self, depth: torch.Tensor, normals: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor):
         A_T_P = torch.linalg.inv(self.anchor.world_T_cam) @ world_T_cam
@@ -211,19 +212,33 @@ def _view_key(K: torch.Tensor, height: int, width: int) -> tuple:
     return K.shape[0], height, width, tuple(K.flatten().tolist())
 
 
-def _agreement(warp, rgb: torch.Tensor, depth: torch.Tensor,
-               mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    valid = warp.valid.detach()
-    hit = mask.sum(dim=(1, 2, 3)).clamp_min(1)
-    count = valid.sum(dim=(1, 2, 3)).clamp_min(1)
-    coverage = valid.sum(dim=(1, 2, 3)) / hit
-    rgb_error = ((warp.rgb.detach() - rgb).abs().mean(1, keepdim=True) * valid).sum(dim=(1, 2, 3)) / count
-    relative = (warp.depth.detach() - depth).abs() / depth.clamp_min(1e-6)
-    depth_error = (relative * valid).sum(dim=(1, 2, 3)) / count
-    return coverage.double(), rgb_error.double(), depth_error.double()
+@dataclass
+class WarpAgreement:
+    """How well the warp matches the exact render, per view (B,).
 
+    Attributes:
+        coverage: fraction of hit pixels with a valid warp.
+        rgb_error: mean |rgb_warp - rgb_exact| over valid pixels.
+        depth_error: mean |depth_warp - depth_exact| / depth_exact over valid pixels.
+    """
 
-def _drifted(stats: tuple[torch.Tensor, torch.Tensor, torch.Tensor], config: DiffRenderConfig) -> bool:
-    coverage, rgb_error, depth_error = stats
-    return bool((coverage < config.min_coverage).any() or (rgb_error > config.max_rgb_error).any()
-                or (depth_error > config.max_depth_error).any())
+    coverage: torch.Tensor
+    rgb_error: torch.Tensor
+    depth_error: torch.Tensor
+
+    @classmethod
+    def of(cls, warp, rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor) -> WarpAgreement:
+        """Compare a :class:`~kadv.render.dibr.Reprojection` with the exact rgb, depth and mask."""
+        valid = warp.valid.detach()
+        hit = mask.sum(dim=(1, 2, 3)).clamp_min(1)
+        count = valid.sum(dim=(1, 2, 3)).clamp_min(1)
+        coverage = valid.sum(dim=(1, 2, 3)) / hit
+        rgb_error = ((warp.rgb.detach() - rgb).abs().mean(1, keepdim=True) * valid).sum(dim=(1, 2, 3)) / count
+        relative = (warp.depth.detach() - depth).abs() / depth.clamp_min(1e-6)
+        depth_error = (relative * valid).sum(dim=(1, 2, 3)) / count
+        return cls(coverage.double(), rgb_error.double(), depth_error.double())
+
+    def drifted(self, config: DiffRenderConfig) -> bool:
+        """Whether any view passed the ``on_drift`` tolerances."""
+        return bool((self.coverage < config.min_coverage).any() or (self.rgb_error > config.max_rgb_error).any()
+                    or (self.depth_error > config.max_depth_error).any())

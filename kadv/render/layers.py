@@ -13,12 +13,12 @@ import numpy as np
 import open3d as o3d
 import torch
 
-from kadv.geometry.camera import pixel_rays
+from kadv.geometry.camera import batched_intrinsics, pixel_rays
 from kadv.geometry.pose import check_world_T_cam
 from kadv.render.raycast import ExactRenderer, RayHits, pixel_angle
 from kadv.scenes.scene import Scene
 
-__all__ = ["AnchorLayers", "camera_face_normals", "guard_band_intrinsics", "render_anchor"]
+__all__ = ["RING", "AnchorLayers", "camera_face_normals", "guard_band_intrinsics", "render_anchor", "ring_view"]
 
 
 @dataclass
@@ -64,6 +64,18 @@ def guard_band_intrinsics(K: torch.Tensor, guard_band: int, supersample: int) ->
     K[..., 1, 2] += guard_band
     K[..., :2, :] *= supersample
     return K
+
+
+RING = 1  # pixels of the ring around a frame
+
+
+def ring_view(K: torch.Tensor, height: int, width: int) -> tuple[torch.Tensor, int, int]:
+    """Intrinsics (B, 3, 3) and size of the frame plus a one-pixel ring around it.
+
+    Occlusion edges just outside the frame enter it when the camera moves; they are found on the
+    ring. The frame's own render is the ring render's interior (the same rays), ``cropped(RING)``.
+    """
+    return guard_band_intrinsics(K, RING, 1), height + 2 * RING, width + 2 * RING
 
 
 def camera_face_normals(scene: Scene, triangle_ids: np.ndarray, world_T_cam: torch.Tensor) -> np.ndarray:
@@ -120,7 +132,7 @@ def render_anchor(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.T
     """
     pose = check_world_T_cam(world_T_cam).detach().double()
     batch = pose.shape[0]
-    K = torch.as_tensor(K, dtype=torch.float64).expand(batch, 3, 3)
+    K = batched_intrinsics(K, batch)
     K_anchor = guard_band_intrinsics(K, guard_band, supersample)
     h, w = supersample * (height + 2 * guard_band), supersample * (width + 2 * guard_band)
     origins, directions = pixel_rays(pose, K_anchor, h, w)

@@ -12,19 +12,23 @@ edge is counted once.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
 
+from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import check_world_T_cam
 from kadv.render.raycast import ExactRenderer, RenderOutput
 
-__all__ = ["EdgePairs", "find_edge_pairs", "silhouette_term"]
+__all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term"]
 
 _BISECTION_STEPS = 10
 _MIN_JUMP = 0.005   # relative depth difference below which neighbours are one surface
 _CONTINUITY = 0.01  # relative depth gap at the located crossing that makes it an occlusion
+_FG_SHARE = 0.5     # share of the way from the foreground's plane to the background's still foreground
+_FG_MAX_RATIO = 1.5  # ... and at most this ratio of the foreground plane's depth
+_MAX_CROSSING_ERROR = 0.25  # the chosen edge's exact crossing within a quarter segment of the bisection's
 
 
 @dataclass
@@ -62,8 +66,8 @@ def _plane_depth(renderer: ExactRenderer, ids: np.ndarray, rays_cam: np.ndarray,
     return np.where((ids >= 0) & (z > 0), z, np.inf)
 
 
-def _crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: torch.Tensor, K: torch.Tensor,
-               uv_a: torch.Tensor, uv_b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def edge_crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: torch.Tensor, K: torch.Tensor,
+                   uv_a: torch.Tensor, uv_b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Crossing t (N,) of edges (N, 2, 3) (camera frame) with the segment a->b, and whether it is genuine."""
     m = torch.linalg.cross(rays_a, rays_b)
     v0, v1 = vertices_cam[:, 0], vertices_cam[:, 1]
@@ -78,83 +82,133 @@ def _crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: torch.T
     return t, genuine
 
 
+@dataclass
+class _Candidates:
+    """Neighbour pairs (N) across a possible occlusion edge in one direction, with their views' poses."""
+
+    batch: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    uv_a: np.ndarray
+    uv_b: np.ndarray
+    R: np.ndarray
+    c: np.ndarray
+
+    def subset(self, keep: np.ndarray) -> _Candidates:
+        return _Candidates(*(getattr(self, f.name)[keep] for f in fields(self)))
+
+
+def _candidate_pairs(renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, pose: np.ndarray, K_inv: np.ndarray,
+                     horizontal: bool) -> _Candidates:
+    """Neighbours (x, x+1) or (y, y+1) on different triangles whose depths (B, H, W) jump."""
+    batch, height, width = z.shape
+    za, zb = (z[:, :, :-1], z[:, :, 1:]) if horizontal else (z[:, :-1, :], z[:, 1:, :])
+    ia, ib = (ids[:, :, :-1], ids[:, :, 1:]) if horizontal else (ids[:, :-1, :], ids[:, 1:, :])
+    near, far = np.minimum(za, zb), np.maximum(za, zb)
+    with np.errstate(invalid="ignore"):  # both rays missing: inf - inf
+        candidate = (ia != ib) & np.isfinite(near) & (~np.isfinite(far) | ((far - near) > _MIN_JUMP * near))
+    bi, yi, xi = np.nonzero(candidate)
+    a = yi * width + xi
+    uv_a = np.c_[xi + 0.5, yi + 0.5]
+    pairs = _Candidates(bi, a, a + (1 if horizontal else width), uv_a,
+                        uv_a + ([1.0, 0.0] if horizontal else [0.0, 1.0]), pose[bi, :3, :3], pose[bi, :3, 3])
+    flat_ids, flat_z = ids.reshape(batch, -1), z.reshape(batch, -1)
+    # Neighbours on one continuous surface (a grazing floor's triangles) are no edge: the plane of
+    # either one's triangle, extended to the other's ray, meets it at its depth. Dropping them here
+    # spares the bisection most candidates; it would find no occlusion between them either.
+    z_a, z_b = flat_z[bi, pairs.a], flat_z[bi, pairs.b]
+    with np.errstate(invalid="ignore"):
+        b_on_a = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.a], _rays(K_inv, bi, pairs.uv_b), pairs.R, pairs.c) - z_b)
+        a_on_b = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.b], _rays(K_inv, bi, pairs.uv_a), pairs.R, pairs.c) - z_a)
+        continuous = (b_on_a <= _CONTINUITY * z_b) & (a_on_b <= _CONTINUITY * z_a)
+    return pairs.subset(~continuous)
+
+
+def _bisect(renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray, flat_ids: np.ndarray,
+            K_inv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bisect each segment a -> b with real rays for where the foreground ends.
+
+    Returns the occluding triangle (N,), whether the depths on the two sides of the final bracket
+    differ enough to be an occlusion (N,), and the crossing t in [0, 1] (N,).
+    """
+    bi = pairs.batch
+    a_is_fg = flat_z[bi, pairs.a] <= flat_z[bi, pairs.b]
+    fg_id = np.where(a_is_fg, flat_ids[bi, pairs.a], flat_ids[bi, pairs.b])
+    bg_id = np.where(a_is_fg, flat_ids[bi, pairs.b], flat_ids[bi, pairs.a])
+    lo, hi = np.zeros(len(bi)), np.ones(len(bi))
+    id_lo, id_hi = flat_ids[bi, pairs.a].copy(), flat_ids[bi, pairs.b].copy()
+    z_lo, z_hi = flat_z[bi, pairs.a].copy(), flat_z[bi, pairs.b].copy()
+    for _ in range(_BISECTION_STEPS):
+        mid = 0.5 * (lo + hi)
+        rays_cam = _rays(K_inv, bi, pairs.uv_a + mid[:, None] * (pairs.uv_b - pairs.uv_a))
+        hits = renderer.cast(pairs.c, np.einsum("nij,nj->ni", pairs.R, rays_cam))
+        z_fg = _plane_depth(renderer, fg_id, rays_cam, pairs.R, pairs.c)
+        z_bg = _plane_depth(renderer, bg_id, rays_cam, pairs.R, pairs.c)
+        # a hit is foreground up to a share of the way to the background's plane, and no further
+        # than a bounded ratio beyond the foreground's own plane
+        with np.errstate(invalid="ignore", divide="ignore"):  # a plane the ray misses: inf / inf
+            limit = z_fg * np.minimum(1.0 + _FG_SHARE * (z_bg / z_fg - 1.0), _FG_MAX_RATIO)
+        mid_z = np.where(hits.hit, hits.t, np.inf)
+        same_as_a = (hits.hit & (mid_z < limit)) == a_is_fg
+        lo, id_lo, z_lo = (np.where(same_as_a, mid, lo), np.where(same_as_a, hits.triangle_ids, id_lo),
+                           np.where(same_as_a, mid_z, z_lo))
+        hi, id_hi, z_hi = (np.where(same_as_a, hi, mid), np.where(same_as_a, id_hi, hits.triangle_ids),
+                           np.where(same_as_a, z_hi, mid_z))
+    occluder = np.where(a_is_fg, id_lo, id_hi)
+    near_z, far_z = np.minimum(z_lo, z_hi), np.maximum(z_lo, z_hi)
+    occlusion = (occluder >= 0) & np.isfinite(near_z) & ((far_z - near_z) > _CONTINUITY * near_z)
+    return occluder, occlusion, 0.5 * (lo + hi)
+
+
+def _occluder_edge(renderer: ExactRenderer, pairs: _Candidates, occluder: np.ndarray, t_star: np.ndarray,
+                   K: np.ndarray, K_inv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which of the occluder's three edges crosses the segment at ``t_star``.
+
+    Returns its vertex indices (N, 2), how far (in segment units) its exact crossing lies from
+    ``t_star`` (N,), and whether it is steep in the image (N,).
+    """
+    bi, R, c = pairs.batch, pairs.R, pairs.c
+    faces = renderer.scene.faces[np.maximum(occluder, 0)]
+    edges = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1)  # (N, 3, 2)
+    vertices_cam = np.einsum("nji,nekj->neki", R, renderer.scene.vertices[edges] - c[:, None, None])
+    three = lambda array: torch.from_numpy(np.repeat(array, 3, axis=0))  # noqa: E731
+    t_all, ok_all = edge_crossings(torch.from_numpy(vertices_cam.reshape(-1, 2, 3)), three(_rays(K_inv, bi, pairs.uv_a)),
+                                   three(_rays(K_inv, bi, pairs.uv_b)), three(K[bi]), three(pairs.uv_a),
+                                   three(pairs.uv_b))
+    n = len(bi)
+    error = np.where(ok_all.numpy(), np.abs(t_all.numpy() - np.repeat(t_star, 3)), np.inf).reshape(n, 3)
+    best = error.argmin(axis=1)
+    chosen = edges[np.arange(n), best]
+    v = renderer.scene.vertices[chosen]
+    # image-plane direction of the edge (first order, at the crossing depth)
+    direction_cam = np.einsum("nji,nj->ni", R, v[:, 1] - v[:, 0])
+    return chosen, error[np.arange(n), best], np.abs(direction_cam[:, 1]) >= np.abs(direction_cam[:, 0])
+
+
 def find_edge_pairs(renderer: ExactRenderer, exact: RenderOutput, world_T_cam: torch.Tensor, K: torch.Tensor) -> EdgePairs:
-    """Locate occlusion-edge pairs and their occluding triangle edges in exact renders (no gradient)."""
+    """Locate occlusion-edge pairs and their occluding triangle edges in exact renders (no gradient).
+
+    Three steps per direction: candidate neighbours across a depth jump, a bisection with real rays
+    for the occluder and the crossing, and the occluder's edge that crosses there.
+    """
     depth = exact.depth[:, 0].double().numpy()
     ids = exact.triangle_ids[:, 0].numpy()
-    batch, height, width = depth.shape
+    batch = depth.shape[0]
     pose = check_world_T_cam(world_T_cam).detach().double().numpy()
-    K = torch.as_tensor(K, dtype=torch.float64).expand(batch, 3, 3).numpy()
+    K = batched_intrinsics(K, batch).numpy()
     K_inv = np.linalg.inv(K)
     z = np.where(depth > 0, depth, np.inf)
     found = {k: [] for k in ("batch", "a", "b", "horizontal", "edge", "t")}
     for horizontal in (True, False):
-        za, zb = (z[:, :, :-1], z[:, :, 1:]) if horizontal else (z[:, :-1, :], z[:, 1:, :])
-        ia, ib = (ids[:, :, :-1], ids[:, :, 1:]) if horizontal else (ids[:, :-1, :], ids[:, 1:, :])
-        near, far = np.minimum(za, zb), np.maximum(za, zb)
-        with np.errstate(invalid="ignore"):  # both rays missing: inf - inf
-            candidate = (ia != ib) & np.isfinite(near) & (~np.isfinite(far) | ((far - near) > _MIN_JUMP * near))
-        bi, yi, xi = np.nonzero(candidate)
-        a = yi * width + xi
-        b = a + (1 if horizontal else width)
-        uv_a = np.c_[xi + 0.5, yi + 0.5]
-        uv_b = uv_a + ([1.0, 0.0] if horizontal else [0.0, 1.0])
-        R, c = pose[bi, :3, :3], pose[bi, :3, 3]
-        flat_ids, flat_z = ids.reshape(batch, -1), z.reshape(batch, -1)
-        # Neighbours on one continuous surface (a grazing floor's triangles) are no edge: the plane of
-        # either one's triangle, extended to the other's ray, meets it at its depth. Dropping them here
-        # spares the bisection most candidates; it would find no occlusion between them either.
-        with np.errstate(invalid="ignore"):
-            b_on_a = np.abs(_plane_depth(renderer, flat_ids[bi, a], _rays(K_inv, bi, uv_b), R, c) - flat_z[bi, b])
-            a_on_b = np.abs(_plane_depth(renderer, flat_ids[bi, b], _rays(K_inv, bi, uv_a), R, c) - flat_z[bi, a])
-            edge = ~((b_on_a <= _CONTINUITY * flat_z[bi, b]) & (a_on_b <= _CONTINUITY * flat_z[bi, a]))
-        bi, a, b, uv_a, uv_b, R, c = bi[edge], a[edge], b[edge], uv_a[edge], uv_b[edge], R[edge], c[edge]
-        if not len(bi):
+        pairs = _candidate_pairs(renderer, z, ids, pose, K_inv, horizontal)
+        if not len(pairs.batch):
             continue
-        a_is_fg = flat_z[bi, a] <= flat_z[bi, b]
-        fg_id = np.where(a_is_fg, flat_ids[bi, a], flat_ids[bi, b])
-        bg_id = np.where(a_is_fg, flat_ids[bi, b], flat_ids[bi, a])
-        lo, hi = np.zeros(len(bi)), np.ones(len(bi))
-        id_lo, id_hi = flat_ids[bi, a].copy(), flat_ids[bi, b].copy()
-        z_lo, z_hi = flat_z[bi, a].copy(), flat_z[bi, b].copy()
-        for _ in range(_BISECTION_STEPS):
-            mid = 0.5 * (lo + hi)
-            rays_cam = _rays(K_inv, bi, uv_a + mid[:, None] * (uv_b - uv_a))
-            hits = renderer.cast(c, np.einsum("nij,nj->ni", R, rays_cam))
-            z_fg = _plane_depth(renderer, fg_id, rays_cam, R, c)
-            z_bg = _plane_depth(renderer, bg_id, rays_cam, R, c)
-            limit = z_fg * np.minimum(1.0 + 0.5 * (z_bg / z_fg - 1.0), 1.5)
-            mid_z = np.where(hits.hit, hits.t, np.inf)
-            mid_fg = hits.hit & (mid_z < limit)
-            same_as_a = mid_fg == a_is_fg
-            lo, id_lo, z_lo = (np.where(same_as_a, mid, lo), np.where(same_as_a, hits.triangle_ids, id_lo),
-                               np.where(same_as_a, mid_z, z_lo))
-            hi, id_hi, z_hi = (np.where(same_as_a, hi, mid), np.where(same_as_a, id_hi, hits.triangle_ids),
-                               np.where(same_as_a, z_hi, mid_z))
-        occluder = np.where(a_is_fg, id_lo, id_hi)
-        near_z, far_z = np.minimum(z_lo, z_hi), np.maximum(z_lo, z_hi)
-        occlusion = (occluder >= 0) & np.isfinite(near_z) & ((far_z - near_z) > _CONTINUITY * near_z)
-        t_star = 0.5 * (lo + hi)
-        # which of the occluder's edges crosses the segment at t_star, and is it steep or flat?
-        faces = renderer.scene.faces[np.maximum(occluder, 0)]
-        edges = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1)  # (N, 3, 2)
-        vertices_cam = np.einsum("nji,nekj->neki", R, renderer.scene.vertices[edges] - c[:, None, None])
-        rays_a, rays_b = _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b)
-        n = len(bi)
-        t_all, ok_all = _crossings(torch.from_numpy(vertices_cam.reshape(-1, 2, 3)),
-                                   torch.from_numpy(np.repeat(rays_a, 3, axis=0)), torch.from_numpy(np.repeat(rays_b, 3, axis=0)),
-                                   torch.from_numpy(np.repeat(K[bi], 3, axis=0)), torch.from_numpy(np.repeat(uv_a, 3, axis=0)),
-                                   torch.from_numpy(np.repeat(uv_b, 3, axis=0)))
-        error = np.where(ok_all.numpy(), np.abs(t_all.numpy() - np.repeat(t_star, 3)), np.inf).reshape(n, 3)
-        best = error.argmin(axis=1)
-        chosen = edges[np.arange(n), best]
-        v = renderer.scene.vertices[chosen]
-        direction_cam = np.einsum("nji,nj->ni", R, v[:, 1] - v[:, 0])
-        # image-plane direction of the edge (first order, at the crossing depth)
-        steep = np.abs(direction_cam[:, 1]) >= np.abs(direction_cam[:, 0])
-        keep = occlusion & (error[np.arange(n), best] < 0.25) & (steep == horizontal)
-        for key, value in (("batch", bi), ("a", a), ("b", b), ("horizontal", np.full(n, horizontal)), ("edge", chosen),
-                           ("t", t_star)):
+        occluder, occlusion, t_star = _bisect(renderer, pairs, z.reshape(batch, -1), ids.reshape(batch, -1), K_inv)
+        chosen, error, steep = _occluder_edge(renderer, pairs, occluder, t_star, K, K_inv)
+        keep = occlusion & (error < _MAX_CROSSING_ERROR) & (steep == horizontal)
+        n = len(pairs.batch)
+        for key, value in (("batch", pairs.batch), ("a", pairs.a), ("b", pairs.b), ("horizontal", np.full(n, horizontal)),
+                           ("edge", chosen), ("t", t_star)):
             found[key].append(value[keep])
     if not found["batch"]:
         empty = np.zeros(0, np.int64)
@@ -179,7 +233,7 @@ def silhouette_term(renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torc
     if len(pairs.batch) == 0:
         return (term.view(batch, height, width, channels).permute(0, 3, 1, 2).to(values.dtype)
                 + (0 * world_T_cam.sum()).to(device))
-    K = torch.as_tensor(K, dtype=torch.float64).expand(batch, 3, 3)
+    K = batched_intrinsics(K, batch)
     bi = torch.from_numpy(pairs.batch)
     R, c = world_T_cam[bi, :3, :3].double(), world_T_cam[bi, :3, 3].double()
     vertices = torch.from_numpy(renderer.scene.vertices[pairs.edge])  # (N, 2, 3) world
@@ -190,7 +244,7 @@ def silhouette_term(renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torc
     K_inv = torch.linalg.inv(K[bi])
     rays_a = (K_inv @ torch.cat([uv_a, torch.ones(len(bi), 1, dtype=torch.float64)], 1)[..., None])[..., 0]
     rays_b = (K_inv @ torch.cat([uv_b, torch.ones(len(bi), 1, dtype=torch.float64)], 1)[..., None])[..., 0]
-    t, genuine = _crossings(vertices_cam, rays_a, rays_b, K[bi], uv_a, uv_b)
+    t, genuine = edge_crossings(vertices_cam, rays_a, rays_b, K[bi], uv_a, uv_b)
     far_b = torch.from_numpy(pairs.t > 0.5)
     # the pixel beyond the crossing's half is partly covered by its neighbour's surface
     coefficient = (torch.where(far_b, t - 0.5, 0.5 - t) * genuine).to(device)

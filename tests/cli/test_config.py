@@ -9,7 +9,7 @@ from hydra import compose, initialize_config_module
 from omegaconf import OmegaConf
 
 from kadv.attack import AttackConfig, InitViewConfig
-from kadv.cli.attack import _settings
+from kadv.cli.attack import attack_settings
 from kadv.cli.common import shading_from_config
 from kadv.models import PRESETS
 from kadv.models.train_tiny import TinyTrainConfig
@@ -36,7 +36,7 @@ def test_every_group_option_composes_into_valid_settings() -> None:
     for group in ("scene", "model", "loss", "render", "penalty", "attack", "experiment"):
         for option in _options(group):
             cfg = _compose("kadv_attack", f"{group}={option}")
-            attack, init = _settings(cfg.attack)
+            attack, init = attack_settings(cfg.attack)
             PenaltyConfig(**OmegaConf.to_container(cfg.penalty))
             DiffRenderConfig(supersample=cfg.render.supersample, **OmegaConf.to_container(cfg.render.differentiable))
             shading_from_config(cfg.render.shading)
@@ -49,7 +49,7 @@ def test_every_group_option_composes_into_valid_settings() -> None:
 
 def test_yaml_defaults_equal_the_library_defaults() -> None:
     cfg = _compose("kadv_attack", "~experiment")
-    attack, init = _settings(cfg.attack)
+    attack, init = attack_settings(cfg.attack)
     assert attack == AttackConfig() and init == InitViewConfig()
     assert OmegaConf.to_container(cfg.penalty) == _defaults(PenaltyConfig)
     diff = OmegaConf.to_container(cfg.render.differentiable)
@@ -64,7 +64,7 @@ def test_yaml_defaults_equal_the_library_defaults() -> None:
                                                                      ("paper", 400, 5, 10, "perceptual")])
 def test_experiment_presets(experiment, steps, restarts, views, loss) -> None:
     cfg = _compose("kadv_attack", f"experiment={experiment}")
-    attack, init = _settings(cfg.attack)
+    attack, init = attack_settings(cfg.attack)
     assert (attack.steps, attack.restarts, init.count, cfg.loss.kind) == (steps, restarts, views, loss)
 
 
@@ -75,5 +75,5 @@ def test_paper_sweep_is_the_study_grid() -> None:
     assert params.model.split(",") == ["midas_dpt_large", "zoedepth_nk", "depth_anything_v1_large",
                                        "depth_anything_v2_large"]
     assert set(params.scene.split(",")) == {"grey_white_room", "modern_hall", "japanese_classroom"}
-    attack, init = _settings(cfg.attack)
+    attack, init = attack_settings(cfg.attack)
     assert (attack.steps, attack.restarts, init.count, cfg.loss.kind) == (400, 5, 10, "perceptual")

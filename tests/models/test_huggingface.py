@@ -121,20 +121,32 @@ def test_resize_matches_the_transformers_processor(shape, keep, multiple) -> Non
     assert resized_shape(*shape, (518, 518), keep, multiple) == (theirs.height, theirs.width)
 
 
-def test_offline_without_weights_raises_the_documented_error_quickly(tmp_path: Path) -> None:
+def _load_without_weights(env: dict[str, str]) -> tuple[float, str]:
+    """Seconds until load_model('depth_anything_v2_small') gave up, and its message (a subprocess)."""
     script = (
         "import time\nfrom kadv.models import load_model, ModelWeightsUnavailable\nstart = time.perf_counter()\n"
         "try:\n    load_model('depth_anything_v2_small')\nexcept ModelWeightsUnavailable as error:\n"
         "    print('SECONDS', time.perf_counter() - start)\n    print(error)\n"
     )
-    env = {**os.environ, "HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf")}
     result = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=120)
     lines = result.stdout.splitlines()
     assert lines and lines[0].startswith("SECONDS"), result.stdout + result.stderr
-    assert float(lines[0].split()[1]) < 5.0
-    message = "\n".join(lines[1:])
+    return float(lines[0].split()[1]), "\n".join(lines[1:])
+
+
+def test_offline_without_weights_raises_the_documented_error_quickly(tmp_path: Path) -> None:
+    seconds, message = _load_without_weights({**os.environ, "HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf")})
+    assert seconds < 5.0
     assert "depth_anything_v2_small" in message and "depth-anything/Depth-Anything-V2-Small-hf" in message
     assert "HF_HUB_OFFLINE" in message and "save_pretrained" in message
+
+
+def test_without_network_loading_fails_within_seconds_not_after_retries(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if k not in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE")}
+    env.update(HF_HOME=str(tmp_path / "hf"), HF_ENDPOINT="https://hub.kadv-test.invalid")  # a name that never resolves
+    seconds, message = _load_without_weights(env)
+    assert seconds < 10.0
+    assert "cannot be reached" in message and "model.weights=" in message
 
 
 def test_unknown_model_name() -> None:

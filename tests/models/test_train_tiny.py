@@ -4,7 +4,8 @@ import torch
 
 from kadv.datasets import render_procedural_views
 from kadv.models import TinyDepthNet, load_kadv_tiny, save_kadv_tiny
-from kadv.models.train_tiny import TinyTrainConfig, _gradient_matching, fit, ssi_loss, train_tiny
+from kadv.losses import gradient_matching, ssi_loss
+from kadv.models.train_tiny import TinyTrainConfig, fit, train_tiny
 
 
 def _views():
@@ -30,9 +31,9 @@ def test_gradient_matching_by_hand() -> None:
     residual = torch.tensor([[[[0.0, 1.0, 3.0], [0.0, 0.0, 0.0]]]])
     mask = torch.ones_like(residual, dtype=torch.bool)
     # x pairs |1| + |2| + 0 + 0, y pairs 0 + |1| + |3|: 7 over 7 pairs.
-    assert torch.allclose(_gradient_matching(residual, mask, 1), torch.tensor([1.0]))
+    assert torch.allclose(gradient_matching(residual, mask, 1), torch.tensor([1.0]))
     mask[..., 0, 2] = False  # drops the x pair (1, 3) and the y pair (3, 0): 2 over 5 pairs
-    assert torch.allclose(_gradient_matching(residual, mask, 1), torch.tensor([0.4]))
+    assert torch.allclose(gradient_matching(residual, mask, 1), torch.tensor([0.4]))
 
 
 def test_fit_is_deterministic_and_learns() -> None:

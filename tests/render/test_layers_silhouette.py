@@ -6,7 +6,7 @@ import torch
 from kadv.geometry import intrinsics_from_fov, look_at
 from kadv.render import ExactRenderer, find_edge_pairs, render_anchor
 from kadv.render.layers import guard_band_intrinsics
-from kadv.render.silhouette import _crossings
+from kadv.render.silhouette import edge_crossings
 from kadv.scenes import Material, assemble_scene
 from kadv.scenes.box_room import quad_part
 
@@ -66,7 +66,7 @@ def test_crossing_of_a_known_edge() -> None:
     edge = torch.tensor([[[0.2, -1.0, 2.0], [0.2, 1.0, 2.0]]], dtype=torch.float64, requires_grad=True)
     uv_a, uv_b = torch.tensor([[10.5, 10.5]], dtype=torch.float64), torch.tensor([[11.5, 10.5]], dtype=torch.float64)
     rays = [torch.linalg.inv(K) @ torch.tensor([u[0, 0], u[0, 1], 1.0], dtype=torch.float64) for u in (uv_a, uv_b)]
-    t, genuine = _crossings(edge, rays[0][None], rays[1][None], K[None], uv_a, uv_b)
+    t, genuine = edge_crossings(edge, rays[0][None], rays[1][None], K[None], uv_a, uv_b)
     assert bool(genuine[0]) and float(t.detach()) == float(10 + 10 * 0.2 / 2 - 10.5)  # u = 11 -> t = 0.5
     t.sum().backward()  # dt/dx of the edge = focal / depth = 5 per vertex pair
     assert np.isclose(float(edge.grad[0, :, 0].sum()), 5.0)

@@ -187,15 +187,13 @@ def test_missing_file_is_an_error_naming_it_unless_skipped(tmp_path: Path) -> No
     assert scene.num_triangles == 2
 
 
-def test_xml_without_shapes(tmp_path: Path) -> None:
-    (tmp_path / "scene.xml").write_text('<scene version="0.5.0"><integrator type="path"/></scene>')
-    with pytest.raises(ValueError, match="no shapes"):
-        load_scene(tmp_path / "scene.xml")
-
-
-def test_malformed_xml(tmp_path: Path) -> None:
-    (tmp_path / "scene.xml").write_text("<scene><shape")
-    with pytest.raises(ValueError, match="not well-formed"):
+@pytest.mark.parametrize("text, message", [
+    ('<scene version="0.5.0"><integrator type="path"/></scene>', "no shapes"),
+    ("<scene><shape", "not well-formed"),
+], ids=["no shapes", "malformed"])
+def test_a_bad_xml_raises_a_clear_error(tmp_path: Path, text: str, message: str) -> None:
+    (tmp_path / "scene.xml").write_text(text)
+    with pytest.raises(ValueError, match=message):
         load_scene(tmp_path / "scene.xml")
 
 

@@ -85,25 +85,16 @@ def test_nonexistent_path() -> None:
         load_scene("/nonexistent/nowhere.glb")
 
 
-def test_unsupported_extension(tmp_path: Path) -> None:
-    (tmp_path / "scene.fbx").write_text("x")
-    with pytest.raises(ValueError, match="unsupported scene format '.fbx'"):
-        load_scene(tmp_path / "scene.fbx")
+BAD_FILES = [
+    ("scene.fbx", "x", ValueError, "unsupported scene format '.fbx'"),
+    ("bad.obj", "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n", ValueError, "NaN"),
+    ("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", ValueError, "area is zero"),
+    ("empty.obj", "v 0 0 0\n", ValueError, "no triangle mesh"),
+]
 
 
-def test_obj_with_nan_vertices(tmp_path: Path) -> None:
-    (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n")
-    with pytest.raises(ValueError, match="NaN"):
-        load_scene(tmp_path / "bad.obj")
-
-
-def test_zero_area_scene(tmp_path: Path) -> None:
-    (tmp_path / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
-    with pytest.raises(ValueError, match="area is zero"):
-        load_scene(tmp_path / "flat.obj")
-
-
-def test_file_without_triangles(tmp_path: Path) -> None:
-    (tmp_path / "empty.obj").write_text("v 0 0 0\n")
-    with pytest.raises(ValueError, match="no triangle mesh"):
-        load_scene(tmp_path / "empty.obj")
+@pytest.mark.parametrize("name, text, error, message", BAD_FILES, ids=[b[0] for b in BAD_FILES])
+def test_a_bad_file_raises_a_clear_error(tmp_path: Path, name: str, text: str, error: type, message: str) -> None:
+    (tmp_path / name).write_text(text)
+    with pytest.raises(error, match=message):
+        load_scene(tmp_path / name)

@@ -1,0 +1,22 @@
+"""Process settings that every entry point (the commands, the benchmarks, the tests) makes first."""
+from __future__ import annotations
+
+import os
+
+__all__ = ["configure_runtime"]
+
+
+def configure_runtime() -> None:
+    """Settings for a process that renders and runs networks on the CPU.
+
+    - ``OMP_WAIT_POLICY=PASSIVE`` (unless set): idle OpenMP threads (torch's) sleep instead of
+      spinning, so they leave the cores to Open3D's ray casts between network calls. libgomp reads
+      it when torch is first imported: it reaches this process only when called before that (the
+      tests and benchmarks do; ``import kadv`` itself loads no torch), and always reaches the
+      processes a command starts (sweep workers).
+    - matplotlib's Agg backend: figures go to files and no display is needed.
+    """
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    import matplotlib
+
+    matplotlib.use("Agg")

@@ -1,0 +1,36 @@
+"""kadv.diagnostics: the gradient check's pieces, and the check itself on a box room."""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from kadv.diagnostics import FUNCTIONALS, gradient_check_poses, occlusion_edge_mask, smooth_weights
+from kadv.geometry import intrinsics_from_fov, look_at
+from kadv.render import DiffRenderConfig, ExactRenderer
+from kadv.scenes import box_room
+
+
+def test_smooth_weights_are_seeded_and_smooth() -> None:
+    weights = smooth_weights(0, 3, 24, 32)
+    assert torch.equal(weights, smooth_weights(0, 3, 24, 32)) and not torch.equal(weights, smooth_weights(1, 3, 24, 32))
+    neighbour_step = (weights[..., 1:] - weights[..., :-1]).abs().max()
+    assert float(neighbour_step) < 0.2 * float(weights.abs().max())
+
+
+def test_occlusion_edges_are_marked_only_where_depth_jumps() -> None:
+    renderer = ExactRenderer(box_room(seed=0))
+    K = intrinsics_from_fov(40.0, 24, 32)
+    eye = torch.tensor([1.5, 1.4, 1.8], dtype=torch.float64)
+    wall = renderer.render(look_at(eye, eye - torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64)), K, 24, 32)
+    assert not bool(occlusion_edge_mask(wall).any())  # one flat wall
+    room = renderer.render(renderer.scene.cameras[0].world_T_cam, K, 24, 32)
+    edges = occlusion_edge_mask(room)
+    assert float(edges.float().mean()) > 0.05  # boxes in front of walls
+
+
+def test_gradient_check_on_box_room_poses_meets_the_thresholds() -> None:
+    """A fast version of benchmarks/gradcheck.py on three box-room poses, the default configuration."""
+    checks = gradient_check_poses(ExactRenderer(box_room(seed=0)), 3, 0, 70.0, 48, 64, {"default": DiffRenderConfig()})
+    scores = np.array([[c.score(f) for f in FUNCTIONALS] for c in checks["default"]])
+    assert np.median(scores[:, 0]) >= 0.99 and np.median(scores[:, 1]) >= 0.99  # interior rgb, depth
+    assert np.median(scores[:, 2]) >= 0.95 and np.median(scores[:, 3]) >= 0.95  # full rgb, depth

@@ -1,0 +1,67 @@
+"""kadv.render.dibr: the anchor warped into the current view, against analytic planes."""
+from __future__ import annotations
+
+import torch
+
+from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam
+from kadv.render import ExactRenderer, render_anchor, reproject
+from kadv.render.layers import camera_face_normals
+from kadv.scenes import box_room
+
+H, W = 24, 32
+
+
+def _wall_view() -> tuple[ExactRenderer, torch.Tensor, torch.Tensor]:
+    """A camera 1.5 m in front of the box room's wall x = 0, looking straight at it; nothing else in view."""
+    renderer = ExactRenderer(box_room(seed=0))
+    eye = torch.tensor([1.5, 1.4, 1.8], dtype=torch.float64)
+    return renderer, look_at(eye, eye - torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64)).double()[None], intrinsics_from_fov(40.0, H, W)
+
+
+def _warp(renderer: ExactRenderer, anchor_pose: torch.Tensor, pose: torch.Tensor, K: torch.Tensor):
+    anchor = render_anchor(renderer, anchor_pose, K, H, W, guard_band=4, supersample=2)
+    exact = renderer.render(pose.detach(), K, H, W)
+    normals = torch.from_numpy(camera_face_normals(renderer.scene, exact.triangle_ids[:, 0].numpy(), pose)).permute(0, 3, 1, 2)
+    return exact, reproject(anchor, exact.depth, normals, torch.linalg.inv(anchor.world_T_cam) @ pose, K)
+
+
+def test_the_anchor_at_the_current_pose_is_reproduced() -> None:
+    renderer, pose, K = _wall_view()
+    exact, warp = _warp(renderer, pose, pose, K)
+    assert bool(warp.valid.all())
+    torch.testing.assert_close(warp.depth, exact.depth, rtol=1e-5, atol=0)
+    assert float((warp.layer == 0).float().mean()) == 1.0
+
+
+def test_after_a_move_the_warped_depth_is_the_new_exact_depth() -> None:
+    renderer, anchor_pose, K = _wall_view()
+    moved = perturb_world_T_cam(anchor_pose, torch.tensor([[0.0, 0.03, 0.0]], dtype=torch.float64),
+                                torch.tensor([[-0.2, 0.05, 0.1]], dtype=torch.float64))
+    exact, warp = _warp(renderer, anchor_pose, moved, K)
+    assert float(warp.valid.float().mean()) > 0.9
+    valid = warp.valid
+    torch.testing.assert_close(warp.depth[valid], exact.depth[valid], rtol=1e-4, atol=0)
+
+
+def test_moving_toward_a_frontal_wall_lowers_every_depth_one_for_one() -> None:
+    """d(depth)/d(offset along the optical axis) = -1 on a wall the camera faces squarely."""
+    renderer, pose, K = _wall_view()
+    axis = pose[0, :3, 2]
+    step = torch.zeros(1, 3, dtype=torch.float64, requires_grad=True)
+    current = perturb_world_T_cam(pose, torch.zeros(1, 3, dtype=torch.float64), step * axis)
+    _, warp = _warp(renderer, pose, current, K)
+    depth = warp.depth[warp.valid]
+    (gradient,) = torch.autograd.grad(depth.double().mean(), step)
+    assert abs(float(gradient.sum()) + 1.0) < 1e-3
+
+
+def test_pixels_without_a_surface_stay_invalid() -> None:
+    renderer, pose, K = _wall_view()
+    anchor = render_anchor(renderer, pose, K, H, W, guard_band=4, supersample=2)
+    exact = renderer.render(pose, K, H, W)
+    depth = exact.depth.clone()
+    depth[..., :4, :] = 0.0  # as if these rays had missed
+    normals = torch.from_numpy(camera_face_normals(renderer.scene, exact.triangle_ids[:, 0].numpy(), pose)).permute(0, 3, 1, 2)
+    warp = reproject(anchor, depth, normals, torch.eye(4, dtype=torch.float64)[None], K)
+    assert not bool(warp.valid[..., :4, :].any()) and bool(warp.valid[..., 4:, :].all())
+    assert float(warp.depth[..., :4, :].abs().max()) == 0.0
