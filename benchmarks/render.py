@@ -4,6 +4,8 @@ Run: .venv/bin/python benchmarks/render.py
 """
 from __future__ import annotations
 
+import statistics
+
 import torch
 from common import bench_scenes, median_seconds
 
@@ -26,8 +28,10 @@ def exact_timings(scenes) -> None:
             print(f"{scene.name:<22} {height:>4}x{width:<4} {scene.num_triangles:>10} {render * 1e3:>10.1f} {cast * 1e3:>9.1f}")
 
 
-def differentiable_timings(scenes, height: int = 240, width: int = 320) -> None:
+def differentiable_timings(scenes, height: int = 240, width: int = 320) -> dict[str, list[float]]:
+    """Prints the table; returns per-scene ms of the exact render and of the default configuration."""
     print(f"\nDifferentiableRenderer forward+backward at {height}x{width} (supersample 2, guard band 16)")
+    summary: dict[str, list[float]] = {"exact": [], "default": []}
     print(f"{'scene':<22} {'mode':<34} {'ms':>8}")
     for scene in scenes:
         renderer = ExactRenderer(scene)
@@ -36,6 +40,7 @@ def differentiable_timings(scenes, height: int = 240, width: int = 320) -> None:
         base = camera.world_T_cam[None]
         exact_ms = median_seconds(lambda: renderer.render(base, K, height, width, supersample=2), repeats=3) * 1e3
         print(f"{scene.name:<22} {'exact render alone (s=2)':<34} {exact_ms:>8.0f}")
+        summary["exact"].append(exact_ms)
         for values, refresh in (("exact", "always"), ("warp", "every_k")):
             for silhouette in (False, True):
                 config = DiffRenderConfig(values=values, refresh=refresh, silhouette=silhouette)
@@ -47,13 +52,19 @@ def differentiable_timings(scenes, height: int = 240, width: int = 320) -> None:
                     (out.rgb.sum() + out.depth.sum()).backward()
 
                 label = f"values={values} refresh={refresh} sil={'on' if silhouette else 'off'}"
-                print(f"{scene.name:<22} {label:<34} {median_seconds(step, repeats=3) * 1e3:>8.0f}")
+                step_ms = median_seconds(step, repeats=3) * 1e3
+                print(f"{scene.name:<22} {label:<34} {step_ms:>8.0f}")
+                if config == DiffRenderConfig():
+                    summary["default"].append(step_ms)
+    return summary
 
 
 def main() -> None:
     scenes = bench_scenes()
     exact_timings(scenes)
-    differentiable_timings(scenes)
+    summary = differentiable_timings(scenes)
+    print(f"render exact_ms_mean={statistics.mean(summary['exact']):.0f} "
+          f"differentiable_default_ms_mean={statistics.mean(summary['default']):.0f}")
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ from common import REAL_SCENES, scenes_root
 from kadv.datasets import render_procedural_views
 from kadv.losses import depth_metrics
 from kadv.models import load_model
-from kadv.models.train_tiny import evaluate
+from kadv.models.evaluation import evaluate
 from kadv.render import ExactRenderer
 from kadv.scenes import load_scene
 
