@@ -53,13 +53,14 @@ def test_look_at_override_and_clear_error_for_bad_index(tmp_path: Path) -> None:
 
 def _readme_render_examples() -> list[list[str]]:
     lines = re.findall(r"^\.venv/bin/kadv-render(.*?)(?:#.*)?$", README.read_text(), re.MULTILINE)
-    # the README names the scenes where a checkout finds them; tests honour KADV_TEST_SCENES
-    return [line.replace("../shared/scenes", str(scenes_root())).split() for line in lines]
+    return [line.split() for line in lines]
 
 
 @pytest.mark.parametrize("overrides", _readme_render_examples(), ids=lambda o: " ".join(o)[:60])
 def test_readme_examples_render_valid_views(overrides: list[str], tmp_path: Path) -> None:
-    small = [o for o in overrides if not o.startswith(("render.width", "render.height"))]
+    # the README names the scenes where a checkout finds them; tests honour KADV_TEST_SCENES
+    small = [o.replace("../shared/scenes", str(scenes_root())) for o in overrides
+             if not o.startswith(("render.width", "render.height"))]
     result = _run(tmp_path, *small, "render.height=24", "render.width=32")
     assert result.returncode == 0, result.stderr
     summary = json.loads((tmp_path / "run" / "render.json").read_text())
