@@ -53,12 +53,12 @@ def main(cfg: DictConfig) -> None:
         note = f"file camera {int(cfg.camera.index)}" + (
             f", moved {moved:+.3f} m along its optical axis to clear {penalty.margin} m" if moved else "")
     K = intrinsics_from_fov(fov, height, width)
-    validity = view_validity(renderer, world_T_cam, K, height, width, **penalty.validity_options())
+    out = renderer.render(world_T_cam, K, height, width, supersample=supersample)
+    validity = view_validity(renderer, world_T_cam, K, height, width, render=out, **penalty.validity_options())
     verdict, reason = validity.verdicts[0], validity.reasons[0]
     if verdict != "valid" and not cfg.camera.allow_invalid:
         raise ValueError(f"camera: the view is {verdict} ({reason}); "
                          "move the camera, or render it anyway with camera.allow_invalid=true")
-    out = renderer.render(world_T_cam, K, height, width, supersample=supersample)
     depth = out.depth[0, 0].numpy()
     mask = out.mask[0, 0].numpy()
     save_rgb_png(out_dir / "rgb.png", out.rgb[0])

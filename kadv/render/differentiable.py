@@ -154,18 +154,18 @@ class DifferentiableRenderer:
         refreshed = (self.anchor is None or _view_key(K, height, width) != self._anchor_key or c.refresh == "always"
                      or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k))
         anchor = self._refresh(current, K, height, width) if refreshed else None
-        if c.silhouette:
-            K_ring, ring_height, ring_width = ring_view(K, height, width)
-            ring = self._exact_render(current, K_ring, ring_height, ring_width, RING, anchor)
-            exact = ring.cropped(RING)
-        else:
-            exact = self._exact_render(current, K, height, width, 0, anchor)
+        # with silhouettes, the frame is rendered with a ring around it (the frame is its interior)
+        border = RING if c.silhouette else 0
+        K_render, render_height, render_width = ring_view(K, height, width) if c.silhouette else (K, height, width)
+        rendered = self._exact_render(current, K_render, render_height, render_width, border, anchor)
+        exact = rendered.cropped(border) if border else rendered
         ids = exact.triangle_ids[:, 0].numpy()
         normals = torch.from_numpy(camera_face_normals(self.renderer.scene, ids, current)).permute(0, 3, 1, 2)
         normals = normals.to(self.device)
         # what the device needs of the exact render, moved once
-        rgb_exact, depth_exact, mask = (exact.rgb.to(self.device), exact.depth.to(self.device),
-                                        exact.mask.to(self.device))
+        inside = (..., slice(border, render_height - border), slice(border, render_width - border))
+        rgb_rendered, depth_rendered = rendered.rgb.to(self.device), rendered.depth.to(self.device)
+        rgb_exact, depth_exact, mask = rgb_rendered[inside], depth_rendered[inside], exact.mask.to(self.device)
         warp = self._warp(depth_exact, normals, world_T_cam, K)
         agreement = WarpAgreement.of(warp, rgb_exact, depth_exact, mask)
         if c.refresh == "on_drift" and not refreshed and agreement.drifted(c):
@@ -182,11 +182,9 @@ class DifferentiableRenderer:
             rgb = torch.where(valid, warp.rgb, rgb_exact)
             depth = torch.where(valid, warp.depth, depth_exact)
         if c.silhouette:
-            pairs = find_edge_pairs(self.renderer, ring, current, K_ring)
-            inside = (..., slice(RING, -RING), slice(RING, -RING))
-            for_device = (ring.rgb.to(self.device), ring.depth.to(self.device))
-            rgb = rgb + silhouette_term(self.renderer, pairs, world_T_cam, K_ring, for_device[0])[inside]
-            depth = depth + silhouette_term(self.renderer, pairs, world_T_cam, K_ring, for_device[1])[inside]
+            pairs = find_edge_pairs(self.renderer, rendered, current, K_render)
+            rgb = rgb + silhouette_term(self.renderer, pairs, world_T_cam, K_render, rgb_rendered)[inside]
+            depth = depth + silhouette_term(self.renderer, pairs, world_T_cam, K_render, depth_rendered)[inside]
         return DiffRenderOutput(rgb=rgb, depth=depth, mask=mask, exact=exact, world_T_cam=world_T_cam,
                                 coverage=agreement.coverage.cpu(), rgb_error=agreement.rgb_error.cpu(),
                                 depth_error=agreement.depth_error.cpu(), refreshed=refreshed)
@@ -195,12 +193,11 @@ class DifferentiableRenderer:
                       anchor: AnchorLayers | None) -> RenderOutput:
         """The exact render of the frame plus ``border`` pixels; an anchor (CPU) just rendered at this
         pose holds the colours of the frame's sub-pixel rays, which are then not cast again."""
-        s, g = self.config.supersample, self._guard_band
         sub_rgb = None
-        if anchor is not None and s > 1 and g >= border:
-            start = s * (g - border)
+        if anchor is not None and anchor.supersample > 1 and anchor.guard_band >= border:
+            s, start = anchor.supersample, anchor.supersample * (anchor.guard_band - border)
             sub_rgb = anchor.rgb[:, 0, :, start:start + s * height, start:start + s * width]
-        return self.renderer.render(world_T_cam, K, height, width, supersample=s, sub_rgb=sub_rgb)
+        return self.renderer.render(world_T_cam, K, height, width, supersample=self.config.supersample, sub_rgb=sub_rgb)
 
     def _warp(self, depth: torch.Tensor, normals: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor):
         A_T_P = torch.linalg.inv(self.anchor.world_T_cam) @ world_T_cam

@@ -84,13 +84,16 @@ def edge_crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: tor
 
 @dataclass
 class _Candidates:
-    """Neighbour pairs (N) across a possible occlusion edge in one direction, with their views' poses."""
+    """Neighbour pairs (N) across a possible occlusion edge in one direction: pixel indices and
+    centres, camera rays (z = 1) through both centres, and their views' poses."""
 
     batch: np.ndarray
     a: np.ndarray
     b: np.ndarray
     uv_a: np.ndarray
     uv_b: np.ndarray
+    rays_a: np.ndarray
+    rays_b: np.ndarray
     R: np.ndarray
     c: np.ndarray
 
@@ -110,16 +113,17 @@ def _candidate_pairs(renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, po
     bi, yi, xi = np.nonzero(candidate)
     a = yi * width + xi
     uv_a = np.c_[xi + 0.5, yi + 0.5]
-    pairs = _Candidates(bi, a, a + (1 if horizontal else width), uv_a,
-                        uv_a + ([1.0, 0.0] if horizontal else [0.0, 1.0]), pose[bi, :3, :3], pose[bi, :3, 3])
+    uv_b = uv_a + ([1.0, 0.0] if horizontal else [0.0, 1.0])
+    pairs = _Candidates(bi, a, a + (1 if horizontal else width), uv_a, uv_b, _rays(K_inv, bi, uv_a),
+                        _rays(K_inv, bi, uv_b), pose[bi, :3, :3], pose[bi, :3, 3])
     flat_ids, flat_z = ids.reshape(batch, -1), z.reshape(batch, -1)
     # Neighbours on one continuous surface (a grazing floor's triangles) are no edge: the plane of
     # either one's triangle, extended to the other's ray, meets it at its depth. Dropping them here
     # spares the bisection most candidates; it would find no occlusion between them either.
     z_a, z_b = flat_z[bi, pairs.a], flat_z[bi, pairs.b]
     with np.errstate(invalid="ignore"):
-        b_on_a = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.a], _rays(K_inv, bi, pairs.uv_b), pairs.R, pairs.c) - z_b)
-        a_on_b = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.b], _rays(K_inv, bi, pairs.uv_a), pairs.R, pairs.c) - z_a)
+        b_on_a = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.a], pairs.rays_b, pairs.R, pairs.c) - z_b)
+        a_on_b = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.b], pairs.rays_a, pairs.R, pairs.c) - z_a)
         continuous = (b_on_a <= _CONTINUITY * z_b) & (a_on_b <= _CONTINUITY * z_a)
     return pairs.subset(~continuous)
 
@@ -161,7 +165,7 @@ def _bisect(renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray, fla
 
 
 def _occluder_edge(renderer: ExactRenderer, pairs: _Candidates, occluder: np.ndarray, t_star: np.ndarray,
-                   K: np.ndarray, K_inv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   K: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which of the occluder's three edges crosses the segment at ``t_star``.
 
     Returns its vertex indices (N, 2), how far (in segment units) its exact crossing lies from
@@ -172,9 +176,8 @@ def _occluder_edge(renderer: ExactRenderer, pairs: _Candidates, occluder: np.nda
     edges = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1)  # (N, 3, 2)
     vertices_cam = np.einsum("nji,nekj->neki", R, renderer.scene.vertices[edges] - c[:, None, None])
     three = lambda array: torch.from_numpy(np.repeat(array, 3, axis=0))  # noqa: E731
-    t_all, ok_all = edge_crossings(torch.from_numpy(vertices_cam.reshape(-1, 2, 3)), three(_rays(K_inv, bi, pairs.uv_a)),
-                                   three(_rays(K_inv, bi, pairs.uv_b)), three(K[bi]), three(pairs.uv_a),
-                                   three(pairs.uv_b))
+    t_all, ok_all = edge_crossings(torch.from_numpy(vertices_cam.reshape(-1, 2, 3)), three(pairs.rays_a),
+                                   three(pairs.rays_b), three(K[bi]), three(pairs.uv_a), three(pairs.uv_b))
     n = len(bi)
     error = np.where(ok_all.numpy(), np.abs(t_all.numpy() - np.repeat(t_star, 3)), np.inf).reshape(n, 3)
     best = error.argmin(axis=1)
@@ -204,11 +207,11 @@ def find_edge_pairs(renderer: ExactRenderer, exact: RenderOutput, world_T_cam: t
         if not len(pairs.batch):
             continue
         occluder, occlusion, t_star = _bisect(renderer, pairs, z.reshape(batch, -1), ids.reshape(batch, -1), K_inv)
-        chosen, error, steep = _occluder_edge(renderer, pairs, occluder, t_star, K, K_inv)
+        chosen, error, steep = _occluder_edge(renderer, pairs, occluder, t_star, K)
         keep = occlusion & (error < _MAX_CROSSING_ERROR) & (steep == horizontal)
         n = len(pairs.batch)
-        for key, value in (("batch", pairs.batch), ("a", pairs.a), ("b", pairs.b), ("horizontal", np.full(n, horizontal)),
-                           ("edge", chosen), ("t", t_star)):
+        for key, value in (("batch", pairs.batch), ("a", pairs.a), ("b", pairs.b),
+                           ("horizontal", np.full(n, horizontal)), ("edge", chosen), ("t", t_star)):
             found[key].append(value[keep])
     if not found["batch"]:
         empty = np.zeros(0, np.int64)

@@ -12,11 +12,10 @@ from PIL import Image, ImageDraw
 
 from kadv.attack.records import InitViewResult
 from kadv.io import atomic_write
+from kadv.report.images import depth_colour_map, depth_range
 from kadv.scenes import Scene
 
 __all__ = ["annotate", "colourise", "save_curves", "save_figure", "save_four_panel", "save_map", "save_video"]
-
-_CMAP = "turbo"
 
 
 def save_figure(path: Path, figure: plt.Figure) -> Path:
@@ -27,18 +26,10 @@ def save_figure(path: Path, figure: plt.Figure) -> Path:
         plt.close(figure)
 
 
-def _depth_range(depth: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
-    """1st-99th percentile of the valid depths, so a few far pixels do not flatten the room."""
-    if not mask.any():
-        return 0.0, 1.0
-    low, high = np.percentile(depth[mask], [1, 99])
-    return float(low), float(max(high, low + 1e-6))
-
-
 def colourise(values: np.ndarray, mask: np.ndarray, low: float, high: float) -> np.ndarray:
     """(H, W) values -> (H, W, 3) uint8 with the turbo colour map; grey where ``mask`` is False."""
     scaled = np.clip((values - low) / max(high - low, 1e-12), 0.0, 1.0)
-    rgb = plt.get_cmap(_CMAP)(scaled)[..., :3]
+    rgb = depth_colour_map()(scaled)[..., :3]
     rgb[~mask] = 0.5
     return (rgb * 255 + 0.5).astype(np.uint8)
 
@@ -52,16 +43,14 @@ def save_four_panel(path: str | Path, rgb: np.ndarray, depth: np.ndarray, predic
             ground truth), sharing one colour map; mask: (H, W) valid ground truth.
         title: the figure's title (the view's metrics).
     """
-    low, high = _depth_range(depth, mask)
+    low, high = depth_range(depth, mask)
     error = np.where(mask, np.abs(prediction - depth) / np.maximum(depth, 1e-6), np.nan)
     figure, axes = plt.subplots(1, 4, figsize=(4 * 3.4, 3.4 * rgb.shape[0] / rgb.shape[1] + 1.0), layout="constrained")
     axes[0].imshow(np.clip(rgb, 0, 1))
     axes[0].set_title("rendered image")
     shown = [np.ma.masked_where(~mask, depth), np.ma.masked_where(~mask, prediction)]
-    cmap = plt.get_cmap(_CMAP).copy()
-    cmap.set_bad((0.5, 0.5, 0.5))
     for axis, values, name in zip(axes[1:3], shown, ("ground-truth depth", "prediction (aligned)")):
-        image = axis.imshow(values, cmap=cmap, vmin=low, vmax=high, interpolation="nearest")
+        image = axis.imshow(values, cmap=depth_colour_map(), vmin=low, vmax=high, interpolation="nearest")
         axis.set_title(name)
     figure.colorbar(image, ax=axes[1:3].tolist(), fraction=0.03, pad=0.02, label="depth [m], grey: no surface")
     errors = axes[3].imshow(np.ma.masked_invalid(error), cmap="magma", vmin=0.0, vmax=0.5, interpolation="nearest")

@@ -6,11 +6,25 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
+from matplotlib.colors import Colormap
 from PIL import Image
 
 from kadv.io import atomic_write
 
-__all__ = ["save_depth_png", "save_rgb_png"]
+__all__ = ["depth_colour_map", "depth_range", "save_depth_png", "save_rgb_png"]
+
+
+def depth_range(depth: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+    """1st-99th percentile of the valid depths, so a few far pixels do not flatten the room."""
+    if not mask.any():
+        return 0.0, 1.0
+    low, high = np.percentile(depth[mask], [1, 99])
+    return float(low), float(max(high, low + 1e-6))
+
+
+def depth_colour_map() -> Colormap:
+    """The depth maps' colour map (turbo), grey where a value is masked (no surface)."""
+    return plt.get_cmap("turbo").with_extremes(bad=(0.5, 0.5, 0.5))
 
 
 def save_rgb_png(path: str | Path, rgb: torch.Tensor) -> Path:
@@ -31,11 +45,8 @@ def save_depth_png(path: str | Path, depth: torch.Tensor, mask: torch.Tensor | N
     height, width = values.shape
     dpi = 100
     figure, axis = plt.subplots(figsize=(width / dpi * 1.25 + 0.6, height / dpi + 0.3), dpi=dpi)
-    cmap = plt.get_cmap("turbo").copy()
-    cmap.set_bad((0.5, 0.5, 0.5))
-    # a few far pixels (sky through a window, an outdoor ground plane) would flatten the room's range
-    low, high = np.percentile(values[valid], [1, 99]) if valid.any() else (0.0, 1.0)
-    image = axis.imshow(shown, cmap=cmap, interpolation="nearest", vmin=low, vmax=max(high, low + 1e-6))
+    low, high = depth_range(values, valid)
+    image = axis.imshow(shown, cmap=depth_colour_map(), interpolation="nearest", vmin=low, vmax=high)
     axis.set_axis_off()
     figure.colorbar(image, ax=axis, fraction=0.046, pad=0.02, label=label, extend="both")
 

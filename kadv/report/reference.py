@@ -1,14 +1,16 @@
 """Render reliability against an independent path tracer (Mitsuba 3): the study's Table 1, automated.
 
 Each view is rendered by Mitsuba (path tracing, the file's emitters kept) and by kadv's
-:class:`ExactRenderer`, then compared: z-depth at pixel centres (Mitsuba's own
-``scene.ray_intersect`` on kadv's pixel rays, so no jitter or filter blurs it), the images (PSNR and
-SSIM after exposure matching) and a model's predictions on the two images (delta1 after alignment).
+:class:`ExactRenderer`, then compared: z-depth at pixel centres (Mitsuba's own sensor rays and
+``scene.ray_intersect``, so no jitter or filter blurs it and the camera conversion is checked), the
+images (PSNR and SSIM after exposure matching) and a model's predictions on the two images (delta1
+after alignment).
 
 Mitsuba 3 is an optional extra (``pip install kadv[reference]``). It loads the 0.5/0.6-era gallery
 files only through a sanitised copy: the file's sensors and integrator are replaced by ours, an
-``envmap`` whose image is absent becomes a constant sky, and the old ``sunsky`` (whose parameters
-Mitsuba 3 no longer takes) becomes a constant sky plus a directional sun.
+``envmap`` whose image is absent becomes a constant sky, the old ``sunsky`` (whose parameters
+Mitsuba 3 no longer takes) becomes a constant sky plus a directional sun, texture filters Mitsuba 3
+dropped become bilinear, and properties it no longer knows are removed.
 """
 from __future__ import annotations
 
@@ -28,7 +30,8 @@ from kadv.geometry import intrinsics_from_fov
 from kadv.losses import aligned_depth, depth_metrics
 from kadv.models import DepthModel
 from kadv.render import ExactRenderer
-from kadv.report.figures import save_figure
+from kadv.report.figures import depth_colour_map, depth_range, save_figure
+from kadv.scenes.textures import linear_to_srgb, srgb_to_linear
 
 __all__ = ["ReferenceComparison", "compare_view", "load_mitsuba_scene", "mitsuba_depth", "sanitised_scene_xml",
            "save_comparison"]
@@ -37,6 +40,7 @@ log = logging.getLogger(__name__)
 
 # Mitsuba's camera looks along +z with +y up and +x to the left: OpenCV's camera turned half a turn about z.
 _CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0, 1.0])
+_MAX_DEPTH = 8  # path tracer bounces
 
 
 def _mitsuba():
@@ -65,13 +69,17 @@ def _sensor(world_T_cam: np.ndarray, fov_x_deg: float, height: int, width: int, 
 
 
 def sanitised_scene_xml(path: str | Path, views: list[tuple[np.ndarray, float]], height: int, width: int,
-                        spp: int, max_depth: int = 8) -> str:
+                        spp: int, max_depth: int = _MAX_DEPTH) -> str:
     """The scene file with our sensors (one per (world_T_cam, fov_x_deg) view) and a path tracer.
 
     The scene must have been loaded by kadv with the default options (metres = file units, y up),
     so that kadv's world frame is the file's.
     """
-    path = Path(path)
+    return ET.tostring(_sanitised_root(Path(path), views, height, width, spp, max_depth), encoding="unicode")
+
+
+def _sanitised_root(path: Path, views: list[tuple[np.ndarray, float]], height: int, width: int, spp: int,
+                    max_depth: int) -> ET.Element:
     root = ET.parse(path).getroot()
     for tag in ("sensor", "integrator"):
         for element in root.findall(tag):
@@ -98,10 +106,11 @@ def sanitised_scene_xml(path: str | Path, views: list[tuple[np.ndarray, float]],
             # Mitsuba 0.6's "trilinear" and "ewa" mip-map filters are gone; bilinear is the nearest left
             if child.get("name") in ("filterType", "filter_type") and child.get("value") not in ("nearest", "bilinear"):
                 child.set("value", "bilinear")
-    root.insert(0, ET.fromstring(f'<integrator type="path"><integer name="maxDepth" value="{max_depth}"/></integrator>'))
+    integrator = f'<integrator type="path"><integer name="maxDepth" value="{max_depth}"/></integrator>'
+    root.insert(0, ET.fromstring(integrator))
     for index, (world_T_cam, fov) in enumerate(views):
         root.insert(1 + index, _sensor(world_T_cam, fov, height, width, spp))
-    return ET.tostring(root, encoding="unicode")
+    return root
 
 
 _UNREFERENCED = re.compile(r'unreferenced propert(?:y|ies) in (\w+) plugin of type "(\w+)"')
@@ -123,7 +132,7 @@ def load_mitsuba_scene(path: str | Path, views: list[tuple[np.ndarray, float]], 
     folder = str(Path(path).resolve().parent)
     if folder not in [str(p) for p in resolver]:
         resolver.prepend(folder)
-    root = ET.fromstring(sanitised_scene_xml(path, views, height, width, spp))
+    root = _sanitised_root(Path(path), views, height, width, spp, _MAX_DEPTH)
     while True:
         try:
             return mi.load_string(ET.tostring(root, encoding="unicode"))
@@ -164,11 +173,6 @@ def mitsuba_depth(scene, sensor: int, height: int, width: int) -> np.ndarray:
     return depth
 
 
-def _srgb(linear: np.ndarray) -> np.ndarray:
-    linear = np.clip(linear, 0.0, None)
-    return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.power(linear, 1 / 2.4) - 0.055)
-
-
 def _exposure(linear: np.ndarray, target_srgb: np.ndarray) -> float:
     """One scale on linear radiance so that the median brightness matches the target's.
 
@@ -176,9 +180,8 @@ def _exposure(linear: np.ndarray, target_srgb: np.ndarray) -> float:
     would otherwise set the exposure for the whole image.
     """
     brightness = np.median(linear.mean(axis=-1))
-    target = np.median(target_srgb.mean(axis=-1))
-    target_linear = np.where(target <= 0.04045, target / 12.92, ((target + 0.055) / 1.055) ** 2.4)
-    return float(target_linear / max(brightness, 1e-12))
+    target = srgb_to_linear(np.median(target_srgb.mean(axis=-1)))
+    return float(target / max(brightness, 1e-12))
 
 
 @dataclass
@@ -213,10 +216,11 @@ def compare_view(mitsuba_scene, sensor: int, renderer: ExactRenderer, model: Dep
     depth_ref = mitsuba_depth(mitsuba_scene, sensor, height, width)
     depth_ours = ours.depth[0, 0].double().numpy()
     both = (depth_ref > 0) & (depth_ours > 0)
-    depth_rel_err = float(np.median(np.abs(depth_ref[both] - depth_ours[both]) / depth_ours[both])) if both.any() else math.nan
+    relative = np.abs(depth_ref[both] - depth_ours[both]) / depth_ours[both]
+    depth_rel_err = float(np.median(relative)) if both.any() else math.nan
     linear = np.array(mi.render(mitsuba_scene, sensor=sensor, spp=spp, seed=seed))[..., :3]
     kadv_rgb = ours.rgb[0].permute(1, 2, 0).numpy()
-    mitsuba_rgb = np.clip(_srgb(linear * _exposure(linear, kadv_rgb)), 0.0, 1.0).astype(np.float32)
+    mitsuba_rgb = linear_to_srgb(linear * _exposure(linear, kadv_rgb)).astype(np.float32)
     as_tensor = lambda image: torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()  # noqa: E731
     image_psnr = float(psnr(as_tensor(kadv_rgb), as_tensor(mitsuba_rgb), 1.0))
     image_ssim = float(ssim(as_tensor(kadv_rgb), as_tensor(mitsuba_rgb), 11).mean())
@@ -236,18 +240,16 @@ def save_comparison(path: str | Path, comparison: ReferenceComparison, title: st
     The two predictions are aligned to kadv's ground truth and share one colour map.
     """
     mask = comparison.mask
-    both = np.concatenate([comparison.mitsuba_pred[mask], comparison.kadv_pred[mask]])
-    low, high = np.percentile(both, [1, 99]) if both.size else (0.0, 1.0)
+    low, high = depth_range(np.stack([comparison.mitsuba_pred, comparison.kadv_pred]), np.stack([mask, mask]))
     height, width = comparison.kadv_rgb.shape[:2]
     figure, axes = plt.subplots(1, 4, figsize=(4 * 3.2, 3.2 * height / width + 0.9), layout="constrained")
-    cmap = plt.get_cmap("turbo").with_extremes(bad=(0.5, 0.5, 0.5))
     panels = [(comparison.mitsuba_rgb, "Mitsuba 3 (path traced)"), (comparison.kadv_rgb, "kadv (exact renderer)"),
               (comparison.mitsuba_pred, "prediction on Mitsuba"), (comparison.kadv_pred, "prediction on kadv")]
     for axis, (image, name) in zip(axes, panels):
         if image.ndim == 3:
             axis.imshow(image)
         else:
-            shown = axis.imshow(np.ma.masked_where(~mask, image), cmap=cmap, vmin=low, vmax=max(high, low + 1e-6),
+            shown = axis.imshow(np.ma.masked_where(~mask, image), cmap=depth_colour_map(), vmin=low, vmax=high,
                                 interpolation="nearest")
         axis.set_title(name, fontsize=9)
         axis.set_axis_off()

@@ -6,13 +6,19 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-__all__ = ["image_to_rgba", "linear_to_srgb", "load_image"]
+__all__ = ["image_to_rgba", "linear_to_srgb", "load_image", "srgb_to_linear"]
 
 
 def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
     """Encode linear reflectances as sRGB so constant colours match sRGB textures on screen."""
     linear = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
     return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * linear ** (1.0 / 2.4) - 0.055)
+
+
+def srgb_to_linear(srgb: np.ndarray) -> np.ndarray:
+    """Decode sRGB values in [0, 1] to linear ones: the inverse of :func:`linear_to_srgb`."""
+    srgb = np.clip(np.asarray(srgb, np.float64), 0.0, 1.0)
+    return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
 
 
 def image_to_rgba(image: Image.Image | np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
