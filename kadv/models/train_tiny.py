@@ -1,8 +1,10 @@
 """Training kadv-tiny on procedural rooms with a scale-and-shift-invariant disparity loss."""
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -35,6 +37,22 @@ class TinyTrainConfig:
     gradient_weight: float = 0.5
     channels: tuple[int, ...] = DEFAULT_CHANNELS
     init_weights: str | None = None
+
+    def __post_init__(self) -> None:
+        # checked here, before the minutes of rendering that come first in train_tiny
+        for name in ("train_views", "val_views", "steps", "batch_size"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ValueError(f"train.{name} must be an integer >= 1, got {value!r}")
+        if not (math.isfinite(self.lr) and self.lr > 0):
+            raise ValueError(f"train.lr must be positive, got {self.lr}")
+        for name in ("weight_decay", "gradient_weight"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ValueError(f"train.{name} must be >= 0, got {getattr(self, name)}")
+        if not self.channels or any(not isinstance(c, int) or c < 1 for c in self.channels):
+            raise ValueError(f"train.channels must be positive integers, got {list(self.channels)}")
+        if self.init_weights is not None and not Path(self.init_weights).expanduser().is_file():
+            raise FileNotFoundError(f"train.init_weights: no such weights file: {self.init_weights}")
 
 
 def _augment(rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor, generator: torch.Generator):

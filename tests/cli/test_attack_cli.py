@@ -139,7 +139,11 @@ BAD_INPUTS = [
     ("kadv-render", ["camera.eye=[nan,1.5,1]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),
     ("kadv-render", ["render.supersample=0"], "render.supersample"),
     ("kadv-render", ["scene=file", "scene.path=/no/such/room.glb"], "/no/such/room.glb"),
+    ("kadv-train-tiny", ["train.steps=-1"], "train.steps"),
+    ("kadv-train-tiny", ["train.init_weights=/no/such/tiny.safetensors"], "/no/such/tiny.safetensors"),
 ]
+# small images keep the attack and render cases fast; kadv-train-tiny has no render keys
+_SIZE = {"kadv-attack": SMALL[:2], "kadv-render": SMALL[:2]}
 
 
 @pytest.mark.parametrize("tool, overrides, named", BAD_INPUTS, ids=[" ".join(o) for _, o, _ in BAD_INPUTS])
@@ -149,7 +153,7 @@ def test_bad_input_gives_one_line_and_exit_status_2(tool, overrides, named, tmp_
     values = {"corrupt": corrupt, "inside": _inside_box_params(tmp_path)}
     overrides = [o.format(**values) for o in overrides]
     offline = {"HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf"), "HYDRA_FULL_ERROR": "0"}
-    result = _run(tool, tmp_path, "run", *SMALL[:2], *overrides, env=offline)
+    result = _run(tool, tmp_path, "run", *_SIZE.get(tool, []), *overrides, env=offline)
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr

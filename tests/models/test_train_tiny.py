@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import pytest
 import torch
 
 from kadv.datasets import render_procedural_views
@@ -58,3 +59,10 @@ def test_train_tiny_continues_from_init_weights(tmp_path) -> None:
     initial = load_kadv_tiny(start).network.state_dict()
     changed = [not torch.equal(initial[k], v) for k, v in network.state_dict().items()]
     assert any(changed) and 0.0 <= log["val_delta1"] <= 1.0 and len(log["losses"]) == 3
+
+
+@pytest.mark.parametrize("field, value", [("steps", 0), ("train_views", -4), ("batch_size", 1.5), ("lr", 0.0),
+                                          ("weight_decay", -1e-4), ("channels", ()), ("init_weights", "/no/such/file")])
+def test_bad_settings_are_refused_before_any_rendering(field, value) -> None:
+    with pytest.raises((ValueError, FileNotFoundError), match=rf"train\.{field}"):
+        TinyTrainConfig(**{field: value})
