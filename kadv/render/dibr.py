@@ -12,6 +12,8 @@ two surfaces and give the gradient of the wrong one; silhouettes get their own t
 """
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
@@ -20,13 +22,15 @@ from kornia.geometry.depth import depth_to_3d_v2
 from kornia.geometry.linalg import transform_points
 
 from kadv.geometry.camera import batched_intrinsics
-from kadv.render.layers import AnchorLayers
+from kadv.render.layers import AnchorLayers, guard_band_intrinsics
 
 __all__ = ["Reprojection", "reproject"]
 
 # Per-sample arithmetic (a few hundred thousand sub-pixel samples) runs in float32, which halves its
 # memory traffic; the pose algebra stays in float64. benchmarks/gradcheck.py holds either way.
 _DTYPE = torch.float32
+# relative pose and intrinsics entries within this of the anchor's are the anchor's view (A = P)
+_SAME_POSE = 1e-9
 
 
 @dataclass
@@ -108,6 +112,64 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
     return colour, point, total
 
 
+# The taps' weights in the blurred lookups of _sample_layer when a sample sits on a tap's centre
+# (A = P): 0.5, 1, 0.5 along each axis, and their derivatives in the sample position: -1, 0, 1.
+_CENTRED_WEIGHTS = (0.5, 1.0, 0.5)
+_CENTRED_SLOPES = (-1.0, 0.0, 1.0)
+
+
+def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor,
+                            plane_tolerance: float, size: tuple[int, int]):
+    """:func:`_sample_layer` for views at the anchor's own pose (A = P), whose samples (B, M) sit on
+    the anchor's hi-res pixel centres: sub-sample k = (jy, ix) of frame pixel (y, x) is anchor pixel
+    (s (y + g) + jy, s (x + g) + ix). The 3 x 3 taps are then shifted slices of the anchor maps,
+    and the lookups' value and derivative in q come in closed form; the result has the same values
+    and the same first derivatives as :func:`_sample_layer` at q, as a first-order expansion.
+    """
+    s, g = anchor.supersample, anchor.guard_band
+    batch = q.shape[0]
+    height, width = size
+    hs, ws, start = s * height, s * width, s * g - 1
+    maps = torch.cat([anchor.rgb[:, layer], anchor.points[:, layer], anchor.normals[:, layer], anchor.mask[:, layer]],
+                     dim=1)[:, :, start:start + hs + 2, start:start + ws + 2].to(_DTYPE)
+
+    def image(samples: torch.Tensor) -> torch.Tensor:  # (B, C, M) -> (B, C, hs, ws)
+        c = samples.shape[1]
+        return samples.reshape(batch, c, height, width, s, s).permute(0, 1, 2, 4, 3, 5).reshape(batch, c, hs, ws)
+
+    def samples(image: torch.Tensor) -> torch.Tensor:  # (B, C, hs, ws) -> (B, C, M)
+        c = image.shape[1]
+        return image.reshape(batch, c, height, s, width, s).permute(0, 1, 2, 4, 3, 5).reshape(batch, c, -1)
+
+    expected_image = image(expected.detach())
+    tolerance = plane_tolerance * expected_image[:, 2].abs()
+    total = total_x = total_y = 0.0
+    blurred = blurred_x = blurred_y = 0.0
+    for j in range(3):
+        for i in range(3):
+            tap = maps[:, :, j:j + hs, i:i + ws]
+            off_plane = ((expected_image - tap[:, 3:6]) * tap[:, 6:9]).sum(1).abs()
+            same_surface = ((tap[:, 9] > 0) & (off_plane <= tolerance)).to(_DTYPE)
+            if i == 1 and j == 1:
+                centre, value = same_surface, tap[:, 0:6] * same_surface[:, None]
+            weighted = tap[:, 0:6] * same_surface[:, None]
+            w, wx, wy = (_CENTRED_WEIGHTS[i] * _CENTRED_WEIGHTS[j], _CENTRED_SLOPES[i] * _CENTRED_WEIGHTS[j],
+                         _CENTRED_WEIGHTS[i] * _CENTRED_SLOPES[j])
+            total, blurred = total + w * same_surface, blurred + w * weighted
+            if wx:
+                total_x, blurred_x = total_x + wx * same_surface, blurred_x + wx * weighted
+            if wy:
+                total_y, blurred_y = total_y + wy * same_surface, blurred_y + wy * weighted
+    total = total.clamp_min(1e-12)[:, None]
+    # derivative of blurred / total along each axis (quotient rule)
+    slope_x = (blurred_x - blurred * (total_x[:, None] / total)) / total
+    slope_y = (blurred_y - blurred * (total_y[:, None] / total)) / total
+    x, y = q[..., 0], q[..., 1]
+    sampled = (samples(value) + (x - x.detach())[:, None] * samples(slope_x)
+               + (y - y.detach())[:, None] * samples(slope_y))
+    return sampled[:, 0:3], sampled[:, 3:6], samples(centre[:, None])[:, 0]
+
+
 # below this cosine between a sub-pixel ray and its pixel's plane, the ray grazes the plane and
 # keeps the pixel-centre depth instead of meeting the plane far away
 _GRAZING_COSINE = 1e-3
@@ -173,17 +235,33 @@ def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, 
     valid_pixel = (depth[:, 0] > 0).reshape(batch, height * width)
     # Pixels without a surface get a stand-in depth so that no NaN enters the graph; they stay invalid.
     depth = torch.where(depth > 0, depth, torch.ones_like(depth))
-    sub_points_P = _sub_pixel_points(depth, normals, batched_intrinsics(K, batch).to(device, _DTYPE), anchor.supersample)
+    K = batched_intrinsics(K, batch)
+    sub_points_P = _sub_pixel_points(depth, normals, K.to(device, _DTYPE), anchor.supersample)
     expected, q = _project_to_anchor(anchor, sub_points_P, A_T_P)
-    return _composite_layers(anchor, q, expected, torch.linalg.inv(A_T_P.double()).to(device, _DTYPE),
+    if _at_anchor(anchor, A_T_P, K, height, width):
+        sample = functools.partial(_sample_layer_at_anchor, size=(height, width))
+    else:
+        sample = _sample_layer
+    return _composite_layers(anchor, sample, q, expected, torch.linalg.inv(A_T_P.double()).to(device, _DTYPE),
                              depth.reshape(batch, -1), valid_pixel, (height, width), depth_tolerance, plane_tolerance)
 
 
-def _composite_layers(anchor: AnchorLayers, q: torch.Tensor, expected: torch.Tensor, P_T_A: torch.Tensor,
-                      depth: torch.Tensor, valid_pixel: torch.Tensor, size: tuple[int, int], depth_tolerance: float,
-                      plane_tolerance: float) -> Reprojection:
-    """Each pixel takes the first anchor layer whose samples all find the expected surface and whose
-    depth agrees with the exact depth (B, H*W)."""
+def _at_anchor(anchor: AnchorLayers, A_T_P: torch.Tensor, K: torch.Tensor, height: int, width: int) -> bool:
+    """Whether the views (B, 4, 4 relative poses, (B, 3, 3) intrinsics) are the anchor's own, up to
+    rounding, and its band holds every sample's 3 x 3 taps."""
+    s, g = anchor.supersample, anchor.guard_band
+    if s * g < 1 or tuple(anchor.rgb.shape[-2:]) != (s * (height + 2 * g), s * (width + 2 * g)):
+        return False
+    identity = torch.eye(4, dtype=torch.float64).expand(A_T_P.shape[0], 4, 4)
+    return (torch.allclose(A_T_P.detach().double().cpu(), identity, rtol=0.0, atol=_SAME_POSE)
+            and torch.allclose(anchor.K.double().cpu(), guard_band_intrinsics(K, g, s).cpu(), rtol=0.0, atol=_SAME_POSE))
+
+
+def _composite_layers(anchor: AnchorLayers, sample: Callable, q: torch.Tensor, expected: torch.Tensor,
+                      P_T_A: torch.Tensor, depth: torch.Tensor, valid_pixel: torch.Tensor, size: tuple[int, int],
+                      depth_tolerance: float, plane_tolerance: float) -> Reprojection:
+    """Each pixel takes the first anchor layer whose samples (read by ``sample``, a layer sampler)
+    all find the expected surface and whose depth agrees with the exact depth (B, H*W)."""
     batch, pixels = depth.shape
     height, width = size
     device = depth.device
@@ -192,7 +270,7 @@ def _composite_layers(anchor: AnchorLayers, q: torch.Tensor, expected: torch.Ten
     layer_used = torch.full((batch, pixels), -1, dtype=torch.int64, device=device)
     warped_depth = torch.zeros(batch, pixels, dtype=_DTYPE, device=device)
     for layer in range(anchor.num_layers):
-        c, p, total = _sample_layer(anchor, layer, q, expected, plane_tolerance)
+        c, p, total = sample(anchor, layer, q, expected, plane_tolerance)
         total = total.reshape(batch, pixels, -1)
         # every sub-sample must find its surface: a pixel straddling an occlusion edge is left to
         # the silhouette term rather than represented by one side's average

@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import open3d as o3d
 import torch
 
 from kadv.geometry.camera import batched_intrinsics, pixel_rays
@@ -88,20 +87,10 @@ def camera_face_normals(scene: Scene, triangle_ids: np.ndarray, world_T_cam: tor
 
 def _peel(renderer: ExactRenderer, origins: np.ndarray, directions: np.ndarray, layers: int) -> list[RayHits]:
     """The first ``layers`` opaque surfaces along each ray, nearest first."""
-    o, d = origins.reshape(-1, 3), directions.reshape(-1, 3)
-    n = len(o)
-    rays = o3d.core.Tensor(np.concatenate([o, d], axis=1).astype(np.float32))
-    result = renderer.raycasting_scene.list_intersections(rays)
-    ray_ids = result["ray_ids"].numpy().astype(np.int64)
-    t = result["t_hit"].numpy().astype(np.float64)
-    ids = result["primitive_ids"].numpy().astype(np.int64)
-    bary = result["primitive_uvs"].numpy().astype(np.float64)
+    n = len(origins.reshape(-1, 3))
+    ray_ids, t, ids, bary = renderer.intersections(origins.reshape(-1, 3), directions.reshape(-1, 3))
     if len(t):
-        opaque = ~renderer.see_through(ids, bary)
-        ray_ids, t, ids, bary = ray_ids[opaque], t[opaque], ids[opaque], bary[opaque]
         # Coplanar duplicates (z-fighting) would fill several layers with one surface.
-        order = np.lexsort((t, ray_ids))
-        ray_ids, t, ids, bary = ray_ids[order], t[order], ids[order], bary[order]
         keep = np.ones(len(t), bool)
         keep[1:] = ~((ray_ids[1:] == ray_ids[:-1]) & (np.abs(t[1:] - t[:-1]) <= 1e-5 * np.maximum(t[1:], 1e-6)))
         ray_ids, t, ids, bary = ray_ids[keep], t[keep], ids[keep], bary[keep]

@@ -10,6 +10,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import open3d as o3d
 import torch
+from torch.nn import functional as F
 
 from kadv.geometry.camera import pixel_rays
 from kadv.render.shading import Shading, albedo, mip_pyramid, sample_texture, scene_lights, shade, uv_density
@@ -18,9 +19,6 @@ from kadv.scenes.scene import Scene
 __all__ = ["ExactRenderer", "RayHits", "RenderOutput", "pixel_angle"]
 
 _INVALID_ID = np.uint32(2**32 - 1)
-# Alpha-masked surfaces (leaves) are skipped by re-casting just past the hit; bounded because
-# dense foliage rarely needs more than a few layers.
-_MAX_ALPHA_LAYERS = 8
 _ALPHA_CUTOFF = 0.5
 _MIN_HIT_DEPTH = 1e-6  # metres
 
@@ -93,8 +91,15 @@ class ExactRenderer:
             o3d.core.Tensor(scene.vertices.astype(np.float32)), o3d.core.Tensor(scene.faces.astype(np.uint32))
         )
         self._masked = np.array([m.opacity is not None for m in scene.materials], bool)
+        # shading reads these per hit: torch copies made once
         self._pyramids = {i: mip_pyramid(m.texture) for i, m in enumerate(scene.materials) if m.texture is not None}
-        self._uv_density = uv_density(scene)
+        self._opacity = {i: torch.from_numpy(np.ascontiguousarray(m.opacity[:, :, None], np.float32))
+                         for i, m in enumerate(scene.materials) if m.opacity is not None}
+        self._uv_density = torch.from_numpy(uv_density(scene).astype(np.float32))
+        self._uvs = torch.from_numpy(scene.uvs.astype(np.float64))
+        self._normals = torch.from_numpy(scene.normals.astype(np.float32))
+        self._face_normals = torch.from_numpy(scene.face_normals.astype(np.float64))
+        self._lights = torch.from_numpy(self.lights.astype(np.float32))
 
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
         """Cast rays (..., 3) each; alpha-masked texels let rays through.
@@ -106,20 +111,31 @@ class ExactRenderer:
         directions = directions.reshape(-1, 3)
         t, ids, bary = self._cast_once(origins, directions)
         if self._masked.any():
-            offset = np.zeros(len(t))
-            for _ in range(_MAX_ALPHA_LAYERS):
-                see_through = self.see_through(ids, bary)
-                if not see_through.any():
-                    break
-                # Restart just past the hit; parameters along an unchanged direction add up.
-                step = t[see_through] * (1 + 1e-5) + 1e-6
-                offset[see_through] += step
-                t2, ids2, bary2 = self._cast_once(
-                    origins[see_through] + directions[see_through] * offset[see_through, None], directions[see_through]
-                )
-                t[see_through], ids[see_through], bary[see_through] = t2, ids2, bary2
-            t = np.where(ids >= 0, t + offset, np.inf)
+            # the few rays that met a transparent texel take their first opaque hit from the list
+            # of all their intersections (one query, however many leaves they pass)
+            pending = np.flatnonzero(self.see_through(ids, bary))
+            if len(pending):
+                ray_ids, t2, ids2, bary2 = self.intersections(origins[pending], directions[pending])
+                first = np.r_[True, ray_ids[1:] != ray_ids[:-1]] if len(ray_ids) else np.zeros(0, bool)
+                t[pending], ids[pending], bary[pending] = np.inf, -1, 0.0
+                settled = pending[ray_ids[first]]
+                t[settled], ids[settled], bary[settled] = t2[first], ids2[first], bary2[first]
         return RayHits(t, ids, bary)
+
+    def intersections(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Every opaque intersection of rays (N, 3), sorted by ray then distance: ray index (M,),
+        parameter t (M,), triangle id (M,) and barycentrics (M, 2)."""
+        rays = o3d.core.Tensor(np.concatenate([origins, directions], axis=1).astype(np.float32))
+        result = self.raycasting_scene.list_intersections(rays)
+        ray_ids = result["ray_ids"].numpy().astype(np.int64)
+        t = result["t_hit"].numpy().astype(np.float64)
+        ids = result["primitive_ids"].numpy().astype(np.int64)
+        bary = result["primitive_uvs"].numpy().astype(np.float64)
+        if len(t):
+            opaque = ~self.see_through(ids, bary)
+            ray_ids, t, ids, bary = ray_ids[opaque], t[opaque], ids[opaque], bary[opaque]
+        order = np.lexsort((t, ray_ids))
+        return ray_ids[order], t[order], ids[order], bary[order]
 
     def _cast_once(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         rays = o3d.core.Tensor(np.concatenate([origins, directions], axis=1).astype(np.float32))
@@ -135,11 +151,11 @@ class ExactRenderer:
         candidates = hit & self._masked[np.maximum(material_ids, 0)]
         see_through = np.zeros(len(ids), bool)
         for index in np.unique(material_ids[candidates]):
-            selected = candidates & (material_ids == index)
-            uv = self._interpolate(self.scene.uvs, ids[selected], bary[selected])
-            material = self.scene.materials[index]
-            alpha = sample_texture(material.opacity[:, :, None], uv * material.uv_scale)[:, 0]
-            see_through[np.flatnonzero(selected)[alpha < _ALPHA_CUTOFF]] = True
+            selected = np.flatnonzero(candidates & (material_ids == index))
+            uv = self._interpolate(self._uvs, torch.from_numpy(ids[selected]), torch.from_numpy(bary[selected]))
+            uv_scale = torch.as_tensor(self.scene.materials[index].uv_scale, dtype=uv.dtype)
+            alpha = sample_texture(self._opacity[index], uv * uv_scale)[:, 0]
+            see_through[selected[(alpha < _ALPHA_CUTOFF).numpy()]] = True
         return see_through
 
     def back_facing(self, hits: RayHits, directions: np.ndarray) -> np.ndarray:
@@ -148,10 +164,13 @@ class ExactRenderer:
         return hits.hit & (np.einsum("nc,nc->n", normals, directions.reshape(-1, 3)) > 0)
 
     @staticmethod
-    def _interpolate(per_corner: np.ndarray, triangle_ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
-        """Interpolate per-corner attributes (F, 3, C) at barycentrics (N, 2) (Open3D's (u, v))."""
-        weights = np.c_[1.0 - bary[:, 0] - bary[:, 1], bary[:, 0], bary[:, 1]]
-        return np.einsum("nk,nkc->nc", weights, per_corner[triangle_ids].astype(np.float64))
+    def _interpolate(per_corner: torch.Tensor, triangle_ids: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
+        """Interpolate per-corner attributes (F, 3, C) at barycentrics (N, 2) (Open3D's (u, v)), in
+        the attributes' dtype."""
+        bary = bary.to(per_corner.dtype)
+        corners = per_corner[triangle_ids]
+        return (corners[:, 0] * (1.0 - bary[:, 0:1] - bary[:, 1:2]) + corners[:, 1] * bary[:, 0:1]
+                + corners[:, 2] * bary[:, 1:2])
 
     def shade_hits(self, hits: RayHits, origins: np.ndarray, directions: np.ndarray,
                    pixel_angle: float, colour: bool = True) -> dict[str, np.ndarray]:
@@ -161,33 +180,33 @@ class ExactRenderer:
         is the background: the caller takes colour from other rays.
         """
         n = len(hits.t)
-        ids = hits.triangle_ids[hits.hit]
-        bary = hits.barycentrics[hits.hit]
-        dirs = directions.reshape(-1, 3)[hits.hit]
-        points = origins.reshape(-1, 3)[hits.hit] + dirs * hits.t[hits.hit, None]
-        face_normals = self.scene.face_normals[ids].astype(np.float64)
-        back = self.back_facing(hits, directions)[hits.hit]
-        normals = self._interpolate(self.scene.normals, ids, bary)
-        normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
-        normals[back] *= -1
+        hit = torch.from_numpy(hits.hit)
+        ids = torch.from_numpy(hits.triangle_ids)[hit]
+        bary = torch.from_numpy(hits.barycentrics)[hit]
+        t = torch.from_numpy(hits.t)[hit]
+        dirs = torch.from_numpy(directions.reshape(-1, 3))[hit]
+        points = (torch.from_numpy(origins.reshape(-1, 3))[hit] + dirs * t[:, None]).float()
+        back = torch.from_numpy(self.back_facing(hits, directions))[hit]
+        normals = F.normalize(self._interpolate(self._normals, ids, bary), dim=1, eps=1e-12)
+        normals = torch.where(back[:, None], -normals, normals)
         out = {
-            "rgb": np.tile(np.asarray(self.shading.background, np.float32), (n, 1)),
-            "points": np.zeros((n, 3), np.float32),
-            "normals": np.zeros((n, 3), np.float32),
-            "back_face": np.zeros(n, bool),
+            "rgb": torch.tensor(self.shading.background, dtype=torch.float32).repeat(n, 1),
+            "points": torch.zeros(n, 3, dtype=torch.float32),
+            "normals": torch.zeros(n, 3, dtype=torch.float32),
+            "back_face": torch.zeros(n, dtype=torch.bool),
         }
         if colour:
-            uv = self._interpolate(self.scene.uvs, ids, bary)
-            length = np.linalg.norm(dirs, axis=1)
-            incidence = np.abs(np.einsum("nc,nc->n", face_normals, dirs)) / length
+            uv = self._interpolate(self._uvs, ids, bary)
+            length = dirs.norm(dim=1)
+            incidence = (self._face_normals[ids] * dirs).sum(1).abs() / length
             # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
-            footprint = hits.t[hits.hit] * length * pixel_angle / np.sqrt(np.maximum(incidence, 0.05))
-            base = albedo(self.scene, ids, uv, footprint, self._pyramids, self._uv_density)
-            out["rgb"][hits.hit] = shade(self.shading, self.lights, points, normals, base)
-        out["points"][hits.hit] = points
-        out["normals"][hits.hit] = normals
-        out["back_face"][hits.hit] = back
-        return out
+            footprint = t * length * pixel_angle / incidence.clamp_min(0.05).sqrt()
+            base = albedo(self.scene, ids, uv, footprint.float(), self._pyramids, self._uv_density)
+            out["rgb"][hit] = shade(self.shading, self._lights, points, normals, base)
+        out["points"][hit] = points
+        out["normals"][hit] = normals
+        out["back_face"][hit] = back
+        return {key: value.numpy() for key, value in out.items()}
 
     def render(
         self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int = 1,

@@ -2,6 +2,9 @@
 
 A surface point keeps its colour when the camera moves (no head-light, no specular term): the
 differentiable reprojection relies on it.
+
+The per-sample arithmetic runs in torch, float32 for colours, normals and lights (8-bit textures
+need no more) and float64 for texture coordinates, whose tiling can reach hundreds of repeats.
 """
 from __future__ import annotations
 
@@ -13,7 +16,8 @@ from torch.nn import functional as F
 
 from kadv.scenes.scene import Scene
 
-__all__ = ["Shading", "mip_pyramid", "sample_texture", "sample_texture_filtered", "scene_lights", "shade", "uv_density"]
+__all__ = ["Shading", "albedo", "mip_pyramid", "sample_texture", "sample_texture_filtered", "scene_lights", "shade",
+           "uv_density"]
 
 
 @dataclass(frozen=True)
@@ -44,45 +48,46 @@ def scene_lights(scene: Scene, shading: Shading) -> np.ndarray:
     return np.array([[(lo[0] + hi[0]) / 2, lo[1] + 0.9 * (hi[1] - lo[1]), (lo[2] + hi[2]) / 2]])
 
 
-def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
+def sample_texture(texture: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
     """Bilinear lookup with wrap-around (N, C) of ``texture`` (H, W, C) at ``uv`` (N, 2).
 
     v = 1 is the first image row (the OBJ / Mitsuba convention, which trimesh also gives glTF).
     """
-    height, width = texture.shape[:2]
-    x = np.mod(uv[:, 0], 1.0) * width - 0.5
-    y = np.mod(1.0 - uv[:, 1], 1.0) * height - 0.5
-    x0, y0 = np.floor(x), np.floor(y)
-    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-    x0, y0 = x0.astype(np.int64) % width, y0.astype(np.int64) % height
+    height, width, channels = texture.shape
+    x = torch.remainder(uv[:, 0], 1.0) * width - 0.5
+    y = torch.remainder(1.0 - uv[:, 1], 1.0) * height - 0.5
+    x0, y0 = torch.floor(x), torch.floor(y)
+    fx, fy = (x - x0).to(texture.dtype)[:, None], (y - y0).to(texture.dtype)[:, None]
+    x0, y0 = x0.long() % width, y0.long() % height
     x1, y1 = (x0 + 1) % width, (y0 + 1) % height
-    top = texture[y0, x0] * (1 - fx) + texture[y0, x1] * fx
-    bottom = texture[y1, x0] * (1 - fx) + texture[y1, x1] * fx
-    return top * (1 - fy) + bottom * fy
+    flat = texture.reshape(-1, channels)
+    top = torch.lerp(flat[y0 * width + x0], flat[y0 * width + x1], fx)
+    bottom = torch.lerp(flat[y1 * width + x0], flat[y1 * width + x1], fx)
+    return torch.lerp(top, bottom, fy)
 
 
-def mip_pyramid(texture: np.ndarray) -> list[np.ndarray]:
-    """Box-filtered levels of a texture (H, W, C): level k is 2**k times coarser, down to 1 x 1."""
-    levels = [texture.astype(np.float32)]
-    current = torch.from_numpy(levels[0]).permute(2, 0, 1)[None]
+def mip_pyramid(texture: np.ndarray) -> list[torch.Tensor]:
+    """Box-filtered float32 levels (h, w, C) of a texture (H, W, C): level k is 2**k times coarser, down to 1 x 1."""
+    current = torch.from_numpy(np.ascontiguousarray(texture, np.float32)).permute(2, 0, 1)[None]
+    levels = [current[0].permute(1, 2, 0).contiguous()]
     while max(current.shape[-2:]) > 1:
         size = (max(1, current.shape[-2] // 2), max(1, current.shape[-1] // 2))
         current = F.interpolate(current, size=size, mode="area")
-        levels.append(current[0].permute(1, 2, 0).numpy())
+        levels.append(current[0].permute(1, 2, 0).contiguous())
     return levels
 
 
-def sample_texture_filtered(levels: list[np.ndarray], uv: np.ndarray, level: np.ndarray) -> np.ndarray:
+def sample_texture_filtered(levels: list[torch.Tensor], uv: torch.Tensor, level: torch.Tensor) -> torch.Tensor:
     """Trilinear lookup (N, C): bilinear at the two mip levels around ``level`` (N,), blended."""
-    level = np.clip(level, 0.0, len(levels) - 1)
-    low = np.floor(level).astype(np.int64)
-    frac = (level - low)[:, None]
-    out = np.zeros((len(uv), levels[0].shape[2]), np.float64)
-    for index in np.unique(low):
-        selected = low == index
+    level = level.clamp(0.0, len(levels) - 1)
+    low = torch.floor(level).long()
+    frac = (level - low).to(levels[0].dtype)[:, None]
+    out = torch.empty(len(uv), levels[0].shape[2], dtype=levels[0].dtype)
+    for index in torch.unique(low).tolist():
+        selected = torch.nonzero(low == index)[:, 0]
         below = sample_texture(levels[index], uv[selected])
         above = sample_texture(levels[min(index + 1, len(levels) - 1)], uv[selected])
-        out[selected] = below * (1 - frac[selected]) + above * frac[selected]
+        out[selected] = torch.lerp(below, above, frac[selected])
     return out
 
 
@@ -96,34 +101,44 @@ def uv_density(scene: Scene) -> np.ndarray:
     return np.sqrt(uv_area / np.maximum(world, 1e-20))
 
 
-def albedo(scene: Scene, triangle_ids: np.ndarray, uv: np.ndarray, footprint: np.ndarray,
-           pyramids: dict[int, list[np.ndarray]], density: np.ndarray) -> np.ndarray:
-    """Base colour (N, 3) of surface points given their triangles (N,) and texture coordinates (N, 2).
+def albedo(scene: Scene, triangle_ids: torch.Tensor, uv: torch.Tensor, footprint: torch.Tensor,
+           pyramids: dict[int, list[torch.Tensor]], density: torch.Tensor) -> torch.Tensor:
+    """Base colour (N, 3) float32 of surface points given their triangles (N,) and texture coordinates (N, 2).
 
     Textures are prefiltered (mip-mapped, from ``pyramids`` per material index) to each sample's
-    ``footprint`` (N,) (metres of surface one sample covers) using the per-triangle UV ``density``,
-    so renders are band-limited and smooth in the camera pose.
+    ``footprint`` (N,) (metres of surface one sample covers) using the per-triangle UV ``density``
+    (F,), so renders are band-limited and smooth in the camera pose.
     """
-    material_ids = scene.material_ids[triangle_ids]
-    colour = np.empty((len(triangle_ids), 3), np.float32)
-    for index in np.unique(material_ids):
+    material_ids = torch.from_numpy(scene.material_ids)[triangle_ids]
+    # samples grouped by material: one sort instead of a full-length mask per material
+    order = torch.argsort(material_ids, stable=True)
+    counts = torch.bincount(material_ids, minlength=len(scene.materials)).tolist()
+    colour = torch.empty(len(triangle_ids), 3, dtype=torch.float32)
+    start = 0
+    for index, count in enumerate(counts):
+        if not count:
+            continue
+        selected = order[start:start + count]
+        start += count
         material = scene.materials[index]
-        selected = material_ids == index
-        colour[selected] = material.base_color
-        if material.texture is not None:
-            texels = np.sqrt(material.texture.shape[0] * material.texture.shape[1])
-            scale = float(np.sqrt(np.prod(material.uv_scale)))
-            texel_footprint = footprint[selected] * density[triangle_ids[selected]] * scale * texels
-            level = np.log2(np.maximum(texel_footprint, 1.0))
-            colour[selected] *= sample_texture_filtered(pyramids[index], uv[selected] * material.uv_scale, level)
+        base = torch.as_tensor(material.base_color, dtype=torch.float32).expand(count, 3)
+        if material.texture is None:
+            colour[selected] = base
+            continue
+        texels = np.sqrt(material.texture.shape[0] * material.texture.shape[1])
+        scale = float(np.sqrt(np.prod(material.uv_scale)))
+        texel_footprint = footprint[selected] * density[triangle_ids[selected]] * (scale * texels)
+        level = torch.log2(texel_footprint.clamp_min(1.0))
+        uv_scale = torch.as_tensor(material.uv_scale, dtype=uv.dtype)
+        colour[selected] = base * sample_texture_filtered(pyramids[index], uv[selected] * uv_scale, level)
     return colour
 
 
-def shade(shading: Shading, lights: np.ndarray, points: np.ndarray, normals: np.ndarray,
-          base_colour: np.ndarray) -> np.ndarray:
-    """Shaded RGB (N, 3) in [0, 1] of surface points with unit normals facing the viewer side."""
-    to_lights = lights[None, :, :] - points[:, None, :]
-    to_lights /= np.maximum(np.linalg.norm(to_lights, axis=-1, keepdims=True), 1e-9)
-    lambert = np.clip(np.einsum("nlc,nc->nl", to_lights, normals), 0.0, None).mean(axis=1)
+def shade(shading: Shading, lights: torch.Tensor, points: torch.Tensor, normals: torch.Tensor,
+          base_colour: torch.Tensor) -> torch.Tensor:
+    """Shaded RGB (N, 3) in [0, 1] of surface points (N, 3) with unit normals (N, 3) facing the
+    viewer side, under ``lights`` (L, 3)."""
+    to_lights = F.normalize(lights[None, :, :] - points[:, None, :], dim=-1, eps=1e-9)
+    lambert = (to_lights * normals[:, None, :]).sum(-1).clamp_min(0.0).mean(dim=1)
     light = shading.ambient + shading.diffuse * lambert
-    return np.clip(base_colour * light[:, None], 0.0, 1.0)
+    return (base_colour * light[:, None]).clamp(0.0, 1.0)

@@ -51,19 +51,37 @@ class EdgePairs:
     t: np.ndarray
 
 
+def _to_world(R: np.ndarray, rays_cam: np.ndarray) -> np.ndarray:
+    """Camera rays (N, 3) rotated into the world by camera-to-world rotations R (N, 3, 3)."""
+    return np.einsum("nij,nj->ni", R, rays_cam)
+
+
 def _rays(K_inv: np.ndarray, batch: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Camera-frame rays (N, 3) with z = 1 through pixel coordinates uv (N, 2)."""
     return np.einsum("nij,nj->ni", K_inv[batch], np.c_[uv, np.ones(len(uv))])
 
 
-def _plane_depth(renderer: ExactRenderer, ids: np.ndarray, rays_cam: np.ndarray, R: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """z-depth where camera rays meet the plane of triangles ``ids`` (inf for ids < 0)."""
+def _planes(renderer: ExactRenderer, ids: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World normals (N, 3) of triangles ``ids`` (N,) and their planes' offsets n . (v0 - c) (N,)
+    from the camera centres ``c`` (N, 3)."""
     safe = np.maximum(ids, 0)
-    normal = np.einsum("nji,nj->ni", R, renderer.scene.face_normals[safe].astype(np.float64))  # world -> camera
-    point = np.einsum("nji,nj->ni", R, renderer.scene.vertices[renderer.scene.faces[safe, 0]] - c)
+    normal = renderer.scene.face_normals[safe].astype(np.float64)
+    offset = (normal * (renderer.scene.vertices[renderer.scene.faces[safe, 0]] - c)).sum(1)
+    return normal, offset
+
+
+def _plane_z(ids: np.ndarray, offset: np.ndarray, normal_dot_ray: np.ndarray) -> np.ndarray:
+    """z-depth where rays (z = 1 in the camera) meet the planes of triangles ``ids`` (inf for ids < 0
+    or behind the camera), from the planes' offsets and the normals' dot products with the rays."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = (normal * point).sum(1) / (normal * rays_cam).sum(1)
+        z = offset / normal_dot_ray
     return np.where((ids >= 0) & (z > 0), z, np.inf)
+
+
+def _plane_depth(renderer: ExactRenderer, ids: np.ndarray, rays_world: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """z-depth where camera rays (z = 1, world frame) (N, 3) from ``c`` meet the plane of triangles ``ids``."""
+    normal, offset = _planes(renderer, ids, c)
+    return _plane_z(ids, offset, (normal * rays_world).sum(1))
 
 
 def edge_crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: torch.Tensor, K: torch.Tensor,
@@ -84,21 +102,28 @@ def edge_crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: tor
 
 @dataclass
 class _Candidates:
-    """Neighbour pairs (N) across a possible occlusion edge in one direction: pixel indices and
-    centres, camera rays (z = 1) through both centres, and their views' poses."""
+    """Neighbour pairs (N) across a possible occlusion edge: pixel indices, direction and centres,
+    camera rays (z = 1) through both centres in the camera and world frames, and their views' poses."""
 
     batch: np.ndarray
     a: np.ndarray
     b: np.ndarray
+    horizontal: np.ndarray
     uv_a: np.ndarray
     uv_b: np.ndarray
     rays_a: np.ndarray
     rays_b: np.ndarray
+    world_a: np.ndarray
+    world_b: np.ndarray
     R: np.ndarray
     c: np.ndarray
 
     def subset(self, keep: np.ndarray) -> _Candidates:
         return _Candidates(*(getattr(self, f.name)[keep] for f in fields(self)))
+
+    @staticmethod
+    def concatenate(parts: list[_Candidates]) -> _Candidates:
+        return _Candidates(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(_Candidates)))
 
 
 def _candidate_pairs(renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, pose: np.ndarray, K_inv: np.ndarray,
@@ -114,22 +139,23 @@ def _candidate_pairs(renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, po
     a = yi * width + xi
     uv_a = np.c_[xi + 0.5, yi + 0.5]
     uv_b = uv_a + ([1.0, 0.0] if horizontal else [0.0, 1.0])
-    pairs = _Candidates(bi, a, a + (1 if horizontal else width), uv_a, uv_b, _rays(K_inv, bi, uv_a),
-                        _rays(K_inv, bi, uv_b), pose[bi, :3, :3], pose[bi, :3, 3])
+    rays_a, rays_b, R = _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b), pose[bi, :3, :3]
+    pairs = _Candidates(bi, a, a + (1 if horizontal else width), np.full(len(bi), horizontal), uv_a, uv_b, rays_a, rays_b,
+                        _to_world(R, rays_a), _to_world(R, rays_b), R, pose[bi, :3, 3])
     flat_ids, flat_z = ids.reshape(batch, -1), z.reshape(batch, -1)
     # Neighbours on one continuous surface (a grazing floor's triangles) are no edge: the plane of
     # either one's triangle, extended to the other's ray, meets it at its depth. Dropping them here
     # spares the bisection most candidates; it would find no occlusion between them either.
     z_a, z_b = flat_z[bi, pairs.a], flat_z[bi, pairs.b]
     with np.errstate(invalid="ignore"):
-        b_on_a = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.a], pairs.rays_b, pairs.R, pairs.c) - z_b)
-        a_on_b = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.b], pairs.rays_a, pairs.R, pairs.c) - z_a)
+        b_on_a = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.a], pairs.world_b, pairs.c) - z_b)
+        a_on_b = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.b], pairs.world_a, pairs.c) - z_a)
         continuous = (b_on_a <= _CONTINUITY * z_b) & (a_on_b <= _CONTINUITY * z_a)
     return pairs.subset(~continuous)
 
 
-def _bisect(renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray, flat_ids: np.ndarray,
-            K_inv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _bisect(renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray,
+            flat_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bisect each segment a -> b with real rays for where the foreground ends.
 
     Returns the occluding triangle (N,), whether the depths on the two sides of the final bracket
@@ -142,12 +168,17 @@ def _bisect(renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray, fla
     lo, hi = np.zeros(len(bi)), np.ones(len(bi))
     id_lo, id_hi = flat_ids[bi, pairs.a].copy(), flat_ids[bi, pairs.b].copy()
     z_lo, z_hi = flat_z[bi, pairs.a].copy(), flat_z[bi, pairs.b].copy()
+    # A ray through a point of the segment is affine in the point's position along it, and so are
+    # its dot products with the two planes: everything but the cast is computed once.
+    world_a, world_step = pairs.world_a, pairs.world_b - pairs.world_a
+    (fg_normal, fg_offset), (bg_normal, bg_offset) = _planes(renderer, fg_id, pairs.c), _planes(renderer, bg_id, pairs.c)
+    fg_a, fg_step = (fg_normal * world_a).sum(1), (fg_normal * world_step).sum(1)
+    bg_a, bg_step = (bg_normal * world_a).sum(1), (bg_normal * world_step).sum(1)
     for _ in range(_BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        rays_cam = _rays(K_inv, bi, pairs.uv_a + mid[:, None] * (pairs.uv_b - pairs.uv_a))
-        hits = renderer.cast(pairs.c, np.einsum("nij,nj->ni", pairs.R, rays_cam))
-        z_fg = _plane_depth(renderer, fg_id, rays_cam, pairs.R, pairs.c)
-        z_bg = _plane_depth(renderer, bg_id, rays_cam, pairs.R, pairs.c)
+        hits = renderer.cast(pairs.c, world_a + mid[:, None] * world_step)
+        z_fg = _plane_z(fg_id, fg_offset, fg_a + mid * fg_step)
+        z_bg = _plane_z(bg_id, bg_offset, bg_a + mid * bg_step)
         # a hit is foreground up to a share of the way to the background's plane, and no further
         # than a bounded ratio beyond the foreground's own plane
         with np.errstate(invalid="ignore", divide="ignore"):  # a plane the ray misses: inf / inf
@@ -191,8 +222,8 @@ def _occluder_edge(renderer: ExactRenderer, pairs: _Candidates, occluder: np.nda
 def find_edge_pairs(renderer: ExactRenderer, exact: RenderOutput, world_T_cam: torch.Tensor, K: torch.Tensor) -> EdgePairs:
     """Locate occlusion-edge pairs and their occluding triangle edges in exact renders (no gradient).
 
-    Three steps per direction: candidate neighbours across a depth jump, a bisection with real rays
-    for the occluder and the crossing, and the occluder's edge that crosses there.
+    Three steps: candidate neighbours across a depth jump in each direction, a bisection with real
+    rays for the occluder and the crossing, and the occluder's edge that crosses there.
     """
     depth = exact.depth[:, 0].double().numpy()
     ids = exact.triangle_ids[:, 0].numpy()
@@ -201,22 +232,17 @@ def find_edge_pairs(renderer: ExactRenderer, exact: RenderOutput, world_T_cam: t
     K = batched_intrinsics(K, batch).numpy()
     K_inv = np.linalg.inv(K)
     z = np.where(depth > 0, depth, np.inf)
-    found = {k: [] for k in ("batch", "a", "b", "horizontal", "edge", "t")}
-    for horizontal in (True, False):
-        pairs = _candidate_pairs(renderer, z, ids, pose, K_inv, horizontal)
-        if not len(pairs.batch):
-            continue
-        occluder, occlusion, t_star = _bisect(renderer, pairs, z.reshape(batch, -1), ids.reshape(batch, -1), K_inv)
-        chosen, error, steep = _occluder_edge(renderer, pairs, occluder, t_star, K)
-        keep = occlusion & (error < _MAX_CROSSING_ERROR) & (steep == horizontal)
-        n = len(pairs.batch)
-        for key, value in (("batch", pairs.batch), ("a", pairs.a), ("b", pairs.b),
-                           ("horizontal", np.full(n, horizontal)), ("edge", chosen), ("t", t_star)):
-            found[key].append(value[keep])
-    if not found["batch"]:
+    # both directions' candidates in one bisection: its casts are batched
+    pairs = _Candidates.concatenate([_candidate_pairs(renderer, z, ids, pose, K_inv, horizontal)
+                                     for horizontal in (True, False)])
+    if not len(pairs.batch):
         empty = np.zeros(0, np.int64)
         return EdgePairs(empty, empty, empty, np.zeros(0, bool), np.zeros((0, 2), np.int64), np.zeros(0))
-    return EdgePairs(*(np.concatenate(found[k]) for k in ("batch", "a", "b", "horizontal", "edge", "t")))
+    occluder, occlusion, t_star = _bisect(renderer, pairs, z.reshape(batch, -1), ids.reshape(batch, -1))
+    chosen, error, steep = _occluder_edge(renderer, pairs, occluder, t_star, K)
+    keep = occlusion & (error < _MAX_CROSSING_ERROR) & (steep == pairs.horizontal)
+    return EdgePairs(pairs.batch[keep], pairs.a[keep], pairs.b[keep], pairs.horizontal[keep], chosen[keep],
+                     t_star[keep])
 
 
 def silhouette_term(renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torch.Tensor, K: torch.Tensor,

@@ -4,7 +4,7 @@ from __future__ import annotations
 import torch
 
 from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam
-from kadv.render import ExactRenderer, render_anchor, reproject
+from kadv.render import ExactRenderer, dibr, render_anchor, reproject
 from kadv.render.layers import camera_face_normals
 from kadv.scenes import box_room
 
@@ -65,3 +65,32 @@ def test_pixels_without_a_surface_stay_invalid() -> None:
     warp = reproject(anchor, depth, normals, torch.eye(4, dtype=torch.float64)[None], K)
     assert not bool(warp.valid[..., :4, :].any()) and bool(warp.valid[..., 4:, :].all())
     assert float(warp.depth[..., :4, :].abs().max()) == 0.0
+
+
+def test_at_the_anchor_pose_the_closed_form_taps_match_the_gathered_ones(monkeypatch) -> None:
+    """At A = P the taps are shifted slices of the anchor and the lookups come in closed form; the
+    values and pose gradients are the general sampler's (both in float64, where rounding puts no
+    sample off its pixel centre), on a view with occlusion edges."""
+    renderer = ExactRenderer(box_room(seed=0))
+    pose, K = renderer.scene.cameras[0].world_T_cam.double()[None], intrinsics_from_fov(60.0, H, W)
+    anchor = render_anchor(renderer, pose, K, H, W, guard_band=1, supersample=2)
+    exact = renderer.render(pose, K, H, W)
+    normals = torch.from_numpy(camera_face_normals(renderer.scene, exact.triangle_ids[:, 0].numpy(), pose)).permute(0, 3, 1, 2)
+    monkeypatch.setattr(dibr, "_DTYPE", torch.float64)
+    results = []
+    for closed_form in (True, False):
+        if not closed_form:
+            monkeypatch.setattr(dibr, "_at_anchor", lambda *args: False)
+        params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
+        current = perturb_world_T_cam(pose, params[:, :3], params[:, 3:])
+        warp = reproject(anchor, exact.depth, normals, torch.linalg.inv(anchor.world_T_cam) @ current, K)
+        weights = torch.linspace(-1.0, 1.0, 4 * H * W, dtype=torch.float64).reshape(1, 4, H, W)
+        (torch.cat([warp.rgb, warp.depth], 1).double() * weights).sum().backward()
+        results.append((warp, params.grad))
+    (fast, fast_grad), (general, general_grad) = results
+    assert 0.5 < float(fast.valid.float().mean()) < 1.0  # edges in view, some pixels left to the silhouettes
+    assert torch.equal(fast.valid, general.valid)
+    torch.testing.assert_close(fast.rgb, general.rgb, rtol=0, atol=1e-7)  # float32 outputs: one ulp
+    torch.testing.assert_close(fast.depth, general.depth, rtol=1e-9, atol=0)
+    assert float(general_grad.abs().min()) > 0
+    torch.testing.assert_close(fast_grad, general_grad, rtol=1e-6, atol=0)

@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 import numpy as np
+import torch
 
-from kadv.render.shading import Shading, mip_pyramid, sample_texture, shade
+from kadv.render.shading import Shading, mip_pyramid, sample_texture, sample_texture_filtered, shade
 
 
 def _texture() -> np.ndarray:
@@ -11,27 +12,30 @@ def _texture() -> np.ndarray:
 
 
 def test_bilinear_lookup_returns_texels_at_their_centres_and_wraps_around() -> None:
-    texture = _texture()
-    rows, columns = np.meshgrid(np.arange(4), np.arange(8), indexing="ij")
+    texture = torch.from_numpy(_texture())
+    rows, columns = torch.meshgrid(torch.arange(4), torch.arange(8), indexing="ij")
     # texel (row, column) centre: u = (column + 0.5) / W, v = 1 - (row + 0.5) / H (v = 1 is the first row)
-    uv = np.c_[(columns.ravel() + 0.5) / 8, 1.0 - (rows.ravel() + 0.5) / 4]
-    np.testing.assert_allclose(sample_texture(texture, uv), texture.reshape(-1, 3), atol=1e-6)
-    np.testing.assert_allclose(sample_texture(texture, uv + 1.0), sample_texture(texture, uv), atol=1e-6)
-    halfway = sample_texture(texture, np.array([[1.0 / 8, 1.0 - 0.5 / 4]]))[0]  # between texels 0 and 1 of row 0
-    np.testing.assert_allclose(halfway, 0.5 * (texture[0, 0] + texture[0, 1]), atol=1e-6)
+    uv = torch.stack([(columns.flatten() + 0.5) / 8, 1.0 - (rows.flatten() + 0.5) / 4], dim=1).double()
+    torch.testing.assert_close(sample_texture(texture, uv), texture.reshape(-1, 3), atol=1e-6, rtol=0)
+    torch.testing.assert_close(sample_texture(texture, uv + 1.0), sample_texture(texture, uv), atol=1e-6, rtol=0)
+    halfway = sample_texture(texture, torch.tensor([[1.0 / 8, 1.0 - 0.5 / 4]], dtype=torch.float64))[0]
+    torch.testing.assert_close(halfway, 0.5 * (texture[0, 0] + texture[0, 1]), atol=1e-6, rtol=0)  # texels 0 and 1
 
 
-def test_mip_levels_halve_down_to_the_mean() -> None:
+def test_mip_levels_halve_down_to_the_mean_and_the_lookup_blends_two_levels() -> None:
     levels = mip_pyramid(_texture())
-    assert [level.shape[:2] for level in levels] == [(4, 8), (2, 4), (1, 2), (1, 1)]
-    np.testing.assert_allclose(levels[-1][0, 0], _texture().mean(axis=(0, 1)), atol=1e-6)
+    assert [tuple(level.shape[:2]) for level in levels] == [(4, 8), (2, 4), (1, 2), (1, 1)]
+    np.testing.assert_allclose(levels[-1][0, 0].numpy(), _texture().mean(axis=(0, 1)), atol=1e-6)
+    uv = torch.tensor([[0.3, 0.6]], dtype=torch.float64)
+    between = sample_texture_filtered(levels, uv, torch.tensor([2.25]))
+    torch.testing.assert_close(between, 0.75 * sample_texture(levels[2], uv) + 0.25 * sample_texture(levels[3], uv))
+    torch.testing.assert_close(sample_texture_filtered(levels, uv, torch.tensor([9.0])), levels[-1][0])
 
 
 def test_ambient_only_returns_the_base_colour_and_a_facing_light_adds_the_diffuse_weight() -> None:
-    base = np.array([[0.2, 0.4, 0.6]])
-    point, normal = np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]])
-    np.testing.assert_allclose(shade(Shading(ambient=1.0, diffuse=0.0), np.array([[0.0, 5.0, 0.0]]), point, normal, base), base)
-    lit = shade(Shading(ambient=0.3, diffuse=0.5), np.array([[0.0, 5.0, 0.0]]), point, normal, base)
-    np.testing.assert_allclose(lit, base * 0.8)
-    behind = shade(Shading(ambient=0.3, diffuse=0.5), np.array([[0.0, -5.0, 0.0]]), point, normal, base)
-    np.testing.assert_allclose(behind, base * 0.3)
+    base = torch.tensor([[0.2, 0.4, 0.6]])
+    point, normal, above, below = (torch.zeros(1, 3), torch.tensor([[0.0, 1.0, 0.0]]), torch.tensor([[0.0, 5.0, 0.0]]),
+                                   torch.tensor([[0.0, -5.0, 0.0]]))
+    torch.testing.assert_close(shade(Shading(ambient=1.0, diffuse=0.0), above, point, normal, base), base)
+    torch.testing.assert_close(shade(Shading(ambient=0.3, diffuse=0.5), above, point, normal, base), base * 0.8)
+    torch.testing.assert_close(shade(Shading(ambient=0.3, diffuse=0.5), below, point, normal, base), base * 0.3)
