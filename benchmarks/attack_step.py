@@ -58,15 +58,25 @@ def synchronised(fn: Callable[[], object], device: torch.device) -> Callable[[],
     return run
 
 
+def run_seconds(objective: Objective, differentiable: DifferentiableRenderer, view, steps: int, restarts: int) -> float:
+    """Seconds of a gradient run from ``view``."""
+    config = AttackConfig(steps=steps, restarts=restarts)
+    return attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False).views[0].budget.seconds
+
+
+def step_seconds(objective: Objective, differentiable: DifferentiableRenderer, view, restarts: int,
+                 extra: int = STEPS) -> float:
+    """Seconds of one gradient step of ``restarts`` batched restarts. A run of n steps evaluates
+    n + 1 views but takes n backward passes: the step is the difference between two runs, per
+    ``extra`` step."""
+    run_seconds(objective, differentiable, view, 1, restarts)  # warm-up: first calls allocate and pick kernels
+    short = run_seconds(objective, differentiable, view, 1, restarts)
+    return (run_seconds(objective, differentiable, view, 1 + extra, restarts) - short) / extra
+
+
 def per_restart_step(objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[int, float]:
     """Seconds per restart per step of a gradient run, for batches of B restarts."""
-    seconds = {}
-    for batch in BATCHES:
-        config = AttackConfig(steps=1, restarts=batch)
-        attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)  # warm-up at this size
-        run = attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
-        seconds[batch] = run.views[0].budget.seconds / (config.steps + 1) / batch
-    return seconds
+    return {batch: step_seconds(objective, differentiable, view, batch, extra=1) / batch for batch in BATCHES}
 
 
 def measure(label: str, objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[str, float]:
@@ -75,11 +85,7 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
     base = view.world_T_cam[None]
     params = torch.zeros(1, 6, dtype=torch.float64)
     penalty = objective.penalty
-    config = AttackConfig(steps=STEPS, restarts=1)
-    attack(objective, differentiable, [view], HEIGHT, WIDTH, AttackConfig(steps=1, restarts=1), 0,
-           progress=False)  # warm-up: first calls allocate and pick kernels
-    run = attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
-    parts = {"step": run.views[0].budget.seconds / (STEPS + 1)}
+    parts = {"step": step_seconds(objective, differentiable, view, 1)}
 
     def render_forward():
         return differentiable(params.clone().requires_grad_(True), base, K, HEIGHT, WIDTH)

@@ -141,32 +141,34 @@ def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, e
         c = image.shape[1]
         return image.reshape(batch, c, height, s, width, s).permute(0, 1, 2, 4, 3, 5).reshape(batch, c, -1)
 
-    expected_image = image(expected.detach())
-    tolerance = plane_tolerance * expected_image[:, 2].abs()
-    total = total_x = total_y = 0.0
-    blurred = blurred_x = blurred_y = 0.0
-    for j in range(3):
-        for i in range(3):
-            tap = maps[:, :, j:j + hs, i:i + ws]
-            off_plane = ((expected_image - tap[:, 3:6]) * tap[:, 6:9]).sum(1).abs()
-            same_surface = ((tap[:, 9] > 0) & (off_plane <= tolerance)).to(_DTYPE)
-            if i == 1 and j == 1:
-                centre, value = same_surface, tap[:, 0:6] * same_surface[:, None]
-            weighted = tap[:, 0:6] * same_surface[:, None]
-            w, wx, wy = (_CENTRED_WEIGHTS[i] * _CENTRED_WEIGHTS[j], _CENTRED_SLOPES[i] * _CENTRED_WEIGHTS[j],
-                         _CENTRED_WEIGHTS[i] * _CENTRED_SLOPES[j])
-            total, blurred = total + w * same_surface, blurred + w * weighted
-            if wx:
-                total_x, blurred_x = total_x + wx * same_surface, blurred_x + wx * weighted
-            if wy:
-                total_y, blurred_y = total_y + wy * same_surface, blurred_y + wy * weighted
-    total = total.clamp_min(1e-12)[:, None]
-    # derivative of blurred / total along each axis (quotient rule)
-    slope_x = (blurred_x - blurred * (total_x[:, None] / total)) / total
-    slope_y = (blurred_y - blurred * (total_y[:, None] / total)) / total
-    x, y = q[..., 0], q[..., 1]
-    sampled = (samples(value) + (x - x.detach())[:, None] * samples(slope_x)
-               + (y - y.detach())[:, None] * samples(slope_y))
+    # the taps and their weights carry no gradient: only q does, through the closed-form slopes
+    with torch.no_grad():
+        expected_image = image(expected)
+        tolerance = plane_tolerance * expected_image[:, 2].abs()
+        blurred, blurred_x, blurred_y = (maps.new_zeros(batch, 6, hs, ws) for _ in range(3))
+        total, total_x, total_y = (maps.new_zeros(batch, hs, ws) for _ in range(3))
+        for j in range(3):
+            for i in range(3):
+                tap = maps[:, :, j:j + hs, i:i + ws]
+                off_plane = ((expected_image - tap[:, 3:6]) * tap[:, 6:9]).sum(1).abs()
+                same_surface = ((tap[:, 9] > 0) & (off_plane <= tolerance)).to(_DTYPE)
+                weighted = tap[:, 0:6] * same_surface[:, None]
+                if i == 1 and j == 1:
+                    centre, value = same_surface, weighted
+                for accumulated, sums, weight in (
+                        (blurred, total, _CENTRED_WEIGHTS[i] * _CENTRED_WEIGHTS[j]),
+                        (blurred_x, total_x, _CENTRED_SLOPES[i] * _CENTRED_WEIGHTS[j]),
+                        (blurred_y, total_y, _CENTRED_WEIGHTS[i] * _CENTRED_SLOPES[j])):
+                    if weight:
+                        accumulated.add_(weighted, alpha=weight)
+                        sums.add_(same_surface, alpha=weight)
+        total = total.clamp_min_(1e-12)[:, None]
+        # derivative of blurred / total along each axis (quotient rule)
+        slope_x = blurred_x.sub_(blurred * (total_x[:, None] / total)).div_(total)
+        slope_y = blurred_y.sub_(blurred * (total_y[:, None] / total)).div_(total)
+    shift = image(q.transpose(1, 2))  # (B, 2, hs, ws)
+    shift = shift - shift.detach()
+    sampled = samples(value + shift[:, 0:1] * slope_x + shift[:, 1:2] * slope_y)
     return sampled[:, 0:3], sampled[:, 3:6], samples(centre[:, None])[:, 0]
 
 

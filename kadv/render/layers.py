@@ -81,7 +81,7 @@ def camera_face_normals(scene: Scene, triangle_ids: np.ndarray, world_T_cam: tor
     """Camera-frame geometric normals (B, ..., 3) of triangles ``triangle_ids`` (B, ...); 0 where an id is -1."""
     face = scene.face_normals[np.maximum(triangle_ids, 0)].astype(np.float64)
     rotation = world_T_cam[:, :3, :3].detach().double().numpy()
-    normals = np.einsum("bji,bnj->bni", rotation, face.reshape(len(rotation), -1, 3)).reshape(face.shape)
+    normals = np.matmul(face.reshape(len(rotation), -1, 3), rotation).reshape(face.shape)  # rows: (R^T n)^T
     return np.where((triangle_ids >= 0)[..., None], normals, 0.0)
 
 
@@ -126,12 +126,12 @@ def render_anchor(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.T
     h, w = supersample * (height + 2 * guard_band), supersample * (width + 2 * guard_band)
     origins, directions = pixel_rays(pose, K_anchor, h, w)
     hits_per_layer = [renderer.cast(origins, directions)] if layers == 1 else _peel(renderer, origins, directions, layers)
-    rotation_T = pose[:, :3, :3].transpose(1, 2).numpy()
+    rotation = pose[:, :3, :3].numpy()
     maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
     for hits in hits_per_layer:
         shaded = renderer.shade_hits(hits, origins, directions, pixel_angle(K_anchor))
         world = shaded["points"].reshape(batch, -1, 3).astype(np.float64) - pose[:, None, :3, 3].numpy()
-        points = np.einsum("bij,bnj->bni", rotation_T, world)
+        points = np.matmul(world, rotation)  # rows: (R^T (x - c))^T
         valid = hits.hit.reshape(batch, -1)
         maps["rgb"].append(shaded["rgb"].reshape(batch, -1, 3))
         maps["points"].append(np.where(valid[..., None], points, 0.0))
