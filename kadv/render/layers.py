@@ -79,9 +79,9 @@ def ring_view(K: torch.Tensor, height: int, width: int) -> tuple[torch.Tensor, i
 
 def camera_face_normals(scene: Scene, triangle_ids: np.ndarray, world_T_cam: torch.Tensor) -> np.ndarray:
     """Camera-frame geometric normals (B, ..., 3) of triangles ``triangle_ids`` (B, ...); 0 where an id is -1."""
-    face = scene.face_normals[np.maximum(triangle_ids, 0)].astype(np.float64)
-    rotation = world_T_cam[:, :3, :3].detach().double().numpy()
-    normals = np.matmul(face.reshape(len(rotation), -1, 3), rotation).reshape(face.shape)  # rows: (R^T n)^T
+    face = torch.from_numpy(scene.face_normals[np.maximum(triangle_ids, 0)].astype(np.float64))
+    rotation = world_T_cam[:, :3, :3].detach().double().cpu()
+    normals = (face.reshape(len(rotation), -1, 3) @ rotation).reshape(face.shape).numpy()  # rows: (R^T n)^T
     return np.where((triangle_ids >= 0)[..., None], normals, 0.0)
 
 
@@ -126,12 +126,12 @@ def render_anchor(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.T
     h, w = supersample * (height + 2 * guard_band), supersample * (width + 2 * guard_band)
     origins, directions = pixel_rays(pose, K_anchor, h, w)
     hits_per_layer = [renderer.cast(origins, directions)] if layers == 1 else _peel(renderer, origins, directions, layers)
-    rotation = pose[:, :3, :3].numpy()
+    rotation = pose[:, :3, :3]
     maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
     for hits in hits_per_layer:
         shaded = renderer.shade_hits(hits, origins, directions, pixel_angle(K_anchor))
         world = shaded["points"].reshape(batch, -1, 3).astype(np.float64) - pose[:, None, :3, 3].numpy()
-        points = np.matmul(world, rotation)  # rows: (R^T (x - c))^T
+        points = (torch.from_numpy(world) @ rotation).numpy()  # rows: (R^T (x - c))^T
         valid = hits.hit.reshape(batch, -1)
         maps["rgb"].append(shaded["rgb"].reshape(batch, -1, 3))
         maps["points"].append(np.where(valid[..., None], points, 0.0))
