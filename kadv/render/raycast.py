@@ -179,22 +179,19 @@ class ExactRenderer:
         With ``colour`` False only the geometry (points, normals, back faces) is computed and "rgb"
         is the background: the caller takes colour from other rays.
         """
-        n = len(hits.t)
+        # Every ray is shaded (a miss as a point on triangle 0 at the eye) and misses are masked at
+        # the end: indoors nearly every ray hits, and compacting the hits would cost more.
         hit = torch.from_numpy(hits.hit)
-        ids = torch.from_numpy(hits.triangle_ids)[hit]
-        bary = torch.from_numpy(hits.barycentrics)[hit]
-        t = torch.from_numpy(hits.t)[hit]
-        dirs = torch.from_numpy(directions.reshape(-1, 3))[hit]
-        points = (torch.from_numpy(origins.reshape(-1, 3))[hit] + dirs * t[:, None]).float()
-        back = torch.from_numpy(self.back_facing(hits, directions))[hit]
+        ids = torch.from_numpy(np.maximum(hits.triangle_ids, 0))
+        bary = torch.from_numpy(hits.barycentrics)
+        t = torch.from_numpy(np.where(hits.hit, hits.t, 0.0))
+        dirs = torch.from_numpy(directions.reshape(-1, 3))
+        points = (torch.from_numpy(origins.reshape(-1, 3)) + dirs * t[:, None]).float()
+        back = torch.from_numpy(self.back_facing(hits, directions))
         normals = F.normalize(self._interpolate(self._normals, ids, bary), dim=1, eps=1e-12)
         normals = torch.where(back[:, None], -normals, normals)
-        out = {
-            "rgb": torch.tensor(self.shading.background, dtype=torch.float32).repeat(n, 1),
-            "points": torch.zeros(n, 3, dtype=torch.float32),
-            "normals": torch.zeros(n, 3, dtype=torch.float32),
-            "back_face": torch.zeros(n, dtype=torch.bool),
-        }
+        background = torch.tensor(self.shading.background, dtype=torch.float32)
+        rgb = background.expand(len(t), 3)
         if colour:
             uv = self._interpolate(self._uvs, ids, bary)
             length = dirs.norm(dim=1)
@@ -202,11 +199,11 @@ class ExactRenderer:
             # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
             footprint = t * length * pixel_angle / incidence.clamp_min(0.05).sqrt()
             base = albedo(self.scene, ids, uv, footprint.float(), self._pyramids, self._uv_density)
-            out["rgb"][hit] = shade(self.shading, self._lights, points, normals, base)
-        out["points"][hit] = points
-        out["normals"][hit] = normals
-        out["back_face"][hit] = back
-        return {key: value.numpy() for key, value in out.items()}
+            rgb = torch.where(hit[:, None], shade(self.shading, self._lights, points, normals, base), background)
+        return {"rgb": np.ascontiguousarray(rgb.numpy()),
+                "points": torch.where(hit[:, None], points, 0.0).numpy(),
+                "normals": torch.where(hit[:, None], normals, 0.0).numpy(),
+                "back_face": back.numpy()}
 
     def render(
         self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int = 1,

@@ -23,7 +23,7 @@ from kadv.render.raycast import ExactRenderer, RenderOutput
 
 __all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term"]
 
-_BISECTION_STEPS = 10
+_BISECTION_STEPS = 6
 _MIN_JUMP = 0.005   # relative depth difference below which neighbours are one surface
 _CONTINUITY = 0.01  # relative depth gap at the located crossing that makes it an occlusion
 _FG_SHARE = 0.5     # share of the way from the foreground's plane to the background's still foreground
