@@ -2,9 +2,11 @@
 grey_white_room: the Depth Anything V2 Small architecture (random weights) with the perceptual loss
 (random VGG-16 weights), and kadv-tiny with SSIM.
 
-Every part is timed in this one run. overhead = (step - networks) / networks for the first
-configuration, networks = model forward+backward + loss forward+backward; overhead_tiny the same
-for the second. Then the time per restart-step for batches of B = 1, 2, 4, 8 restarts.
+Every part is timed in this one run. A step is the difference between gradient runs of 1 and
+1 + STEPS steps, per extra step (a run of n steps evaluates n + 1 views but takes n backward
+passes). overhead = (step - networks) / networks for the first configuration, networks = model
+forward+backward + loss forward+backward; overhead_tiny the same for the second. Then the time per
+restart-step for batches of B = 1, 2, 4, 8 restarts (runs of 1 and 2 steps).
 
 Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto]
 """
