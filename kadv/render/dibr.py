@@ -12,7 +12,6 @@ two surfaces and give the gradient of the wrong one; silhouettes get their own t
 """
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -119,7 +118,7 @@ _CENTRED_SLOPES = (-1.0, 0.0, 1.0)
 
 
 def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor,
-                            plane_tolerance: float, size: tuple[int, int]):
+                            plane_tolerance: float):
     """:func:`_sample_layer` for views at the anchor's own pose (A = P), whose samples (B, M) sit on
     the anchor's hi-res pixel centres: sub-sample k = (jy, ix) of frame pixel (y, x) is anchor pixel
     (s (y + g) + jy, s (x + g) + ix). The 3 x 3 taps are then shifted slices of the anchor maps,
@@ -128,7 +127,7 @@ def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, e
     """
     s, g = anchor.supersample, anchor.guard_band
     batch = q.shape[0]
-    height, width = size
+    height, width = (size // s - 2 * g for size in anchor.rgb.shape[-2:])  # the frame's
     hs, ws, start = s * height, s * width, s * g - 1
     maps = torch.cat([anchor.rgb[:, layer], anchor.points[:, layer], anchor.normals[:, layer], anchor.mask[:, layer]],
                      dim=1)[:, :, start:start + hs + 2, start:start + ws + 2].to(_DTYPE)
@@ -240,10 +239,7 @@ def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, 
     K = batched_intrinsics(K, batch)
     sub_points_P = _sub_pixel_points(depth, normals, K.to(device, _DTYPE), anchor.supersample)
     expected, q = _project_to_anchor(anchor, sub_points_P, A_T_P)
-    if _at_anchor(anchor, A_T_P, K, height, width):
-        sample = functools.partial(_sample_layer_at_anchor, size=(height, width))
-    else:
-        sample = _sample_layer
+    sample = _sample_layer_at_anchor if _at_anchor(anchor, A_T_P, K, height, width) else _sample_layer
     return _composite_layers(anchor, sample, q, expected, torch.linalg.inv(A_T_P.double()).to(device, _DTYPE),
                              depth.reshape(batch, -1), valid_pixel, (height, width), depth_tolerance, plane_tolerance)
 

@@ -68,6 +68,11 @@ class RayHits:
         return self.triangle_ids >= 0
 
 
+def _open3d_rays(origins: np.ndarray, directions: np.ndarray) -> o3d.core.Tensor:
+    """Open3D's (N, 6) float32 rays from origins and directions (N, 3)."""
+    return o3d.core.Tensor(np.concatenate([origins, directions], axis=1).astype(np.float32))
+
+
 def pixel_angle(K: torch.Tensor) -> float:
     """Angle in radians one pixel subtends at the image centre (the smallest of the batch)."""
     K = torch.as_tensor(K, dtype=torch.float64).reshape(-1, 3, 3)
@@ -125,8 +130,7 @@ class ExactRenderer:
     def intersections(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, ...]:
         """Every opaque intersection of rays (N, 3), sorted by ray then distance: ray index (M,),
         parameter t (M,), triangle id (M,) and barycentrics (M, 2)."""
-        rays = o3d.core.Tensor(np.concatenate([origins, directions], axis=1).astype(np.float32))
-        result = self.raycasting_scene.list_intersections(rays)
+        result = self.raycasting_scene.list_intersections(_open3d_rays(origins, directions))
         ray_ids = result["ray_ids"].numpy().astype(np.int64)
         t = result["t_hit"].numpy().astype(np.float64)
         ids = result["primitive_ids"].numpy().astype(np.int64)
@@ -138,8 +142,7 @@ class ExactRenderer:
         return ray_ids[order], t[order], ids[order], bary[order]
 
     def _cast_once(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        rays = o3d.core.Tensor(np.concatenate([origins, directions], axis=1).astype(np.float32))
-        result = self.raycasting_scene.cast_rays(rays)
+        result = self.raycasting_scene.cast_rays(_open3d_rays(origins, directions))
         raw_ids = result["primitive_ids"].numpy()
         ids = np.where(raw_ids == _INVALID_ID, -1, raw_ids.astype(np.int64))
         return result["t_hit"].numpy().astype(np.float64), ids, result["primitive_uvs"].numpy().astype(np.float64)
@@ -160,8 +163,15 @@ class ExactRenderer:
 
     def back_facing(self, hits: RayHits, directions: np.ndarray) -> np.ndarray:
         """(N,) True where a ray (directions (..., 3), N in all) hit the back of a triangle; False on misses."""
-        normals = self.scene.face_normals[np.maximum(hits.triangle_ids, 0)]
-        return hits.hit & (np.einsum("nc,nc->n", normals, directions.reshape(-1, 3)) > 0)
+        # a copy: the directions may be a read-only broadcast view
+        facing = self._facing(torch.from_numpy(np.maximum(hits.triangle_ids, 0)),
+                              torch.tensor(directions.reshape(-1, 3), dtype=torch.float64))
+        return hits.hit & (facing > 0).numpy()
+
+    def _facing(self, triangle_ids: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
+        """(N,) dot products of ray directions (N, 3) with their triangles' face normals: positive
+        where a ray meets the back of its triangle."""
+        return (self._face_normals[triangle_ids] * directions).sum(1)
 
     @staticmethod
     def _interpolate(per_corner: torch.Tensor, triangle_ids: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
@@ -187,7 +197,8 @@ class ExactRenderer:
         t = torch.from_numpy(np.where(hits.hit, hits.t, 0.0))
         dirs = torch.from_numpy(directions.reshape(-1, 3))
         points = (torch.from_numpy(origins.reshape(-1, 3)) + dirs * t[:, None]).float()
-        back = torch.from_numpy(self.back_facing(hits, directions))
+        facing = self._facing(ids, dirs)
+        back = hit & (facing > 0)
         normals = F.normalize(self._interpolate(self._normals, ids, bary), dim=1, eps=1e-12)
         normals = torch.where(back[:, None], -normals, normals)
         background = torch.tensor(self.shading.background, dtype=torch.float32)
@@ -195,7 +206,7 @@ class ExactRenderer:
         if colour:
             uv = self._interpolate(self._uvs, ids, bary)
             length = dirs.norm(dim=1)
-            incidence = (self._face_normals[ids] * dirs).sum(1).abs() / length
+            incidence = facing.abs() / length
             # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
             footprint = t * length * pixel_angle / incidence.clamp_min(0.05).sqrt()
             base = albedo(self.scene, ids, uv, footprint.float(), self._pyramids, self._uv_density)
