@@ -5,9 +5,10 @@ This is the edge where Hydra meets the library; nothing under ``kadv/`` but ``cl
 from __future__ import annotations
 
 import functools
-import os
+import json
 import logging
 import math
+import os
 import re
 import sys
 from collections.abc import Callable
@@ -127,7 +128,9 @@ def _vector(cfg: DictConfig, key: str) -> torch.Tensor:
     except (TypeError, ValueError):
         numbers = []
     if len(numbers) != 3 or not all(math.isfinite(v) for v in numbers):
-        raise ValueError(f"camera.{key} must be three finite numbers [x, y, z], got {OmegaConf.to_yaml(value).strip()}")
+        # a missing key is null, which OmegaConf cannot print as YAML
+        shown = OmegaConf.to_container(value) if OmegaConf.is_config(value) else value
+        raise ValueError(f"camera.{key} must be three finite numbers [x, y, z], got {json.dumps(shown, default=str)}")
     return torch.tensor(numbers, dtype=torch.float64)
 
 

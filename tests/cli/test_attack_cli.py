@@ -137,6 +137,7 @@ BAD_INPUTS = [
     *([("kadv-attack", ["device=cuda"], "no CUDA device")] if not torch.cuda.is_available() else []),
     ("kadv-render", ["camera.eye=[1,1.5]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),
     ("kadv-render", ["camera.eye=[nan,1.5,1]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),
+    ("kadv-render", ["camera.eye=[1,1.5,1]", "camera.fov_x_deg=70"], "camera.target"),
     ("kadv-render", ["render.supersample=0"], "render.supersample"),
     ("kadv-render", ["scene=file", "scene.path=/no/such/room.glb"], "/no/such/room.glb"),
     ("kadv-train-tiny", ["train.steps=-1"], "train.steps"),
