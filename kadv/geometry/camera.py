@@ -10,7 +10,7 @@ import torch
 
 from kadv.geometry.pose import check_world_T_cam
 
-__all__ = ["Camera", "batched_intrinsics", "intrinsics_from_fov", "pixel_rays", "to_open3d_pinhole"]
+__all__ = ["Camera", "batched_intrinsics", "camera_rays", "intrinsics_from_fov", "pixel_rays", "to_open3d_pinhole"]
 
 
 def intrinsics_from_fov(fov_x_deg: float, height: int, width: int) -> torch.Tensor:
@@ -76,6 +76,21 @@ def batched_intrinsics(K: torch.Tensor, batch: int) -> torch.Tensor:
     return K
 
 
+def camera_rays(K: torch.Tensor, height: int, width: int, supersample: int = 1) -> torch.Tensor:
+    """Camera-frame rays (B, H, s, W, s, 3) float64 with z = 1 through pixel (sub-)centres, for
+    intrinsics K (B, 3, 3): a hit at ray parameter t is the camera-frame point t * ray."""
+    s = int(supersample)
+    if s < 1:
+        raise ValueError(f"supersample must be >= 1, got {supersample}")
+    sub = (torch.arange(s, dtype=torch.float64) + 0.5) / s
+    v = (torch.arange(height, dtype=torch.float64)[:, None] + sub[None, :])  # (H, s)
+    u = (torch.arange(width, dtype=torch.float64)[:, None] + sub[None, :])  # (W, s)
+    vv = v[:, :, None, None].expand(height, s, width, s)
+    uu = u[None, None, :, :].expand(height, s, width, s)
+    pixels = torch.stack([uu, vv, torch.ones_like(uu)], dim=-1)  # (H, s, W, s, 3)
+    return torch.einsum("bij,hawcj->bhawci", torch.linalg.inv(K), pixels)
+
+
 def pixel_rays(
     world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -94,18 +109,7 @@ def pixel_rays(
         per-pixel values.
     """
     pose = check_world_T_cam(world_T_cam).detach().double()
-    batch = pose.shape[0]
-    K = batched_intrinsics(K, batch)
-    s = int(supersample)
-    if s < 1:
-        raise ValueError(f"supersample must be >= 1, got {supersample}")
-    sub = (torch.arange(s, dtype=torch.float64) + 0.5) / s
-    v = (torch.arange(height, dtype=torch.float64)[:, None] + sub[None, :])  # (H, s)
-    u = (torch.arange(width, dtype=torch.float64)[:, None] + sub[None, :])  # (W, s)
-    vv = v[:, :, None, None].expand(height, s, width, s)
-    uu = u[None, None, :, :].expand(height, s, width, s)
-    pixels = torch.stack([uu, vv, torch.ones_like(uu)], dim=-1)  # (H, s, W, s, 3)
-    dirs_cam = torch.einsum("bij,hawcj->bhawci", torch.linalg.inv(K), pixels)
+    dirs_cam = camera_rays(batched_intrinsics(K, pose.shape[0]), height, width, supersample)
     dirs_world = torch.einsum("bij,bhawcj->bhawci", pose[:, :3, :3], dirs_cam)
     origins = pose[:, None, None, None, None, :3, 3].expand_as(dirs_world)
     return origins.numpy(), dirs_world.numpy()

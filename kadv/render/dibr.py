@@ -113,8 +113,7 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
 
 # The taps' weights in the blurred lookups of _sample_layer when a sample sits on a tap's centre
 # (A = P): 0.5, 1, 0.5 along each axis, and their derivatives in the sample position: -1, 0, 1.
-_CENTRED_WEIGHTS = (0.5, 1.0, 0.5)
-_CENTRED_SLOPES = (-1.0, 0.0, 1.0)
+# Both are separable, so each row of taps is first combined along x.
 
 
 def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor,
@@ -124,13 +123,19 @@ def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, e
     (s (y + g) + jy, s (x + g) + ix). The 3 x 3 taps are then shifted slices of the anchor maps,
     and the lookups' value and derivative in q come in closed form; the result has the same values
     and the same first derivatives as :func:`_sample_layer` at q, as a first-order expansion.
+
+    Only the colour and the point's z get a derivative: at A = P the relative rotation is the
+    identity, so the warped depth reads the point's z alone.
     """
     s, g = anchor.supersample, anchor.guard_band
     batch = q.shape[0]
     height, width = (size // s - 2 * g for size in anchor.rgb.shape[-2:])  # the frame's
     hs, ws, start = s * height, s * width, s * g - 1
-    maps = torch.cat([anchor.rgb[:, layer], anchor.points[:, layer], anchor.normals[:, layer], anchor.mask[:, layer]],
-                     dim=1)[:, :, start:start + hs + 2, start:start + ws + 2].to(_DTYPE)
+    window = (..., slice(start, start + hs + 2), slice(start, start + ws + 2))
+    points, normals = anchor.points[:, layer][window].to(_DTYPE), anchor.normals[:, layer][window].to(_DTYPE)
+    # channels: the derivative's (r, g, b, z, mask), then x, y and the plane (normal, n . point)
+    maps = torch.cat([anchor.rgb[:, layer][window].to(_DTYPE), points[:, 2:3], anchor.mask[:, layer][window].to(_DTYPE),
+                      points[:, 0:2], normals, (points * normals).sum(1, keepdim=True)], dim=1)
 
     def image(samples: torch.Tensor) -> torch.Tensor:  # (B, C, M) -> (B, C, hs, ws)
         c = samples.shape[1]
@@ -144,31 +149,31 @@ def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, e
     with torch.no_grad():
         expected_image = image(expected)
         tolerance = plane_tolerance * expected_image[:, 2].abs()
-        blurred, blurred_x, blurred_y = (maps.new_zeros(batch, 6, hs, ws) for _ in range(3))
-        total, total_x, total_y = (maps.new_zeros(batch, hs, ws) for _ in range(3))
+        weighted_rows, sloped_rows = [], []
         for j in range(3):
+            row = []
             for i in range(3):
                 tap = maps[:, :, j:j + hs, i:i + ws]
-                off_plane = ((expected_image - tap[:, 3:6]) * tap[:, 6:9]).sum(1).abs()
-                same_surface = ((tap[:, 9] > 0) & (off_plane <= tolerance)).to(_DTYPE)
-                weighted = tap[:, 0:6] * same_surface[:, None]
+                off_plane = (expected_image * tap[:, 7:10]).sum(1) - tap[:, 10]
+                # (r, g, b, z, 1) on the expected surface, 0 elsewhere
+                row.append(tap[:, 0:5] * ((tap[:, 4] > 0) & (off_plane.abs() <= tolerance))[:, None])
                 if i == 1 and j == 1:
-                    centre, value = same_surface, weighted
-                for accumulated, sums, weight in (
-                        (blurred, total, _CENTRED_WEIGHTS[i] * _CENTRED_WEIGHTS[j]),
-                        (blurred_x, total_x, _CENTRED_SLOPES[i] * _CENTRED_WEIGHTS[j]),
-                        (blurred_y, total_y, _CENTRED_WEIGHTS[i] * _CENTRED_SLOPES[j])):
-                    if weight:
-                        accumulated.add_(weighted, alpha=weight)
-                        sums.add_(same_surface, alpha=weight)
-        total = total.clamp_min_(1e-12)[:, None]
+                    centre = row[-1]
+            weighted_rows.append(torch.add(row[0], row[2]).mul_(0.5).add_(row[1]))
+            sloped_rows.append(row[2] - row[0])
+        blurred = torch.add(weighted_rows[0], weighted_rows[2]).mul_(0.5).add_(weighted_rows[1])
+        blurred_x = torch.add(sloped_rows[0], sloped_rows[2]).mul_(0.5).add_(sloped_rows[1])
+        blurred_y = weighted_rows[2].sub_(weighted_rows[0])
+        total = blurred[:, 4:5].clamp_min_(1e-12)
         # derivative of blurred / total along each axis (quotient rule)
-        slope_x = blurred_x.sub_(blurred * (total_x[:, None] / total)).div_(total)
-        slope_y = blurred_y.sub_(blurred * (total_y[:, None] / total)).div_(total)
+        slope_x = blurred_x[:, 0:4].sub_(blurred[:, 0:4] * (blurred_x[:, 4:5] / total)).div_(total)
+        slope_y = blurred_y[:, 0:4].sub_(blurred[:, 0:4] * (blurred_y[:, 4:5] / total)).div_(total)
+        value = torch.cat([centre[:, 0:4], maps[:, 5:7, 1:1 + hs, 1:1 + ws] * centre[:, 4:5]], dim=1)
     shift = image(q.transpose(1, 2))  # (B, 2, hs, ws)
     shift = shift - shift.detach()
-    sampled = samples(value + shift[:, 0:1] * slope_x + shift[:, 1:2] * slope_y)
-    return sampled[:, 0:3], sampled[:, 3:6], samples(centre[:, None])[:, 0]
+    sloped = samples(value[:, 0:4] + shift[:, 0:1] * slope_x + shift[:, 1:2] * slope_y)
+    flat = samples(value[:, 4:6])
+    return sloped[:, 0:3], torch.cat([flat, sloped[:, 3:4]], dim=1), samples(centre[:, 4:5])[:, 0]
 
 
 # below this cosine between a sub-pixel ray and its pixel's plane, the ray grazes the plane and

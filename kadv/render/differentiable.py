@@ -159,8 +159,7 @@ class DifferentiableRenderer:
         K_render, render_height, render_width = ring_view(K, height, width) if c.silhouette else (K, height, width)
         rendered = self._exact_render(current, K_render, render_height, render_width, border, anchor)
         exact = rendered.cropped(border) if border else rendered
-        ids = exact.triangle_ids[:, 0].numpy()
-        normals = torch.from_numpy(camera_face_normals(self.renderer.scene, ids, current)).permute(0, 3, 1, 2)
+        normals = camera_face_normals(self.renderer.scene, exact.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
         normals = normals.to(self.device)
         # what the device needs of the exact render, moved once
         inside = (..., slice(border, render_height - border), slice(border, render_width - border))

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from kadv.geometry.camera import batched_intrinsics, pixel_rays
+from kadv.geometry.camera import batched_intrinsics, camera_rays, pixel_rays
 from kadv.geometry.pose import check_world_T_cam
 from kadv.render.raycast import ExactRenderer, RayHits, pixel_angle
 from kadv.scenes.scene import Scene
@@ -29,9 +29,9 @@ class AnchorLayers:
         K: (B, 3, 3) intrinsics of the hi-res anchor images.
         supersample: s, sub-pixels per current-view pixel along each axis.
         guard_band: g, extra current-view pixels on each side.
-        rgb: (B, L, 3, Hs, Ws) shaded colour, background where invalid.
-        points: (B, L, 3, Hs, Ws) camera-frame points (z = depth), 0 where invalid.
-        normals: (B, L, 3, Hs, Ws) camera-frame geometric (face) normals.
+        rgb: (B, L, 3, Hs, Ws) float32 shaded colour, background where invalid.
+        points: (B, L, 3, Hs, Ws) float32 camera-frame points (z = depth), 0 where invalid.
+        normals: (B, L, 3, Hs, Ws) float32 camera-frame geometric (face) normals.
         triangle_ids: (B, L, 1, Hs, Ws) int64, -1 where invalid.
         mask: (B, L, 1, Hs, Ws) bool.
     """
@@ -77,12 +77,12 @@ def ring_view(K: torch.Tensor, height: int, width: int) -> tuple[torch.Tensor, i
     return guard_band_intrinsics(K, RING, 1), height + 2 * RING, width + 2 * RING
 
 
-def camera_face_normals(scene: Scene, triangle_ids: np.ndarray, world_T_cam: torch.Tensor) -> np.ndarray:
-    """Camera-frame geometric normals (B, ..., 3) of triangles ``triangle_ids`` (B, ...); 0 where an id is -1."""
-    face = torch.from_numpy(scene.face_normals[np.maximum(triangle_ids, 0)].astype(np.float64))
+def camera_face_normals(scene: Scene, triangle_ids: torch.Tensor, world_T_cam: torch.Tensor) -> torch.Tensor:
+    """Camera-frame geometric normals (B, ..., 3) float64 of triangles ``triangle_ids`` (B, ...); 0 where an id is -1."""
+    face = torch.from_numpy(scene.face_normals).index_select(0, triangle_ids.clamp_min(0).flatten()).double()
     rotation = world_T_cam[:, :3, :3].detach().double().cpu()
-    normals = (face.reshape(len(rotation), -1, 3) @ rotation).reshape(face.shape).numpy()  # rows: (R^T n)^T
-    return np.where((triangle_ids >= 0)[..., None], normals, 0.0)
+    normals = (face.reshape(len(rotation), -1, 3) @ rotation).reshape(*triangle_ids.shape, 3)  # rows: (R^T n)^T
+    return torch.where((triangle_ids >= 0)[..., None], normals, 0.0)
 
 
 def _peel(renderer: ExactRenderer, origins: np.ndarray, directions: np.ndarray, layers: int) -> list[RayHits]:
@@ -125,25 +125,21 @@ def render_anchor(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.T
     K_anchor = guard_band_intrinsics(K, guard_band, supersample)
     h, w = supersample * (height + 2 * guard_band), supersample * (width + 2 * guard_band)
     origins, directions = pixel_rays(pose, K_anchor, h, w)
+    rays_cam = camera_rays(K_anchor, h, w).reshape(batch, -1, 3)
     hits_per_layer = [renderer.cast(origins, directions)] if layers == 1 else _peel(renderer, origins, directions, layers)
-    rotation = pose[:, :3, :3]
     maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
     for hits in hits_per_layer:
         shaded = renderer.shade_hits(hits, origins, directions, pixel_angle(K_anchor))
-        world = shaded["points"].reshape(batch, -1, 3).astype(np.float64) - pose[:, None, :3, 3].numpy()
-        points = (torch.from_numpy(world) @ rotation).numpy()  # rows: (R^T (x - c))^T
-        valid = hits.hit.reshape(batch, -1)
-        maps["rgb"].append(shaded["rgb"].reshape(batch, -1, 3))
-        maps["points"].append(np.where(valid[..., None], points, 0.0))
-        maps["normals"].append(camera_face_normals(renderer.scene, hits.triangle_ids.reshape(batch, -1), pose))
-        maps["ids"].append(hits.triangle_ids.reshape(batch, -1, 1))
-        maps["mask"].append(valid[..., None])
+        ids = torch.from_numpy(hits.triangle_ids).reshape(batch, -1)
+        depth = torch.from_numpy(np.where(hits.hit, hits.t, 0.0)).reshape(batch, -1, 1)
+        maps["rgb"].append(torch.from_numpy(shaded["rgb"]).reshape(batch, -1, 3))
+        maps["points"].append((depth * rays_cam).float())  # 0 where invalid
+        maps["normals"].append(camera_face_normals(renderer.scene, ids, pose).float())
+        maps["ids"].append(ids[..., None])
+        maps["mask"].append(ids[..., None] >= 0)
 
-    def stack(key: str, dtype: torch.dtype) -> torch.Tensor:
-        array = np.stack(maps[key], axis=1)  # (B, L, N, C)
-        tensor = torch.from_numpy(np.ascontiguousarray(array)).to(dtype)
+    def stack(key: str) -> torch.Tensor:
+        tensor = torch.stack(maps[key], dim=1)  # (B, L, N, C)
         return tensor.reshape(batch, len(hits_per_layer), h, w, -1).permute(0, 1, 4, 2, 3).contiguous()
 
-    return AnchorLayers(pose, K_anchor, supersample, guard_band, stack("rgb", torch.float32),
-                        stack("points", torch.float64), stack("normals", torch.float64), stack("ids", torch.int64),
-                        stack("mask", torch.bool))
+    return AnchorLayers(pose, K_anchor, supersample, guard_band, *(stack(key) for key in maps))

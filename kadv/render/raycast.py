@@ -171,14 +171,14 @@ class ExactRenderer:
     def _facing(self, triangle_ids: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
         """(N,) dot products of ray directions (N, 3) with their triangles' face normals: positive
         where a ray meets the back of its triangle."""
-        return (self._face_normals[triangle_ids] * directions).sum(1)
+        return (self._face_normals.index_select(0, triangle_ids) * directions).sum(1)
 
     @staticmethod
     def _interpolate(per_corner: torch.Tensor, triangle_ids: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
         """Interpolate per-corner attributes (F, 3, C) at barycentrics (N, 2) (Open3D's (u, v)), in
         the attributes' dtype."""
         bary = bary.to(per_corner.dtype)
-        corners = per_corner[triangle_ids]
+        corners = per_corner.reshape(len(per_corner), -1).index_select(0, triangle_ids).reshape(-1, *per_corner.shape[1:])
         return (corners[:, 0] * (1.0 - bary[:, 0:1] - bary[:, 1:2]) + corners[:, 1] * bary[:, 0:1]
                 + corners[:, 2] * bary[:, 1:2])
 

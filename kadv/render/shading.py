@@ -60,9 +60,11 @@ def sample_texture(texture: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
     fx, fy = (x - x0).to(texture.dtype)[:, None], (y - y0).to(texture.dtype)[:, None]
     x0, y0 = x0.long() % width, y0.long() % height
     x1, y1 = (x0 + 1) % width, (y0 + 1) % height
-    flat = texture.reshape(-1, channels)
-    top = torch.lerp(flat[y0 * width + x0], flat[y0 * width + x1], fx)
-    bottom = torch.lerp(flat[y1 * width + x0], flat[y1 * width + x1], fx)
+    # the four taps in one index_select (several times faster than indexing with [ ] on the CPU)
+    rows, columns = torch.cat([y0, y0, y1, y1]) * width, torch.cat([x0, x1, x0, x1])
+    top_left, top_right, bottom_left, bottom_right = texture.reshape(-1, channels).index_select(0, rows + columns).split(len(uv))
+    top = torch.lerp(top_left, top_right, fx)
+    bottom = torch.lerp(bottom_left, bottom_right, fx)
     return torch.lerp(top, bottom, fy)
 
 
@@ -85,9 +87,10 @@ def sample_texture_filtered(levels: list[torch.Tensor], uv: torch.Tensor, level:
     out = torch.empty(len(uv), levels[0].shape[2], dtype=levels[0].dtype)
     for index in torch.unique(low).tolist():
         selected = torch.nonzero(low == index)[:, 0]
-        below = sample_texture(levels[index], uv[selected])
-        above = sample_texture(levels[min(index + 1, len(levels) - 1)], uv[selected])
-        out[selected] = torch.lerp(below, above, frac[selected])
+        uv_selected = uv.index_select(0, selected)
+        below = sample_texture(levels[index], uv_selected)
+        above = sample_texture(levels[min(index + 1, len(levels) - 1)], uv_selected)
+        out.index_copy_(0, selected, torch.lerp(below, above, frac.index_select(0, selected)))
     return out
 
 
@@ -124,14 +127,16 @@ def albedo(scene: Scene, triangle_ids: torch.Tensor, uv: torch.Tensor, footprint
         material = scene.materials[index]
         base = torch.as_tensor(material.base_color, dtype=torch.float32).expand(count, 3)
         if material.texture is None:
-            colour[selected] = base
+            colour.index_copy_(0, selected, base)
             continue
         texels = np.sqrt(material.texture.shape[0] * material.texture.shape[1])
         scale = float(np.sqrt(np.prod(material.uv_scale)))
-        texel_footprint = footprint[selected] * density[triangle_ids[selected]] * (scale * texels)
+        texel_footprint = (footprint.index_select(0, selected) * density.index_select(0, triangle_ids.index_select(0, selected))
+                           * (scale * texels))
         level = torch.log2(texel_footprint.clamp_min(1.0))
         uv_scale = torch.as_tensor(material.uv_scale, dtype=uv.dtype)
-        colour[selected] = base * sample_texture_filtered(pyramids[index], uv[selected] * uv_scale, level)
+        colour.index_copy_(0, selected, base * sample_texture_filtered(pyramids[index], uv.index_select(0, selected) * uv_scale,
+                                                                       level))
     return colour
 
 

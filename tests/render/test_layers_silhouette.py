@@ -27,7 +27,7 @@ def test_depth_peeling_layers_are_sorted_and_complete() -> None:
     K = intrinsics_from_fov(60.0, 16, 16)
     anchor = render_anchor(renderer, POSE, K, 16, 16, layers=3)
     centre_depths = anchor.points[0, :, 2, 8, 8]
-    assert torch.allclose(centre_depths, torch.tensor([2.0, 4.0, 0.0], dtype=torch.float64), atol=1e-6)  # panel, wall, none
+    assert torch.allclose(centre_depths, torch.tensor([2.0, 4.0, 0.0], dtype=torch.float32), atol=1e-6)  # panel, wall, none
     assert anchor.mask[0, :, 0, 8, 8].tolist() == [True, True, False]
     corner = anchor.points[0, :, 2, 0, 0].tolist()  # outside the panel: the wall only
     assert abs(corner[0] - 4.0) < 1e-6 and not anchor.mask[0, 1, 0, 0, 0]
@@ -41,7 +41,7 @@ def test_guard_band_widens_the_view_around_the_same_centre() -> None:
     assert torch.allclose(anchor.K[0], guard_band_intrinsics(K, 4, 2))
     assert float(anchor.K[0, 0, 2]) == 2 * (8 + 4)
     # the hi-res pixels around the centre of the current view still see the panel's centre
-    assert torch.allclose(anchor.points[0, 0, :, 23:25, 23:25].mean(dim=(1, 2)), torch.tensor([0.0, 0.0, 2.0], dtype=torch.float64),
+    assert torch.allclose(anchor.points[0, 0, :, 23:25, 23:25].mean(dim=(1, 2)), torch.tensor([0.0, 0.0, 2.0], dtype=torch.float32),
                           atol=0.05)
 
 
