@@ -16,6 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
+from torch.nn import functional as F
 from kornia.geometry.camera.perspective import project_points
 from kornia.geometry.depth import depth_to_3d_v2
 from kornia.geometry.linalg import transform_points
@@ -116,11 +117,47 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
 # Both are separable, so each row of taps is first combined along x.
 
 
+_BAND_ROWS = 64
+
+
+def _centred_taps(maps: torch.Tensor, expected: torch.Tensor, plane_tolerance: float, value: torch.Tensor,
+                  slope_x: torch.Tensor, slope_y: torch.Tensor) -> None:
+    """Value (B, 7, h, w) = (r, g, b, z, on the surface, x, y) and the blurred lookups' slopes (B, 4, h, w) in x and
+    y of (r, g, b, z) at samples on anchor pixel centres, from the maps (B, 11, h + 2, w + 2) of
+    :func:`_sample_layer_at_anchor` around them and the samples' expected points (B, 3, h, w);
+    written into the given tensors."""
+    h, w = expected.shape[-2:]
+    tolerance = plane_tolerance * expected[:, 2].abs()
+    weighted_rows, sloped_rows = [], []
+    for j in range(3):
+        row = []
+        for i in range(3):
+            tap = maps[:, :, j:j + h, i:i + w]
+            # n . expected - n . point, unrolled (a sum over 3 channels is slow)
+            off_plane = torch.addcmul(torch.addcmul(torch.addcmul(-tap[:, 10], expected[:, 0], tap[:, 7]),
+                                                    expected[:, 1], tap[:, 8]), expected[:, 2], tap[:, 9])
+            # (r, g, b, z, 1) on the expected surface, 0 elsewhere
+            row.append(tap[:, 0:5] * ((tap[:, 4] > 0) & (off_plane.abs() <= tolerance))[:, None])
+        weighted_rows.append(torch.add(row[0], row[2]).mul_(0.5).add_(row[1]))
+        sloped_rows.append(row[2] - row[0])
+        if j == 1:
+            centre = row[1]
+    blurred = torch.add(weighted_rows[0], weighted_rows[2]).mul_(0.5).add_(weighted_rows[1])
+    blurred_x = torch.add(sloped_rows[0], sloped_rows[2]).mul_(0.5).add_(sloped_rows[1])
+    blurred_y = weighted_rows[2].sub_(weighted_rows[0])
+    total = blurred[:, 4:5].clamp_min_(1e-12)
+    # derivative of blurred / total along each axis (quotient rule)
+    torch.div(blurred_x[:, 0:4].sub_(blurred[:, 0:4] * (blurred_x[:, 4:5] / total)), total, out=slope_x)
+    torch.div(blurred_y[:, 0:4].sub_(blurred[:, 0:4] * (blurred_y[:, 4:5] / total)), total, out=slope_y)
+    value[:, 0:5] = centre
+    torch.mul(maps[:, 5:7, 1:1 + h, 1:1 + w], centre[:, 4:5], out=value[:, 5:7])
+
+
 def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor,
                             plane_tolerance: float):
     """:func:`_sample_layer` for views at the anchor's own pose (A = P), whose samples (B, M) sit on
-    the anchor's hi-res pixel centres: sub-sample k = (jy, ix) of frame pixel (y, x) is anchor pixel
-    (s (y + g) + jy, s (x + g) + ix). The 3 x 3 taps are then shifted slices of the anchor maps,
+    the anchor's hi-res pixel centres: the samples form a hi-res image of the frame, and sample
+    (row, column) is anchor pixel (row + s g, column + s g). The 3 x 3 taps are then shifted slices of the anchor maps,
     and the lookups' value and derivative in q come in closed form; the result has the same values
     and the same first derivatives as :func:`_sample_layer` at q, as a first-order expansion.
 
@@ -137,43 +174,27 @@ def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, e
     maps = torch.cat([anchor.rgb[:, layer][window].to(_DTYPE), points[:, 2:3], anchor.mask[:, layer][window].to(_DTYPE),
                       points[:, 0:2], normals, (points * normals).sum(1, keepdim=True)], dim=1)
 
-    def image(samples: torch.Tensor) -> torch.Tensor:  # (B, C, M) -> (B, C, hs, ws)
-        c = samples.shape[1]
-        return samples.reshape(batch, c, height, width, s, s).permute(0, 1, 2, 4, 3, 5).reshape(batch, c, hs, ws)
+    def image(samples: torch.Tensor) -> torch.Tensor:  # (B, C, M) -> (B, C, hs, ws): the samples' own order
+        return samples.reshape(batch, samples.shape[1], hs, ws)
 
     def samples(image: torch.Tensor) -> torch.Tensor:  # (B, C, hs, ws) -> (B, C, M)
-        c = image.shape[1]
-        return image.reshape(batch, c, height, s, width, s).permute(0, 1, 2, 4, 3, 5).reshape(batch, c, -1)
+        return image.reshape(batch, image.shape[1], -1)
 
     # the taps and their weights carry no gradient: only q does, through the closed-form slopes
     with torch.no_grad():
         expected_image = image(expected)
-        tolerance = plane_tolerance * expected_image[:, 2].abs()
-        weighted_rows, sloped_rows = [], []
-        for j in range(3):
-            row = []
-            for i in range(3):
-                tap = maps[:, :, j:j + hs, i:i + ws]
-                off_plane = (expected_image * tap[:, 7:10]).sum(1) - tap[:, 10]
-                # (r, g, b, z, 1) on the expected surface, 0 elsewhere
-                row.append(tap[:, 0:5] * ((tap[:, 4] > 0) & (off_plane.abs() <= tolerance))[:, None])
-                if i == 1 and j == 1:
-                    centre = row[-1]
-            weighted_rows.append(torch.add(row[0], row[2]).mul_(0.5).add_(row[1]))
-            sloped_rows.append(row[2] - row[0])
-        blurred = torch.add(weighted_rows[0], weighted_rows[2]).mul_(0.5).add_(weighted_rows[1])
-        blurred_x = torch.add(sloped_rows[0], sloped_rows[2]).mul_(0.5).add_(sloped_rows[1])
-        blurred_y = weighted_rows[2].sub_(weighted_rows[0])
-        total = blurred[:, 4:5].clamp_min_(1e-12)
-        # derivative of blurred / total along each axis (quotient rule)
-        slope_x = blurred_x[:, 0:4].sub_(blurred[:, 0:4] * (blurred_x[:, 4:5] / total)).div_(total)
-        slope_y = blurred_y[:, 0:4].sub_(blurred[:, 0:4] * (blurred_y[:, 4:5] / total)).div_(total)
-        value = torch.cat([centre[:, 0:4], maps[:, 5:7, 1:1 + hs, 1:1 + ws] * centre[:, 4:5]], dim=1)
+        value, slope_x, slope_y = (maps.new_empty(batch, channels, hs, ws) for channels in (7, 4, 4))
+        # in bands of rows, whose temporaries stay in the cache
+        for top in range(0, hs, _BAND_ROWS):
+            bottom = min(top + _BAND_ROWS, hs)
+            rows = slice(top, bottom)
+            _centred_taps(maps[:, :, top:bottom + 2], expected_image[:, :, rows], plane_tolerance,
+                          value[:, :, rows], slope_x[:, :, rows], slope_y[:, :, rows])
     shift = image(q.transpose(1, 2))  # (B, 2, hs, ws)
     shift = shift - shift.detach()
     sloped = samples(value[:, 0:4] + shift[:, 0:1] * slope_x + shift[:, 1:2] * slope_y)
-    flat = samples(value[:, 4:6])
-    return sloped[:, 0:3], torch.cat([flat, sloped[:, 3:4]], dim=1), samples(centre[:, 4:5])[:, 0]
+    flat = samples(value[:, 4:7])
+    return sloped[:, 0:3], torch.cat([flat[:, 1:3], sloped[:, 3:4]], dim=1), flat[:, 0]
 
 
 # below this cosine between a sub-pixel ray and its pixel's plane, the ray grazes the plane and
@@ -183,39 +204,40 @@ _MIN_TAP_WEIGHT = 1e-9  # a sub-sample whose taps all lie on other surfaces foun
 
 
 def _sub_pixel_points(depth: torch.Tensor, normals: torch.Tensor, K: torch.Tensor, s: int) -> torch.Tensor:
-    """Current-frame points (B, H, W, s*s, 3) of the s x s sub-pixel samples of each pixel.
+    """Current-frame points (B, H, s, W, s, 3) of the s x s sub-pixel samples of each pixel, in the
+    order of a hi-res image (row, sub-row, column, sub-column).
 
     Sub-pixel rays meet the plane of the pixel's triangle (``normals`` (B, 3, H, W), current
     camera frame) at the pixel's exact depth (B, 1, H, W), positive everywhere.
     """
     # kornia's meshgrid puts pixel (i, j) at (j, i); kadv's centres are at +0.5: shift the principal point.
-    points = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False)[:, :, :, None, :]
+    points = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False)[:, :, None, :, None, :]
+    per_pixel = depth[:, 0, :, None, :, None, None]  # (B, H, 1, W, 1, 1)
     offsets = (torch.arange(s, dtype=depth.dtype, device=depth.device) + 0.5) / s - 0.5
-    sub = torch.stack(torch.meshgrid(offsets, offsets, indexing="xy"), dim=-1).reshape(-1, 2)  # (S, 2) as (dx, dy)
-    rays = points / depth[:, 0, :, :, None, None].clamp_min(1e-12)
-    focal = torch.stack([K[:, 0, 0], K[:, 1, 1]], dim=-1)[:, None, None, None, :]
-    shift = sub[None, None, None] / focal  # (B, 1, 1, S, 2) in normalised image coordinates
-    sub_rays = rays + torch.cat([shift, torch.zeros_like(shift[..., :1])], dim=-1)  # (B, H, W, S, 3)
-    n = normals.detach().to(depth.dtype).permute(0, 2, 3, 1)[:, :, :, None, :]
+    dy, dx = torch.meshgrid(offsets, offsets, indexing="ij")
+    focal = torch.stack([K[:, 0, 0], K[:, 1, 1]], dim=-1)[:, None, None, :]
+    shift = torch.stack([dx, dy], dim=-1) / focal  # (B, s, s, 2) in normalised image coordinates
+    shift = torch.cat([shift, torch.zeros_like(shift[..., :1])], dim=-1)[:, None, :, None, :, :]  # (B, 1, s, 1, s, 3)
+    sub_rays = points / per_pixel.clamp_min(1e-12) + shift  # (B, H, s, W, s, 3)
+    n = normals.detach().to(depth.dtype).permute(0, 2, 3, 1)[:, :, None, :, None, :]
     numerator = (n * points).sum(-1, keepdim=True)
     denominator = (n * sub_rays).sum(-1, keepdim=True)
     grazing = denominator.abs() < _GRAZING_COSINE * sub_rays.norm(dim=-1, keepdim=True)
-    t = torch.where(grazing, depth[:, 0, :, :, None, None].expand_as(numerator),
-                    numerator / torch.where(grazing, 1.0, denominator))
+    t = torch.where(grazing, per_pixel.expand_as(denominator), numerator / torch.where(grazing, 1.0, denominator))
     return sub_rays * t
 
 
 def _project_to_anchor(anchor: AnchorLayers, sub_points_P: torch.Tensor,
                        A_T_P: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Anchor-frame points (B, 3, M) and hi-res anchor pixel coordinates q (B, M, 2) of the
-    sub-pixel points (B, H, W, S, 3), M = H * W * S; points behind the anchor land far outside."""
+    sub-pixel points (B, H, s, W, s, 3), M = H * s * W * s; points behind the anchor land far outside."""
     batch, height = sub_points_P.shape[:2]
     device = sub_points_P.device
     sub_points_A = transform_points(A_T_P[:, None, None].to(device, _DTYPE), sub_points_P.reshape(batch, height, -1, 3))
-    sub_points_A = sub_points_A.reshape(sub_points_P.shape)
-    q = project_points(sub_points_A, anchor.K[:, None, None, None].to(device, _DTYPE)).reshape(batch, -1, 2)
+    sub_points_A = sub_points_A.reshape(batch, -1, 3)
+    q = project_points(sub_points_A, anchor.K[:, None].to(device, _DTYPE))
     q = torch.where(torch.isfinite(q), q, torch.full_like(q, -1e6))
-    return sub_points_A.reshape(batch, -1, 3).transpose(1, 2), q
+    return sub_points_A.transpose(1, 2), q
 
 
 def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, A_T_P: torch.Tensor, K: torch.Tensor,
@@ -267,21 +289,27 @@ def _composite_layers(anchor: AnchorLayers, sample: Callable, q: torch.Tensor, e
     all find the expected surface and whose depth agrees with the exact depth (B, H*W)."""
     batch, pixels = depth.shape
     height, width = size
+    s = anchor.supersample
     device = depth.device
+
+    def image(samples: torch.Tensor) -> torch.Tensor:  # (B, C, M) -> (B, C, sH, sW): the samples' order
+        return samples.reshape(batch, samples.shape[1], s * height, s * width)
+
     colour = torch.zeros(batch, 3, pixels, dtype=_DTYPE, device=device)
     found = torch.zeros(batch, pixels, dtype=torch.bool, device=device)
     layer_used = torch.full((batch, pixels), -1, dtype=torch.int64, device=device)
     warped_depth = torch.zeros(batch, pixels, dtype=_DTYPE, device=device)
     for layer in range(anchor.num_layers):
         c, p, total = sample(anchor, layer, q, expected, plane_tolerance)
-        total = total.reshape(batch, pixels, -1)
         # every sub-sample must find its surface: a pixel straddling an occlusion edge is left to
         # the silhouette term rather than represented by one side's average
-        ok = (total > _MIN_TAP_WEIGHT).all(-1)
-        c = c.reshape(batch, 3, pixels, -1).mean(-1)
-        sub_z = transform_points(P_T_A[:, None], p.transpose(1, 2))[..., 2].reshape(batch, pixels, -1)
+        ok = -F.max_pool2d(-image(total[:, None]), s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): the least weight
+        c = F.avg_pool2d(image(c), s).reshape(batch, 3, pixels)
+        sub_z = image(transform_points(P_T_A[:, None], p.transpose(1, 2))[..., 2][:, None])
         # 1/z is affine across a plane's image, so the harmonic mean is the pixel-centre depth
-        z = sub_z.shape[-1] / (1.0 / torch.where(ok[..., None], sub_z, torch.ones_like(sub_z)).clamp_min(1e-9)).sum(-1)
+        inverse = 1.0 / torch.where(ok.repeat_interleave(s, 2).repeat_interleave(s, 3), sub_z, 1.0).clamp_min(1e-9)
+        z = (1.0 / F.avg_pool2d(inverse, s)).reshape(batch, pixels)
+        ok = ok.reshape(batch, pixels)
         agree = ok & valid_pixel & ((z - depth).abs() <= depth_tolerance * depth)
         take = agree & ~found
         colour = torch.where(take[:, None], c, colour)

@@ -239,27 +239,27 @@ class ExactRenderer:
         hits = self.cast(origins, directions)
         angle = pixel_angle(K)
         maps = self.shade_hits(hits, origins, directions, angle, colour=s == 1)
-        if sub_rgb is not None:
-            if s == 1 or tuple(sub_rgb.shape) != (batch, 3, s * height, s * width):
-                raise ValueError(f"sub_rgb: expected ({batch}, 3, {s * height}, {s * width}) with supersample > 1, "
-                                 f"got {tuple(sub_rgb.shape)}")
-            sub = sub_rgb.permute(0, 2, 3, 1).numpy()
-        elif s > 1:
-            sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s)
-            sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s)["rgb"]
-        if s > 1:
-            maps["rgb"] = sub.reshape(batch, height, s, width, s, 3).mean(axis=(2, 4)).reshape(-1, 3)
 
         def image(values: np.ndarray, channels: int) -> torch.Tensor:
             return torch.from_numpy(np.ascontiguousarray(
                 values.reshape(batch, height, width, channels).transpose(0, 3, 1, 2)))
+
+        if sub_rgb is not None:
+            if s == 1 or tuple(sub_rgb.shape) != (batch, 3, s * height, s * width):
+                raise ValueError(f"sub_rgb: expected ({batch}, 3, {s * height}, {s * width}) with supersample > 1, "
+                                 f"got {tuple(sub_rgb.shape)}")
+        elif s > 1:
+            sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s)
+            sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s)["rgb"]
+            sub_rgb = torch.from_numpy(sub).reshape(batch, s * height, s * width, 3).permute(0, 3, 1, 2)
+        rgb = F.avg_pool2d(sub_rgb, s).contiguous() if s > 1 else image(maps["rgb"], 3)
 
         # a ray that meets a surface within a micrometre of the eye starts on it (the eye lies on the
         # surface): it measures no depth, so it is no hit in the mask
         mask = hits.hit & (hits.t > _MIN_HIT_DEPTH)
         depth = np.where(mask, hits.t, 0.0).astype(np.float32)
         return RenderOutput(
-            rgb=image(maps["rgb"].astype(np.float32), 3),
+            rgb=rgb,
             depth=image(depth, 1),
             mask=image(mask, 1),
             normals=image(maps["normals"], 3),
