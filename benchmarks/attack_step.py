@@ -2,9 +2,10 @@
 grey_white_room: the Depth Anything V2 Small architecture (random weights) with the perceptual loss
 (random VGG-16 weights), and kadv-tiny with SSIM.
 
-Every part is timed in this one run. A step is the difference between gradient runs of 1 and
-1 + STEPS steps, per extra step (a run of n steps evaluates n + 1 views but takes n backward
-passes). overhead = (step - networks) / networks for the first configuration, networks = model
+Every part is timed in this one run, each as the fastest of a few repeats (the machine's noise
+only ever adds time; the batch scaling at the end is timed once). A step is the difference between gradient runs of 1 and 1 + STEPS steps,
+per extra step (a run of n steps evaluates n + 1 views but takes n backward passes).
+overhead = (step - networks) / networks for the first configuration, networks = model
 forward+backward + loss forward+backward; overhead_tiny the same for the second. Then the time per
 restart-step for batches of B = 1, 2, 4, 8 restarts (runs of 1 and 2 steps).
 
@@ -17,7 +18,7 @@ import tempfile
 from collections.abc import Callable
 
 import torch
-from common import load_bench_scene, median_seconds
+from common import fastest_seconds, load_bench_scene
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
 from kadv.attack import AttackConfig, Objective, PenaltyConfig, attack, file_init_views
@@ -30,6 +31,7 @@ from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
 
 HEIGHT, WIDTH = 240, 320
 STEPS = 3
+REPEATS = 3
 BATCHES = (1, 2, 4, 8)
 
 
@@ -67,18 +69,19 @@ def run_seconds(objective: Objective, differentiable: DifferentiableRenderer, vi
 
 
 def step_seconds(objective: Objective, differentiable: DifferentiableRenderer, view, restarts: int,
-                 extra: int = STEPS) -> float:
+                 extra: int = STEPS, repeats: int = REPEATS) -> float:
     """Seconds of one gradient step of ``restarts`` batched restarts. A run of n steps evaluates
     n + 1 views but takes n backward passes: the step is the difference between two runs, per
     ``extra`` step."""
     run_seconds(objective, differentiable, view, 1, restarts)  # warm-up: first calls allocate and pick kernels
-    short = run_seconds(objective, differentiable, view, 1, restarts)
-    return (run_seconds(objective, differentiable, view, 1 + extra, restarts) - short) / extra
+    short, long = (min(run_seconds(objective, differentiable, view, steps, restarts) for _ in range(repeats))
+                   for steps in (1, 1 + extra))
+    return (long - short) / extra
 
 
 def per_restart_step(objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[int, float]:
     """Seconds per restart per step of a gradient run, for batches of B restarts."""
-    return {batch: step_seconds(objective, differentiable, view, batch, extra=1) / batch for batch in BATCHES}
+    return {batch: step_seconds(objective, differentiable, view, batch, extra=1, repeats=1) / batch for batch in BATCHES}
 
 
 def measure(label: str, objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[str, float]:
@@ -96,10 +99,10 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
         out = render_forward()
         (out.rgb.sum() + out.depth.sum()).backward()
 
-    parts["exact render (s=2, ring)"] = median_seconds(
+    parts["exact render (s=2, ring)"] = fastest_seconds(
         lambda: renderer.render(base, K, HEIGHT + 2, WIDTH + 2, supersample=differentiable.config.supersample), 3)
-    parts["render fwd (exact+warp+silhouettes)"] = median_seconds(synchronised(render_forward, device), 3)
-    parts["render fwd+bwd"] = median_seconds(synchronised(render_forward_backward, device), 3)
+    parts["render fwd (exact+warp+silhouettes)"] = fastest_seconds(synchronised(render_forward, device), 3)
+    parts["render fwd+bwd"] = fastest_seconds(synchronised(render_forward_backward, device), 3)
     out = render_forward()
     rgb = out.rgb.detach().float().requires_grad_(True)
 
@@ -122,10 +125,10 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
         shortcut_penalty(distance_to_surface(renderer, c), penalty.d_th).sum().backward()
         step_guard(renderer, centre, centre + 0.01, penalty.margin)
 
-    parts["model fwd+bwd"] = median_seconds(synchronised(model_step, device), 3)
-    parts["loss fwd+bwd"] = median_seconds(synchronised(loss_step, device), 3)
-    parts["penalty + guard"] = median_seconds(penalty_guard, 3)
-    parts["view validity"] = median_seconds(
+    parts["model fwd+bwd"] = fastest_seconds(synchronised(model_step, device), 3)
+    parts["loss fwd+bwd"] = fastest_seconds(synchronised(loss_step, device), 3)
+    parts["penalty + guard"] = fastest_seconds(penalty_guard, 3)
+    parts["view validity"] = fastest_seconds(
         lambda: view_validity(renderer, base, K, HEIGHT, WIDTH, **penalty.validity_options()), 3)
     accounted = parts["render fwd+bwd"] + parts["model fwd+bwd"] + parts["loss fwd+bwd"] + parts["penalty + guard"] \
         + parts["view validity"]

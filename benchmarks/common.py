@@ -26,7 +26,8 @@ def bench_scenes() -> list[Scene]:
     return [box_room(seed=0)] + [load_scene(scenes_root() / name / "scene.xml") for name in REAL_SCENES]
 
 
-def median_seconds(fn: Callable[[], object], repeats: int = 7, warmup: int = 1) -> float:
+def timings(fn: Callable[[], object], repeats: int, warmup: int = 1) -> list[float]:
+    """Seconds of ``repeats`` calls of ``fn`` after ``warmup`` untimed ones."""
     for _ in range(warmup):
         fn()
     times = []
@@ -34,7 +35,16 @@ def median_seconds(fn: Callable[[], object], repeats: int = 7, warmup: int = 1) 
         start = time.perf_counter()
         fn()
         times.append(time.perf_counter() - start)
-    return statistics.median(times)
+    return times
+
+
+def median_seconds(fn: Callable[[], object], repeats: int = 7, warmup: int = 1) -> float:
+    return statistics.median(timings(fn, repeats, warmup))
+
+
+def fastest_seconds(fn: Callable[[], object], repeats: int = 3, warmup: int = 1) -> float:
+    """The fastest of ``repeats`` calls: on a shared machine, noise only ever adds time."""
+    return min(timings(fn, repeats, warmup))
 
 
 def load_bench_scene(name: str) -> Scene:

@@ -70,7 +70,9 @@ class RayHits:
 
 def _open3d_rays(origins: np.ndarray, directions: np.ndarray) -> o3d.core.Tensor:
     """Open3D's (N, 6) float32 rays from origins and directions (N, 3)."""
-    return o3d.core.Tensor(np.concatenate([origins, directions], axis=1).astype(np.float32))
+    rays = np.empty((len(origins), 6), np.float32)  # filled in place: no float64 copy of the pair
+    rays[:, :3], rays[:, 3:] = origins, directions
+    return o3d.core.Tensor(rays)
 
 
 def pixel_angle(K: torch.Tensor) -> float:
