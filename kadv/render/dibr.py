@@ -213,18 +213,20 @@ def _sub_pixel_points(depth: torch.Tensor, normals: torch.Tensor, K: torch.Tenso
     # kornia's meshgrid puts pixel (i, j) at (j, i); kadv's centres are at +0.5: shift the principal point.
     points = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False)[:, :, None, :, None, :]
     per_pixel = depth[:, 0, :, None, :, None, None]  # (B, H, 1, W, 1, 1)
+    rays = points / per_pixel.clamp_min(1e-12)  # through the pixel centres, z = 1
     offsets = (torch.arange(s, dtype=depth.dtype, device=depth.device) + 0.5) / s - 0.5
     dy, dx = torch.meshgrid(offsets, offsets, indexing="ij")
     focal = torch.stack([K[:, 0, 0], K[:, 1, 1]], dim=-1)[:, None, None, :]
     shift = torch.stack([dx, dy], dim=-1) / focal  # (B, s, s, 2) in normalised image coordinates
     shift = torch.cat([shift, torch.zeros_like(shift[..., :1])], dim=-1)[:, None, :, None, :, :]  # (B, 1, s, 1, s, 3)
-    sub_rays = points / per_pixel.clamp_min(1e-12) + shift  # (B, H, s, W, s, 3)
     n = normals.detach().to(depth.dtype).permute(0, 2, 3, 1)[:, :, None, :, None, :]
+    # the plane n . X = n . point along each sub-pixel ray rays + shift; shift has no z
     numerator = (n * points).sum(-1, keepdim=True)
-    denominator = (n * sub_rays).sum(-1, keepdim=True)
-    grazing = denominator.abs() < _GRAZING_COSINE * sub_rays.norm(dim=-1, keepdim=True)
-    t = torch.where(grazing, per_pixel.expand_as(denominator), numerator / torch.where(grazing, 1.0, denominator))
-    return sub_rays * t
+    denominator = (n * rays).sum(-1, keepdim=True) + (n[..., 0:1] * shift[..., 0:1] + n[..., 1:2] * shift[..., 1:2])
+    # a sub-pixel ray is as long as its pixel's, to well within the cosine's precision
+    grazing = denominator.abs() < _GRAZING_COSINE * rays.norm(dim=-1, keepdim=True)
+    t = torch.where(grazing, per_pixel, numerator / torch.where(grazing, 1.0, denominator))
+    return (rays + shift) * t
 
 
 def _project_to_anchor(anchor: AnchorLayers, sub_points_P: torch.Tensor,
