@@ -2,9 +2,12 @@
 grey_white_room: the Depth Anything V2 Small architecture (random weights) with the perceptual loss
 (random VGG-16 weights), and kadv-tiny with SSIM.
 
-Every part is timed in this one run, each as the fastest of a few repeats (the machine's noise
-only ever adds time; the batch scaling at the end is timed once). A step is the difference between gradient runs of 1 and 1 + STEPS steps,
-per extra step (a run of n steps evaluates n + 1 views but takes n backward passes).
+Every part is timed in this one run, each as the fastest of REPEATS tries (the machine's noise only
+ever adds time). The step and the networks are tried in turn, so that both meet the machine in the
+same state, and over about as long (the fastest of three one-second calls is luckier than the fastest
+of three ten-second runs); the batch scaling at the end is timed once. A step is the difference between
+gradient runs of 1 and 1 + STEPS steps, per extra step (a run of n steps evaluates n + 1 views but
+takes n backward passes).
 overhead = (step - networks) / networks for the first configuration, networks = model
 forward+backward + loss forward+backward; overhead_tiny the same for the second. Then the time per
 restart-step for batches of B = 1, 2, 4, 8 restarts (runs of 1 and 2 steps).
@@ -14,11 +17,12 @@ Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto]
 from __future__ import annotations
 
 import argparse
+import math
 import tempfile
 from collections.abc import Callable
 
 import torch
-from common import fastest_seconds, load_bench_scene
+from common import fastest_seconds, load_bench_scene, timings
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
 from kadv.attack import AttackConfig, Objective, PenaltyConfig, attack, file_init_views
@@ -30,7 +34,7 @@ from kadv.penalties import distance_to_surface, shortcut_penalty, step_guard, vi
 from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
 
 HEIGHT, WIDTH = 240, 320
-STEPS = 3
+STEPS = 5
 REPEATS = 3
 BATCHES = (1, 2, 4, 8)
 
@@ -69,19 +73,18 @@ def run_seconds(objective: Objective, differentiable: DifferentiableRenderer, vi
 
 
 def step_seconds(objective: Objective, differentiable: DifferentiableRenderer, view, restarts: int,
-                 extra: int = STEPS, repeats: int = REPEATS) -> float:
-    """Seconds of one gradient step of ``restarts`` batched restarts. A run of n steps evaluates
-    n + 1 views but takes n backward passes: the step is the difference between two runs, per
-    ``extra`` step."""
+                 extra: int = STEPS) -> float:
+    """Seconds of one gradient step of ``restarts`` batched restarts, timed once. A run of n steps
+    evaluates n + 1 views but takes n backward passes: the step is the difference between two
+    runs, per ``extra`` step."""
     run_seconds(objective, differentiable, view, 1, restarts)  # warm-up: first calls allocate and pick kernels
-    short, long = (min(run_seconds(objective, differentiable, view, steps, restarts) for _ in range(repeats))
-                   for steps in (1, 1 + extra))
-    return (long - short) / extra
+    short = run_seconds(objective, differentiable, view, 1, restarts)
+    return (run_seconds(objective, differentiable, view, 1 + extra, restarts) - short) / extra
 
 
 def per_restart_step(objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[int, float]:
     """Seconds per restart per step of a gradient run, for batches of B restarts."""
-    return {batch: step_seconds(objective, differentiable, view, batch, extra=1, repeats=1) / batch for batch in BATCHES}
+    return {batch: step_seconds(objective, differentiable, view, batch, extra=1) / batch for batch in BATCHES}
 
 
 def measure(label: str, objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[str, float]:
@@ -90,7 +93,6 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
     base = view.world_T_cam[None]
     params = torch.zeros(1, 6, dtype=torch.float64)
     penalty = objective.penalty
-    parts = {"step": step_seconds(objective, differentiable, view, 1)}
 
     def render_forward():
         return differentiable(params.clone().requires_grad_(True), base, K, HEIGHT, WIDTH)
@@ -99,10 +101,6 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
         out = render_forward()
         (out.rgb.sum() + out.depth.sum()).backward()
 
-    parts["exact render (s=2, ring)"] = fastest_seconds(
-        lambda: renderer.render(base, K, HEIGHT + 2, WIDTH + 2, supersample=differentiable.config.supersample), 3)
-    parts["render fwd (exact+warp+silhouettes)"] = fastest_seconds(synchronised(render_forward, device), 3)
-    parts["render fwd+bwd"] = fastest_seconds(synchronised(render_forward_backward, device), 3)
     out = render_forward()
     rgb = out.rgb.detach().float().requires_grad_(True)
 
@@ -118,6 +116,34 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
         b = prediction.double().clone().requires_grad_(True)
         objective.l_depth(a, b, mask).sum().backward()
 
+    # The step and the networks are timed in turn, so that both meet the machine in the same state,
+    # and over about as long: the networks as STEPS calls in a row, as many as the step's difference.
+    def short_run():
+        run_seconds(objective, differentiable, view, 1, 1)
+
+    def long_run():
+        run_seconds(objective, differentiable, view, 1 + STEPS, 1)
+
+    def repeated(fn: Callable[[], None]) -> Callable[[], None]:
+        def run() -> None:
+            for _ in range(STEPS):
+                fn()
+        return run
+
+    interleaved = {"short run": short_run, "long run": long_run,
+                   "model fwd+bwd": repeated(synchronised(model_step, device)),
+                   "loss fwd+bwd": repeated(synchronised(loss_step, device))}
+    fastest = {name: math.inf for name in interleaved}
+    short_run()  # warm-up: first calls allocate and pick kernels
+    for _ in range(REPEATS):
+        for name, fn in interleaved.items():
+            fastest[name] = min(fastest[name], timings(fn, 1, warmup=0)[0])
+    parts = {"step": (fastest["long run"] - fastest["short run"]) / STEPS}
+    parts["exact render (s=2, ring)"] = fastest_seconds(
+        lambda: renderer.render(base, K, HEIGHT + 2, WIDTH + 2, supersample=differentiable.config.supersample), 3)
+    parts["render fwd (exact+warp+silhouettes)"] = fastest_seconds(synchronised(render_forward, device), 3)
+    parts["render fwd+bwd"] = fastest_seconds(synchronised(render_forward_backward, device), 3)
+    parts["model fwd+bwd"], parts["loss fwd+bwd"] = fastest["model fwd+bwd"] / STEPS, fastest["loss fwd+bwd"] / STEPS
     centre = base[:, :3, 3].clone()
 
     def penalty_guard():
@@ -125,8 +151,6 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
         shortcut_penalty(distance_to_surface(renderer, c), penalty.d_th).sum().backward()
         step_guard(renderer, centre, centre + 0.01, penalty.margin)
 
-    parts["model fwd+bwd"] = fastest_seconds(synchronised(model_step, device), 3)
-    parts["loss fwd+bwd"] = fastest_seconds(synchronised(loss_step, device), 3)
     parts["penalty + guard"] = fastest_seconds(penalty_guard, 3)
     parts["view validity"] = fastest_seconds(
         lambda: view_validity(renderer, base, K, HEIGHT, WIDTH, **penalty.validity_options()), 3)
