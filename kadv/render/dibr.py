@@ -112,20 +112,21 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
     return colour, point, total
 
 
-# The taps' weights in the blurred lookups of _sample_layer when a sample sits on a tap's centre
-# (A = P): 0.5, 1, 0.5 along each axis, and their derivatives in the sample position: -1, 0, 1.
-# Both are separable, so each row of taps is first combined along x.
-
-
+# hi-res rows of samples whose closed-form taps are computed at once: their temporaries stay in the cache
 _BAND_ROWS = 64
 
 
 def _centred_taps(maps: torch.Tensor, expected: torch.Tensor, plane_tolerance: float, value: torch.Tensor,
                   slope_x: torch.Tensor, slope_y: torch.Tensor) -> None:
-    """Value (B, 7, h, w) = (r, g, b, z, on the surface, x, y) and the blurred lookups' slopes (B, 4, h, w) in x and
-    y of (r, g, b, z) at samples on anchor pixel centres, from the maps (B, 11, h + 2, w + 2) of
-    :func:`_sample_layer_at_anchor` around them and the samples' expected points (B, 3, h, w);
-    written into the given tensors."""
+    """Value (B, 7, h, w) = (r, g, b, z, on the surface, x, y) and the blurred lookups' slopes
+    (B, 4, h, w) in x and y of (r, g, b, z) at samples on anchor pixel centres, from the maps
+    (B, 11, h + 2, w + 2) of :func:`_sample_layer_at_anchor` around them and the samples' expected
+    points (B, 3, h, w); written into the given tensors.
+
+    The blurred lookups of :func:`_sample_layer` weigh the taps of a sample on a tap's centre by
+    0.5, 1, 0.5 along each axis, with derivatives -1, 0, 1 in the sample's position: both are
+    separable, so each row of taps is combined along x first.
+    """
     h, w = expected.shape[-2:]
     tolerance = plane_tolerance * expected[:, 2].abs()
     weighted_rows, sloped_rows = [], []
@@ -157,8 +158,8 @@ def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, e
                             plane_tolerance: float):
     """:func:`_sample_layer` for views at the anchor's own pose (A = P), whose samples (B, M) sit on
     the anchor's hi-res pixel centres: the samples form a hi-res image of the frame, and sample
-    (row, column) is anchor pixel (row + s g, column + s g). The 3 x 3 taps are then shifted slices of the anchor maps,
-    and the lookups' value and derivative in q come in closed form; the result has the same values
+    (row, column) is anchor pixel (row + s g, column + s g). The 3 x 3 taps are then shifted slices
+    of the anchor maps, and the lookups' value and derivative in q come in closed form; the result has the same values
     and the same first derivatives as :func:`_sample_layer` at q, as a first-order expansion.
 
     Only the colour and the point's z get a derivative: at A = P the relative rotation is the

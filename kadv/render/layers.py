@@ -78,7 +78,8 @@ def ring_view(K: torch.Tensor, height: int, width: int) -> tuple[torch.Tensor, i
 
 
 def camera_face_normals(scene: Scene, triangle_ids: torch.Tensor, world_T_cam: torch.Tensor) -> torch.Tensor:
-    """Camera-frame geometric normals (B, ..., 3) float64 of triangles ``triangle_ids`` (B, ...); 0 where an id is -1."""
+    """Camera-frame geometric normals (B, ..., 3) float64 of triangles ``triangle_ids`` (B, ...);
+    0 where an id is -1."""
     face = torch.from_numpy(scene.face_normals).index_select(0, triangle_ids.clamp_min(0).flatten()).double()
     rotation = world_T_cam[:, :3, :3].detach().double().cpu()
     normals = (face.reshape(len(rotation), -1, 3) @ rotation).reshape(*triangle_ids.shape, 3)  # rows: (R^T n)^T

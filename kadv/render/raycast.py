@@ -180,7 +180,7 @@ class ExactRenderer:
         """Interpolate per-corner attributes (F, 3, C) at barycentrics (N, 2) (Open3D's (u, v)), in
         the attributes' dtype."""
         bary = bary.to(per_corner.dtype)
-        corners = per_corner.reshape(len(per_corner), -1).index_select(0, triangle_ids).reshape(-1, *per_corner.shape[1:])
+        corners = per_corner.flatten(1).index_select(0, triangle_ids).reshape(-1, *per_corner.shape[1:])
         return (corners[:, 0] * (1.0 - bary[:, 0:1] - bary[:, 1:2]) + corners[:, 1] * bary[:, 0:1]
                 + corners[:, 2] * bary[:, 1:2])
 

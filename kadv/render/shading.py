@@ -62,7 +62,8 @@ def sample_texture(texture: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
     x1, y1 = (x0 + 1) % width, (y0 + 1) % height
     # the four taps in one index_select (several times faster than indexing with [ ] on the CPU)
     rows, columns = torch.cat([y0, y0, y1, y1]) * width, torch.cat([x0, x1, x0, x1])
-    top_left, top_right, bottom_left, bottom_right = texture.reshape(-1, channels).index_select(0, rows + columns).split(len(uv))
+    taps = texture.reshape(-1, channels).index_select(0, rows + columns)
+    top_left, top_right, bottom_left, bottom_right = taps.split(len(uv))
     top = torch.lerp(top_left, top_right, fx)
     bottom = torch.lerp(bottom_left, bottom_right, fx)
     return torch.lerp(top, bottom, fy)
@@ -131,12 +132,12 @@ def albedo(scene: Scene, triangle_ids: torch.Tensor, uv: torch.Tensor, footprint
             continue
         texels = np.sqrt(material.texture.shape[0] * material.texture.shape[1])
         scale = float(np.sqrt(np.prod(material.uv_scale)))
-        texel_footprint = (footprint.index_select(0, selected) * density.index_select(0, triangle_ids.index_select(0, selected))
-                           * (scale * texels))
+        density_selected = density.index_select(0, triangle_ids.index_select(0, selected))
+        texel_footprint = footprint.index_select(0, selected) * density_selected * (scale * texels)
         level = torch.log2(texel_footprint.clamp_min(1.0))
         uv_scale = torch.as_tensor(material.uv_scale, dtype=uv.dtype)
-        colour.index_copy_(0, selected, base * sample_texture_filtered(pyramids[index], uv.index_select(0, selected) * uv_scale,
-                                                                       level))
+        filtered = sample_texture_filtered(pyramids[index], uv.index_select(0, selected) * uv_scale, level)
+        colour.index_copy_(0, selected, base * filtered)
     return colour
 
 
