@@ -120,7 +120,7 @@ def _centred_taps(maps: torch.Tensor, expected: torch.Tensor, plane_tolerance: f
                   slope_x: torch.Tensor, slope_y: torch.Tensor) -> None:
     """Value (B, 7, h, w) = (r, g, b, z, on the surface, x, y) and the blurred lookups' slopes
     (B, 4, h, w) in x and y of (r, g, b, z) at samples on anchor pixel centres, from the maps
-    (B, 11, h + 2, w + 2) of :func:`_sample_layer_at_anchor` around them and the samples' expected
+    (B, 11, h + 2, w + 2) of :func:`_anchor_layer_pixels` around them and the samples' expected
     points (B, 3, h, w); written into the given tensors.
 
     The blurred lookups of :func:`_sample_layer` weigh the taps of a sample on a tap's centre by
@@ -154,36 +154,31 @@ def _centred_taps(maps: torch.Tensor, expected: torch.Tensor, plane_tolerance: f
     torch.mul(maps[:, 5:7, 1:1 + h, 1:1 + w], centre[:, 4:5], out=value[:, 5:7])
 
 
-def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor,
-                            plane_tolerance: float):
-    """:func:`_sample_layer` for views at the anchor's own pose (A = P), whose samples (B, M) sit on
-    the anchor's hi-res pixel centres: the samples form a hi-res image of the frame, and sample
-    (row, column) is anchor pixel (row + s g, column + s g). The 3 x 3 taps are then shifted slices
-    of the anchor maps, and the lookups' value and derivative in q come in closed form; the result has the same values
-    and the same first derivatives as :func:`_sample_layer` at q, as a first-order expansion.
+def _anchor_layer_pixels(anchor: AnchorLayers, layer: int, expected: torch.Tensor, shift: torch.Tensor,
+                         P_T_A: torch.Tensor, plane_tolerance: float) -> tuple[torch.Tensor, ...]:
+    """One layer's warp per pixel for views at the anchor's own pose (A = P).
 
-    Only the colour and the point's z get a derivative: at A = P the relative rotation is the
-    identity, so the warped depth reads the point's z alone.
+    The sub-pixel samples (B, 3, M) ``expected`` (anchor frame) then sit on the anchor's hi-res
+    pixel centres: they form a hi-res image of the frame, and sample (row, column) is anchor pixel
+    (row + s g, column + s g). The 3 x 3 taps are shifted slices of the anchor maps and the lookups'
+    values and slopes in q come in closed form (:func:`_centred_taps`). Values are exact; the
+    gradient is the pixel's mean slope times the motion of its centre's projection, ``shift``
+    (B, 2, H, W) = q - q.detach(): the same as :func:`_sample_layer` gives, to first order in
+    the sub-pixel offsets (each sub-sample's projection moves as its pixel centre's).
+
+    Returns colour (B, 3, H * W), z-depth (B, H * W) (the harmonic mean of the sub-samples', which
+    is the pixel-centre depth on a plane) and whether every sub-sample found its surface (B, H * W).
     """
     s, g = anchor.supersample, anchor.guard_band
-    batch = q.shape[0]
-    height, width = (size // s - 2 * g for size in anchor.rgb.shape[-2:])  # the frame's
+    batch, _, height, width = shift.shape
     hs, ws, start = s * height, s * width, s * g - 1
     window = (..., slice(start, start + hs + 2), slice(start, start + ws + 2))
     points, normals = anchor.points[:, layer][window].to(_DTYPE), anchor.normals[:, layer][window].to(_DTYPE)
     # channels: the derivative's (r, g, b, z, mask), then x, y and the plane (normal, n . point)
     maps = torch.cat([anchor.rgb[:, layer][window].to(_DTYPE), points[:, 2:3], anchor.mask[:, layer][window].to(_DTYPE),
                       points[:, 0:2], normals, (points * normals).sum(1, keepdim=True)], dim=1)
-
-    def image(samples: torch.Tensor) -> torch.Tensor:  # (B, C, M) -> (B, C, hs, ws): the samples' own order
-        return samples.reshape(batch, samples.shape[1], hs, ws)
-
-    def samples(image: torch.Tensor) -> torch.Tensor:  # (B, C, hs, ws) -> (B, C, M)
-        return image.reshape(batch, image.shape[1], -1)
-
-    # the taps and their weights carry no gradient: only q does, through the closed-form slopes
     with torch.no_grad():
-        expected_image = image(expected)
+        expected_image = expected.reshape(batch, 3, hs, ws)
         value, slope_x, slope_y = (maps.new_empty(batch, channels, hs, ws) for channels in (7, 4, 4))
         # in bands of rows, whose temporaries stay in the cache
         for top in range(0, hs, _BAND_ROWS):
@@ -191,11 +186,23 @@ def _sample_layer_at_anchor(anchor: AnchorLayers, layer: int, q: torch.Tensor, e
             rows = slice(top, bottom)
             _centred_taps(maps[:, :, top:bottom + 2], expected_image[:, :, rows], plane_tolerance,
                           value[:, :, rows], slope_x[:, :, rows], slope_y[:, :, rows])
-    shift = image(q.transpose(1, 2))  # (B, 2, hs, ws)
-    shift = shift - shift.detach()
-    sloped = samples(value[:, 0:4] + shift[:, 0:1] * slope_x + shift[:, 1:2] * slope_y)
-    flat = samples(value[:, 4:7])
-    return sloped[:, 0:3], torch.cat([flat[:, 1:3], sloped[:, 3:4]], dim=1), flat[:, 0]
+        on_surface = value[:, 4:5]
+        ok = -F.max_pool2d(-on_surface, s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): every sub-sample
+        colour = F.avg_pool2d(value[:, 0:3], s)
+        # 1/z is affine across a plane's image, so the harmonic mean is the pixel-centre depth; its
+        # derivative weighs sub-sample k by z^2 / (S z_k^2)
+        sub_z = torch.where(on_surface > 0, value[:, 3:4], 1.0).clamp_min(1e-9)
+        z = 1.0 / F.avg_pool2d(1.0 / sub_z, s)
+        weight = 1.0 / (sub_z * sub_z)
+        mean_x, mean_y = F.avg_pool2d(slope_x[:, 0:3], s), F.avg_pool2d(slope_y[:, 0:3], s)
+        z_squared = z * z
+        depth_x, depth_y = (z_squared * F.avg_pool2d(slope[:, 3:4] * weight, s) for slope in (slope_x, slope_y))
+        point = z_squared * F.avg_pool2d(torch.cat([value[:, 5:7], value[:, 3:4]], dim=1) * weight, s)
+    colour = colour + shift[:, 0:1] * mean_x + shift[:, 1:2] * mean_y
+    # the depth also moves with P_T_A at fixed anchor points
+    moved = transform_points(P_T_A[:, None], point.flatten(2).transpose(1, 2))[..., 2].reshape(batch, 1, height, width)
+    z = z + shift[:, 0:1] * depth_x + shift[:, 1:2] * depth_y + (moved - moved.detach())
+    return colour.flatten(2), z.flatten(1), ok.flatten(1)
 
 
 # below this cosine between a sub-pixel ray and its pixel's plane, the ray grazes the plane and
@@ -268,10 +275,24 @@ def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, 
     depth = torch.where(depth > 0, depth, torch.ones_like(depth))
     K = batched_intrinsics(K, batch)
     sub_points_P = _sub_pixel_points(depth, normals, K.to(device, _DTYPE), anchor.supersample)
-    expected, q = _project_to_anchor(anchor, sub_points_P, A_T_P)
-    sample = _sample_layer_at_anchor if _at_anchor(anchor, A_T_P, K, height, width) else _sample_layer
-    return _composite_layers(anchor, sample, q, expected, torch.linalg.inv(A_T_P.double()).to(device, _DTYPE),
-                             depth.reshape(batch, -1), valid_pixel, (height, width), depth_tolerance, plane_tolerance)
+    P_T_A = torch.linalg.inv(A_T_P.double()).to(device, _DTYPE)
+    if _at_anchor(anchor, A_T_P, K, height, width):
+        with torch.no_grad():
+            expected, _ = _project_to_anchor(anchor, sub_points_P, A_T_P)
+        # pixel centres, shaped as one sub-sample per pixel
+        centres = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K.to(device, _DTYPE)), normalize_points=False)
+        _, q = _project_to_anchor(anchor, centres[:, :, None, :, None, :], A_T_P)
+        shift = (q - q.detach()).transpose(1, 2).reshape(batch, 2, height, width)
+
+        def layer_pixels(layer: int) -> tuple[torch.Tensor, ...]:
+            return _anchor_layer_pixels(anchor, layer, expected, shift, P_T_A, plane_tolerance)
+    else:
+        expected, q = _project_to_anchor(anchor, sub_points_P, A_T_P)
+
+        def layer_pixels(layer: int) -> tuple[torch.Tensor, ...]:
+            return _sampled_layer_pixels(anchor, layer, q, expected, P_T_A, plane_tolerance, (height, width))
+    return _composite_layers(layer_pixels, anchor.num_layers, depth.reshape(batch, -1), valid_pixel, (height, width),
+                             depth_tolerance)
 
 
 def _at_anchor(anchor: AnchorLayers, A_T_P: torch.Tensor, K: torch.Tensor, height: int, width: int) -> bool:
@@ -285,34 +306,41 @@ def _at_anchor(anchor: AnchorLayers, A_T_P: torch.Tensor, K: torch.Tensor, heigh
             and torch.allclose(anchor.K.double().cpu(), guard_band_intrinsics(K, g, s).cpu(), rtol=0.0, atol=_SAME_POSE))
 
 
-def _composite_layers(anchor: AnchorLayers, sample: Callable, q: torch.Tensor, expected: torch.Tensor,
-                      P_T_A: torch.Tensor, depth: torch.Tensor, valid_pixel: torch.Tensor, size: tuple[int, int],
-                      depth_tolerance: float, plane_tolerance: float) -> Reprojection:
-    """Each pixel takes the first anchor layer whose samples (read by ``sample``, a layer sampler)
-    all find the expected surface and whose depth agrees with the exact depth (B, H*W)."""
-    batch, pixels = depth.shape
+def _sampled_layer_pixels(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor,
+                          P_T_A: torch.Tensor, plane_tolerance: float, size: tuple[int, int]) -> tuple[torch.Tensor, ...]:
+    """One layer's warp per pixel from its sub-pixel samples read by :func:`_sample_layer`:
+    colour (B, 3, H * W), z-depth (B, H * W) and whether every sub-sample found its surface (B, H * W)."""
+    batch = q.shape[0]
     height, width = size
     s = anchor.supersample
-    device = depth.device
 
     def image(samples: torch.Tensor) -> torch.Tensor:  # (B, C, M) -> (B, C, sH, sW): the samples' order
         return samples.reshape(batch, samples.shape[1], s * height, s * width)
 
+    c, p, total = _sample_layer(anchor, layer, q, expected, plane_tolerance)
+    ok = -F.max_pool2d(-image(total[:, None]), s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): the least weight
+    sub_z = image(transform_points(P_T_A[:, None], p.transpose(1, 2))[..., 2][:, None])
+    # 1/z is affine across a plane's image, so the harmonic mean is the pixel-centre depth
+    inverse = 1.0 / torch.where(ok.repeat_interleave(s, 2).repeat_interleave(s, 3), sub_z, 1.0).clamp_min(1e-9)
+    z = 1.0 / F.avg_pool2d(inverse, s)
+    return F.avg_pool2d(image(c), s).flatten(2), z.flatten(1), ok.flatten(1)
+
+
+def _composite_layers(layer_pixels: Callable[[int], tuple[torch.Tensor, ...]], layers: int, depth: torch.Tensor,
+                      valid_pixel: torch.Tensor, size: tuple[int, int], depth_tolerance: float) -> Reprojection:
+    """Each pixel takes the first of ``layers`` anchor layers (read per pixel by ``layer_pixels``)
+    whose samples all find the expected surface and whose depth agrees with the exact depth (B, H*W).
+    A pixel straddling an occlusion edge is left to the silhouette term rather than represented by
+    one side's average."""
+    batch, pixels = depth.shape
+    height, width = size
+    device = depth.device
     colour = torch.zeros(batch, 3, pixels, dtype=_DTYPE, device=device)
     found = torch.zeros(batch, pixels, dtype=torch.bool, device=device)
     layer_used = torch.full((batch, pixels), -1, dtype=torch.int64, device=device)
     warped_depth = torch.zeros(batch, pixels, dtype=_DTYPE, device=device)
-    for layer in range(anchor.num_layers):
-        c, p, total = sample(anchor, layer, q, expected, plane_tolerance)
-        # every sub-sample must find its surface: a pixel straddling an occlusion edge is left to
-        # the silhouette term rather than represented by one side's average
-        ok = -F.max_pool2d(-image(total[:, None]), s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): the least weight
-        c = F.avg_pool2d(image(c), s).reshape(batch, 3, pixels)
-        sub_z = image(transform_points(P_T_A[:, None], p.transpose(1, 2))[..., 2][:, None])
-        # 1/z is affine across a plane's image, so the harmonic mean is the pixel-centre depth
-        inverse = 1.0 / torch.where(ok.repeat_interleave(s, 2).repeat_interleave(s, 3), sub_z, 1.0).clamp_min(1e-9)
-        z = (1.0 / F.avg_pool2d(inverse, s)).reshape(batch, pixels)
-        ok = ok.reshape(batch, pixels)
+    for layer in range(layers):
+        c, z, ok = layer_pixels(layer)
         agree = ok & valid_pixel & ((z - depth).abs() <= depth_tolerance * depth)
         take = agree & ~found
         colour = torch.where(take[:, None], c, colour)
