@@ -16,7 +16,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
-from torch.nn import functional as F
 from kornia.geometry.camera.perspective import project_points
 from kornia.geometry.depth import depth_to_3d_v2
 from kornia.geometry.linalg import transform_points
@@ -187,17 +186,17 @@ def _anchor_layer_pixels(anchor: AnchorLayers, layer: int, expected: torch.Tenso
             _centred_taps(maps[:, :, top:bottom + 2], expected_image[:, :, rows], plane_tolerance,
                           value[:, :, rows], slope_x[:, :, rows], slope_y[:, :, rows])
         on_surface = value[:, 4:5]
-        ok = -F.max_pool2d(-on_surface, s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): every sub-sample
-        colour = F.avg_pool2d(value[:, 0:3], s)
+        ok = _block_min(on_surface, s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): every sub-sample
+        colour = _block_mean(value[:, 0:3], s)
         # 1/z is affine across a plane's image, so the harmonic mean is the pixel-centre depth; its
         # derivative weighs sub-sample k by z^2 / (S z_k^2)
         sub_z = torch.where(on_surface > 0, value[:, 3:4], 1.0).clamp_min(1e-9)
-        z = 1.0 / F.avg_pool2d(1.0 / sub_z, s)
+        z = 1.0 / _block_mean(1.0 / sub_z, s)
         weight = 1.0 / (sub_z * sub_z)
-        mean_x, mean_y = F.avg_pool2d(slope_x[:, 0:3], s), F.avg_pool2d(slope_y[:, 0:3], s)
+        mean_x, mean_y = _block_mean(slope_x[:, 0:3], s), _block_mean(slope_y[:, 0:3], s)
         z_squared = z * z
-        depth_x, depth_y = (z_squared * F.avg_pool2d(slope[:, 3:4] * weight, s) for slope in (slope_x, slope_y))
-        point = z_squared * F.avg_pool2d(torch.cat([value[:, 5:7], value[:, 3:4]], dim=1) * weight, s)
+        depth_x, depth_y = (z_squared * _block_mean(slope[:, 3:4] * weight, s) for slope in (slope_x, slope_y))
+        point = z_squared * _block_mean(torch.cat([value[:, 5:7], value[:, 3:4]], dim=1) * weight, s)
     colour = colour + shift[:, 0:1] * mean_x + shift[:, 1:2] * mean_y
     # the depth also moves with P_T_A at fixed anchor points
     moved = transform_points(P_T_A[:, None], point.flatten(2).transpose(1, 2))[..., 2].reshape(batch, 1, height, width)
@@ -277,8 +276,7 @@ def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, 
     sub_points_P = _sub_pixel_points(depth, normals, K.to(device, _DTYPE), anchor.supersample)
     P_T_A = torch.linalg.inv(A_T_P.double()).to(device, _DTYPE)
     if _at_anchor(anchor, A_T_P, K, height, width):
-        with torch.no_grad():
-            expected, _ = _project_to_anchor(anchor, sub_points_P, A_T_P)
+        expected = sub_points_P.reshape(batch, -1, 3).transpose(1, 2)  # A = P, to within _SAME_POSE
         # pixel centres, shaped as one sub-sample per pixel
         centres = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K.to(device, _DTYPE)), normalize_points=False)
         _, q = _project_to_anchor(anchor, centres[:, :, None, :, None, :], A_T_P)
@@ -306,6 +304,22 @@ def _at_anchor(anchor: AnchorLayers, A_T_P: torch.Tensor, K: torch.Tensor, heigh
             and torch.allclose(anchor.K.double().cpu(), guard_band_intrinsics(K, g, s).cpu(), rtol=0.0, atol=_SAME_POSE))
 
 
+def _block_mean(image: torch.Tensor, s: int) -> torch.Tensor:
+    """Mean (B, C, H, W) of each s x s block of a hi-res image (B, C, sH, sW), differentiable.
+
+    A sum of s * s strided slices: avg_pool2d's CPU kernel takes three times as long here."""
+    total = sum(image[..., i::s, j::s] for i in range(s) for j in range(s))
+    return total / (s * s)
+
+
+def _block_min(image: torch.Tensor, s: int) -> torch.Tensor:
+    """Least value (B, C, H, W) of each s x s block of a hi-res image (B, C, sH, sW)."""
+    least = image[..., 0::s, 0::s]
+    for k in range(1, s * s):
+        least = torch.minimum(least, image[..., k // s::s, k % s::s])
+    return least
+
+
 def _sampled_layer_pixels(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor,
                           P_T_A: torch.Tensor, plane_tolerance: float, size: tuple[int, int]) -> tuple[torch.Tensor, ...]:
     """One layer's warp per pixel from its sub-pixel samples read by :func:`_sample_layer`:
@@ -318,12 +332,12 @@ def _sampled_layer_pixels(anchor: AnchorLayers, layer: int, q: torch.Tensor, exp
         return samples.reshape(batch, samples.shape[1], s * height, s * width)
 
     c, p, total = _sample_layer(anchor, layer, q, expected, plane_tolerance)
-    ok = -F.max_pool2d(-image(total[:, None]), s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): the least weight
+    ok = _block_min(image(total[:, None]), s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): the least weight
     sub_z = image(transform_points(P_T_A[:, None], p.transpose(1, 2))[..., 2][:, None])
     # 1/z is affine across a plane's image, so the harmonic mean is the pixel-centre depth
     inverse = 1.0 / torch.where(ok.repeat_interleave(s, 2).repeat_interleave(s, 3), sub_z, 1.0).clamp_min(1e-9)
-    z = 1.0 / F.avg_pool2d(inverse, s)
-    return F.avg_pool2d(image(c), s).flatten(2), z.flatten(1), ok.flatten(1)
+    z = 1.0 / _block_mean(inverse, s)
+    return _block_mean(image(c), s).flatten(2), z.flatten(1), ok.flatten(1)
 
 
 def _composite_layers(layer_pixels: Callable[[int], tuple[torch.Tensor, ...]], layers: int, depth: torch.Tensor,
