@@ -10,7 +10,8 @@ import torch
 
 from kadv.geometry.pose import check_world_T_cam
 
-__all__ = ["Camera", "batched_intrinsics", "camera_rays", "intrinsics_from_fov", "pixel_rays", "to_open3d_pinhole"]
+__all__ = ["Camera", "batched_intrinsics", "camera_rays", "intrinsics_from_fov", "pixel_rays", "to_open3d_pinhole",
+           "world_rays"]
 
 
 def intrinsics_from_fov(fov_x_deg: float, height: int, width: int) -> torch.Tensor:
@@ -109,9 +110,15 @@ def pixel_rays(
         per-pixel values.
     """
     pose = check_world_T_cam(world_T_cam).detach().double()
-    dirs_cam = camera_rays(batched_intrinsics(K, pose.shape[0]), height, width, supersample)
-    dirs_world = torch.einsum("bij,bhawcj->bhawci", pose[:, :3, :3], dirs_cam)
-    origins = pose[:, None, None, None, None, :3, 3].expand_as(dirs_world)
+    return world_rays(pose, camera_rays(batched_intrinsics(K, pose.shape[0]), height, width, supersample))
+
+
+def world_rays(world_T_cam: torch.Tensor, rays_cam: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    """World-frame origins and directions, float64 arrays (B, ..., 3), of camera-frame rays
+    (B, ..., 3) (from :func:`camera_rays`) of cameras at poses (B, 4, 4)."""
+    pose = world_T_cam.detach().double()
+    dirs_world = torch.einsum("bij,b...j->b...i", pose[:, :3, :3], rays_cam)
+    origins = pose[:, :3, 3].reshape(len(pose), *[1] * (rays_cam.dim() - 2), 3).expand_as(dirs_world)
     return origins.numpy(), dirs_world.numpy()
 
 

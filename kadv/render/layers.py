@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from kadv.geometry.camera import batched_intrinsics, camera_rays, pixel_rays
+from kadv.geometry.camera import batched_intrinsics, camera_rays, world_rays
 from kadv.geometry.pose import check_world_T_cam
 from kadv.render.raycast import ExactRenderer, RayHits, pixel_angle
 from kadv.scenes.scene import Scene
@@ -125,8 +125,9 @@ def render_anchor(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.T
     K = batched_intrinsics(K, batch)
     K_anchor = guard_band_intrinsics(K, guard_band, supersample)
     h, w = supersample * (height + 2 * guard_band), supersample * (width + 2 * guard_band)
-    origins, directions = pixel_rays(pose, K_anchor, h, w)
-    rays_cam = camera_rays(K_anchor, h, w).reshape(batch, -1, 3)
+    rays_cam = camera_rays(K_anchor, h, w)
+    origins, directions = world_rays(pose, rays_cam)
+    rays_cam = rays_cam.reshape(batch, -1, 3)
     hits_per_layer = [renderer.cast(origins, directions)] if layers == 1 else _peel(renderer, origins, directions, layers)
     maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
     for hits in hits_per_layer:
