@@ -169,7 +169,10 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
 def main() -> None:
     parser = argparse.ArgumentParser(description="Time one gradient attack step, part by part.")
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda (the networks and the warp)")
-    device = resolve_device(parser.parse_args().device)
+    try:
+        device = resolve_device(parser.parse_args().device)
+    except ValueError as error:
+        parser.exit(2, f"{parser.prog}: error: {error}\n")  # one line and exit status 2, as the commands answer
     scene = load_bench_scene("grey_white_room")
     renderer = ExactRenderer(scene)
     penalty = PenaltyConfig()
