@@ -187,8 +187,9 @@ class DifferentiableRenderer:
                 depth = torch.where(valid, warp.depth, depth_exact)
             pairs = edges.result() if edges is not None else None
         if pairs is not None:
-            rgb = rgb + silhouette_term(self.renderer, pairs, world_T_cam, K_render, rgb_rendered)[inside]
-            depth = depth + silhouette_term(self.renderer, pairs, world_T_cam, K_render, depth_rendered)[inside]
+            term = silhouette_term(self.renderer, pairs, world_T_cam, K_render,
+                                   torch.cat([rgb_rendered, depth_rendered], dim=1))[inside]
+            rgb, depth = rgb + term[:, :3], depth + term[:, 3:]
         return DiffRenderOutput(rgb=rgb, depth=depth, mask=mask, exact=exact, world_T_cam=world_T_cam,
                                 coverage=agreement.coverage.cpu(), rgb_error=agreement.rgb_error.cpu(),
                                 depth_error=agreement.depth_error.cpu(), refreshed=refreshed)

@@ -131,7 +131,7 @@ def render_anchor(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.T
     hits_per_layer = [renderer.cast(origins, directions)] if layers == 1 else _peel(renderer, origins, directions, layers)
     maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
     for hits in hits_per_layer:
-        shaded = renderer.shade_hits(hits, origins, directions, pixel_angle(K_anchor))
+        shaded = renderer.shade_hits(hits, origins, directions, pixel_angle(K_anchor), geometry=False)
         ids = torch.from_numpy(hits.triangle_ids).reshape(batch, -1)
         depth = torch.from_numpy(np.where(hits.hit, hits.t, 0.0)).reshape(batch, -1, 1)
         maps["rgb"].append(torch.from_numpy(shaded["rgb"]).reshape(batch, -1, 3))

@@ -185,11 +185,12 @@ class ExactRenderer:
                 + corners[:, 2] * bary[:, 1:2])
 
     def shade_hits(self, hits: RayHits, origins: np.ndarray, directions: np.ndarray,
-                   pixel_angle: float, colour: bool = True) -> dict[str, np.ndarray]:
+                   pixel_angle: float, colour: bool = True, geometry: bool = True) -> dict[str, np.ndarray]:
         """Shade hits; ``pixel_angle`` (radians per sample) selects the texture mip level.
 
-        With ``colour`` False only the geometry (points, normals, back faces) is computed and "rgb"
-        is the background: the caller takes colour from other rays.
+        Returns "rgb" (N, 3) float32 and, with ``geometry``, the masked "points", "normals" (N, 3)
+        and "back_face" (N,). With ``colour`` False "rgb" is the background: the caller takes
+        colour from other rays.
         """
         # Every ray is shaded (a miss as a point on triangle 0 at the eye) and misses are masked at
         # the end: indoors nearly every ray hits, and compacting the hits would cost more.
@@ -213,10 +214,11 @@ class ExactRenderer:
             footprint = t * length * pixel_angle / incidence.clamp_min(0.05).sqrt()
             base = albedo(self.scene, ids, uv, footprint.float(), self._pyramids, self._uv_density)
             rgb = torch.where(hit[:, None], shade(self.shading, self._lights, points, normals, base), background)
-        return {"rgb": np.ascontiguousarray(rgb.numpy()),
-                "points": torch.where(hit[:, None], points, 0.0).numpy(),
-                "normals": torch.where(hit[:, None], normals, 0.0).numpy(),
-                "back_face": back.numpy()}
+        maps = {"rgb": np.ascontiguousarray(rgb.numpy())}
+        if geometry:
+            maps.update(points=torch.where(hit[:, None], points, 0.0).numpy(),
+                        normals=torch.where(hit[:, None], normals, 0.0).numpy(), back_face=back.numpy())
+        return maps
 
     def render(
         self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int = 1,
@@ -252,7 +254,8 @@ class ExactRenderer:
                                  f"got {tuple(sub_rgb.shape)}")
         elif s > 1:
             sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s)
-            sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s)["rgb"]
+            sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s,
+                                  geometry=False)["rgb"]
             sub_rgb = torch.from_numpy(sub).reshape(batch, s * height, s * width, 3).permute(0, 3, 1, 2)
         rgb = F.avg_pool2d(sub_rgb, s).contiguous() if s > 1 else image(maps["rgb"], 3)
 

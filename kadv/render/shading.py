@@ -115,8 +115,10 @@ def albedo(scene: Scene, triangle_ids: torch.Tensor, uv: torch.Tensor, footprint
     """
     material_ids = scene.material_ids[triangle_ids.numpy()]
     # samples grouped by material: one sort instead of a full-length mask per material (numpy's
-    # stable sort is several times faster than torch's on the CPU here)
-    order = torch.from_numpy(np.argsort(material_ids, kind="stable"))
+    # stable sort is several times faster than torch's on the CPU here, and a radix sort on ids
+    # of 16 bits or fewer)
+    narrow = material_ids.astype(np.min_scalar_type(max(len(scene.materials) - 1, 0)))
+    order = torch.from_numpy(np.argsort(narrow, kind="stable"))
     counts = np.bincount(material_ids, minlength=len(scene.materials)).tolist()
     colour = torch.empty(len(triangle_ids), 3, dtype=torch.float32)
     start = 0
