@@ -35,7 +35,7 @@ from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
 
 HEIGHT, WIDTH = 240, 320
 STEPS = 5
-REPEATS = 3
+REPEATS = 5
 BATCHES = (1, 2, 4, 8)
 
 
