@@ -2,26 +2,26 @@
 grey_white_room: the Depth Anything V2 Small architecture (random weights) with the perceptual loss
 (random VGG-16 weights), and kadv-tiny with SSIM.
 
-Every part is timed in this one run, each as the fastest of REPEATS tries (the machine's noise only
-ever adds time). The step and the networks are tried in turn, so that both meet the machine in the
-same state, and over about as long (the fastest of three one-second calls is luckier than the fastest
-of three ten-second runs); the batch scaling at the end is timed once. A step is the difference between
-gradient runs of 1 and 1 + STEPS steps, per extra step (a run of n steps evaluates n + 1 views but
-takes n backward passes).
-overhead = (step - networks) / networks for the first configuration, networks = model
-forward+backward + loss forward+backward; overhead_tiny the same for the second. Then the time per
-restart-step for batches of B = 1, 2, 4, 8 restarts (runs of 1 and 2 steps).
+Every part is timed in this one run as the fastest of several tries (the machine's noise only ever
+adds time). A step is the time between two consecutive optimiser updates of a gradient run (step
+guard, differentiable render, objective, records, backward, update), read from an optimiser hook;
+the networks are model forward+backward then loss forward+backward, timed as one call. Steps and
+networks calls are tried in turn, STEPS of each per round, REPEATS rounds, so that both are windows
+of the same length that meet the machine in the same states.
+overhead = (step - networks) / networks for the first configuration; overhead_tiny the same for the
+second. Then the time per restart-step for batches of B = 1, 2, 4, 8 restarts (the fastest of two steps).
 
 Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto]
 """
 from __future__ import annotations
 
 import argparse
-import math
 import tempfile
+import time
 from collections.abc import Callable
 
 import torch
+from torch.optim.optimizer import register_optimizer_step_post_hook
 from common import fastest_seconds, load_bench_scene, timings
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
@@ -66,25 +66,23 @@ def synchronised(fn: Callable[[], object], device: torch.device) -> Callable[[],
     return run
 
 
-def run_seconds(objective: Objective, differentiable: DifferentiableRenderer, view, steps: int, restarts: int) -> float:
-    """Seconds of a gradient run from ``view``."""
-    config = AttackConfig(steps=steps, restarts=restarts)
-    return attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False).views[0].budget.seconds
-
-
-def step_seconds(objective: Objective, differentiable: DifferentiableRenderer, view, restarts: int,
-                 extra: int = STEPS) -> float:
-    """Seconds of one gradient step of ``restarts`` batched restarts, timed once. A run of n steps
-    evaluates n + 1 views but takes n backward passes: the step is the difference between two
-    runs, per ``extra`` step."""
-    run_seconds(objective, differentiable, view, 1, restarts)  # warm-up: first calls allocate and pick kernels
-    short = run_seconds(objective, differentiable, view, 1, restarts)
-    return (run_seconds(objective, differentiable, view, 1 + extra, restarts) - short) / extra
+def step_seconds(objective: Objective, differentiable: DifferentiableRenderer, view, steps: int,
+                 restarts: int) -> list[float]:
+    """Seconds of each step but the first of a gradient run of ``steps`` steps of ``restarts`` batched
+    restarts from ``view``: the times between consecutive optimiser updates."""
+    stamps = []
+    hook = register_optimizer_step_post_hook(lambda *_: stamps.append(time.perf_counter()))
+    try:
+        attack(objective, differentiable, [view], HEIGHT, WIDTH, AttackConfig(steps=steps, restarts=restarts), 0,
+               progress=False)
+    finally:
+        hook.remove()
+    return [later - earlier for earlier, later in zip(stamps, stamps[1:])]
 
 
 def per_restart_step(objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[int, float]:
     """Seconds per restart per step of a gradient run, for batches of B restarts."""
-    return {batch: step_seconds(objective, differentiable, view, batch, extra=1) / batch for batch in BATCHES}
+    return {batch: min(step_seconds(objective, differentiable, view, 3, batch)) / batch for batch in BATCHES}
 
 
 def measure(label: str, objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[str, float]:
@@ -116,34 +114,23 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
         b = prediction.double().clone().requires_grad_(True)
         objective.l_depth(a, b, mask).sum().backward()
 
-    # The step and the networks are timed in turn, so that both meet the machine in the same state,
-    # and over about as long: the networks as STEPS calls in a row, as many as the step's difference.
-    def short_run():
-        run_seconds(objective, differentiable, view, 1, 1)
+    def timed(fn: Callable[[], None]) -> float:
+        return timings(synchronised(fn, device), 1, warmup=0)[0]
 
-    def long_run():
-        run_seconds(objective, differentiable, view, 1 + STEPS, 1)
-
-    def repeated(fn: Callable[[], None]) -> Callable[[], None]:
-        def run() -> None:
-            for _ in range(STEPS):
-                fn()
-        return run
-
-    interleaved = {"short run": short_run, "long run": long_run,
-                   "model fwd+bwd": repeated(synchronised(model_step, device)),
-                   "loss fwd+bwd": repeated(synchronised(loss_step, device))}
-    fastest = {name: math.inf for name in interleaved}
-    short_run()  # warm-up: first calls allocate and pick kernels
+    # Steps and networks calls in turn, STEPS of each per round, so that both meet the machine in
+    # the same states; the networks' two parts are also timed on their own for the table.
+    times = {"step": [], "networks": [], "model fwd+bwd": [], "loss fwd+bwd": []}
+    step_seconds(objective, differentiable, view, 2, 1)  # warm-up: first calls allocate and pick kernels
     for _ in range(REPEATS):
-        for name, fn in interleaved.items():
-            fastest[name] = min(fastest[name], timings(fn, 1, warmup=0)[0])
-    parts = {"step": (fastest["long run"] - fastest["short run"]) / STEPS}
+        times["step"] += step_seconds(objective, differentiable, view, 1 + STEPS, 1)
+        times["networks"] += [timed(lambda: (model_step(), loss_step())) for _ in range(STEPS)]
+        times["model fwd+bwd"].append(timed(model_step))
+        times["loss fwd+bwd"].append(timed(loss_step))
+    parts = {name: min(seconds) for name, seconds in times.items()}
     parts["exact render (s=2, ring)"] = fastest_seconds(
         lambda: renderer.render(base, K, HEIGHT + 2, WIDTH + 2, supersample=differentiable.config.supersample), 3)
     parts["render fwd (exact+warp+silhouettes)"] = fastest_seconds(synchronised(render_forward, device), 3)
     parts["render fwd+bwd"] = fastest_seconds(synchronised(render_forward_backward, device), 3)
-    parts["model fwd+bwd"], parts["loss fwd+bwd"] = fastest["model fwd+bwd"] / STEPS, fastest["loss fwd+bwd"] / STEPS
     centre = base[:, :3, 3].clone()
 
     def penalty_guard():
@@ -152,10 +139,10 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
         step_guard(renderer, centre, centre + 0.01, penalty.margin)
 
     parts["penalty + guard"] = fastest_seconds(penalty_guard, 3)
-    parts["view validity"] = fastest_seconds(
-        lambda: view_validity(renderer, base, K, HEIGHT, WIDTH, **penalty.validity_options()), 3)
-    accounted = parts["render fwd+bwd"] + parts["model fwd+bwd"] + parts["loss fwd+bwd"] + parts["penalty + guard"] \
-        + parts["view validity"]
+    parts["view validity (on the step's render)"] = fastest_seconds(
+        lambda: view_validity(renderer, base, K, HEIGHT, WIDTH, render=out.exact, **penalty.validity_options()), 3)
+    accounted = (parts["render fwd+bwd"] + parts["networks"] + parts["penalty + guard"]
+                 + parts["view validity (on the step's render)"])
     parts["optimiser, metrics, records, rest"] = parts["step"] - accounted
     print(f"\n{label} at {HEIGHT}x{WIDTH} on {device}, one restart (ms)")
     for name, seconds in parts.items():
@@ -190,8 +177,8 @@ def main() -> None:
                                      view)
     overheads = []
     for parts in results.values():
-        networks = parts["model fwd+bwd"] + parts["loss fwd+bwd"]
-        overheads.append(((parts["step"] - networks) / networks, parts["render fwd+bwd"], networks))
+        overheads.append(((parts["step"] - parts["networks"]) / parts["networks"], parts["render fwd+bwd"],
+                          parts["networks"]))
     (overhead, render, networks), (overhead_tiny, _, _) = overheads
     print(f"\nattack_step overhead={overhead:.2f} render_ms={render * 1e3:.0f} networks_ms={networks * 1e3:.0f} "
           f"overhead_tiny={overhead_tiny:.2f} device={device.type}")
