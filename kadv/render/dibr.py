@@ -12,6 +12,7 @@ two surfaces and give the gradient of the wrong one; silhouettes get their own t
 """
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -111,8 +112,10 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
     return colour, point, total
 
 
-# hi-res rows of samples whose closed-form taps are computed at once: their temporaries stay in the cache
-_BAND_ROWS = 64
+# hi-res samples whose closed-form taps are computed at once, at most: bands this large spread each
+# of their hundred-odd torch calls' fixed cost (dispatch, waking the threads) over enough samples,
+# and keep the temporaries to a few MB. Bands of 64 rows at 640 samples took half as long again.
+_BAND_SAMPLES = 160_000
 
 
 def _centred_taps(maps: torch.Tensor, expected: torch.Tensor, plane_tolerance: float, value: torch.Tensor,
@@ -179,9 +182,10 @@ def _anchor_layer_pixels(anchor: AnchorLayers, layer: int, expected: torch.Tenso
     with torch.no_grad():
         expected_image = expected.reshape(batch, 3, hs, ws)
         value, slope_x, slope_y = (maps.new_empty(batch, channels, hs, ws) for channels in (7, 4, 4))
-        # in bands of rows, whose temporaries stay in the cache
-        for top in range(0, hs, _BAND_ROWS):
-            bottom = min(top + _BAND_ROWS, hs)
+        # in bands of rows of equal height
+        band = math.ceil(hs / math.ceil(hs * ws / _BAND_SAMPLES))
+        for top in range(0, hs, band):
+            bottom = min(top + band, hs)
             rows = slice(top, bottom)
             _centred_taps(maps[:, :, top:bottom + 2], expected_image[:, :, rows], plane_tolerance,
                           value[:, :, rows], slope_x[:, :, rows], slope_y[:, :, rows])
