@@ -2,20 +2,22 @@
 grey_white_room: the Depth Anything V2 Small architecture (random weights) with the perceptual loss
 (random VGG-16 weights), and kadv-tiny with SSIM.
 
-Every part is timed in this one run as the fastest of several tries (the machine's noise only ever
-adds time). A step is the time between two consecutive optimiser updates of a gradient run (step
-guard, differentiable render, objective, records, backward, update), read from an optimiser hook;
-the networks are model forward+backward then loss forward+backward, timed as one call. Steps and
-networks calls are tried in turn, STEPS of each per round, REPEATS rounds, so that both are windows
-of the same length that meet the machine in the same states.
-overhead = (step - networks) / networks for the first configuration; overhead_tiny the same for the
-second. Then the time per restart-step for batches of B = 1, 2, 4, 8 restarts (the fastest of two steps).
+Every part is timed in this one run. A step is the time between two consecutive optimiser updates
+of a gradient run (step guard, differentiable render, objective, records, backward, update); the
+networks are model forward+backward then loss forward+backward, timed as one call. The machine's
+speed drifts by up to a third within minutes, so the two are measured side by side: each optimiser
+update's hook times one networks call, and every step is compared with the mean of the calls just
+before and just after it. overhead = the median over REPEATS x STEPS steps of (step - networks) /
+networks, for the first configuration; overhead_tiny the same for the second. The table's other
+parts are the fastest of several tries (noise only ever adds time). Then the time per restart-step
+for batches of B = 1, 2, 4, 8 restarts (the fastest of two steps).
 
 Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto]
 """
 from __future__ import annotations
 
 import argparse
+import statistics
 import tempfile
 import time
 from collections.abc import Callable
@@ -66,26 +68,35 @@ def synchronised(fn: Callable[[], object], device: torch.device) -> Callable[[],
     return run
 
 
-def step_seconds(objective: Objective, differentiable: DifferentiableRenderer, view, steps: int,
-                 restarts: int) -> list[float]:
+def step_seconds(objective: Objective, differentiable: DifferentiableRenderer, view, steps: int, restarts: int,
+                 between: Callable[[], float] | None = None) -> tuple[list[float], list[float]]:
     """Seconds of each step but the first of a gradient run of ``steps`` steps of ``restarts`` batched
-    restarts from ``view``: the times between consecutive optimiser updates."""
-    stamps = []
-    hook = register_optimizer_step_post_hook(lambda *_: stamps.append(time.perf_counter()))
+    restarts from ``view`` (the times between consecutive optimiser updates, less what the hook
+    spent), and the seconds ``between()`` reports when the hook calls it after each update."""
+    updates, resumes, inside = [], [], []
+
+    def hook(*_) -> None:
+        updates.append(time.perf_counter())
+        if between is not None:
+            inside.append(between())
+        resumes.append(time.perf_counter())
+
+    handle = register_optimizer_step_post_hook(hook)
     try:
         attack(objective, differentiable, [view], HEIGHT, WIDTH, AttackConfig(steps=steps, restarts=restarts), 0,
                progress=False)
     finally:
-        hook.remove()
-    return [later - earlier for earlier, later in zip(stamps, stamps[1:])]
+        handle.remove()
+    return [update - resume for resume, update in zip(resumes, updates[1:])], inside
 
 
 def per_restart_step(objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[int, float]:
     """Seconds per restart per step of a gradient run, for batches of B restarts."""
-    return {batch: min(step_seconds(objective, differentiable, view, 3, batch)) / batch for batch in BATCHES}
+    return {batch: min(step_seconds(objective, differentiable, view, 3, batch)[0]) / batch for batch in BATCHES}
 
 
-def measure(label: str, objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[str, float]:
+def measure(label: str, objective: Objective, differentiable: DifferentiableRenderer,
+            view) -> tuple[dict[str, float], float]:
     renderer, device = objective.renderer, objective.device
     K = intrinsics_from_fov(view.fov_x_deg, HEIGHT, WIDTH)
     base = view.world_T_cam[None]
@@ -117,13 +128,17 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
     def timed(fn: Callable[[], None]) -> float:
         return timings(synchronised(fn, device), 1, warmup=0)[0]
 
-    # Steps and networks calls in turn, STEPS of each per round, so that both meet the machine in
-    # the same states; the networks' two parts are also timed on their own for the table.
+    # a networks call after every optimiser update, so that each step has one just before and one
+    # just after it; the networks' two parts are also timed on their own for the table
     times = {"step": [], "networks": [], "model fwd+bwd": [], "loss fwd+bwd": []}
+    own = []  # (step - networks) / networks per step, against the mean of its two neighbouring calls
     step_seconds(objective, differentiable, view, 2, 1)  # warm-up: first calls allocate and pick kernels
     for _ in range(REPEATS):
-        times["step"] += step_seconds(objective, differentiable, view, 1 + STEPS, 1)
-        times["networks"] += [timed(lambda: (model_step(), loss_step())) for _ in range(STEPS)]
+        steps, networks = step_seconds(objective, differentiable, view, 1 + STEPS, 1,
+                                       lambda: timed(lambda: (model_step(), loss_step())))
+        own += [step / (0.5 * (before + after)) - 1.0 for step, before, after in zip(steps, networks, networks[1:])]
+        times["step"] += steps
+        times["networks"] += networks
         times["model fwd+bwd"].append(timed(model_step))
         times["loss fwd+bwd"].append(timed(loss_step))
     parts = {name: min(seconds) for name, seconds in times.items()}
@@ -144,13 +159,17 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
     accounted = (parts["render fwd+bwd"] + parts["networks"] + parts["penalty + guard"]
                  + parts["view validity (on the step's render)"])
     parts["optimiser, metrics, records, rest"] = parts["step"] - accounted
+    overhead = statistics.median(own)
     print(f"\n{label} at {HEIGHT}x{WIDTH} on {device}, one restart (ms)")
     for name, seconds in parts.items():
         print(f"  {name:<40} {seconds * 1e3:>9.1f}")
+    print(f"  (step - networks) / networks, median of {len(own)} steps against the calls beside them: "
+          f"{overhead:.3f} (fastest step against fastest call: "
+          f"{parts['step'] / parts['networks'] - 1.0:.3f})")
     scaling = per_restart_step(objective, differentiable, view)
     print("  per restart-step with B restarts batched: "
           + ", ".join(f"B={b} {seconds * 1e3:.0f} ms" for b, seconds in scaling.items()))
-    return parts
+    return parts, overhead
 
 
 def main() -> None:
@@ -175,11 +194,8 @@ def main() -> None:
             objective = Objective(model, loss, renderer, penalty, device=device)
             results[label] = measure(label, objective, DifferentiableRenderer(renderer, DiffRenderConfig(), device),
                                      view)
-    overheads = []
-    for parts in results.values():
-        overheads.append(((parts["step"] - parts["networks"]) / parts["networks"], parts["render fwd+bwd"],
-                          parts["networks"]))
-    (overhead, render, networks), (overhead_tiny, _, _) = overheads
+    (parts, overhead), (_, overhead_tiny) = results.values()
+    render, networks = parts["render fwd+bwd"], parts["networks"]
     print(f"\nattack_step overhead={overhead:.2f} render_ms={render * 1e3:.0f} networks_ms={networks * 1e3:.0f} "
           f"overhead_tiny={overhead_tiny:.2f} device={device.type}")
 

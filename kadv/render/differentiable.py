@@ -7,7 +7,6 @@ well the warp agrees with the exact render.
 """
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import torch
@@ -160,33 +159,29 @@ class DifferentiableRenderer:
         K_render, render_height, render_width = ring_view(K, height, width) if c.silhouette else (K, height, width)
         rendered = self._exact_render(current, K_render, render_height, render_width, border, anchor)
         exact = rendered.cropped(border) if border else rendered
-        with ThreadPoolExecutor(max_workers=1) as pool:
-            # The edge search is mostly single-threaded (numpy and Open3D) and the reprojection is
-            # torch's: side by side, each has a core and the two take little more than the longer.
-            edges = pool.submit(find_edge_pairs, self.renderer, rendered, current, K_render) if c.silhouette else None
-            normals = camera_face_normals(self.renderer.scene, exact.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
-            normals = normals.to(self.device)
-            # what the device needs of the exact render, moved once
-            inside = (..., slice(border, render_height - border), slice(border, render_width - border))
-            rgb_rendered, depth_rendered = rendered.rgb.to(self.device), rendered.depth.to(self.device)
-            rgb_exact, depth_exact, mask = rgb_rendered[inside], depth_rendered[inside], exact.mask.to(self.device)
+        normals = camera_face_normals(self.renderer.scene, exact.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
+        normals = normals.to(self.device)
+        # what the device needs of the exact render, moved once
+        inside = (..., slice(border, render_height - border), slice(border, render_width - border))
+        rgb_rendered, depth_rendered = rendered.rgb.to(self.device), rendered.depth.to(self.device)
+        rgb_exact, depth_exact, mask = rgb_rendered[inside], depth_rendered[inside], exact.mask.to(self.device)
+        warp = self._warp(depth_exact, normals, world_T_cam, K)
+        agreement = WarpAgreement.of(warp, rgb_exact, depth_exact, mask)
+        if c.refresh == "on_drift" and not refreshed and agreement.drifted(c):
+            self._refresh(current, K, height, width)
+            refreshed = True
             warp = self._warp(depth_exact, normals, world_T_cam, K)
             agreement = WarpAgreement.of(warp, rgb_exact, depth_exact, mask)
-            if c.refresh == "on_drift" and not refreshed and agreement.drifted(c):
-                self._refresh(current, K, height, width)
-                refreshed = True
-                warp = self._warp(depth_exact, normals, world_T_cam, K)
-                agreement = WarpAgreement.of(warp, rgb_exact, depth_exact, mask)
-            self._steps_since_refresh += 1
-            valid = warp.valid
-            if c.values == "exact":
-                rgb = rgb_exact + torch.where(valid, warp.rgb - warp.rgb.detach(), torch.zeros_like(warp.rgb))
-                depth = depth_exact + torch.where(valid, warp.depth - warp.depth.detach(), torch.zeros_like(warp.depth))
-            else:
-                rgb = torch.where(valid, warp.rgb, rgb_exact)
-                depth = torch.where(valid, warp.depth, depth_exact)
-            pairs = edges.result() if edges is not None else None
-        if pairs is not None:
+        self._steps_since_refresh += 1
+        valid = warp.valid
+        if c.values == "exact":
+            rgb = rgb_exact + torch.where(valid, warp.rgb - warp.rgb.detach(), torch.zeros_like(warp.rgb))
+            depth = depth_exact + torch.where(valid, warp.depth - warp.depth.detach(), torch.zeros_like(warp.depth))
+        else:
+            rgb = torch.where(valid, warp.rgb, rgb_exact)
+            depth = torch.where(valid, warp.depth, depth_exact)
+        if c.silhouette:
+            pairs = find_edge_pairs(self.renderer, rendered, current, K_render)
             term = silhouette_term(self.renderer, pairs, world_T_cam, K_render,
                                    torch.cat([rgb_rendered, depth_rendered], dim=1))[inside]
             rgb, depth = rgb + term[:, :3], depth + term[:, 3:]
