@@ -75,6 +75,25 @@ def _open3d_rays(origins: np.ndarray, directions: np.ndarray) -> o3d.core.Tensor
     return o3d.core.Tensor(rays)
 
 
+def _raycasting_scene(vertices: np.ndarray, faces: np.ndarray) -> o3d.t.geometry.RaycastingScene:
+    """An Open3D ray-casting scene of triangles ``faces`` (F, 3) of ``vertices`` (V, 3); triangle ids
+    are the rows of ``faces``."""
+    raycasting_scene = o3d.t.geometry.RaycastingScene()
+    if len(faces):
+        raycasting_scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)),
+                                       o3d.core.Tensor(faces.astype(np.uint32)))
+    return raycasting_scene
+
+
+def _cast(raycasting_scene: o3d.t.geometry.RaycastingScene, origins: np.ndarray,
+          directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """First hits of rays (N, 3): t (inf on a miss), triangle id (-1 on a miss) and barycentrics."""
+    result = raycasting_scene.cast_rays(_open3d_rays(origins, directions))
+    raw_ids = result["primitive_ids"].numpy()
+    ids = np.where(raw_ids == _INVALID_ID, -1, raw_ids.astype(np.int64))
+    return result["t_hit"].numpy().astype(np.float64), ids, result["primitive_uvs"].numpy().astype(np.float64)
+
+
 def pixel_angle(K: torch.Tensor) -> float:
     """Angle in radians one pixel subtends at the image centre (the smallest of the batch)."""
     K = torch.as_tensor(K, dtype=torch.float64).reshape(-1, 3, 3)
@@ -93,11 +112,16 @@ class ExactRenderer:
         self.scene = scene
         self.shading = shading or Shading()
         self.lights = scene_lights(scene, self.shading)
-        self.raycasting_scene = o3d.t.geometry.RaycastingScene()
-        self.raycasting_scene.add_triangles(
-            o3d.core.Tensor(scene.vertices.astype(np.float32)), o3d.core.Tensor(scene.faces.astype(np.uint32))
-        )
+        self.raycasting_scene = _raycasting_scene(scene.vertices, scene.faces)
         self._masked = np.array([m.opacity is not None for m in scene.materials], bool)
+        # A ray that met a transparent texel continues in two smaller scenes: the first hit among the
+        # opaque materials' triangles, and every hit on the alpha-masked ones (a few, where listing
+        # them in the whole scene would list every wall behind).
+        masked_faces = self._masked[scene.material_ids]
+        self._opaque_faces, self._masked_faces = np.flatnonzero(~masked_faces), np.flatnonzero(masked_faces)
+        if len(self._masked_faces):
+            self._opaque_scene = _raycasting_scene(scene.vertices, scene.faces[self._opaque_faces])
+            self._masked_scene = _raycasting_scene(scene.vertices, scene.faces[self._masked_faces])
         # shading reads these per hit: torch copies made once
         self._pyramids = {i: mip_pyramid(m.texture) for i, m in enumerate(scene.materials) if m.texture is not None}
         self._opacity = {i: torch.from_numpy(np.ascontiguousarray(m.opacity[:, :, None], np.float32))
@@ -116,38 +140,49 @@ class ExactRenderer:
         """
         origins = origins.reshape(-1, 3)
         directions = directions.reshape(-1, 3)
-        t, ids, bary = self._cast_once(origins, directions)
-        if self._masked.any():
-            # the few rays that met a transparent texel take their first opaque hit from the list
-            # of all their intersections (one query, however many leaves they pass)
+        t, ids, bary = _cast(self.raycasting_scene, origins, directions)
+        if len(self._masked_faces):
+            # the few rays that met a transparent texel take their first opaque hit from one cast and
+            # one list of intersections, however many leaves they pass
             pending = np.flatnonzero(self.see_through(ids, bary))
             if len(pending):
-                ray_ids, t2, ids2, bary2 = self.intersections(origins[pending], directions[pending])
-                first = np.r_[True, ray_ids[1:] != ray_ids[:-1]] if len(ray_ids) else np.zeros(0, bool)
-                t[pending], ids[pending], bary[pending] = np.inf, -1, 0.0
-                settled = pending[ray_ids[first]]
-                t[settled], ids[settled], bary[settled] = t2[first], ids2[first], bary2[first]
+                t[pending], ids[pending], bary[pending] = self._first_opaque(origins[pending], directions[pending])
         return RayHits(t, ids, bary)
+
+    def _first_opaque(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """First opaque hit (t, triangle id, barycentrics) of rays (N, 3) whose first hit is a
+        transparent texel: the nearer of the first hit on an opaque material's triangle and the
+        first opaque texel among the hits on alpha-masked triangles."""
+        t, local, bary = _cast(self._opaque_scene, origins, directions)
+        ids = np.where(local >= 0, self._opaque_faces[np.maximum(local, 0)], -1)
+        ray_ids, t_masked, ids_masked, bary_masked = self._list_opaque(self._masked_scene, self._masked_faces,
+                                                                       origins, directions)
+        first = np.r_[True, ray_ids[1:] != ray_ids[:-1]] if len(ray_ids) else np.zeros(0, bool)
+        nearer = first & (t_masked < t[ray_ids])
+        rays = ray_ids[nearer]
+        t[rays], ids[rays], bary[rays] = t_masked[nearer], ids_masked[nearer], bary_masked[nearer]
+        return t, ids, bary
 
     def intersections(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, ...]:
         """Every opaque intersection of rays (N, 3), sorted by ray then distance: ray index (M,),
         parameter t (M,), triangle id (M,) and barycentrics (M, 2)."""
-        result = self.raycasting_scene.list_intersections(_open3d_rays(origins, directions))
+        return self._list_opaque(self.raycasting_scene, None, origins, directions)
+
+    def _list_opaque(self, raycasting_scene: o3d.t.geometry.RaycastingScene, faces: np.ndarray | None,
+                     origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, ...]:
+        """:meth:`intersections` in ``raycasting_scene``, whose triangle i is the scene's ``faces[i]``
+        (or i when ``faces`` is None)."""
+        result = raycasting_scene.list_intersections(_open3d_rays(origins, directions))
         ray_ids = result["ray_ids"].numpy().astype(np.int64)
         t = result["t_hit"].numpy().astype(np.float64)
         ids = result["primitive_ids"].numpy().astype(np.int64)
+        ids = ids if faces is None else faces[ids]
         bary = result["primitive_uvs"].numpy().astype(np.float64)
         if len(t):
             opaque = ~self.see_through(ids, bary)
             ray_ids, t, ids, bary = ray_ids[opaque], t[opaque], ids[opaque], bary[opaque]
         order = np.lexsort((t, ray_ids))
         return ray_ids[order], t[order], ids[order], bary[order]
-
-    def _cast_once(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        result = self.raycasting_scene.cast_rays(_open3d_rays(origins, directions))
-        raw_ids = result["primitive_ids"].numpy()
-        ids = np.where(raw_ids == _INVALID_ID, -1, raw_ids.astype(np.int64))
-        return result["t_hit"].numpy().astype(np.float64), ids, result["primitive_uvs"].numpy().astype(np.float64)
 
     def see_through(self, ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
         """(N,) True where a hit (triangle ids, barycentrics) falls on a transparent texel of an alpha mask."""

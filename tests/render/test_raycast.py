@@ -96,6 +96,31 @@ def test_alpha_mask_lets_rays_through_to_the_surface_behind() -> None:
     assert float(out.depth[0, 0, 16, 4]) == pytest.approx(2.0, rel=1e-5)  # stopped by the opaque half
 
 
+def test_first_opaque_hit_behind_transparent_texels_is_the_nearest_of_all_intersections() -> None:
+    # alpha-masked quads (checkered holes) in front of, between and behind opaque quads, and a wall
+    holes = (np.indices((32, 32)).sum(0) // 8 % 2).astype(np.float32)
+    materials = [Material("leaf", base_color=np.ones(3), texture=_checker_texture(), opacity=holes),
+                 Material("wall", base_color=np.array([0.0, 1.0, 0.0]))]
+
+    def quad(z: float, half: float, shift: float, material: int):
+        corners = np.array([[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]], float)
+        return quad_part(corners + [shift, 0.0, 0.0], material, f"quad{z}")
+
+    scene = assemble_scene([quad(2.0, 1.0, 0.0, 0), quad(2.5, 0.4, 0.3, 1), quad(3.0, 1.0, 0.1, 0),
+                            quad(3.5, 1.0, -0.2, 0), quad(4.0, 5.0, 0.0, 1)], materials, name="leaves")
+    renderer = ExactRenderer(scene)
+    directions = np.c_[np.random.default_rng(0).uniform(-0.6, 0.6, (4000, 2)), np.ones(4000)]
+    origins = np.zeros_like(directions)
+    hits = renderer.cast(origins, directions)
+    ray_ids, t, ids, bary = renderer.intersections(origins, directions)
+    first = np.r_[True, ray_ids[1:] != ray_ids[:-1]]
+    assert len(np.unique(ids[first])) >= 6  # rays stop on every layer (two triangles a quad)
+    np.testing.assert_array_equal(np.flatnonzero(hits.hit), ray_ids[first])
+    np.testing.assert_array_equal(hits.t[ray_ids[first]], t[first])
+    np.testing.assert_array_equal(hits.triangle_ids[ray_ids[first]], ids[first])
+    np.testing.assert_array_equal(hits.barycentrics[ray_ids[first]], bary[first])
+
+
 def _same_point_from_two_cameras(scene) -> tuple[torch.Tensor, torch.Tensor]:
     renderer = ExactRenderer(scene)
     camera = scene.cameras[0]
