@@ -22,6 +22,7 @@ from kornia.geometry.depth import depth_to_3d_v2
 from kornia.geometry.linalg import transform_points
 
 from kadv.geometry.camera import batched_intrinsics
+from kadv.geometry.vector import dot
 from kadv.render.layers import AnchorLayers, guard_band_intrinsics
 
 __all__ = ["Reprojection", "reproject"]
@@ -232,8 +233,8 @@ def _sub_pixel_points(depth: torch.Tensor, normals: torch.Tensor, K: torch.Tenso
     shift = torch.cat([shift, torch.zeros_like(shift[..., :1])], dim=-1)[:, None, :, None, :, :]  # (B, 1, s, 1, s, 3)
     n = normals.detach().to(depth.dtype).permute(0, 2, 3, 1)[:, :, None, :, None, :]
     # the plane n . X = n . point along each sub-pixel ray rays + shift; shift has no z
-    numerator = (n * points).sum(-1, keepdim=True)
-    denominator = (n * rays).sum(-1, keepdim=True) + (n[..., 0:1] * shift[..., 0:1] + n[..., 1:2] * shift[..., 1:2])
+    numerator = dot(n, points)[..., None]
+    denominator = dot(n, rays)[..., None] + (n[..., 0:1] * shift[..., 0:1] + n[..., 1:2] * shift[..., 1:2])
     # a sub-pixel ray is as long as its pixel's, to well within the cosine's precision
     grazing = denominator.abs() < _GRAZING_COSINE * rays.norm(dim=-1, keepdim=True)
     t = torch.where(grazing, per_pixel, numerator / torch.where(grazing, 1.0, denominator))

@@ -13,6 +13,7 @@ import torch
 from torch.nn import functional as F
 
 from kadv.geometry.camera import pixel_rays
+from kadv.geometry.vector import dot
 from kadv.render.shading import Shading, albedo, mip_pyramid, sample_texture, scene_lights, shade, uv_density
 from kadv.scenes.scene import Scene
 
@@ -208,7 +209,7 @@ class ExactRenderer:
     def _facing(self, triangle_ids: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
         """(N,) dot products of ray directions (N, 3) with their triangles' face normals: positive
         where a ray meets the back of its triangle."""
-        return (self._face_normals.index_select(0, triangle_ids) * directions).sum(1)
+        return dot(self._face_normals.index_select(0, triangle_ids), directions)
 
     @staticmethod
     def _interpolate(per_corner: torch.Tensor, triangle_ids: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:

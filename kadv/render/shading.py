@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
+from kadv.geometry.vector import dot
 from kadv.scenes.scene import Scene
 
 __all__ = ["Shading", "albedo", "mip_pyramid", "sample_texture", "sample_texture_filtered", "scene_lights", "shade",
@@ -148,6 +149,6 @@ def shade(shading: Shading, lights: torch.Tensor, points: torch.Tensor, normals:
     """Shaded RGB (N, 3) in [0, 1] of surface points (N, 3) with unit normals (N, 3) facing the
     viewer side, under ``lights`` (L, 3)."""
     to_lights = F.normalize(lights[None, :, :] - points[:, None, :], dim=-1, eps=1e-9)
-    lambert = (to_lights * normals[:, None, :]).sum(-1).clamp_min(0.0).mean(dim=1)
+    lambert = dot(to_lights, normals[:, None, :]).clamp_min(0.0).mean(dim=1)
     light = shading.ambient + shading.diffuse * lambert
     return (base_colour * light[:, None]).clamp(0.0, 1.0)

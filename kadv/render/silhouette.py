@@ -19,6 +19,7 @@ import torch
 
 from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import check_world_T_cam
+from kadv.geometry.vector import dot, mat_vec
 from kadv.render.raycast import ExactRenderer, RenderOutput
 
 __all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term"]
@@ -51,16 +52,9 @@ class EdgePairs:
     t: np.ndarray
 
 
-def _mat_vec(M: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """M x for matrices M (N, 3, 3) and vectors x (N, ..., 3), as three products and two sums
-    (numpy's einsum took several times as long)."""
-    M = M.reshape(M.shape[:1] + (1,) * (x.ndim - 2) + (3, 3))
-    return M[..., 0] * x[..., 0:1] + M[..., 1] * x[..., 1:2] + M[..., 2] * x[..., 2:3]
-
-
 def _rays(K_inv: np.ndarray, batch: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Camera-frame rays (N, 3) with z = 1 through pixel coordinates uv (N, 2)."""
-    return _mat_vec(K_inv[batch], np.c_[uv, np.ones(len(uv))])
+    return mat_vec(K_inv[batch], np.c_[uv, np.ones(len(uv))])
 
 
 def _planes(renderer: ExactRenderer, ids: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -68,7 +62,7 @@ def _planes(renderer: ExactRenderer, ids: np.ndarray, c: np.ndarray) -> tuple[np
     from the camera centres ``c`` (N, 3)."""
     safe = np.maximum(ids, 0)
     normal = renderer.scene.face_normals[safe].astype(np.float64)
-    offset = (normal * (renderer.scene.vertices[renderer.scene.faces[safe, 0]] - c)).sum(1)
+    offset = dot(normal, renderer.scene.vertices[renderer.scene.faces[safe, 0]] - c)
     return normal, offset
 
 
@@ -83,7 +77,7 @@ def _plane_z(ids: np.ndarray, offset: np.ndarray, normal_dot_ray: np.ndarray) ->
 def _plane_depth(renderer: ExactRenderer, ids: np.ndarray, rays_world: np.ndarray, c: np.ndarray) -> np.ndarray:
     """z-depth where camera rays (z = 1, world frame) (N, 3) from ``c`` meet the plane of triangles ``ids``."""
     normal, offset = _planes(renderer, ids, c)
-    return _plane_z(ids, offset, (normal * rays_world).sum(1))
+    return _plane_z(ids, offset, dot(normal, rays_world))
 
 
 def edge_crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: torch.Tensor, K: torch.Tensor,
@@ -91,8 +85,8 @@ def edge_crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: tor
     """Crossing t (N,) of edges (N, 2, 3) (camera frame) with the segment a->b, and whether it is genuine."""
     m = torch.linalg.cross(rays_a, rays_b)
     v0, v1 = vertices_cam[:, 0], vertices_cam[:, 1]
-    denominator = (m * (v1 - v0)).sum(-1)
-    s = -(m * v0).sum(-1) / torch.where(denominator.abs() > 1e-12, denominator, torch.ones_like(denominator))
+    denominator = dot(m, v1 - v0)
+    s = -dot(m, v0) / torch.where(denominator.abs() > 1e-12, denominator, torch.ones_like(denominator))
     point = v0 + s[:, None] * (v1 - v0)
     projected = (K @ point[..., None])[..., 0]
     uv = projected[:, :2] / projected[:, 2:3].clamp_min(1e-9)
@@ -143,7 +137,7 @@ def _candidate_pairs(renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, po
     uv_b = uv_a + ([1.0, 0.0] if horizontal else [0.0, 1.0])
     rays_a, rays_b, R = _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b), pose[bi, :3, :3]
     pairs = _Candidates(bi, a, a + (1 if horizontal else width), np.full(len(bi), horizontal), uv_a, uv_b, rays_a, rays_b,
-                        _mat_vec(R, rays_a), _mat_vec(R, rays_b), R, pose[bi, :3, 3])
+                        mat_vec(R, rays_a), mat_vec(R, rays_b), R, pose[bi, :3, 3])
     flat_ids, flat_z = ids.reshape(batch, -1), z.reshape(batch, -1)
     # Neighbours on one continuous surface (a grazing floor's triangles) are no edge: the plane of
     # either one's triangle, extended to the other's ray, meets it at its depth. Dropping them here
@@ -174,8 +168,8 @@ def _bisect(renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray,
     # its dot products with the two planes: everything but the cast is computed once.
     world_a, world_step = pairs.world_a, pairs.world_b - pairs.world_a
     (fg_normal, fg_offset), (bg_normal, bg_offset) = _planes(renderer, fg_id, pairs.c), _planes(renderer, bg_id, pairs.c)
-    fg_a, fg_step = (fg_normal * world_a).sum(1), (fg_normal * world_step).sum(1)
-    bg_a, bg_step = (bg_normal * world_a).sum(1), (bg_normal * world_step).sum(1)
+    fg_a, fg_step = dot(fg_normal, world_a), dot(fg_normal, world_step)
+    bg_a, bg_step = dot(bg_normal, world_a), dot(bg_normal, world_step)
     for _ in range(_BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
         hits = renderer.cast(pairs.c, world_a + mid[:, None] * world_step)
@@ -207,7 +201,7 @@ def _occluder_edge(renderer: ExactRenderer, pairs: _Candidates, occluder: np.nda
     bi, R, c = pairs.batch, pairs.R, pairs.c
     faces = renderer.scene.faces[np.maximum(occluder, 0)]
     edges = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1)  # (N, 3, 2)
-    vertices_cam = _mat_vec(R.swapaxes(1, 2), renderer.scene.vertices[edges] - c[:, None, None])
+    vertices_cam = mat_vec(R.swapaxes(1, 2), renderer.scene.vertices[edges] - c[:, None, None])
     three = lambda array: torch.from_numpy(np.repeat(array, 3, axis=0))  # noqa: E731
     t_all, ok_all = edge_crossings(torch.from_numpy(vertices_cam.reshape(-1, 2, 3)), three(pairs.rays_a),
                                    three(pairs.rays_b), three(K[bi]), three(pairs.uv_a), three(pairs.uv_b))
@@ -217,7 +211,7 @@ def _occluder_edge(renderer: ExactRenderer, pairs: _Candidates, occluder: np.nda
     chosen = edges[np.arange(n), best]
     v = renderer.scene.vertices[chosen]
     # image-plane direction of the edge (first order, at the crossing depth)
-    direction_cam = _mat_vec(R.swapaxes(1, 2), v[:, 1] - v[:, 0])
+    direction_cam = mat_vec(R.swapaxes(1, 2), v[:, 1] - v[:, 0])
     return chosen, error[np.arange(n), best], np.abs(direction_cam[:, 1]) >= np.abs(direction_cam[:, 0])
 
 
