@@ -23,5 +23,5 @@ def test_mat_vec_applies_each_matrix_to_its_vectors() -> None:
     np.testing.assert_allclose(mat_vec(M, x), np.einsum("nij,nekj->neki", M, x), rtol=1e-14, atol=1e-14)
     swap = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
     np.testing.assert_array_equal(mat_vec(swap[None], np.array([[1.0, 2.0, 3.0]])), [[2.0, 1.0, 6.0]])
-    tM, tx = torch.from_numpy(M), torch.from_numpy(x[:, 0])
+    tM, tx = torch.from_numpy(M), torch.from_numpy(x[:, 0, 0])
     torch.testing.assert_close(mat_vec(tM, tx), (tM @ tx[..., None])[..., 0], rtol=1e-14, atol=1e-14)
