@@ -119,6 +119,7 @@ class ExactRenderer:
         # opaque materials' triangles, and every hit on the alpha-masked ones (a few, where listing
         # them in the whole scene would list every wall behind).
         masked_faces = self._masked[scene.material_ids]
+        self._masked_face = np.r_[masked_faces, False]  # per triangle, and a False that a miss (id -1) reads
         self._opaque_faces, self._masked_faces = np.flatnonzero(~masked_faces), np.flatnonzero(masked_faces)
         if len(self._masked_faces):
             self._opaque_scene = _raycasting_scene(scene.vertices, scene.faces[self._opaque_faces])
@@ -187,12 +188,11 @@ class ExactRenderer:
 
     def see_through(self, ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
         """(N,) True where a hit (triangle ids, barycentrics) falls on a transparent texel of an alpha mask."""
-        hit = ids >= 0
-        material_ids = np.where(hit, self.scene.material_ids[np.where(hit, ids, 0)], -1)
-        candidates = hit & self._masked[np.maximum(material_ids, 0)]
         see_through = np.zeros(len(ids), bool)
-        for index in np.unique(material_ids[candidates]):
-            selected = np.flatnonzero(candidates & (material_ids == index))
+        candidates = np.flatnonzero(self._masked_face[ids])
+        material_ids = self.scene.material_ids[ids[candidates]]
+        for index in np.unique(material_ids):
+            selected = candidates[material_ids == index]
             uv = self._interpolate(self._uvs, torch.from_numpy(ids[selected]), torch.from_numpy(bary[selected]))
             uv_scale = torch.as_tensor(self.scene.materials[index].uv_scale, dtype=uv.dtype)
             alpha = sample_texture(self._opacity[index], uv * uv_scale)[:, 0]
