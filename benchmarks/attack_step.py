@@ -3,20 +3,25 @@ grey_white_room: the Depth Anything V2 Small architecture (random weights) with 
 (random VGG-16 weights), and kadv-tiny with SSIM.
 
 Every part is timed in this one run. A step is the time between two consecutive optimiser updates
-of a gradient run (step guard, differentiable render, objective, records, backward, update); the
-networks are model forward+backward then loss forward+backward, timed as one call. The machine's
-speed drifts by up to a third within minutes, so the two are measured side by side: each optimiser
-update's hook times one networks call, and every step is compared with the mean of the calls just
-before and just after it. overhead = the median over REPEATS x STEPS steps of (step - networks) /
-networks, for the first configuration; overhead_tiny the same for the second. The table's other
-parts are the fastest of several tries (noise only ever adds time). Then the time per restart-step
-for batches of B = 1, 2, 4, 8 restarts (the fastest of two steps).
+of a gradient run (step guard, differentiable render, objective, records, backward, update). The
+networks are the model's and the loss's forward passes and one backward pass through both, as a step
+runs them, timed as one call (as two separate forward+backward pairs they take about 3% less: a
+step's graph holds both networks' activations at once, and that memory comes as fresh pages). The
+machine's speed drifts by up to a third within minutes, so the two are measured side by side: each
+optimiser update's hook times one networks call, and every step is compared with the mean of the
+calls just before and just after it. overhead = the median over REPEATS x STEPS steps of
+(step - networks) / networks, for the first configuration; overhead_tiny the same for the second.
+The same ratio for runs whose render is replaced by one fixed output shows what the attack's own
+bookkeeping (objective terms, penalty, guard, records, optimiser) adds beside the render.
+The table's other parts are the fastest of several tries (noise only ever adds time). Then the time
+per restart-step for batches of B = 1, 2, 4, 8 restarts (the fastest of two steps).
 
 Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto]
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import statistics
 import tempfile
 import time
@@ -29,11 +34,11 @@ from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, D
 
 from kadv.attack import AttackConfig, Objective, PenaltyConfig, attack, file_init_views
 from kadv.device import resolve_device
-from kadv.geometry import intrinsics_from_fov
+from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam
 from kadv.losses import VGG16_TAPS, PerceptualLoss, depth_loss, vgg16_features
 from kadv.models import DepthModel, load_model
 from kadv.penalties import distance_to_surface, shortcut_penalty, step_guard, view_validity
-from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
+from kadv.render import DiffRenderConfig, DiffRenderOutput, DifferentiableRenderer, ExactRenderer
 
 HEIGHT, WIDTH = 240, 320
 STEPS = 5
@@ -90,6 +95,40 @@ def step_seconds(objective: Objective, differentiable: DifferentiableRenderer, v
     return [update - resume for resume, update in zip(resumes, updates[1:])], inside
 
 
+class FixedRender:
+    """Stands in for the differentiable renderer with one render's output at every pose (its values,
+    and a zero-valued dependence on the pose for the gradient), so that a run with it times
+    everything a step does but the render."""
+
+    def __init__(self, differentiable: DifferentiableRenderer, output: DiffRenderOutput) -> None:
+        self.renderer, self.config, self.output = differentiable.renderer, differentiable.config, output
+
+    def reset(self) -> None:
+        """Nothing to forget (the attack calls it before each init view)."""
+
+    def __call__(self, params: torch.Tensor, base: torch.Tensor, K: torch.Tensor, height: int,
+                 width: int) -> DiffRenderOutput:
+        world_T_cam = perturb_world_T_cam(torch.as_tensor(base, dtype=torch.float64).reshape(-1, 4, 4),
+                                          params[:, :3].double(), params[:, 3:].double())
+        zero = (0 * params.sum()).float()
+        return dataclasses.replace(self.output, rgb=self.output.rgb.detach() + zero,
+                                   depth=self.output.depth.detach() + zero, world_T_cam=world_T_cam)
+
+
+def paired_overheads(objective: Objective, differentiable, view, networks: Callable[[], float],
+                     rounds: int) -> tuple[list[float], list[float], list[float]]:
+    """Steps of ``rounds`` gradient runs of 1 + STEPS steps with a ``networks()`` call timed after every
+    optimiser update: the steps' and the calls' seconds, and each step's (step - networks) /
+    networks against the mean of the calls just before and just after it."""
+    steps, calls, own = [], [], []
+    for _ in range(rounds):
+        run_steps, run_calls = step_seconds(objective, differentiable, view, 1 + STEPS, 1, networks)
+        own += [step / (0.5 * (before + after)) - 1.0
+                for step, before, after in zip(run_steps, run_calls, run_calls[1:])]
+        steps, calls = steps + run_steps, calls + run_calls
+    return steps, calls, own
+
+
 def per_restart_step(objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[int, float]:
     """Seconds per restart per step of a gradient run, for batches of B restarts."""
     return {batch: min(step_seconds(objective, differentiable, view, 3, batch)[0]) / batch for batch in BATCHES}
@@ -125,23 +164,21 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
         b = prediction.double().clone().requires_grad_(True)
         objective.l_depth(a, b, mask).sum().backward()
 
+    def networks_step():
+        # as a step runs them: both forward passes, then one backward through both
+        objective.l_depth(gt.clone().requires_grad_(True), objective.model(rgb), mask).sum().backward()
+
     def timed(fn: Callable[[], None]) -> float:
         return timings(synchronised(fn, device), 1, warmup=0)[0]
 
-    # a networks call after every optimiser update, so that each step has one just before and one
-    # just after it; the networks' two parts are also timed on their own for the table
-    times = {"step": [], "networks": [], "model fwd+bwd": [], "loss fwd+bwd": []}
-    own = []  # (step - networks) / networks per step, against the mean of its two neighbouring calls
     step_seconds(objective, differentiable, view, 2, 1)  # warm-up: first calls allocate and pick kernels
-    for _ in range(REPEATS):
-        steps, networks = step_seconds(objective, differentiable, view, 1 + STEPS, 1,
-                                       lambda: timed(lambda: (model_step(), loss_step())))
-        own += [step / (0.5 * (before + after)) - 1.0 for step, before, after in zip(steps, networks, networks[1:])]
-        times["step"] += steps
-        times["networks"] += networks
-        times["model fwd+bwd"].append(timed(model_step))
-        times["loss fwd+bwd"].append(timed(loss_step))
-    parts = {name: min(seconds) for name, seconds in times.items()}
+    steps, networks, own = paired_overheads(objective, differentiable, view, lambda: timed(networks_step), REPEATS)
+    # the same with the render's output fixed: what the attack's own bookkeeping adds to the networks
+    _, _, own_fixed = paired_overheads(objective, FixedRender(differentiable, out), view, lambda: timed(networks_step),
+                                       1)
+    parts = {"step": min(steps), "networks": min(networks),
+             "model fwd+bwd": fastest_seconds(synchronised(model_step, device), REPEATS),
+             "loss fwd+bwd": fastest_seconds(synchronised(loss_step, device), REPEATS)}
     parts["exact render (s=2, ring)"] = fastest_seconds(
         lambda: renderer.render(base, K, HEIGHT + 2, WIDTH + 2, supersample=differentiable.config.supersample), 3)
     parts["render fwd (exact+warp+silhouettes)"] = fastest_seconds(synchronised(render_forward, device), 3)
@@ -166,6 +203,8 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
     print(f"  (step - networks) / networks, median of {len(own)} steps against the calls beside them: "
           f"{overhead:.3f} (fastest step against fastest call: "
           f"{parts['step'] / parts['networks'] - 1.0:.3f})")
+    print(f"  the same with the render's output fixed (median of {len(own_fixed)} steps): "
+          f"{statistics.median(own_fixed):.3f}")
     scaling = per_restart_step(objective, differentiable, view)
     print("  per restart-step with B restarts batched: "
           + ", ".join(f"B={b} {seconds * 1e3:.0f} ms" for b, seconds in scaling.items()))
