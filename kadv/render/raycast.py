@@ -114,11 +114,10 @@ class ExactRenderer:
         self.shading = shading or Shading()
         self.lights = scene_lights(scene, self.shading)
         self.raycasting_scene = _raycasting_scene(scene.vertices, scene.faces)
-        self._masked = np.array([m.opacity is not None for m in scene.materials], bool)
         # A ray that met a transparent texel continues in two smaller scenes: the first hit among the
         # opaque materials' triangles, and every hit on the alpha-masked ones (a few, where listing
         # them in the whole scene would list every wall behind).
-        masked_faces = self._masked[scene.material_ids]
+        masked_faces = np.array([m.opacity is not None for m in scene.materials], bool)[scene.material_ids]
         self._masked_face = np.r_[masked_faces, False]  # per triangle, and a False that a miss (id -1) reads
         self._opaque_faces, self._masked_faces = np.flatnonzero(~masked_faces), np.flatnonzero(masked_faces)
         if len(self._masked_faces):
