@@ -1,27 +1,44 @@
-# `make demo` / `make test` create .venv on first use; nothing else needs installing by hand.
+# `make demo` / `make test` install the Debian packages they need (system-packages.txt) and create
+# .venv on first use; nothing else needs installing by hand.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.kadv-installed
+DEMO_PACKAGES := $(shell sed -n 's/^demo://p' system-packages.txt)
+TEST_PACKAGES := $(DEMO_PACKAGES) $(shell sed -n 's/^test://p' system-packages.txt)
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench clean demo-packages test-packages
 
-$(STAMP): pyproject.toml
-	@if ! dpkg -s libusb-1.0-0 >/dev/null 2>&1; then \
-	  if [ "$$(id -u)" = 0 ]; then apt-get update -qq && apt-get install -y -qq libusb-1.0-0; \
-	  else echo "Open3D needs libusb. Run:  sudo apt-get install -y libusb-1.0-0   then retry."; exit 1; fi; \
+# Installs the missing ones of $(1) with apt-get as root; otherwise prints the one line to run and stops.
+# dpkg-query's status, not `dpkg -s`: a removed package whose configuration remains still passes `dpkg -s`.
+define require_packages
+	@missing=""; for package in $(1); do dpkg-query -W -f='$${Status}' $$package 2>/dev/null | grep -q 'ok installed' || missing="$$missing $$package"; done; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    echo "Installing Debian packages:$$missing"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null || exit 1; \
+	  else echo "kadv needs Debian packages that are missing. Run:  sudo apt-get install -y$$missing   then retry."; exit 1; fi; \
 	fi
+endef
+
+demo-packages:
+	$(call require_packages,$(DEMO_PACKAGES))
+
+test-packages:
+	$(call require_packages,$(TEST_PACKAGES))
+
+$(STAMP): pyproject.toml | demo-packages
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet torch==2.13.0 -e ".[test,reference]"
 	touch $@
 
-demo: $(STAMP)
+demo: demo-packages $(STAMP)
 	$(BIN)/kadv-attack
 
-test: $(STAMP)
+test: test-packages $(STAMP)
 	$(BIN)/python -m pytest -q
 
-bench: $(STAMP)
+bench: demo-packages $(STAMP)
 	cd benchmarks && for b in render penalty gradcheck tiny_accuracy attack_step attack_vs_baselines reference_render; do ../$(BIN)/python $$b.py || exit 1; done
 
 clean:
