@@ -39,7 +39,7 @@ test: test-packages $(STAMP)
 	$(BIN)/python -m pytest -q
 
 bench: demo-packages $(STAMP)
-	cd benchmarks && for b in render penalty gradcheck tiny_accuracy attack_step attack_vs_baselines reference_render; do ../$(BIN)/python $$b.py || exit 1; done
+	cd benchmarks && for b in render penalty gradcheck tiny_accuracy attack_step search_anytime reference_render; do ../$(BIN)/python $$b.py || exit 1; done
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache

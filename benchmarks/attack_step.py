@@ -32,7 +32,7 @@ from torch.optim.optimizer import register_optimizer_step_post_hook
 from common import fastest_seconds, load_bench_scene, timings
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
-from kadv.attack import AttackConfig, Objective, PenaltyConfig, attack, file_init_views
+from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
 from kadv.device import resolve_device
 from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam
 from kadv.losses import VGG16_TAPS, PerceptualLoss, depth_loss, vgg16_features
@@ -88,8 +88,8 @@ def step_seconds(objective: Objective, differentiable: DifferentiableRenderer, v
 
     handle = register_optimizer_step_post_hook(hook)
     try:
-        attack(objective, differentiable, [view], HEIGHT, WIDTH, AttackConfig(steps=steps, restarts=restarts), 0,
-               progress=False)
+        config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=restarts), budget_evaluations=None)
+        attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
     finally:
         handle.remove()
     return [update - resume for resume, update in zip(resumes, updates[1:])], inside

@@ -1,4 +1,4 @@
-"""The adversarial viewpoint attack: objective, init views, gradient and black-box searches."""
+"""The adversarial viewpoint attack: objective, init views, and search methods behind one registry."""
 from __future__ import annotations
 
 from kadv.attack.init_views import (
@@ -12,32 +12,69 @@ from kadv.attack.init_views import (
     sample_init_views,
     save_init_params,
     score_views,
+    ViewScores,
 )
+from kadv.attack.loop import Proposer, fitness, proposer_search
+from kadv.attack.methods.cma import CMASettings
+from kadv.attack.methods.gradient import GradientSettings, gradient_ascent, gradient_search
+from kadv.attack.methods.hybrid import HybridSettings
+from kadv.attack.methods.nevergrad import NevergradSettings
+from kadv.attack.methods.random import RandomSettings
 from kadv.attack.objective import Objective, ObjectiveTerms
-from kadv.penalties import PenaltyConfig
-from kadv.attack.records import AttackResult, Budget, InitViewResult, ViewRecord, select_top_views, separated
+from kadv.attack.records import (
+    AttackResult,
+    Budget,
+    InitViewResult,
+    ViewRecord,
+    best_so_far,
+    incumbent_path,
+    select_top_views,
+    separated,
+)
+from kadv.attack.registry import METHODS, NoSettings, SearchMethod, get_method, register_method, register_proposer
 from kadv.attack.runner import attack
-from kadv.attack.search import METHODS, AttackConfig, SearchContext
+from kadv.attack.search import DEFAULT_METHOD, AttackConfig, Clock, SearchContext
+from kadv.penalties import PenaltyConfig
 
 __all__ = [
+    "DEFAULT_METHOD",
     "METHODS",
     "AttackConfig",
     "AttackResult",
     "Budget",
+    "CMASettings",
+    "Clock",
+    "GradientSettings",
+    "HybridSettings",
     "InitView",
     "InitViewConfig",
     "InitViewError",
     "InitViewResult",
+    "NevergradSettings",
+    "NoSettings",
     "Objective",
     "ObjectiveTerms",
     "PenaltyConfig",
+    "Proposer",
+    "RandomSettings",
     "SearchContext",
+    "SearchMethod",
     "ViewRecord",
+    "ViewScores",
     "attack",
+    "best_so_far",
     "check_init_views",
     "clear_file_camera",
     "file_init_views",
+    "fitness",
+    "get_method",
+    "gradient_ascent",
+    "gradient_search",
+    "incumbent_path",
     "load_init_params",
+    "proposer_search",
+    "register_method",
+    "register_proposer",
     "sample_init_views",
     "save_init_params",
     "score_views",

@@ -11,6 +11,7 @@ import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import kornia
 import numpy as np
 import torch
 
@@ -18,7 +19,7 @@ from kadv.geometry import axis_angle_to_matrix, check_world_T_cam, intrinsics_fr
 from kadv.io import write_json
 from kadv.losses import depth_metrics
 from kadv.models import DepthModel
-from kadv.penalties import PenaltyConfig, distance_to_surface, step_guard, view_validity
+from kadv.penalties import PenaltyConfig, distance_to_surface, plane_labels, step_guard, view_validity
 from kadv.render import ExactRenderer
 
 __all__ = [
@@ -32,6 +33,7 @@ __all__ = [
     "sample_init_views",
     "save_init_params",
     "score_views",
+    "ViewScores",
 ]
 
 
@@ -76,10 +78,11 @@ class InitView:
 
 @dataclass(frozen=True)
 class InitViewConfig:
-    """How init views are chosen (``attack.init_*`` keys).
+    """How init views are chosen (``conf/init/``, the ``init`` node).
 
     Attributes:
         count: init views in all: the file's cameras first (if ``file_cameras``), then sampled ones.
+        params: an ``init_params.json`` to start from instead (None: choose them).
         file_cameras: start from the scene file's cameras.
         candidates: M, sampled candidates to score with the model.
         clearance: minimum distance of a sampled centre to any surface; None: 2 * penalty.d_th.
@@ -87,9 +90,12 @@ class InitViewConfig:
         pitch_deg, roll_deg: ranges of the view's pitch (positive: up) and roll.
         fov_x_deg: horizontal field of view of sampled views.
         min_hit_fraction: a sampled view must see a surface in at least this fraction of pixels.
+        content_weight: weight of what a sampled view shows (distinct surfaces, depth range, image
+            structure; each scored in [0, 1]) beside the model's delta1 when ranking candidates.
     """
 
     count: int = 3
+    params: str | None = None
     file_cameras: bool = True
     candidates: int = 32
     clearance: float | None = None
@@ -98,18 +104,21 @@ class InitViewConfig:
     roll_deg: tuple[float, float] = (-5.0, 5.0)
     fov_x_deg: float = 70.0
     min_hit_fraction: float = 0.8
+    content_weight: float = 0.5
 
     def __post_init__(self) -> None:
         if self.count < 1:
-            raise ValueError(f"attack.init_views must be >= 1, got {self.count}")
+            raise ValueError(f"init.count must be >= 1, got {self.count}")
         if self.candidates < 1:
-            raise ValueError(f"attack.init_candidates must be >= 1, got {self.candidates}")
+            raise ValueError(f"init.candidates must be >= 1, got {self.candidates}")
         for name in ("eye_height", "pitch_deg", "roll_deg"):
             low, high = getattr(self, name)
             if not low <= high:
-                raise ValueError(f"attack.init_{name}: expected [low, high] with low <= high, got {[low, high]}")
+                raise ValueError(f"init.{name}: expected [low, high] with low <= high, got {[low, high]}")
         if not 0.0 <= self.min_hit_fraction <= 1.0:
-            raise ValueError(f"attack.init_min_hit_fraction must be in [0, 1], got {self.min_hit_fraction}")
+            raise ValueError(f"init.min_hit_fraction must be in [0, 1], got {self.min_hit_fraction}")
+        if not (math.isfinite(self.content_weight) and self.content_weight >= 0):
+            raise ValueError(f"init.content_weight must be >= 0, got {self.content_weight}")
         intrinsics_from_fov(self.fov_x_deg, 1, 1)
 
 
@@ -160,23 +169,61 @@ def file_init_views(renderer: ExactRenderer, margin: float) -> list[InitView]:
     return views
 
 
+@dataclass
+class ViewScores:
+    """What N candidate views show and how well the model predicts them; tensors (N,).
+
+    Attributes:
+        delta1: the model's accuracy after scale-and-shift alignment.
+        surfaces: distinct planes each covering at least 5% of the view's surface pixels.
+        depth_range: log(max / min) of the view's ground-truth z-depth.
+        structure: mean Sobel gradient magnitude of the image's luminance.
+    """
+
+    delta1: torch.Tensor
+    surfaces: torch.Tensor
+    depth_range: torch.Tensor
+    structure: torch.Tensor
+
+    def content(self) -> torch.Tensor:
+        """What a view shows, in [0, 1]: the mean of its surfaces (6 or more score 1), its depth
+        range (a far/near ratio of 4 or more scores 1) and its image structure (a mean gradient of
+        0.1 or more scores 1): saturating terms, so no single one buys a view its place."""
+        return (torch.clamp(self.surfaces / _FULL_SURFACES, max=1.0)
+                + torch.clamp(self.depth_range / math.log(_FULL_DEPTH_RATIO), max=1.0)
+                + torch.clamp(self.structure / _FULL_STRUCTURE, max=1.0)) / 3.0
+
+
+# where each content term saturates (see ViewScores.content)
+_FULL_SURFACES, _FULL_DEPTH_RATIO, _FULL_STRUCTURE = 6.0, 4.0, 0.1
+# a plane counts as a distinct surface of a view from this share of its surface pixels
+_SURFACE_SHARE = 0.05
+
+
 def score_views(model: DepthModel, renderer: ExactRenderer, poses: torch.Tensor, fov_x_deg: torch.Tensor,
-                height: int, width: int, batch_size: int = 8) -> tuple[torch.Tensor, torch.Tensor]:
-    """delta1 (N,) of the model at N poses (N, 4, 4) with fields of view (N,), at the given size,
-    and each view's depth range log(max / min) over its valid pixels (N,)."""
-    scores, spreads = [], []
+                height: int, width: int, batch_size: int = 8) -> ViewScores:
+    """Score N views at poses (N, 4, 4) with fields of view (N,) at the given size."""
+    labels = plane_labels(renderer)
+    scores: dict[str, list[torch.Tensor]] = {"delta1": [], "surfaces": [], "depth_range": [], "structure": []}
     with torch.no_grad():
         for start in range(0, len(poses), batch_size):
             chunk = slice(start, start + batch_size)
             K = torch.stack([intrinsics_from_fov(float(f), height, width) for f in fov_x_deg[chunk]])
             out = renderer.render(poses[chunk], K, height, width)
             prediction = model(out.rgb)
-            scores.append(depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)["delta1"])
+            scores["delta1"].append(depth_metrics(prediction.double(), out.depth.double(), out.mask,
+                                                  model.output_kind)["delta1"])
             depth = out.depth.double()
             far = torch.where(out.mask, depth, torch.zeros_like(depth)).amax(dim=(1, 2, 3))
             near = torch.where(out.mask, depth, torch.full_like(depth, torch.inf)).amin(dim=(1, 2, 3))
-            spreads.append(torch.log(far.clamp_min(1e-6) / near.clamp_min(1e-6)))
-    return torch.cat(scores), torch.cat(spreads)
+            scores["depth_range"].append(torch.log(far.clamp_min(1e-6) / near.clamp_min(1e-6)))
+            ids = out.triangle_ids.reshape(len(depth), -1).numpy()
+            scores["surfaces"].append(torch.tensor([
+                float((np.bincount(labels[row[row >= 0]]) >= _SURFACE_SHARE * max((row >= 0).sum(), 1)).sum())
+                for row in ids], dtype=torch.float64))
+            gradient = kornia.filters.sobel(kornia.color.rgb_to_grayscale(out.rgb.float()))
+            scores["structure"].append(gradient.mean(dim=(1, 2, 3)).double())
+    return ViewScores(**{key: torch.cat(values) for key, values in scores.items()})
 
 
 def _candidate_poses(renderer: ExactRenderer, config: InitViewConfig, count: int, rng: np.random.Generator,
@@ -206,12 +253,14 @@ def _candidate_poses(renderer: ExactRenderer, config: InitViewConfig, count: int
 
 def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, seed: int, config: InitViewConfig,
                       penalty: PenaltyConfig, height: int, width: int) -> list[InitView]:
-    """Draw ``config.candidates`` seeded candidate views and keep the ``count`` the model predicts best.
+    """Draw ``config.candidates`` seeded candidate views and keep the ``count`` best: views the model
+    predicts well that show something.
 
     A candidate's centre is in free space with clearance above ``config.clearance`` (default
     2 * d_th), its height, pitch and roll within the configured ranges; its view must be valid
-    and hit a surface in at least ``min_hit_fraction`` of its pixels. Candidates are ranked by
-    delta1 (to two decimals), ties by the view's depth range, so a bare wall does not win.
+    (an uninformative view is not) and hit a surface in at least ``min_hit_fraction`` of its
+    pixels. Candidates are ranked by delta1 + ``content_weight`` * :meth:`ViewScores.content`:
+    ranking by accuracy alone rewards views with nothing in them (a bare wall, a plain corner).
 
     Raises:
         InitViewError: if fewer than ``count`` acceptable candidates turn up.
@@ -234,14 +283,16 @@ def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, se
         accepted += list(poses[keep][:needed])
     if len(accepted) < count:
         raise InitViewError(f"scene {renderer.scene.name!r}: only {len(accepted)} of {count} sampled init views are "
-                            f"valid with clearance {clearance} m (check attack.init_eye_height and the scene's scale)")
+                            f"valid with clearance {clearance} m (check init.eye_height and the scene's scale)")
     poses = torch.stack(accepted)
     fov = torch.full((len(poses),), config.fov_x_deg, dtype=torch.float64)
-    scores, spreads = score_views(model, renderer, poses, fov, height, width)
-    # many views of a bare wall are predicted perfectly; among equally accurate views, prefer depth variety
-    order = sorted(range(len(poses)), key=lambda i: (-round(float(scores[i]), 2), -float(spreads[i])))[:count]
-    return [InitView(f"sampled{rank}", "sampled", poses[i], config.fov_x_deg, float(scores[i]),
-                     note=f"best {rank + 1} of {len(poses)} candidates by delta1") for rank, i in enumerate(order)]
+    scores = score_views(model, renderer, poses, fov, height, width)
+    content = scores.content()
+    rank_by = scores.delta1 + config.content_weight * content
+    order = sorted(range(len(poses)), key=lambda i: -float(rank_by[i]))[:count]
+    return [InitView(f"sampled{rank}", "sampled", poses[i], config.fov_x_deg, float(scores.delta1[i]),
+                     note=f"best {rank + 1} of {len(poses)} candidates by delta1 + {config.content_weight} x content "
+                          f"(content {float(content[i]):.2f})") for rank, i in enumerate(order)]
 
 
 def check_init_views(renderer: ExactRenderer, views: list[InitView], penalty: PenaltyConfig, height: int,

@@ -1,8 +1,9 @@
 """What an attack returns: one record per evaluated view, per-init-view results, the budget.
 
-Every search method (gradient, random, CMA-ES) returns the same types, so reports treat them alike.
-For the gradient method ``restart`` is the restart's index; for the black-box methods it is the
-lane within the evaluated batch. Step 0, restart 0 is always the init view itself.
+Every search method returns the same types, so reports treat them alike. ``restart`` is a lane
+of the method (a gradient restart, a view's place in a black-box batch); step 0, restart 0 is
+always the init view itself. Each result names its *path*: the views a report follows as the
+search's trajectory (a gradient run's best restart, a black-box search's successive best views).
 """
 from __future__ import annotations
 
@@ -14,7 +15,8 @@ import torch
 from kadv.attack.init_views import InitView
 from kadv.geometry import axis_angle_to_matrix, perturb_world_T_cam
 
-__all__ = ["AttackResult", "Budget", "InitViewResult", "ViewRecord", "select_top_views", "separated"]
+__all__ = ["AttackResult", "Budget", "InitViewResult", "ViewRecord", "best_so_far", "incumbent_path", "select_top_views",
+           "separated"]
 
 
 @dataclass
@@ -32,7 +34,9 @@ class ViewRecord:
         verdict: ``view_validity``'s verdict ("valid", "inside an object", ...).
         guard_fraction: fraction of the proposed move that the step guard let through (1: all).
         coverage, rgb_error, depth_error, refreshed: the differentiable renderer's agreement with
-            the exact render (NaN and False for black-box methods, which render exactly).
+            the exact render (NaN and False for views rendered exactly).
+        seconds: wall-clock seconds since the search from this init view began (machine-dependent,
+            so ``trajectory.csv`` leaves it out).
     """
 
     step: int
@@ -51,6 +55,7 @@ class ViewRecord:
     rgb_error: float = math.nan
     depth_error: float = math.nan
     refreshed: bool = False
+    seconds: float = math.nan
 
     @property
     def valid(self) -> bool:
@@ -81,17 +86,16 @@ class InitViewResult:
     Attributes:
         init: the init view.
         records: every evaluated view in order of evaluation.
-        best_restart: the gradient restart whose valid views reach the largest L_depth (None for
-            black-box methods, whose lanes are not separate runs).
         top: the adversarial views, highest L_depth first.
         budget: what the search cost.
+        path: the views a report follows as the search's trajectory, in order.
     """
 
     init: InitView
     records: list[ViewRecord]
-    best_restart: int | None
     top: list[ViewRecord]
     budget: Budget
+    path: list[ViewRecord]
 
     @property
     def init_record(self) -> ViewRecord:
@@ -104,6 +108,27 @@ class AttackResult:
 
     method: str
     views: list[InitViewResult] = field(default_factory=list)
+
+
+def _improvements(records: list[ViewRecord]) -> list[tuple[int, ViewRecord]]:
+    """(evaluations so far, view) for the first view and each valid view that raised the best L_depth."""
+    out, best = [(1, records[0])], records[0].l_depth if records[0].valid else -math.inf
+    for count, record in enumerate(records[1:], start=2):
+        if record.valid and record.l_depth > best:
+            out.append((count, record))
+            best = record.l_depth
+    return out
+
+
+def incumbent_path(records: list[ViewRecord]) -> list[ViewRecord]:
+    """The init view, then each valid view that raised the best L_depth so far, in evaluation order."""
+    return [record for _, record in _improvements(records)]
+
+
+def best_so_far(records: list[ViewRecord]) -> list[tuple[int, float, float, float]]:
+    """(evaluations, seconds, L_depth, delta1) each time the best valid L_depth so far rose: the
+    search's anytime curve, starting at the init view."""
+    return [(count, r.seconds, r.l_depth, r.delta1) for count, r in _improvements(records)]
 
 
 def _angle_between(theta_a: list[float], theta_b: list[float]) -> float:

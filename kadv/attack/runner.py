@@ -1,25 +1,19 @@
 """``attack``: run one search method from every init view, resumably."""
 from __future__ import annotations
 
-import math
-import time
 from collections.abc import Callable
 
 import numpy as np
 from tqdm import tqdm
 
-from kadv.attack.blackbox import cma_search, random_search
-from kadv.attack.gradient import gradient_search
 from kadv.attack.init_views import InitView
 from kadv.attack.objective import Objective
 from kadv.attack.records import AttackResult, InitViewResult
+from kadv.attack.registry import get_method
 from kadv.attack.search import AttackConfig, SearchContext
 from kadv.render import DifferentiableRenderer
 
 __all__ = ["attack"]
-
-SearchMethod = Callable[[SearchContext, AttackConfig, np.random.Generator, tqdm], InitViewResult]
-_METHODS: dict[str, SearchMethod] = {"gradient": gradient_search, "random": random_search, "cma": cma_search}
 
 
 def attack(objective: Objective, differentiable: DifferentiableRenderer, init_views: list[InitView], height: int,
@@ -32,34 +26,35 @@ def attack(objective: Objective, differentiable: DifferentiableRenderer, init_vi
 
     Args:
         objective: what to maximise; its penalty settings also rule the step guard and view validity.
-        differentiable: the differentiable renderer (the gradient method's; black-box methods use
-            its exact renderer and supersampling).
+        differentiable: the differentiable renderer (gradient steps use it; views evaluated
+            without a gradient use its exact renderer and supersampling).
         init_views: starting views.
         height, width: image size.
         config: search settings.
         seed: the run's seed.
         completed: results already computed, by init-view index; they are not recomputed.
         on_result: called with (index, result) as each init view finishes (to save it).
-        progress: show a tqdm bar.
+        progress: show a tqdm bar (in evaluated views; no total under a seconds budget alone).
     """
-    method = _METHODS[config.method]
+    method = get_method(config.method)
     completed = dict(completed or {})
     result = AttackResult(config.method)
-    per_view = config.steps + 1 if config.method == "gradient" else math.ceil(config.evaluations / config.population)
-    with tqdm(total=len(init_views) * per_view, desc=f"{config.method} attack", disable=not progress,
-              unit="step", dynamic_ncols=True) as bar:
+    per_view = config.evaluations
+    with tqdm(total=len(init_views) * per_view if per_view else None, desc=f"{config.method} attack",
+              disable=not progress, unit="view", dynamic_ncols=True) as bar:
         for index, init in enumerate(init_views):
             if index in completed:
-                bar.update(per_view)
+                bar.update(per_view or 0)
                 result.views.append(completed[index])
                 continue
             bar.set_description(f"{config.method} attack, init view {index + 1}/{len(init_views)}")
             differentiable.reset()
-            context = SearchContext(objective, differentiable, init, height, width)
-            started = time.perf_counter()
-            view_result = method(context, config, np.random.default_rng([seed, index]), bar)
-            view_result.budget.seconds = time.perf_counter() - started
+            context = SearchContext(objective, differentiable, init, height, width, config)
+            view_result = method.search(context, np.random.default_rng([seed, index]), bar)
             result.views.append(view_result)
             if on_result is not None:
                 on_result(index, view_result)
+            if per_view:  # a search that ended early leaves the bar where the budget would have
+                bar.n = (index + 1) * per_view
+                bar.refresh()
     return result

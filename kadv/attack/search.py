@@ -1,23 +1,46 @@
-"""What every search method shares: its settings, pose bounds, the guarded move, view evaluation
-and recording."""
+"""What every search method shares: the attack's settings, pose bounds, the budget, the guarded
+move, view evaluation and recording."""
 from __future__ import annotations
 
+import dataclasses
 import math
+import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
 
 from kadv.attack.init_views import InitView
 from kadv.attack.objective import Objective, ObjectiveTerms
-from kadv.attack.records import ViewRecord
+from kadv.attack.records import Budget, InitViewResult, ViewRecord, select_top_views
 from kadv.geometry import intrinsics_from_fov, matrix_to_axis_angle, perturb_world_T_cam
 from kadv.penalties import step_guard, view_validity
 from kadv.render import DifferentiableRenderer, RenderOutput
 
-__all__ = ["METHODS", "AttackConfig", "SearchContext"]
+__all__ = ["DEFAULT_METHOD", "AttackConfig", "Clock", "SearchContext", "check_settings"]
 
-METHODS = ("gradient", "random", "cma")
+# The method that led the anytime benchmark at its full budget (benchmarks/search_anytime.py).
+DEFAULT_METHOD = "random"
+
+
+def check_settings(settings: Any, node: str) -> None:
+    """Refuse a settings dataclass holding a negative count, a non-positive rate or a NaN, naming
+    ``<node>.<field>``. Fields named ``*_fraction`` must lie in (0, 1]; others are positive numbers,
+    and integers at least 1 (``steps`` at least 0)."""
+    for field in dataclasses.fields(settings):
+        value = getattr(settings, field.name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            continue
+        if isinstance(value, int):
+            least = 0 if field.name == "steps" else 1
+            if value < least:
+                raise ValueError(f"{node}.{field.name} must be an integer >= {least}, got {value!r}")
+        elif field.name.endswith("_fraction"):
+            if not (math.isfinite(value) and 0.0 < value <= 1.0):
+                raise ValueError(f"{node}.{field.name} must be in (0, 1], got {value}")
+        elif not (math.isfinite(value) and value >= 0.0) or (value == 0.0 and not field.name.startswith("jitter")):
+            raise ValueError(f"{node}.{field.name} must be positive, got {value}")
 
 
 @dataclass(frozen=True)
@@ -25,75 +48,68 @@ class AttackConfig:
     """How to search (``conf/attack/``). Angles in degrees, distances in metres.
 
     Attributes:
-        method: "gradient" (Adam through the differentiable renderer), "random" or "cma".
-        steps: gradient steps per restart (each restart evaluates steps + 1 views).
-        restarts: gradient runs per init view, batched; restart 0 starts at the init view, the
-            others from seeded pose jitter.
-        lr_rotation: Adam learning rate of the rotation vector (radians).
-        lr_translation: Adam learning rate of the centre offset (metres).
-        jitter_deg, jitter_distance: largest rotation and centre offset of a restart's start.
-        max_angle_deg, max_distance: how far a pose may move from its init view (None: unbounded).
+        method: a registered search method (:data:`kadv.attack.METHODS`).
+        settings: that method's settings dataclass (the ``attack.<method>`` node); None: its defaults.
+        budget_evaluations: model forward passes per init view, the init view's included (None:
+            no count limit; a method without a natural end then needs ``budget_seconds``).
+        budget_seconds: wall-clock seconds per init view (None: no time limit). A batch starts
+            only if the previous one's duration still fits, so the count depends on the machine.
+        max_angle_deg, max_distance: how far a pose may turn and move from its init view (None:
+            unbounded; black-box methods then sample up to 180 degrees and 2 m).
         top_n: adversarial views kept per init view.
         min_separation, min_separation_deg: two adversarial views differ by at least this much
             in centre position or in orientation.
-        population: views per batch of the black-box methods.
-        cma_sigma: CMA-ES initial step size, as a fraction of the search box.
-        budget_evaluations: black-box evaluations per init view; None: the gradient method's
-            forward passes, restarts * (steps + 1).
-        budget_seconds: black-box seconds per init view (None: no time limit).
     """
 
-    method: str = "gradient"
-    steps: int = 30
-    restarts: int = 3
-    lr_rotation: float = 0.02
-    lr_translation: float = 0.03
-    jitter_deg: float = 3.0
-    jitter_distance: float = 0.05
+    method: str = DEFAULT_METHOD
+    settings: Any = None
+    budget_evaluations: int | None = 123
+    budget_seconds: float | None = None
     max_angle_deg: float | None = 45.0
     max_distance: float | None = 1.0
     top_n: int = 5
     min_separation: float = 0.05
     min_separation_deg: float = 3.0
-    population: int = 8
-    cma_sigma: float = 0.3
-    budget_evaluations: int | None = None
-    budget_seconds: float | None = None
 
     def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise ValueError(f"attack.method must be one of {', '.join(METHODS)}, got {self.method!r}")
-        for name in ("steps", "restarts", "top_n", "population"):
-            value = getattr(self, name)
-            if not isinstance(value, int) or value < (0 if name == "steps" else 1):
-                raise ValueError(f"attack.{name} must be an integer >= {0 if name == 'steps' else 1}, got {value!r}")
-        for name in ("lr_rotation", "lr_translation", "cma_sigma"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
-                raise ValueError(f"attack.{name} must be positive, got {getattr(self, name)}")
-        for name in ("jitter_deg", "jitter_distance", "min_separation", "min_separation_deg"):
+        from kadv.attack.registry import get_method
+
+        method = get_method(self.method)
+        if self.settings is None:
+            object.__setattr__(self, "settings", method.settings())
+        elif not isinstance(self.settings, method.settings):
+            raise ValueError(f"attack.{self.method}: expected {method.settings.__name__}, "
+                             f"got {type(self.settings).__name__}")
+        check_settings(self.settings, f"attack.{self.method}")
+        if not isinstance(self.top_n, int) or self.top_n < 1:
+            raise ValueError(f"attack.top_n must be an integer >= 1, got {self.top_n!r}")
+        for name in ("min_separation", "min_separation_deg"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise ValueError(f"attack.{name} must be >= 0, got {getattr(self, name)}")
         for name in ("max_angle_deg", "max_distance", "budget_seconds"):
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise ValueError(f"attack.{name} must be positive or null, got {value}")
-        if self.budget_evaluations is not None and self.budget_evaluations < 1:
-            raise ValueError(f"attack.budget_evaluations must be >= 1 or null, got {self.budget_evaluations}")
+        if self.budget_evaluations is not None and (not isinstance(self.budget_evaluations, int)
+                                                    or self.budget_evaluations < 1):
+            raise ValueError(f"attack.budget_evaluations must be an integer >= 1 or null, got {self.budget_evaluations!r}")
+        if self.evaluations is None and self.budget_seconds is None:
+            raise ValueError(f"attack.method={self.method} needs attack.budget_evaluations or attack.budget_seconds")
 
     @property
-    def evaluations(self) -> int:
-        """Black-box evaluations per init view."""
-        return self.budget_evaluations or self.restarts * (self.steps + 1)
+    def evaluations(self) -> int | None:
+        """Forward passes per init view: the budget, or the method's own end (None: unbounded)."""
+        from kadv.attack.registry import get_method
+
+        natural = get_method(self.method).evaluations(self.settings)
+        if self.budget_evaluations is None:
+            return natural
+        return self.budget_evaluations if natural is None else min(natural, self.budget_evaluations)
 
     def search_box(self) -> torch.Tensor:
-        """Half-widths (6,) of the pose box a gradient run may reach: its bounds, or Adam's reach
-        (a learning rate per step) where it is unbounded or reaches less far."""
-        rotation = self.lr_rotation * max(self.steps, 1)
-        translation = self.lr_translation * max(self.steps, 1)
-        if self.max_angle_deg is not None:
-            rotation = min(rotation, math.radians(self.max_angle_deg))
-        if self.max_distance is not None:
-            translation = min(translation, self.max_distance)
+        """Half-widths (6,) of the region black-box methods sample: the rotation and distance bounds."""
+        rotation = math.radians(self.max_angle_deg if self.max_angle_deg is not None else 180.0)
+        translation = self.max_distance if self.max_distance is not None else 2.0
         return torch.tensor([rotation] * 3 + [translation] * 3, dtype=torch.float64)
 
     def project(self, params: torch.Tensor) -> torch.Tensor:
@@ -105,6 +121,56 @@ class AttackConfig:
             delta = delta * (self.max_distance / delta.norm(dim=1, keepdim=True).clamp_min(1e-12)).clamp(max=1.0)
         return torch.cat([omega, delta], dim=1)
 
+    def sample_ball(self, unit: np.ndarray) -> torch.Tensor:
+        """Map points (N, 6) of the unit cube [0, 1)^6 onto poses spread uniformly over the two balls
+        of the bounds (rotation vector, centre offset): a uniform or space-filling design stays one."""
+        half = self.search_box()
+        parts = []
+        for k, radius in ((0, half[0]), (3, half[3])):
+            # three independent coordinates: radius from one, direction from two (Archimedes' projection)
+            r = unit[:, k] ** (1.0 / 3.0) * float(radius)
+            z = 2.0 * unit[:, k + 1] - 1.0
+            phi = 2.0 * math.pi * unit[:, k + 2]
+            s = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
+            parts.append(np.stack([r * s * np.cos(phi), r * s * np.sin(phi), r * z], axis=1))
+        return torch.from_numpy(np.concatenate(parts, axis=1))
+
+
+class Clock:
+    """The evaluation and seconds budgets of one init view's search.
+
+    A batch of views may start while the count allows it and the previous batch's duration still
+    fits in ``budget_seconds`` (so a search ends within about one batch of it).
+    """
+
+    def __init__(self, evaluations: int | None, seconds: float | None) -> None:
+        self.evaluations, self.seconds = evaluations, seconds
+        self.started = time.perf_counter()
+        self.budget = Budget()
+        self._last_batch = 0.0
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.started
+
+    def remaining(self) -> int:
+        """Evaluations the count budget still allows (a large number when it has none)."""
+        return (self.evaluations if self.evaluations is not None else 2**31) - self.budget.forward
+
+    def allows(self, count: int) -> int:
+        """How many of ``count`` views may be evaluated now (0: the search is over)."""
+        count = min(count, self.remaining())
+        if count <= 0:
+            return 0
+        if self.seconds is not None and self.elapsed() + self._last_batch > self.seconds:
+            return 0
+        return count
+
+    def spent(self, views: int, seconds: float, backward: int = 0) -> None:
+        """Count a batch of ``views`` forward (and ``backward``) passes that took ``seconds``."""
+        self.budget.forward += views
+        self.budget.backward += backward
+        self._last_batch = seconds
+
 
 class SearchContext:
     """Everything needed to evaluate views around one init view.
@@ -114,18 +180,21 @@ class SearchContext:
         differentiable: the differentiable renderer (its exact renderer must be the objective's).
         init: the init view.
         height, width: image size.
+        config: the attack's settings (bounds, budgets).
     """
 
     def __init__(self, objective: Objective, differentiable: DifferentiableRenderer, init: InitView, height: int,
-                 width: int) -> None:
+                 width: int, config: AttackConfig) -> None:
         self.objective = objective
         self.differentiable = differentiable
         self.renderer = differentiable.renderer
         self.init = init
+        self.config = config
         self.height, self.width = height, width
         self.K = intrinsics_from_fov(init.fov_x_deg, height, width)
         self.margin = objective.penalty.margin
         self.validity_options = objective.penalty.validity_options()
+        self.clock = Clock(config.evaluations, config.budget_seconds)
 
     def base(self, batch: int) -> torch.Tensor:
         return self.init.world_T_cam.double()[None].expand(batch, 4, 4)
@@ -149,15 +218,16 @@ class SearchContext:
 
     def records(self, step: int, params: torch.Tensor, world_T_cam: torch.Tensor, terms: ObjectiveTerms,
                 guard_fraction: torch.Tensor, stats: tuple[torch.Tensor, ...] | None = None,
-                refreshed: bool = False, lanes: range | None = None,
+                refreshed: bool = False, lanes: list[int] | range | None = None,
                 render: RenderOutput | None = None) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view, with the view's validity verdict (from ``render``, the
-        views' exact render, when given)."""
+        views' exact render, when given) and the search's clock."""
         pose = world_T_cam.detach()
         validity = view_validity(self.renderer, pose, self.K, self.height, self.width, render=render,
                                  **self.validity_options)
         theta = matrix_to_axis_angle(pose[:, :3, :3])
-        lanes = lanes or range(len(pose))
+        lanes = lanes if lanes is not None else range(len(pose))
+        seconds = self.clock.elapsed()
         rows = []
         for b, lane in enumerate(lanes):
             coverage, rgb_error, depth_error = (float(s[b]) for s in stats) if stats else (math.nan,) * 3
@@ -166,13 +236,28 @@ class SearchContext:
                 centre=pose[b, :3, 3].tolist(), l_depth=float(terms.l_depth[b].detach()), l_dist=float(terms.l_dist[b].detach()),
                 objective=float(terms.objective[b].detach()), delta1=float(terms.delta1[b]), abs_rel=float(terms.abs_rel[b]),
                 verdict=validity.verdicts[b], guard_fraction=float(guard_fraction[b]), coverage=coverage,
-                rgb_error=rgb_error, depth_error=depth_error, refreshed=refreshed))
+                rgb_error=rgb_error, depth_error=depth_error, refreshed=refreshed, seconds=seconds))
         return rows
 
-    def evaluate_exact(self, params: torch.Tensor) -> tuple[torch.Tensor, ObjectiveTerms, RenderOutput]:
-        """Poses (B, 4, 4), objective terms and exact renders of views (no gradient)."""
+    def evaluate(self, step: int, params: torch.Tensor, lanes: list[int] | range | None = None) -> list[ViewRecord]:
+        """Move from the init view to each pose (B, 6) through the step guard, render exactly,
+        evaluate and record, counting the views against the budget."""
+        started = time.perf_counter()
+        params = self.config.project(params)
+        reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
+        params = torch.cat([params[:, :3], reached], dim=1)
         with torch.no_grad():
             pose = perturb_world_T_cam(self.base(len(params)), params[:, :3], params[:, 3:])
             out = self.renderer.render(pose, self.K, self.height, self.width,
                                        supersample=self.differentiable.config.supersample)
-            return pose, self.objective(out.rgb, out.depth, out.mask, pose), out
+            terms = self.objective(out.rgb, out.depth, out.mask, pose)
+        rows = self.records(step, params, pose, terms, fraction, lanes=lanes, render=out)
+        self.clock.spent(len(params), time.perf_counter() - started)
+        return rows
+
+    def result(self, records: list[ViewRecord], path: list[ViewRecord]) -> InitViewResult:
+        """The search's result: its records, the adversarial views chosen from them, the budget
+        spent (seconds included) and the path a report follows."""
+        self.clock.budget.seconds = self.clock.elapsed()
+        top = select_top_views(records, self.config.top_n, self.config.min_separation, self.config.min_separation_deg)
+        return InitViewResult(self.init, records, top, self.clock.budget, path)

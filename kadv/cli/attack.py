@@ -1,9 +1,9 @@
 """``kadv-attack``: find camera views where a depth model fails; writes the run directory."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
-from dataclasses import fields
 from pathlib import Path
 
 import hydra
@@ -11,6 +11,8 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from kadv.attack import (
+    DEFAULT_METHOD,
+    METHODS,
     AttackConfig,
     InitViewConfig,
     Objective,
@@ -18,11 +20,18 @@ from kadv.attack import (
     attack,
     check_init_views,
     file_init_views,
+    get_method,
     load_init_params,
     sample_init_views,
     save_init_params,
 )
-from kadv.cli.common import check_render_config, reports_user_errors, scene_from_config, shading_from_config
+from kadv.cli.common import (
+    check_render_config,
+    reports_user_errors,
+    scene_from_config,
+    settings_from_node,
+    shading_from_config,
+)
 from kadv.device import resolve_device
 from kadv.io import atomic_write
 from kadv.losses import depth_loss
@@ -34,21 +43,18 @@ from kadv.runtime import configure_runtime
 log = logging.getLogger(__name__)
 
 INIT_PARAMS = "init_params.json"
-_INIT_KEYS = {"init_views": "count", "init_file_cameras": "file_cameras", "init_candidates": "candidates",
-              "init_clearance": "clearance", "init_eye_height": "eye_height", "init_pitch_deg": "pitch_deg",
-              "init_roll_deg": "roll_deg", "init_fov_x_deg": "fov_x_deg", "init_min_hit_fraction": "min_hit_fraction"}
 
 
-def attack_settings(cfg: DictConfig) -> tuple[AttackConfig, InitViewConfig]:
-    """The ``attack`` node split into the search's and the init views' settings; unknown keys are errors."""
+def attack_settings(cfg: DictConfig) -> AttackConfig:
+    """The ``attack`` node as an :class:`AttackConfig`: the shared keys, ``method``, and that method's
+    ``attack.<method>`` node as its settings dataclass; unknown keys are errors."""
     node = OmegaConf.to_container(cfg, resolve=True)
-    node.pop("init_params", None)
-    search_keys = {f.name for f in fields(AttackConfig)}
-    unknown = sorted(set(node) - search_keys - set(_INIT_KEYS))
-    if unknown:
-        raise ValueError(f"unknown key(s) attack.{', attack.'.join(unknown)}")
-    init = {_INIT_KEYS[k]: tuple(v) if isinstance(v, list) else v for k, v in node.items() if k in _INIT_KEYS}
-    return AttackConfig(**{k: v for k, v in node.items() if k in search_keys}), InitViewConfig(**init)
+    method = get_method(node.pop("method", DEFAULT_METHOD))
+    settings = settings_from_node(method.settings, node.pop(method.name, None), f"attack.{method.name}")
+    for name in METHODS:  # the nodes of other methods (a preset may carry several) are not this run's
+        node.pop(name, None)
+    shared = settings_from_node(AttackConfig, {"method": method.name, **node}, "attack")
+    return dataclasses.replace(shared, settings=settings)
 
 
 def _init_views(cfg: DictConfig, run_dir: Path, renderer: ExactRenderer, model, penalty: PenaltyConfig,
@@ -57,8 +63,8 @@ def _init_views(cfg: DictConfig, run_dir: Path, renderer: ExactRenderer, model, 
     saved = run_dir / INIT_PARAMS
     if saved.is_file():
         return load_init_params(saved)
-    if cfg.attack.get("init_params"):
-        views = load_init_params(cfg.attack.init_params)
+    if init_config.params:
+        views = load_init_params(init_config.params)
     else:
         views = file_init_views(renderer, penalty.margin)[: init_config.count] if init_config.file_cameras else []
         views += sample_init_views(renderer, model, init_config.count - len(views), int(cfg.seed), init_config,
@@ -89,8 +95,9 @@ def main(cfg: DictConfig) -> float:
         return float(summary["adversarial_l_depth"])
     device = resolve_device(cfg.device)
     height, width, supersample = check_render_config(cfg.render)
-    attack_config, init_config = attack_settings(cfg.attack)
-    penalty = PenaltyConfig(**OmegaConf.to_container(cfg.penalty, resolve=True))
+    attack_config = attack_settings(cfg.attack)
+    init_config = settings_from_node(InitViewConfig, OmegaConf.to_container(cfg.init, resolve=True), "init")
+    penalty = settings_from_node(PenaltyConfig, OmegaConf.to_container(cfg.penalty, resolve=True), "penalty")
     diff_config = DiffRenderConfig(supersample=supersample,
                                    **OmegaConf.to_container(cfg.render.differentiable, resolve=True))
     scene = scene_from_config(cfg.scene)

@@ -4,6 +4,7 @@ This is the edge where Hydra meets the library; nothing under ``kadv/`` but ``cl
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import logging
@@ -30,6 +31,7 @@ from kadv.scenes import Scene, box_room, load_scene
 __all__ = [
     "FAILURE",
     "camera_from_config",
+    "settings_from_node",
     "check_render_config",
     "dirname",
     "reports_user_errors",
@@ -152,3 +154,15 @@ def camera_from_config(cfg: DictConfig, scene: Scene) -> tuple[torch.Tensor, flo
     if fov is None:
         raise ValueError("camera.fov_x_deg is required with an explicit pose")
     return pose, float(fov)
+
+
+def settings_from_node(cls: type, node: dict | None, prefix: str) -> Any:
+    """The settings dataclass ``cls`` from a config node (a dict; None: the defaults); a key it does
+    not know is an error naming ``<prefix>.<key>``. Lists become tuples."""
+    node = dict(node or {})
+    known = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(node) - known)
+    if unknown:
+        raise ValueError(f"unknown key(s) {', '.join(f'{prefix}.{k}' for k in unknown)}; "
+                         f"{prefix} takes {', '.join(sorted(known)) or 'no keys'}")
+    return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in node.items()})

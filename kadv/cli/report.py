@@ -12,16 +12,18 @@ from kadv.losses import depth_loss
 from kadv.models import load_model
 from kadv.render import ExactRenderer
 from kadv.report.html import save_mean_curves, write_html
-from kadv.report.sweep import RunRecord, collect_runs, method_table, table2, table3
+from kadv.report.sweep import RunRecord, collect_runs, method_table, methods_of, table2, table3
 from kadv.report.transfer import transfer_tables
 from kadv.runtime import configure_runtime
 
 DESCRIPTION = """kadv-report: turns kadv-attack run directories into the study's tables and more.
-Writes to OUT (default: <first path>/report): table2.{md,csv} (adversarial L_depth and delta1 per
-model x scene), table3.{md,csv} (change from the init views), methods.{md,csv} (each attack method's
+Writes to OUT (default: <first path>/report), for each search method M in the runs:
+table2_M.{md,csv} (adversarial L_depth and delta1 per model x scene) and table3_M.{md,csv} (change
+from the init views); then methods.{md,csv} (each attack method's
 gain, evaluations and seconds, when the runs hold more than one), transfer_delta1.{md,csv} and
 transfer_l_depth.{md,csv} (every model scored on every model's adversarial views, re-rendered from
-their saved poses), curves.png, and report.html (self-contained: tables, curves, gallery, maps)."""
+their saved poses), curves.png (anytime curves per model and method), and report.html
+(self-contained: tables, curves, gallery, maps)."""
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -38,8 +40,10 @@ def report(paths: list[str], out: Path | None, transfer: bool = True, progress: 
     """Write every table, the curves and ``report.html``; returns the files written."""
     runs = collect_runs(paths)
     out = out or Path(paths[0]) / "report"
-    tables = [table2(runs), table3(runs)]
-    stems = ["table2", "table3"]
+    tables, stems = [], []
+    for method in methods_of(runs):
+        tables += [table2(runs, method), table3(runs, method)]
+        stems += [f"table2_{method}", f"table3_{method}"]
     methods = method_table(runs)
     if methods is not None:
         tables.append(methods)
@@ -66,7 +70,7 @@ def report(paths: list[str], out: Path | None, transfer: bool = True, progress: 
         stems += ["transfer_delta1", "transfer_l_depth"]
     written = [path for table, stem in zip(tables, stems) for path in table.write(out, stem)]
     curves = save_mean_curves(out / "curves.png", runs)
-    written += [curves] if curves else []
+    written.append(curves)
     written.append(write_html(out / "report.html", tables, curves, runs))
     return written
 

@@ -5,7 +5,14 @@ from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface, shortcut_penalty
 from kadv.penalties.guard import StepCheck, step_guard
 from kadv.penalties.sampling import random_valid_poses
-from kadv.penalties.validity import ViewValidity, fibonacci_sphere, probe_directions_hits, view_validity
+from kadv.penalties.validity import (
+    ViewValidity,
+    fibonacci_sphere,
+    plane_labels,
+    plane_shares,
+    probe_directions_hits,
+    view_validity,
+)
 
 __all__ = [
     "PenaltyConfig",
@@ -13,6 +20,8 @@ __all__ = [
     "ViewValidity",
     "distance_to_surface",
     "fibonacci_sphere",
+    "plane_labels",
+    "plane_shares",
     "probe_directions_hits",
     "random_valid_poses",
     "shortcut_penalty",

@@ -19,6 +19,11 @@ class PenaltyConfig:
         probe_rays: directions of the spherical inside/outside probe.
         outside_threshold: probe escape fraction above which a centre is outside the scene.
         inside_threshold: probe back-face fraction above which a centre is inside an object.
+        uninformative: judge views that show too little depth structure "uninformative" (recorded,
+            never chosen as adversarial or init views).
+        max_plane_share: a view is uninformative when one plane covers more than this share of the
+            pixels that hit a surface (min-max normalisation turns a lone plane's depth into a ramp
+            that any model's flat guess misses, so its L_depth says nothing about the model).
     """
 
     d_th: float = 0.2
@@ -29,6 +34,8 @@ class PenaltyConfig:
     probe_rays: int = 512
     outside_threshold: float = 0.3
     inside_threshold: float = 0.5
+    uninformative: bool = True
+    max_plane_share: float = 0.9
 
     def __post_init__(self) -> None:
         for name in ("d_th", "margin", "near", "min_distance"):
@@ -38,11 +45,12 @@ class PenaltyConfig:
             raise ValueError(f"penalty.weight must be >= 0, got {self.weight}")
         if self.probe_rays < 16:
             raise ValueError(f"penalty.probe_rays must be >= 16, got {self.probe_rays}")
-        for name in ("outside_threshold", "inside_threshold"):
+        for name in ("outside_threshold", "inside_threshold", "max_plane_share"):
             if not 0 < getattr(self, name) < 1:
                 raise ValueError(f"penalty.{name} must be in (0, 1), got {getattr(self, name)}")
 
-    def validity_options(self) -> dict[str, float | int]:
+    def validity_options(self) -> dict[str, float | int | None]:
         """Keyword arguments of :func:`kadv.penalties.view_validity`."""
         return {"near": self.near, "min_distance": self.min_distance, "probe_rays": self.probe_rays,
-                "outside_threshold": self.outside_threshold, "inside_threshold": self.inside_threshold}
+                "outside_threshold": self.outside_threshold, "inside_threshold": self.inside_threshold,
+                "max_plane_share": self.max_plane_share if self.uninformative else None}

@@ -15,9 +15,14 @@ optical centre instead:
   behind counts the same way.
 - *too close*: the centre is nearer than ``min_distance`` to a surface or some of the view's
   pixels are nearer than the near plane.
+- *uninformative*: a view that is otherwise valid but where one plane (a wall seen close, the
+  floor) covers more than ``max_plane_share`` of the pixels that hit a surface. A lone plane's
+  ground truth, min-max normalised, is a ramp that a model's nearly flat guess misses by a wide
+  margin while its delta1 stays near 1, so the view's L_depth says nothing about the model.
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,9 +34,14 @@ from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface
 from kadv.render.raycast import ExactRenderer, RenderOutput
 
-__all__ = ["ViewValidity", "fibonacci_sphere", "probe_directions_hits", "view_validity"]
+__all__ = ["ViewValidity", "fibonacci_sphere", "plane_labels", "plane_shares", "probe_directions_hits", "view_validity"]
 
 VALID, INSIDE, OUTSIDE, TOO_CLOSE = "valid", "inside an object", "outside the scene", "too close"
+UNINFORMATIVE = "uninformative"
+# Triangles lie in one plane when their unit normals agree to ~1 degree and their offsets to 2 cm:
+# coarse enough for a wall split into many triangles, fine enough to part a table top from the floor.
+_PLANE_NORMAL_STEP, _PLANE_OFFSET_STEP = 0.02, 0.02
+_PLANE_LABELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 @dataclass
@@ -45,7 +55,9 @@ class ViewValidity:
         probe_miss_fraction: (B,) fraction of spherical probe directions that escape.
         probe_back_fraction: (B,) fraction of probe directions whose first hit is a back face.
         distance: (B,) distance from the optical centre to the nearest surface, metres.
-        verdicts: one of "valid", "inside an object", "outside the scene", "too close" per camera.
+        plane_share: (B,) share of the pixels that hit a surface which lie on the most common plane.
+        verdicts: one of "valid", "inside an object", "outside the scene", "too close",
+            "uninformative" per camera.
         reasons: a sentence per camera saying why.
     """
 
@@ -55,6 +67,7 @@ class ViewValidity:
     probe_miss_fraction: torch.Tensor
     probe_back_fraction: torch.Tensor
     distance: torch.Tensor
+    plane_share: torch.Tensor
     verdicts: list[str]
     reasons: list[str]
 
@@ -70,6 +83,36 @@ def fibonacci_sphere(count: int) -> np.ndarray:
     radius = np.sqrt(1.0 - z * z)
     angle = np.pi * (1.0 + 5**0.5) * index
     return np.stack([radius * np.cos(angle), radius * np.sin(angle), z], axis=1)
+
+
+def plane_labels(renderer: ExactRenderer) -> np.ndarray:
+    """(F,) int64 label per triangle of the renderer's scene; coplanar triangles share a label
+    (computed once per scene)."""
+    if renderer not in _PLANE_LABELS:
+        scene = renderer.scene
+        corners = scene.vertices[scene.faces]
+        normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+        # n and -n are one plane: make each normal's largest component positive
+        sign = np.sign(np.take_along_axis(normal, np.abs(normal).argmax(axis=1)[:, None], axis=1))
+        normal *= np.where(sign == 0, 1.0, sign)
+        offset = np.einsum("fi,fi->f", normal, corners[:, 0])
+        keys = np.concatenate([np.round(normal / _PLANE_NORMAL_STEP), np.round(offset / _PLANE_OFFSET_STEP)[:, None]],
+                              axis=1)
+        _PLANE_LABELS[renderer] = np.unique(keys, axis=0, return_inverse=True)[1].reshape(-1)
+    return _PLANE_LABELS[renderer]
+
+
+def plane_shares(renderer: ExactRenderer, triangle_ids: np.ndarray) -> np.ndarray:
+    """(B,) share of each view's hit pixels that lie on its most common plane (0 for a view that
+    hits nothing), from per-pixel triangle ids (B, N) with -1 for a miss."""
+    labels = plane_labels(renderer)
+    shares = np.zeros(len(triangle_ids))
+    for b, ids in enumerate(triangle_ids):
+        hit = ids[ids >= 0]
+        if len(hit):
+            shares[b] = np.bincount(labels[hit]).max() / len(hit)
+    return shares
 
 
 def probe_directions_hits(renderer: ExactRenderer, centres: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -93,6 +136,7 @@ def view_validity(
     probe_rays: int = PenaltyConfig.probe_rays,
     outside_threshold: float = PenaltyConfig.outside_threshold,
     inside_threshold: float = PenaltyConfig.inside_threshold,
+    max_plane_share: float | None = PenaltyConfig.max_plane_share,
     render: RenderOutput | None = None,
 ) -> ViewValidity:
     """Classify B camera views.
@@ -107,6 +151,8 @@ def view_validity(
         probe_rays: directions of the spherical probe.
         outside_threshold: probe miss fraction above which the centre is outside the scene.
         inside_threshold: probe back-face fraction above which the centre is inside an object.
+        max_plane_share: a view whose most common plane covers more of its hit pixels than this is
+            "uninformative" (None: never).
         render: the views' exact render at these poses, K and size, when the caller has one: its
             pixel-centre hits are used instead of casting them again.
     """
@@ -116,17 +162,20 @@ def view_validity(
     if render is None:
         origins, directions = pixel_rays(pose, K, height, width)
         hits = renderer.cast(origins, directions)
+        triangle_ids = hits.triangle_ids.reshape(batch, -1)
         hit = hits.hit.reshape(batch, -1)
         view_back = renderer.back_facing(hits, directions).reshape(batch, -1)
         near_hit = hit & (hits.t.reshape(batch, -1) < near)
     else:
         if tuple(render.depth.shape) != (batch, 1, height, width):
             raise ValueError(f"render: expected depth ({batch}, 1, {height}, {width}), got {tuple(render.depth.shape)}")
-        hit = (render.triangle_ids >= 0).reshape(batch, -1).numpy()
+        triangle_ids = render.triangle_ids.reshape(batch, -1).numpy()
+        hit = triangle_ids >= 0
         view_back = render.back_face.reshape(batch, -1).numpy()
         near_hit = hit & (render.depth.reshape(batch, -1).double().numpy() < near)
     probe_miss, probe_back = probe_directions_hits(renderer, centres, fibonacci_sphere(probe_rays))
     distance = distance_to_surface(renderer, torch.from_numpy(centres)).numpy()
+    share = plane_shares(renderer, triangle_ids)
     verdicts, reasons = [], []
     for b in range(batch):
         miss_frac, back_frac = probe_miss[b].mean(), probe_back[b].mean()
@@ -140,6 +189,9 @@ def view_validity(
             verdicts.append(TOO_CLOSE)
             reasons.append(f"centre {distance[b]:.3f} m from a surface, {near_hit[b].mean():.1%} of pixels nearer "
                            f"than {near} m (limits {min_distance} m, 0 pixels)")
+        elif max_plane_share is not None and share[b] > max_plane_share:
+            verdicts.append(UNINFORMATIVE)
+            reasons.append(f"one plane covers {share[b]:.0%} of the surface pixels (> {max_plane_share:.0%})")
         else:
             verdicts.append(VALID)
             reasons.append(f"enclosed ({miss_frac:.0%} escape, {back_frac:.0%} back faces), {distance[b]:.2f} m clear")
@@ -151,6 +203,7 @@ def view_validity(
         probe_miss_fraction=as_tensor(probe_miss.mean(axis=1)),
         probe_back_fraction=as_tensor(probe_back.mean(axis=1)),
         distance=as_tensor(distance),
+        plane_share=as_tensor(share),
         verdicts=verdicts,
         reasons=reasons,
     )

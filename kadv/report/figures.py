@@ -10,7 +10,7 @@ import numpy as np
 from matplotlib.collections import PolyCollection
 from PIL import Image, ImageDraw
 
-from kadv.attack.records import InitViewResult
+from kadv.attack.records import InitViewResult, best_so_far
 from kadv.io import atomic_write
 from kadv.report.images import depth_colour_map, depth_range
 from kadv.scenes import Scene
@@ -68,31 +68,28 @@ def _grid(count: int) -> tuple[int, int]:
 
 
 def save_curves(path: str | Path, results: list[InitViewResult]) -> Path:
-    """L_depth per step for each restart (gradient) or each evaluation batch (black-box), per init view,
-    with the init view's value and the chosen adversarial views marked."""
+    """L_depth of every evaluated view against the evaluations so far, the best valid one so far and
+    the search's path, per init view, with the init view's value and the adversarial views marked."""
     rows, columns = _grid(len(results))
     figure, axes = plt.subplots(rows, columns, figsize=(4.6 * columns, 3.2 * rows), squeeze=False)
     for axis, result in zip(axes.flat, results):
-        lanes = sorted({r.restart for r in result.records})
-        if result.best_restart is not None:
-            for lane in lanes:
-                records = [r for r in result.records if r.restart == lane]
-                axis.plot([r.step for r in records], [r.l_depth for r in records], lw=2.0 if lane == result.best_restart else 1.0,
-                          label=f"restart {lane}" + (" (best)" if lane == result.best_restart else ""))
-        else:
-            axis.scatter([r.step for r in result.records], [r.l_depth for r in result.records], s=6, alpha=0.5,
-                         label="evaluated views")
-            best = np.maximum.accumulate([r.l_depth for r in result.records])
-            axis.plot([r.step for r in result.records], best, color="k", lw=1.5, label="best so far")
+        order = {id(r): count for count, r in enumerate(result.records, start=1)}
+        valid = [r for r in result.records if r.valid]
+        axis.scatter([order[id(r)] for r in valid], [r.l_depth for r in valid], s=6, alpha=0.4, label="evaluated views")
         invalid = [r for r in result.records if not r.valid]
         if invalid:
-            axis.scatter([r.step for r in invalid], [r.l_depth for r in invalid], marker="x", color="grey",
-                         label="invalid view")
+            axis.scatter([order[id(r)] for r in invalid], [r.l_depth for r in invalid], marker="x", s=10, color="grey",
+                         label="invalid or uninformative")
+        curve = best_so_far(result.records)
+        axis.step([c[0] for c in curve] + [len(result.records)], [c[2] for c in curve] + [curve[-1][2]], where="post",
+                  color="k", lw=1.5, label="best so far")
+        axis.plot([order[id(r)] for r in result.path], [r.l_depth for r in result.path], color="tab:orange", lw=1.0,
+                  label="path")
         axis.axhline(result.init_record.l_depth, color="k", ls="--", lw=1, label="init view")
-        axis.scatter([r.step for r in result.top], [r.l_depth for r in result.top], marker="*", s=120, color="red",
-                     zorder=5, label="adversarial views")
+        axis.scatter([order[id(r)] for r in result.top], [r.l_depth for r in result.top], marker="*", s=120,
+                     color="red", zorder=5, label="adversarial views")
         axis.set_title(f"{result.init.name}")
-        axis.set_xlabel("step")
+        axis.set_xlabel("evaluated views")
         axis.set_ylabel("L_depth")
         axis.legend(fontsize=7)
     for axis in list(axes.flat)[len(results):]:
@@ -118,8 +115,9 @@ def _arrow(axis: plt.Axes, pose: np.ndarray, length: float, **style) -> None:
 
 
 def save_map(path: str | Path, scene: Scene, results: list[InitViewResult]) -> Path:
-    """Top-down plan with each restart's camera path coloured by L_depth, the init view (black) and the
-    adversarial views (red) with their view directions, one panel per init view."""
+    """Top-down plan with every evaluated camera centre coloured by L_depth, the search's path (grey),
+    the init view (black) and the adversarial views (red) with their view directions, one panel per
+    init view."""
     poses = np.array([r.init.world_T_cam.numpy() for r in results])
     cut = float(poses[:, 1, 3].max()) + 0.3
     polygons = _plan_polygons(scene, cut)
@@ -131,12 +129,10 @@ def save_map(path: str | Path, scene: Scene, results: list[InitViewResult]) -> P
     figure, axes = plt.subplots(rows, columns, figsize=(4.6 * columns, 4.2 * rows), squeeze=False)
     for axis, result in zip(axes.flat, results):
         axis.add_collection(PolyCollection(polygons, facecolors="0.6", edgecolors="0.45", linewidths=0.3))
-        for lane in sorted({r.restart for r in result.records}):
-            records = [r for r in result.records if r.restart == lane]
-            xz = np.array([[r.centre[0], r.centre[2]] for r in records])
-            if result.best_restart is not None:
-                axis.plot(xz[:, 0], xz[:, 1], color="0.3", lw=0.6)
-            points = axis.scatter(xz[:, 0], xz[:, 1], c=[r.l_depth for r in records], cmap="viridis", norm=norm, s=8)
+        xz = np.array([[r.centre[0], r.centre[2]] for r in result.records])
+        points = axis.scatter(xz[:, 0], xz[:, 1], c=[r.l_depth for r in result.records], cmap="viridis", norm=norm, s=8)
+        trail = np.array([[r.centre[0], r.centre[2]] for r in result.path])
+        axis.plot(trail[:, 0], trail[:, 1], color="0.3", lw=0.8)
         init = result.init.world_T_cam.numpy()
         axis.plot(init[0, 3], init[2, 3], "k*", ms=12, label="init view")
         _arrow(axis, init, 0.1 * size, color="k", lw=1.5)

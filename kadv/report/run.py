@@ -17,18 +17,19 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from kadv.attack import AttackResult, InitView, InitViewResult, Objective, ViewRecord
+from kadv.attack import AttackResult, InitView, InitViewResult, Objective, ViewRecord, best_so_far
 from kadv.attack.records import Budget
 from kadv.geometry import intrinsics_from_fov
 from kadv.io import atomic_write, write_json
 from kadv.losses import aligned_depth
+from kadv.penalties.validity import UNINFORMATIVE
 from kadv.report.figures import annotate, colourise, save_curves, save_four_panel, save_map, save_video
 
 __all__ = ["SUMMARY", "is_complete", "load_partial_results", "save_partial_result", "trajectory_rows", "write_run"]
 
 SUMMARY = "summary.json"
 _PARTIAL = "partial"
-_PACKAGES = ("kadv", "torch", "kornia", "open3d-cpu", "trimesh", "transformers", "numpy", "cma")
+_PACKAGES = ("kadv", "torch", "kornia", "open3d-cpu", "trimesh", "transformers", "numpy", "cma", "nevergrad")
 _MAX_VIDEO_FRAMES = 200
 
 
@@ -42,8 +43,8 @@ def save_partial_result(run_dir: str | Path, index: int, result: InitViewResult)
     data = {
         "init": result.init.to_dict(),
         "records": [asdict(r) for r in result.records],
-        "best_restart": result.best_restart,
         "top": [[r.step, r.restart] for r in result.top],
+        "path": [[r.step, r.restart] for r in result.path],
         "budget": result.budget.to_dict(),
     }
     return write_json(Path(run_dir) / _PARTIAL / f"init{index}.json", data)
@@ -57,13 +58,14 @@ def load_partial_results(run_dir: str | Path) -> dict[int, InitViewResult]:
         records = [ViewRecord(**r) for r in data["records"]]
         by_key = {(r.step, r.restart): r for r in records}
         results[int(path.stem.removeprefix("init"))] = InitViewResult(
-            InitView.from_dict(data["init"]), records, data["best_restart"],
-            [by_key[tuple(key)] for key in data["top"]], Budget(**data["budget"]))
+            InitView.from_dict(data["init"]), records, [by_key[tuple(key)] for key in data["top"]],
+            Budget(**data["budget"]), [by_key[tuple(key)] for key in data["path"]])
     return results
 
 
 def trajectory_rows(result: AttackResult) -> list[dict]:
-    """One row per evaluated view: where, the objective's terms, validity, guard and renderer agreement."""
+    """One row per evaluated view: where, the objective's terms, validity, guard and renderer agreement
+    (not its clock, which differs from machine to machine and run to run)."""
     rows = []
     for index, view in enumerate(result.views):
         for r in view.records:
@@ -73,7 +75,7 @@ def trajectory_rows(result: AttackResult) -> list[dict]:
             row.update({f"omega_{a}": v for a, v in zip("xyz", r.params[:3])})
             row.update({f"delta_{a}": v for a, v in zip("xyz", r.params[3:])})
             row.update({f.name: getattr(r, f.name) for f in fields(r)
-                        if f.name not in ("step", "restart", "params", "theta", "centre")})
+                        if f.name not in ("step", "restart", "params", "theta", "centre", "seconds")})
             rows.append(row)
     return rows
 
@@ -124,15 +126,8 @@ def _save_views(views_dir: Path, index: int, view: InitViewResult, render: _View
 
 
 def _video_frames(view: InitViewResult, render: _ViewRenderer) -> list[np.ndarray]:
-    """The best restart's path (gradient) or the successive best views (black-box), image | prediction."""
-    if view.best_restart is not None:
-        path = [r for r in view.records if r.restart == view.best_restart]
-    else:
-        path, best = [], -np.inf
-        for record in view.records:
-            if record.valid and record.l_depth > best:
-                path.append(record)
-                best = record.l_depth
+    """The search's path (see :class:`InitViewResult`), image | depth | prediction per frame."""
+    path = view.path
     path = path[:: max(1, len(path) // _MAX_VIDEO_FRAMES + (len(path) % _MAX_VIDEO_FRAMES > 0))]
     frames = []
     for start in range(0, len(path), 16):
@@ -193,10 +188,12 @@ def write_run(run_dir: str | Path, result: AttackResult, objective: Objective, h
             "adversarial": adversarial,
             "adversarial_mean": {k: float(np.mean([a[k] for a in adversarial])) if adversarial else None
                                  for k in ("l_depth", "delta1", "abs_rel")},
-            "best_restart": view.best_restart,
             "l_depth_gain": gain,
+            "anytime": [dict(zip(("evaluations", "seconds", "l_depth", "delta1"), point))
+                        for point in best_so_far(view.records)],
             "evaluations": len(view.records),
             "invalid_views": sum(not r.valid for r in view.records),
+            "uninformative_views": sum(r.verdict == UNINFORMATIVE for r in view.records),
             "guarded_steps": sum(r.guard_fraction < 1.0 for r in view.records),
             "budget": view.budget.to_dict(),
         })

@@ -19,7 +19,7 @@ import yaml
 from kadv.io import atomic_write
 from kadv.report.run import SUMMARY
 
-__all__ = ["RunRecord", "Table", "collect_runs", "method_table", "primary_method", "table2", "table3"]
+__all__ = ["RunRecord", "Table", "collect_runs", "main_method", "method_table", "methods_of", "table2", "table3"]
 
 
 @dataclass
@@ -96,14 +96,21 @@ def collect_runs(paths: list[str | Path]) -> list[RunRecord]:
     return runs
 
 
-def primary_method(runs: list[RunRecord]) -> str:
-    methods = {r.method for r in runs}
-    return "gradient" if "gradient" in methods else sorted(methods)[0]
+def methods_of(runs: list[RunRecord]) -> list[str]:
+    """The search methods present, in alphabetical order."""
+    return sorted({r.method for r in runs})
 
 
-def _grid(runs: list[RunRecord], value) -> tuple[list[str], list[str], dict[tuple[str, str], float]]:
-    """Mean of ``value(run)`` per (model, scene) over the runs of the primary method."""
-    method = primary_method(runs)
+def main_method(runs: list[RunRecord]) -> str:
+    """The method with the most runs (ties: alphabetical), whose views the transfer matrix re-renders."""
+    counts = defaultdict(int)
+    for run in runs:
+        counts[run.method] += 1
+    return min(counts, key=lambda method: (-counts[method], method))
+
+
+def _grid(runs: list[RunRecord], method: str, value) -> tuple[list[str], list[str], dict[tuple[str, str], float]]:
+    """Mean of ``value(run)`` per (model, scene) over the runs of ``method``."""
     cells: dict[tuple[str, str], list[float]] = defaultdict(list)
     for run in runs:
         if run.method == method:
@@ -113,9 +120,10 @@ def _grid(runs: list[RunRecord], value) -> tuple[list[str], list[str], dict[tupl
     return models, scenes, {key: statistics.mean(values) for key, values in cells.items()}
 
 
-def _paired_table(title: str, runs: list[RunRecord], first: tuple[str, object], second: tuple[str, object]) -> Table:
+def _paired_table(title: str, runs: list[RunRecord], method: str, first: tuple[str, object],
+                  second: tuple[str, object]) -> Table:
     """Models as rows; per scene a column pair (first, second); then their averages over scenes."""
-    grids = [_grid(runs, getter) for _, getter in (first, second)]
+    grids = [_grid(runs, method, getter) for _, getter in (first, second)]
     models, scenes = grids[0][0], grids[0][1]
     header = ["model"] + [f"{scene} {name}" for scene in scenes for name in (first[0], second[0])]
     header += [f"Avg {first[0]}", f"Avg {second[0]}"]
@@ -139,16 +147,18 @@ def _paired_table(title: str, runs: list[RunRecord], first: tuple[str, object], 
     return table
 
 
-def table2(runs: list[RunRecord]) -> Table:
-    """The study's Table 2: adversarial L_depth (higher: worse for the model) and delta1 (lower: worse)."""
-    return _paired_table(f"Table 2: adversarial views ({primary_method(runs)} attack)", runs,
+def table2(runs: list[RunRecord], method: str) -> Table:
+    """The study's Table 2 for one method's runs: adversarial L_depth (higher: worse for the model)
+    and delta1 (lower: worse)."""
+    return _paired_table(f"Table 2: adversarial views ({method} attack)", runs, method,
                          ("L_depth", lambda r: r.summary["adversarial_l_depth"]),
                          ("delta1", lambda r: r.summary["adversarial_delta1"]))
 
 
-def table3(runs: list[RunRecord]) -> Table:
-    """The study's Table 3: adversarial - init for L_depth, init - adversarial for delta1."""
-    return _paired_table(f"Table 3: change from the init views ({primary_method(runs)} attack)", runs,
+def table3(runs: list[RunRecord], method: str) -> Table:
+    """The study's Table 3 for one method's runs: adversarial - init for L_depth, init - adversarial
+    for delta1."""
+    return _paired_table(f"Table 3: change from the init views ({method} attack)", runs, method,
                          ("dL_depth", lambda r: r.summary["adversarial_l_depth"] - r.summary["init_l_depth"]),
                          ("ddelta1", lambda r: r.summary["init_delta1"] - r.summary["adversarial_delta1"]))
 

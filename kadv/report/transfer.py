@@ -14,7 +14,7 @@ from kadv.losses import depth_metrics
 from kadv.models import DepthModel
 from kadv.penalties import PenaltyConfig
 from kadv.render import ExactRenderer
-from kadv.report.sweep import RunRecord, Table, primary_method
+from kadv.report.sweep import RunRecord, Table, main_method
 
 __all__ = ["transfer_tables"]
 
@@ -39,7 +39,7 @@ def transfer_tables(runs: list[RunRecord], renderer_of: Callable[[RunRecord], Ex
     Each run's adversarial poses are re-rendered exactly at the run's size and scored by each model
     in the sweep; cells average over scenes and views. The diagonal reproduces the runs' own scores.
     """
-    method = primary_method(runs)
+    method = main_method(runs)
     runs = [r for r in runs if r.method == method]
     models = {r.model: r for r in runs}
     names = sorted(models)

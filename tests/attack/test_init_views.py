@@ -16,6 +16,7 @@ from kadv.attack import (
     file_init_views,
     load_init_params,
     sample_init_views,
+    score_views,
     save_init_params,
 )
 from kadv.penalties import distance_to_surface, view_validity
@@ -52,9 +53,11 @@ def test_sampled_views_are_valid_clear_in_range_and_ranked(tiny_objective) -> No
     config = InitViewConfig(candidates=12, eye_height=(1.2, 1.6), pitch_deg=(-20.0, 0.0), roll_deg=(0.0, 0.0))
     views = sample_init_views(renderer, model, 4, 3, config, PENALTY, 48, 64)
     assert len(views) == 4 and all(v.source == "sampled" for v in views)
-    scores = [round(v.delta1, 2) for v in views]
-    assert scores == sorted(scores, reverse=True)
     poses = torch.stack([v.world_T_cam for v in views])
+    scores = score_views(model, renderer, poses, torch.full((4,), config.fov_x_deg), 48, 64)
+    ranked = (scores.delta1 + config.content_weight * scores.content()).tolist()
+    assert ranked == sorted(ranked, reverse=True)  # accuracy and what the view shows, together
+    assert ((scores.content() > 0) & (scores.content() <= 1)).all() and (scores.surfaces >= 1).all()
     assert (distance_to_surface(renderer, poses[:, :3, 3]) > 2 * PENALTY.d_th).all()
     centres = poses[:, :3, 3].numpy()
     below = renderer.cast(centres, np.broadcast_to(np.array([0.0, -1.0, 0.0]), centres.shape))

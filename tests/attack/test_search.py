@@ -3,23 +3,47 @@ from __future__ import annotations
 import math
 import time
 
+import numpy as np
 import pytest
 import torch
 
-from kadv.attack import AttackConfig, ViewRecord, attack, select_top_views, separated
+from kadv.attack import (
+    METHODS,
+    AttackConfig,
+    GradientSettings,
+    NevergradSettings,
+    Proposer,
+    SearchContext,
+    ViewRecord,
+    attack,
+    get_method,
+    gradient_search,
+    register_proposer,
+    select_top_views,
+    separated,
+)
+from kadv.report.run import trajectory_rows
 
 H, W = 48, 64
+BUILT_IN = ("gradient", "random", "cma", "nevergrad", "hybrid")
 
 
-def _run(objective, differentiable, views, size=(H, W), **overrides):
-    config = AttackConfig(**{"steps": 10, "restarts": 2, **overrides})
+def _run(objective, differentiable, views, size=(H, W), method="gradient", settings=None, **overrides):
+    config = AttackConfig(method, settings, **overrides)
     return attack(objective, differentiable, views, *size, config, seed=0, progress=False)
+
+
+def test_the_registry_holds_the_built_in_methods_and_refuses_unknown_ones() -> None:
+    assert all(get_method(m).name == m for m in BUILT_IN) and set(BUILT_IN) <= set(METHODS)
+    with pytest.raises(ValueError, match="attack.method must be one of .*gradient.*got 'adam'"):
+        AttackConfig("adam")
 
 
 def test_ten_gradient_steps_raise_l_depth_on_every_restart(tiny_objective, differentiable, file_view) -> None:
     # L_depth is rough in the pose at a few thousand pixels (min-max normalisation, occlusions); at
     # 96 x 128 ten steps lift every restart
-    result = _run(tiny_objective, differentiable, [file_view], size=(96, 128), restarts=3)
+    result = _run(tiny_objective, differentiable, [file_view], size=(96, 128),
+                  settings=GradientSettings(steps=10, restarts=3), budget_evaluations=None)
     view = result.views[0]
     for restart in range(3):
         path = [r for r in view.records if r.restart == restart]
@@ -28,20 +52,34 @@ def test_ten_gradient_steps_raise_l_depth_on_every_restart(tiny_objective, diffe
     assert view.budget.forward == 33 and view.budget.backward == 30 and view.budget.seconds > 0
     assert view.init_record.params == [0.0] * 6  # restart 0 starts at the init view itself
     best = max(range(3), key=lambda b: max(r.l_depth for r in view.records if r.restart == b and r.valid))
-    assert view.best_restart == best
-    assert view.top and all(r.valid and r.restart == best for r in view.top)
+    assert view.path == [r for r in view.records if r.restart == best]  # the path is the best restart
     assert [r.l_depth for r in view.top] == sorted((r.l_depth for r in view.top), reverse=True)
     for i, a in enumerate(view.top):
         for b in view.top[i + 1:]:
             assert separated(a, b, 0.05, 3.0)
 
 
+def test_the_gradient_method_starts_from_given_poses(tiny_objective, differentiable, file_view) -> None:
+    start = torch.tensor([[0.0, 0.1, 0.0, 0.05, 0.0, 0.0], [0.0, -0.1, 0.0, 0.0, 0.0, 0.05]], dtype=torch.float64)
+    config = AttackConfig("gradient", GradientSettings(steps=2), budget_evaluations=None)
+    context = SearchContext(tiny_objective, differentiable, file_view, H, W, config)
+    from tqdm import tqdm
+
+    with tqdm(disable=True) as bar:
+        result = gradient_search(context, np.random.default_rng(0), bar, start=start)
+    first = [r for r in result.records if r.step == 0]
+    assert [r.params for r in first] == [[0.0] * 6, *start.tolist()]  # the init view is prepended as restart 0
+    assert result.budget.forward == 3 * 3 and {r.restart for r in result.records} == {0, 1, 2}
+
+
 def test_bounds_hold_on_every_visited_pose(tiny_objective, differentiable, file_view) -> None:
-    result = _run(tiny_objective, differentiable, [file_view], lr_rotation=0.2, lr_translation=0.2,
-                  max_angle_deg=5.0, max_distance=0.1, steps=4)
-    for record in result.views[0].records:
-        assert torch.tensor(record.params[:3], dtype=torch.float64).norm() <= math.radians(5.0) + 1e-9
-        assert torch.tensor(record.params[3:], dtype=torch.float64).norm() <= 0.1 + 1e-9
+    for method, settings in (("gradient", GradientSettings(steps=4, lr_rotation=0.2, lr_translation=0.2)),
+                             ("random", None)):
+        result = _run(tiny_objective, differentiable, [file_view], method=method, settings=settings,
+                      max_angle_deg=5.0, max_distance=0.1, budget_evaluations=12)
+        for record in result.views[0].records:
+            assert torch.tensor(record.params[:3], dtype=torch.float64).norm() <= math.radians(5.0) + 1e-9
+            assert torch.tensor(record.params[3:], dtype=torch.float64).norm() <= 0.1 + 1e-9
 
 
 def _record(l_depth: float, centre: list[float], verdict: str = "valid", theta=(0.0, 0.0, 0.0)) -> ViewRecord:
@@ -49,9 +87,10 @@ def _record(l_depth: float, centre: list[float], verdict: str = "valid", theta=(
                       l_dist=0.0, objective=l_depth, delta1=1.0, abs_rel=0.0, verdict=verdict)
 
 
-def test_top_views_skip_invalid_views_and_keep_their_separation() -> None:
+def test_top_views_skip_invalid_and_uninformative_views_and_keep_their_separation() -> None:
     records = [
         _record(0.9, [0.0, 0.0, 0.0], verdict="inside an object"),
+        _record(0.85, [2.0, 0.0, 0.0], verdict="uninformative"),
         _record(0.8, [0.0, 0.0, 0.0]),
         _record(0.7, [0.01, 0.0, 0.0]),                        # too near the 0.8 view
         _record(0.6, [0.01, 0.0, 0.0], theta=(0.0, 0.2, 0.0)),  # as near, but turned by 11.5 degrees
@@ -62,45 +101,74 @@ def test_top_views_skip_invalid_views_and_keep_their_separation() -> None:
     assert select_top_views(records, 2, 0.05, 3.0) == top[:2]
 
 
-@pytest.mark.parametrize("method", ["random", "cma"])
-def test_black_box_methods_stay_within_their_evaluation_budget(method, tiny_objective, differentiable, file_view) -> None:
-    result = _run(tiny_objective, differentiable, [file_view], method=method, budget_evaluations=11, population=4)
+@pytest.mark.parametrize("method", BUILT_IN)
+def test_every_method_stays_within_its_evaluation_budget(method, tiny_objective, differentiable, file_view) -> None:
+    result = _run(tiny_objective, differentiable, [file_view], method=method, budget_evaluations=11)
     view = result.views[0]
-    assert view.budget.forward == len(view.records) == 11
-    assert view.budget.backward == 0
-    assert view.init_record.params == [0.0] * 6 and view.best_restart is None
+    assert len(view.records) == view.budget.forward <= 11
+    assert view.budget.forward >= 11 - 2  # the gradient's batches of 3 restarts leave at most 2 unspent
+    assert view.init_record.params == [0.0] * 6 and view.path[0].step == 0 and view.path[-1] in view.records
     assert all(r.valid for r in view.top)
-    half = AttackConfig(steps=10, restarts=2).search_box()
-    for record in view.records:  # samples stay in the box a gradient run may reach
+    half = AttackConfig().search_box()
+    for record in view.records:  # every pose stays in the bounds' box
         assert all(abs(p) <= h + 1e-9 for p, h in zip(record.params, half.tolist()))
 
 
-@pytest.mark.parametrize("method", ["random", "cma"])
-def test_black_box_methods_stay_within_their_time_budget(method, tiny_objective, differentiable, file_view) -> None:
+@pytest.mark.parametrize("method", BUILT_IN)
+def test_every_method_stays_within_its_time_budget(method, tiny_objective, differentiable, file_view) -> None:
     started = time.perf_counter()
-    result = _run(tiny_objective, differentiable, [file_view], method=method, budget_evaluations=10_000,
-                  budget_seconds=1.0, population=4)
+    settings = GradientSettings(steps=10_000) if method == "gradient" else None
+    result = _run(tiny_objective, differentiable, [file_view], method=method, settings=settings,
+                  budget_evaluations=None, budget_seconds=1.5)
     elapsed = time.perf_counter() - started
     view = result.views[0]
-    assert view.budget.forward < 10_000
-    # the clock is checked before each batch, so at most one batch runs past the budget
-    per_batch = elapsed / max(1, len({r.step for r in view.records}))
-    assert view.budget.seconds <= 1.0 + 2 * per_batch + 0.5
+    batches = len({r.step for r in view.records})
+    assert batches >= 2 and view.budget.forward == len(view.records)
+    # a batch starts only while the previous batch's duration still fits in the budget
+    assert view.budget.seconds <= 1.5 + 2 * elapsed / batches
 
 
-def test_same_seed_gives_bit_identical_records(tiny_objective, differentiable, file_view) -> None:
-    first = _run(tiny_objective, differentiable, [file_view], steps=3)
-    second = _run(tiny_objective, differentiable, [file_view], steps=3)
-    assert first.views[0].records == second.views[0].records
+@pytest.mark.parametrize("method, settings", [("hybrid", None), ("nevergrad", NevergradSettings("TwoPointsDE")),
+                                              ("nevergrad", None)])
+def test_same_seed_gives_identical_trajectories(method, settings, tiny_objective, differentiable, file_view) -> None:
+    runs = [_run(tiny_objective, differentiable, [file_view], method=method, settings=settings, budget_evaluations=20)
+            for _ in range(2)]
+    assert trajectory_rows(runs[0]) == trajectory_rows(runs[1])
+    assert len(trajectory_rows(runs[0])) == 20
+
+
+def test_same_seed_gives_bit_identical_gradient_records(tiny_objective, differentiable, file_view) -> None:
+    first, second = (_run(tiny_objective, differentiable, [file_view], settings=GradientSettings(steps=3))
+                     for _ in range(2))
+    assert trajectory_rows(first) == trajectory_rows(second)
+
+
+def test_a_method_added_through_the_documented_route_runs(tiny_objective, differentiable, file_view) -> None:
+    # the README's route: a Proposer subclass registered under a name, then attack.method=<name>
+    @register_proposer("still_test")
+    class Still(Proposer):
+        def ask(self, count: int) -> torch.Tensor:
+            return torch.zeros(min(count, 4), 6, dtype=torch.float64)
+
+    result = _run(tiny_objective, differentiable, [file_view], method="still_test", budget_evaluations=9)
+    assert len(result.views[0].records) == 9 and all(r.params == [0.0] * 6 for r in result.views[0].records)
+    METHODS.pop("still_test")
 
 
 @pytest.mark.parametrize("overrides, key", [
-    ({"steps": -1}, "attack.steps"),
-    ({"method": "adam"}, "attack.method"),
-    ({"restarts": 0}, "attack.restarts"),
-    ({"lr_rotation": 0.0}, "attack.lr_rotation"),
+    ({"settings": GradientSettings(steps=-1)}, "attack.gradient.steps"),
+    ({"settings": GradientSettings(restarts=0)}, "attack.gradient.restarts"),
+    ({"settings": GradientSettings(lr_rotation=0.0)}, "attack.gradient.lr_rotation"),
     ({"max_distance": -1.0}, "attack.max_distance"),
+    ({"budget_evaluations": 0}, "attack.budget_evaluations"),
 ])
 def test_bad_settings_name_their_key(overrides, key) -> None:
     with pytest.raises(ValueError, match=key):
-        AttackConfig(**overrides)
+        AttackConfig("gradient", **overrides)
+
+
+def test_bad_method_settings_name_their_key() -> None:
+    with pytest.raises(ValueError, match="attack.nevergrad.optimizer.*NGOpt"):
+        NevergradSettings("NoSuchOptimizer")
+    with pytest.raises(ValueError, match="attack.method=random needs attack.budget_evaluations or attack.budget_seconds"):
+        AttackConfig("random", budget_evaluations=None)

@@ -16,8 +16,8 @@ from PIL import Image
 from kadv import box_room
 
 BIN = Path(sys.executable).parent
-SMALL = ["render.height=48", "render.width=64", "attack.steps=4", "attack.restarts=2", "attack.init_views=2",
-         "attack.init_candidates=8", "progress=false"]
+SMALL = ["render.height=48", "render.width=64", "attack=gradient", "attack.gradient.steps=4", "attack.gradient.restarts=2", "init.count=2",
+         "init.candidates=8", "progress=false"]
 
 
 def _command(tool: str, run_dir: Path, *overrides: str) -> list[str]:
@@ -127,12 +127,14 @@ def _inside_box_params(tmp_path: Path) -> Path:
 BAD_INPUTS = [
     ("kadv-attack", ["scene=file", "scene.path=/no/such/scene.xml"], "/no/such/scene.xml"),
     ("kadv-attack", ["scene=file", "scene.path={corrupt}"], "corrupt.xml"),
-    ("kadv-attack", ["attack.steps=-3"], "attack.steps"),
+    ("kadv-attack", ["attack.gradient.steps=-3"], "attack.gradient.steps"),
+    ("kadv-attack", ["attack.method=adam"], "attack.method must be one of"),
+    ("kadv-attack", ["attack=nevergrad", "attack.nevergrad.optimizer=NoSuchOpt"], "NGOpt"),
     ("kadv-attack", ["model.name=no_such_model"], "no_such_model"),
     ("kadv-attack", ["render.supersample=0"], "render.supersample"),
     ("kadv-attack", ["model=depth_anything_v2_small"], "depth_anything_v2_small"),
-    ("kadv-attack", ["attack.init_params={inside}"], "inside an object"),
-    ("kadv-attack", ["attack.init_params=/no/such/init_params.json"], "/no/such/init_params.json"),
+    ("kadv-attack", ["init.params={inside}"], "inside an object"),
+    ("kadv-attack", ["init.params=/no/such/init_params.json"], "/no/such/init_params.json"),
     ("kadv-attack", ["device=tpu"], "device='tpu'"),
     *([("kadv-attack", ["device=cuda"], "no CUDA device")] if not torch.cuda.is_available() else []),
     ("kadv-render", ["camera.eye=[1,1.5]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),

@@ -8,7 +8,7 @@ import pytest
 from hydra import compose, initialize_config_module
 from omegaconf import OmegaConf
 
-from kadv.attack import AttackConfig, InitViewConfig
+from kadv.attack import DEFAULT_METHOD, AttackConfig, InitViewConfig, get_method
 from kadv.cli.attack import attack_settings
 from kadv.cli.common import shading_from_config
 from kadv.models import PRESETS
@@ -33,24 +33,26 @@ def _defaults(cls) -> dict:
 
 
 def test_every_group_option_composes_into_valid_settings() -> None:
-    for group in ("scene", "model", "loss", "render", "penalty", "attack", "experiment"):
+    for group in ("scene", "model", "loss", "render", "penalty", "init", "attack", "experiment"):
         for option in _options(group):
             cfg = _compose("kadv_attack", f"{group}={option}")
-            attack, init = attack_settings(cfg.attack)
+            attack = attack_settings(cfg.attack)
+            InitViewConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in OmegaConf.to_container(cfg.init).items()})
             PenaltyConfig(**OmegaConf.to_container(cfg.penalty))
             DiffRenderConfig(supersample=cfg.render.supersample, **OmegaConf.to_container(cfg.render.differentiable))
             shading_from_config(cfg.render.shading)
             assert cfg.loss.kind in ("ssim", "perceptual") and cfg.loss.space in ("disparity", "depth")
             assert OmegaConf.is_missing(cfg.model, "name") or cfg.model.name in {*PRESETS, "kadv_tiny"}
             assert cfg.scene.kind in ("box_room", "file")
-            if group == "attack":
-                assert attack.method == option
+            if group == "attack":  # each method's YAML node is its settings dataclass, defaults included
+                assert attack.method == option and attack.settings == get_method(option).settings()
 
 
 def test_yaml_defaults_equal_the_library_defaults() -> None:
     cfg = _compose("kadv_attack", "~experiment")
-    attack, init = attack_settings(cfg.attack)
-    assert attack == AttackConfig() and init == InitViewConfig()
+    init = OmegaConf.to_container(cfg.init)
+    assert attack_settings(cfg.attack) == AttackConfig()
+    assert InitViewConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in init.items()}) == InitViewConfig()
     assert OmegaConf.to_container(cfg.penalty) == _defaults(PenaltyConfig)
     diff = OmegaConf.to_container(cfg.render.differentiable)
     assert DiffRenderConfig(supersample=cfg.render.supersample, **diff) == DiffRenderConfig()
@@ -60,12 +62,14 @@ def test_yaml_defaults_equal_the_library_defaults() -> None:
     assert TinyTrainConfig(**{**train, "channels": tuple(train["channels"])}) == TinyTrainConfig()
 
 
-@pytest.mark.parametrize("experiment, steps, restarts, views, loss", [("demo", 40, 3, 2, "ssim"),
-                                                                     ("paper", 400, 5, 10, "perceptual")])
-def test_experiment_presets(experiment, steps, restarts, views, loss) -> None:
-    cfg = _compose("kadv_attack", f"experiment={experiment}")
-    attack, init = attack_settings(cfg.attack)
-    assert (attack.steps, attack.restarts, init.count, cfg.loss.kind) == (steps, restarts, views, loss)
+def test_experiment_presets() -> None:
+    demo = _compose("kadv_attack", "experiment=demo")
+    attack = attack_settings(demo.attack)
+    assert (attack.method, attack.evaluations, demo.init.count, demo.loss.kind) == (DEFAULT_METHOD, 123, 2, "ssim")
+    paper = _compose("kadv_attack", "experiment=paper")
+    attack = attack_settings(paper.attack)  # the study's protocol keeps the gradient attack
+    assert (attack.method, attack.settings.steps, attack.settings.restarts, attack.evaluations) == ("gradient", 400, 5, 2005)
+    assert (paper.init.count, paper.loss.kind) == (10, "perceptual")
 
 
 def test_paper_sweep_is_the_study_grid() -> None:
@@ -75,5 +79,5 @@ def test_paper_sweep_is_the_study_grid() -> None:
     assert params.model.split(",") == ["midas_dpt_large", "zoedepth_nk", "depth_anything_v1_large",
                                        "depth_anything_v2_large"]
     assert set(params.scene.split(",")) == {"grey_white_room", "modern_hall", "japanese_classroom"}
-    attack, init = attack_settings(cfg.attack)
-    assert (attack.steps, attack.restarts, init.count, cfg.loss.kind) == (400, 5, 10, "perceptual")
+    attack = attack_settings(cfg.attack)
+    assert (attack.settings.steps, attack.settings.restarts, cfg.init.count, cfg.loss.kind) == (400, 5, 10, "perceptual")

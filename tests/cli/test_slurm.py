@@ -12,8 +12,8 @@ import pytest
 from tests.cli.slurm import INSTALL, missing_binaries, slurm_cluster
 
 BIN = Path(sys.executable).parent
-TINY = ["render.height=24", "render.width=32", "attack.steps=2", "attack.restarts=2", "attack.init_views=1",
-        "attack.init_candidates=4", "progress=false", "video=false"]
+TINY = ["render.height=24", "render.width=32", "attack.budget_evaluations=6", "init.count=1",
+        "init.candidates=4", "progress=false", "video=false"]
 LAUNCHER = ["hydra/launcher=submitit_slurm", "hydra.launcher.partition=debug", "hydra.launcher.timeout_min=10",
             "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=1", "hydra.launcher.gpus_per_node=0"]
 
@@ -46,8 +46,8 @@ def test_a_two_job_sweep_runs_on_slurm(cluster, tmp_path: Path) -> None:
 
 
 def test_a_job_that_fails_on_slurm_is_reported(cluster, tmp_path: Path) -> None:
-    result = _sweep(cluster, tmp_path, "attack.steps=2,-1")
+    result = _sweep(cluster, tmp_path, "attack.budget_evaluations=6,-1")
     assert result.returncode != 0
     failures = json.loads((tmp_path / "sweep" / "failures.json").read_text())
-    assert len(failures) == 1 and "attack.steps=-1" in failures[0]["overrides"]
+    assert len(failures) == 1 and "attack.budget_evaluations=-1" in failures[0]["overrides"]
     assert len(list((tmp_path / "sweep").glob("*/summary.json"))) == 1

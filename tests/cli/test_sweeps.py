@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 
 BIN = Path(sys.executable).parent
-TINY = ["render.height=24", "render.width=32", "attack.steps=2", "attack.restarts=2", "attack.init_views=1",
-        "attack.init_candidates=4", "progress=false", "video=false"]
-GRID = ["scene.seed=0,1", "attack.method=gradient,random"]
+TINY = ["render.height=24", "render.width=32", "attack.budget_evaluations=6", "init.count=1",
+        "init.candidates=4", "progress=false", "video=false"]
+GRID = ["scene.seed=0,1", "attack=gradient,random"]
 
 
 def _sweep(cwd: Path, *overrides: str, timeout: int = 600) -> subprocess.CompletedProcess:
@@ -36,7 +36,7 @@ def _check_grid(cwd: Path) -> None:
     assert len(jobs) == 4 and len(_summaries(cwd)) == 4
     for name, folder in jobs.items():  # each folder is named after its own overrides
         summary = json.loads((folder / "summary.json").read_text())
-        assert f"attack.method={summary['method']}" in name
+        assert f"attack={summary['method']}" in name
         assert f"scene.seed={summary['scene'].removeprefix('box_room_')}" in name
 
 
@@ -66,13 +66,13 @@ def test_a_killed_sweep_finishes_on_a_rerun_without_redoing_jobs(tmp_path: Path)
 
 
 def test_a_failing_job_does_not_stop_the_others(tmp_path: Path) -> None:
-    result = _sweep(tmp_path, "attack.steps=2,-1", "scene.seed=0")
+    result = _sweep(tmp_path, "attack.budget_evaluations=6,-1", "scene.seed=0")
     assert result.returncode != 0
     failures = json.loads((tmp_path / "sweep" / "failures.json").read_text())
     assert len(failures) == 1
-    assert "attack.steps=-1" in failures[0]["overrides"] and "attack.steps" in failures[0]["error"]
-    assert len(_summaries(tmp_path)) == 1 and "attack.steps=2" in _summaries(tmp_path)[0].parent.name
-    fixed = _sweep(tmp_path, "attack.steps=2,3", "scene.seed=0")  # a clean rerun clears the record
+    assert "attack.budget_evaluations=-1" in failures[0]["overrides"] and "attack.budget_evaluations" in failures[0]["error"]
+    assert len(_summaries(tmp_path)) == 1 and "attack.budget_evaluations=6" in _summaries(tmp_path)[0].parent.name
+    fixed = _sweep(tmp_path, "attack.budget_evaluations=6,7", "scene.seed=0")  # a clean rerun clears the record
     assert fixed.returncode == 0 and not (tmp_path / "sweep" / "failures.json").exists()
 
 
@@ -82,9 +82,10 @@ def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(tmp_path: Pat
                             text=True, timeout=600)
     assert result.returncode == 0, result.stderr[-2000:]
     out = tmp_path / "sweep" / "report"
-    table2 = (out / "table2.md").read_text()
-    assert "| kadv_tiny |" in table2 and "box_room_0 L_depth" in table2 and "Avg delta1" in table2
-    assert (out / "table3.csv").read_text().startswith("model,box_room_0 dL_depth,")
+    for method in ("gradient", "random"):  # the study's tables for each method in the sweep
+        table2 = (out / f"table2_{method}.md").read_text()
+        assert "| kadv_tiny |" in table2 and "box_room_0 L_depth" in table2 and "Avg delta1" in table2
+        assert (out / f"table3_{method}.csv").read_text().startswith("model,box_room_0 dL_depth,")
     methods = (out / "methods.csv").read_text().splitlines()
     assert len(methods) == 5 and {"gradient", "random"} <= {line.split(",")[2] for line in methods[1:]}
     transfer = (out / "transfer_delta1.csv").read_text().splitlines()
@@ -95,8 +96,8 @@ def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(tmp_path: Pat
                           "--disable-background-networking", "--disable-component-update", "--disable-sync",
                           f"--user-data-dir={tmp_path / 'chromium'}", "--virtual-time-budget=5000", "--dump-dom",
                           (out / "report.html").as_uri()], capture_output=True, text=True, timeout=120).stdout
-    assert dom.count("<table") == 5  # tables 2 and 3, methods, transfer delta1 and L_depth
-    assert dom.count("<tr>") == 5 + 2 + 2 + 4 + 1 + 1  # the headers, then each table's rows
+    assert dom.count("<table") == 7  # tables 2 and 3 of each method, methods, transfer delta1 and L_depth
+    assert dom.count("<tr>") == 4 * 3 + 5 + 2 * 2  # tables 2 and 3: header, model, Avg; methods; transfer
     images = int(dom.split('data-images="')[1].split('"')[0])
     assert images == 1 + 2 * 2 and f'data-images-loaded="{images}"' in dom  # curves, gallery, maps
     assert 'href="box_room_0' not in dom and dom.count('<a href="') >= 4

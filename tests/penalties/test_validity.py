@@ -95,7 +95,8 @@ def test_grey_white_room_classification_agrees_with_brute_force(grey_white_room)
     centres = np.random.default_rng(2024).uniform(lo, hi, size=(200, 3))
     poses = torch.stack([look_at(torch.tensor(c), torch.tensor(c + [1.0, 0.0, 0.3])) for c in centres])
     ours = view_validity(renderer, poses, K, 12, 16)
-    mapping = {"valid": "free", "too close": "free", "inside an object": "inside", "outside the scene": "outside"}
+    mapping = {"valid": "free", "too close": "free", "uninformative": "free", "inside an object": "inside",
+               "outside the scene": "outside"}
     ours_classes = [mapping[v] for v in ours.verdicts]
     reference = _reference_classes(grey_white_room, centres)
     disagreements = [(i, centres[i].round(3).tolist(), a, b, ours.reasons[i])
@@ -106,3 +107,19 @@ def test_grey_white_room_classification_agrees_with_brute_force(grey_white_room)
     print("grey_white_room classes:", counts, "agreement:", 1 - len(disagreements) / 200)
     assert len(disagreements) <= 6  # >= 97% agreement
     assert counts["free"] > 20 and counts["inside"] + counts["outside"] > 10  # all classes exercised
+
+
+def test_a_wall_filling_the_frame_is_uninformative_and_a_corner_view_is_not(room_renderer: ExactRenderer) -> None:
+    lo, hi = room_renderer.scene.bounds
+    middle = (lo + hi) / 2
+    # 0.6 m from the wall at z = lo, looking straight at it: one plane fills every pixel
+    eye = torch.tensor([middle[0], 1.5, lo[2] + 0.6], dtype=torch.float64)
+    wall = look_at(eye, eye - torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64))
+    # from near one corner toward the opposite one: floor, walls and boxes share the frame
+    near_corner = torch.tensor([lo[0] + 0.5, 1.6, lo[2] + 0.5], dtype=torch.float64)
+    corner = look_at(near_corner, torch.tensor([hi[0], 0.8, hi[2]], dtype=torch.float64))
+    result = view_validity(room_renderer, torch.stack([wall, corner]), K, 12, 16)
+    assert result.verdicts == ["uninformative", "valid"]
+    assert result.plane_share[0] == 1.0 and result.plane_share[1] < 0.9
+    # the verdict can be turned off (penalty.uninformative: false passes max_plane_share=None)
+    assert view_validity(room_renderer, wall, K, 12, 16, max_plane_share=None).verdicts == ["valid"]

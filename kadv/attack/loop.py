@@ -1,0 +1,65 @@
+"""Black-box search as ask/tell proposers, driven by one loop that owns the budget.
+
+The loop evaluates the init view at step 0, then asks the proposer for a batch of pose
+parameters, moves there through the step guard, renders, evaluates and records each view
+(with its validity verdict), and tells the proposer the records, until the evaluation or
+seconds budget ends. Proposers only propose.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from kadv.attack.records import InitViewResult, ViewRecord, incumbent_path
+from kadv.attack.search import SearchContext
+
+__all__ = ["Proposer", "fitness", "proposer_search"]
+
+
+def fitness(records: list[ViewRecord]) -> np.ndarray:
+    """Each view's objective, -inf for an invalid view or a non-finite value (to maximise)."""
+    return np.array([r.objective if r.valid and math.isfinite(r.objective) else -math.inf for r in records])
+
+
+class Proposer:
+    """Proposes pose parameters (omega, delta) relative to the init view; the loop evaluates them.
+
+    Args:
+        context: the search context (``context.config`` holds the bounds, ``.settings`` the
+            method's own settings).
+        rng: the search's seeded generator; draw every random number from it.
+    """
+
+    def __init__(self, context: SearchContext, rng: np.random.Generator) -> None:
+        self.context, self.config, self.settings, self.rng = context, context.config, context.config.settings, rng
+
+    def ask(self, count: int) -> torch.Tensor:
+        """At most ``count`` poses (N, 6) float64 to evaluate next (N = 0 ends the search)."""
+        raise NotImplementedError
+
+    def tell(self, records: list[ViewRecord]) -> None:
+        """The records of the poses last asked for (possibly fewer, when the budget cut the batch)."""
+
+
+def proposer_search(proposer_class: type[Proposer], context: SearchContext, rng: np.random.Generator,
+                    bar: tqdm) -> InitViewResult:
+    """Run a proposer from one init view within the context's budget."""
+    proposer = proposer_class(context, rng)
+    records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64))
+    bar.update(1)
+    step = 1
+    while (left := context.clock.allows(context.clock.remaining())) > 0:
+        params = proposer.ask(left)
+        count = context.clock.allows(len(params))
+        if count == 0:
+            break
+        rows = context.evaluate(step, params[:count])
+        records += rows
+        proposer.tell(rows)
+        bar.set_postfix(L_depth=f"{max(r.l_depth for r in records if r.valid or r is records[0]):.4f}", refresh=False)
+        bar.update(count)
+        step += 1
+    return context.result(records, incumbent_path(records))

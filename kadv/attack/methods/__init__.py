@@ -1,0 +1,1 @@
+"""The built-in search methods, one module each; every module here registers itself."""

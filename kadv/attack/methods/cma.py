@@ -1,0 +1,50 @@
+"""CMA-ES (the ``cma`` package, ask/tell) on the pose parameters scaled to the unit search box."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cma
+import numpy as np
+import torch
+
+from kadv.attack.loop import Proposer, fitness
+from kadv.attack.records import ViewRecord
+from kadv.attack.registry import register_proposer
+
+__all__ = ["CMAProposer", "CMASettings"]
+
+# CMA-ES ranks candidates; an invalid view ranks below every valid one
+_INVALID_FITNESS = 1e9
+
+
+@dataclass(frozen=True)
+class CMASettings:
+    """``attack.cma``.
+
+    Attributes:
+        sigma: initial step size, as a fraction of the search box.
+        population: candidates per generation (one evaluated batch).
+    """
+
+    sigma: float = 0.3
+    population: int = 8
+
+
+@register_proposer("cma", CMASettings)
+class CMAProposer(Proposer):
+    """Minimises -objective; a generation cut short by the budget is not told (CMA-ES needs whole ones)."""
+
+    def __init__(self, context, rng: np.random.Generator) -> None:
+        super().__init__(context, rng)
+        options = {"seed": int(rng.integers(1, 2**31 - 1)), "popsize": self.settings.population,
+                   "bounds": [-1.0, 1.0], "verbose": -9, "CMA_stds": None}
+        self.strategy = cma.CMAEvolutionStrategy(np.zeros(6), self.settings.sigma, options)
+        self.candidates: list[np.ndarray] = []
+
+    def ask(self, count: int) -> torch.Tensor:
+        self.candidates = self.strategy.ask()
+        return torch.from_numpy(np.asarray(self.candidates)) * self.config.search_box()
+
+    def tell(self, records: list[ViewRecord]) -> None:
+        if len(records) == len(self.candidates):
+            self.strategy.tell(self.candidates, [-v if np.isfinite(v) else _INVALID_FITNESS for v in fitness(records)])

@@ -1,0 +1,127 @@
+"""The study's attack: Adam on (omega, delta) through the differentiable renderer, guarded steps."""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from kadv.attack.records import InitViewResult, ViewRecord
+from kadv.attack.registry import register_method
+from kadv.attack.search import SearchContext
+
+__all__ = ["GradientSettings", "gradient_ascent", "gradient_search", "restart_jitter"]
+
+
+@dataclass(frozen=True)
+class GradientSettings:
+    """``attack.gradient``. Angles in degrees, distances in metres.
+
+    Attributes:
+        steps: Adam steps per restart (each restart evaluates steps + 1 views).
+        restarts: runs per init view, batched; restart 0 starts at the init view, the others from
+            seeded pose jitter.
+        lr_rotation: Adam learning rate of the rotation vector (radians).
+        lr_translation: Adam learning rate of the centre offset (metres).
+        jitter_deg, jitter_distance: largest rotation and centre offset of a restart's start.
+    """
+
+    steps: int = 40
+    restarts: int = 3
+    lr_rotation: float = 0.02
+    lr_translation: float = 0.03
+    jitter_deg: float = 3.0
+    jitter_distance: float = 0.05
+
+
+def restart_jitter(rng: np.random.Generator, restarts: int, settings: GradientSettings) -> torch.Tensor:
+    """Start parameters (restarts, 6): zero for restart 0, uniform in the jitter balls for the others."""
+    directions = rng.normal(size=(restarts, 2, 3))
+    directions /= np.linalg.norm(directions, axis=2, keepdims=True)
+    scale = np.array([math.radians(settings.jitter_deg), settings.jitter_distance])[None, :, None]
+    radii = rng.uniform(size=(restarts, 2, 1)) ** (1.0 / 3.0) * scale
+    params = torch.from_numpy((directions * radii).reshape(restarts, 6))
+    params[0] = 0.0
+    return params
+
+
+def gradient_ascent(context: SearchContext, start: torch.Tensor, steps: int, lr_rotation: float,
+                    lr_translation: float, bar: tqdm, first_step: int = 0) -> list[ViewRecord]:
+    """Batched Adam runs from ``start`` (R, 6) within the context's budget; their records.
+
+    Each update is pulled back within the pose bounds, then passes the step guard (a move that
+    would cross or approach a surface is shortened; the fraction taken is recorded). A step runs
+    only while the budget allows all R views; restart r is lane r, step s is ``first_step + s``.
+    """
+    clock = context.clock
+    batch = clock.allows(len(start))
+    if batch == 0:
+        return []
+    start = context.config.project(start[:batch].double())
+    reached, fraction = context.guard(torch.zeros(batch, 3, dtype=torch.float64), start[:, 3:])
+    omega = start[:, :3].clone().requires_grad_(True)
+    delta = reached.clone().requires_grad_(True)
+    optimiser = torch.optim.Adam([{"params": [omega], "lr": lr_rotation},
+                                  {"params": [delta], "lr": lr_translation}], maximize=True)
+    base = context.base(batch)
+    records: list[ViewRecord] = []
+    for step in range(steps + 1):
+        if step > 0 and clock.allows(batch) < batch:
+            break
+        started = time.perf_counter()
+        params = torch.cat([omega, delta], dim=1)
+        out = context.differentiable(params, base, context.K, context.height, context.width)
+        terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam)
+        records += context.records(first_step + step, params, out.world_T_cam, terms, fraction,
+                                   (out.coverage, out.rgb_error, out.depth_error), out.refreshed, render=out.exact)
+        bar.set_postfix(L_depth=f"{float(terms.l_depth.detach().max()):.4f}", refresh=False)
+        bar.update(batch)
+        if step == steps:
+            clock.spent(batch, time.perf_counter() - started)
+            break
+        optimiser.zero_grad()
+        terms.objective.sum().backward()
+        previous = delta.detach().clone()
+        optimiser.step()
+        with torch.no_grad():
+            bounded = context.config.project(torch.cat([omega, delta], dim=1))
+            reached, fraction = context.guard(previous, bounded[:, 3:])
+            omega.copy_(bounded[:, :3])
+            delta.copy_(reached)
+        clock.spent(batch, time.perf_counter() - started, backward=batch)
+    return records
+
+
+def best_lane(records: list[ViewRecord]) -> list[ViewRecord]:
+    """The records of the lane (restart) whose valid views reach the largest L_depth."""
+    lanes = sorted({r.restart for r in records})
+    best = max(lanes, key=lambda b: max((r.l_depth for r in records if r.restart == b and r.valid), default=-math.inf))
+    return [r for r in records if r.restart == best]
+
+
+@register_method("gradient", GradientSettings, evaluations=lambda s: s.restarts * (s.steps + 1))
+def gradient_search(context: SearchContext, rng: np.random.Generator, bar: tqdm,
+                    start: torch.Tensor | None = None) -> InitViewResult:
+    """Maximise the objective from one init view with batched Adam runs.
+
+    Args:
+        context: the search context; its settings are :class:`GradientSettings`.
+        rng: seeds the restarts' jitter.
+        bar: progress, in evaluated views.
+        start: start poses (R, 6) relative to the init view instead of jitter around it; the init
+            view itself is restart 0 (prepended unless a row is zero, which then comes first).
+
+    Every visited view is recorded with its validity verdict; invalid views are never chosen. The
+    path is the best restart's.
+    """
+    settings = context.config.settings
+    if start is None:
+        start = restart_jitter(rng, settings.restarts, settings)
+    else:
+        zero = (start == 0).all(dim=1)
+        start = torch.cat([torch.zeros(1, 6, dtype=torch.float64), start[~zero].double()])
+    records = gradient_ascent(context, start, settings.steps, settings.lr_rotation, settings.lr_translation, bar)
+    return context.result(records, best_lane(records))

@@ -1,0 +1,60 @@
+"""Any optimizer of the ``nevergrad`` package (NGOpt by default), through its ask/tell interface."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import nevergrad as ng
+import numpy as np
+import torch
+
+from kadv.attack.loop import Proposer, fitness
+from kadv.attack.records import ViewRecord
+from kadv.attack.registry import register_proposer
+
+__all__ = ["NevergradProposer", "NevergradSettings"]
+
+# nevergrad minimises; an invalid view gets a loss worse than any valid one
+_INVALID_LOSS = 1e9
+
+
+@dataclass(frozen=True)
+class NevergradSettings:
+    """``attack.nevergrad``.
+
+    Attributes:
+        optimizer: a name in ``nevergrad.optimizers.registry`` (NGOpt picks one by budget and dimension).
+        population: candidates asked for per evaluated batch (nevergrad's ``num_workers``).
+    """
+
+    optimizer: str = "NGOpt"
+    population: int = 8
+
+    def __post_init__(self) -> None:
+        if self.optimizer not in ng.optimizers.registry:
+            some = ", ".join(n for n in ("NGOpt", "TwoPointsDE", "PSO", "OnePlusOne", "DE", "CMA") if n in ng.optimizers.registry)
+            raise ValueError(f"attack.nevergrad.optimizer={self.optimizer!r} is not a nevergrad optimizer; "
+                             f"valid names include {some} (nevergrad.optimizers.registry lists all)")
+
+
+@register_proposer("nevergrad", NevergradSettings)
+class NevergradProposer(Proposer):
+    """Minimises -objective over the unit search box [-1, 1]^6, seeded from the search's generator."""
+
+    def __init__(self, context, rng: np.random.Generator) -> None:
+        super().__init__(context, rng)
+        parametrization = ng.p.Array(shape=(6,), lower=-1.0, upper=1.0)
+        parametrization.random_state = np.random.RandomState(int(rng.integers(1, 2**31 - 1)))
+        # the evaluation budget when there is one; else a count that a seconds budget rarely exceeds
+        budget = context.clock.remaining() if context.clock.evaluations is not None else 1000
+        self.optimizer = ng.optimizers.registry[self.settings.optimizer](
+            parametrization=parametrization, budget=max(budget, 1), num_workers=self.settings.population)
+        self.candidates: list = []
+
+    def ask(self, count: int) -> torch.Tensor:
+        self.candidates = [self.optimizer.ask() for _ in range(min(self.settings.population, count))]
+        unit = np.stack([c.value for c in self.candidates])
+        return torch.from_numpy(unit) * self.config.search_box()
+
+    def tell(self, records: list[ViewRecord]) -> None:
+        for candidate, value in zip(self.candidates, fitness(records)):
+            self.optimizer.tell(candidate, -value if np.isfinite(value) else _INVALID_LOSS)

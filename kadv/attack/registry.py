@@ -1,0 +1,81 @@
+"""The one registry of search methods: config validation, the runner, progress and reports read it.
+
+A method is a function ``search(context, rng, bar) -> InitViewResult`` with a settings dataclass
+(its ``attack.<name>`` config node). Black-box methods are written as ask/tell proposers
+(:class:`kadv.attack.loop.Proposer`) and registered with :func:`register_proposer`; the shared
+loop owns the budgets, the init view at step 0, the step guard, validity and records.
+"""
+from __future__ import annotations
+
+import functools
+import importlib
+import pkgutil
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["METHODS", "NoSettings", "SearchMethod", "get_method", "register_method", "register_proposer"]
+
+
+@dataclass(frozen=True)
+class NoSettings:
+    """Settings of a method that has none."""
+
+
+@dataclass(frozen=True)
+class SearchMethod:
+    """A registered search method.
+
+    Attributes:
+        name: its ``attack.method`` name.
+        settings: its settings dataclass (the ``attack.<name>`` node).
+        search: ``search(context, rng, bar) -> InitViewResult`` for one init view.
+        evaluations: the forward passes it ends after by itself, given its settings (None: it runs
+            until the budget ends).
+    """
+
+    name: str
+    settings: type
+    search: Callable[..., Any]
+    evaluations: Callable[[Any], int | None]
+
+
+METHODS: dict[str, SearchMethod] = {}
+
+
+def register_method(name: str, settings: type = NoSettings,
+                    evaluations: Callable[[Any], int | None] = lambda settings: None) -> Callable:
+    """Decorator: register ``search(context, rng, bar)`` as method ``name``."""
+    def decorate(search: Callable) -> Callable:
+        METHODS[name] = SearchMethod(name, settings, search, evaluations)
+        return search
+    return decorate
+
+
+def register_proposer(name: str, settings: type = NoSettings) -> Callable[[type], type]:
+    """Class decorator: register an ask/tell :class:`~kadv.attack.loop.Proposer` as method ``name``,
+    driven by the shared loop."""
+    from kadv.attack.loop import proposer_search
+
+    def decorate(proposer: type) -> type:
+        register_method(name, settings)(functools.partial(proposer_search, proposer))
+        return proposer
+    return decorate
+
+
+@functools.cache
+def _load_builtin() -> None:
+    """Import every module of :mod:`kadv.attack.methods` once, so each registers itself: adding a
+    method is adding a module there (and its YAML under ``conf/attack/``)."""
+    import kadv.attack.methods as package
+
+    for module in pkgutil.iter_modules(package.__path__):
+        importlib.import_module(f"{package.__name__}.{module.name}")
+
+
+def get_method(name: str) -> SearchMethod:
+    """The method registered as ``name``; a ValueError naming the known ones otherwise."""
+    _load_builtin()
+    if name not in METHODS:
+        raise ValueError(f"attack.method must be one of {', '.join(sorted(METHODS))}, got {name!r}")
+    return METHODS[name]
