@@ -127,7 +127,7 @@ def _inside_box_params(tmp_path: Path) -> Path:
 BAD_INPUTS = [
     ("kadv-attack", ["scene=file", "scene.path=/no/such/scene.xml"], "/no/such/scene.xml"),
     ("kadv-attack", ["scene=file", "scene.path={corrupt}"], "corrupt.xml"),
-    ("kadv-attack", ["attack.gradient.steps=-3"], "attack.gradient.steps"),
+    ("kadv-attack", ["attack=gradient", "attack.gradient.steps=-3"], "attack.gradient.steps"),
     ("kadv-attack", ["attack.method=adam"], "attack.method must be one of"),
     ("kadv-attack", ["attack=nevergrad", "attack.nevergrad.optimizer=NoSuchOpt"], "NGOpt"),
     ("kadv-attack", ["model.name=no_such_model"], "no_such_model"),
