@@ -1,7 +1,6 @@
 """``kadv-attack``: find camera views where a depth model fails; writes the run directory."""
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 from pathlib import Path
@@ -53,8 +52,7 @@ def attack_settings(cfg: DictConfig) -> AttackConfig:
     settings = settings_from_node(method.settings, node.pop(method.name, None), f"attack.{method.name}")
     for name in METHODS:  # the nodes of other methods (a preset may carry several) are not this run's
         node.pop(name, None)
-    shared = settings_from_node(AttackConfig, {"method": method.name, **node}, "attack")
-    return dataclasses.replace(shared, settings=settings)
+    return settings_from_node(AttackConfig, {"method": method.name, "settings": settings, **node}, "attack")
 
 
 def _init_views(cfg: DictConfig, run_dir: Path, renderer: ExactRenderer, model, penalty: PenaltyConfig,
