@@ -32,4 +32,4 @@ def test_a_wheel_in_a_fresh_venv_ships_the_configs(tmp_path: Path) -> None:
     assert (tmp_path / "out" / "rgb.png").is_file()
     help_text = subprocess.run([str(env_dir / "bin" / "kadv-attack"), "--help"], cwd=tmp_path, capture_output=True,
                                text=True, timeout=300).stdout
-    assert help_text.startswith("kadv-attack:") and "attack: cma, gradient, random" in help_text
+    assert help_text.startswith("kadv-attack:") and "attack: cma, gradient, hybrid, nevergrad, random" in help_text

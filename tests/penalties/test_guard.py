@@ -72,6 +72,7 @@ def test_ten_thousand_guarded_random_steps_stay_valid() -> None:
         centres = torch.where(check.allowed[:, None], proposal, centres)
         targets = centres + torch.from_numpy(rng.normal(size=(cameras, 3)))
         poses = torch.stack([look_at(c, t) for c, t in zip(centres, targets)])
-        validity = view_validity(renderer, poses, K, 8, 8, near=0.05, min_distance=0.05)
+        # a camera facing one wall is a poor view but a legal place: only the geometric verdicts are checked here
+        validity = view_validity(renderer, poses, K, 8, 8, near=0.05, min_distance=0.05, max_plane_share=None)
         assert all(v == "valid" for v in validity.verdicts), validity.reasons
     assert 0 < refused < cameras * steps  # the guard was exercised, and cameras did move
