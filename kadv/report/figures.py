@@ -91,10 +91,12 @@ def save_curves(path: str | Path, results: list[InitViewResult]) -> Path:
         axis.set_title(f"{result.init.name}")
         axis.set_xlabel("evaluated views")
         axis.set_ylabel("L_depth")
-        axis.legend(fontsize=7)
     for axis in list(axes.flat)[len(results):]:
         axis.set_axis_off()
-    figure.tight_layout()
+    # one legend under the panels: inside them it hid the best views, which sit top right
+    legend = {label: handle for axis in axes.flat for handle, label in zip(*axis.get_legend_handles_labels())}
+    figure.legend(legend.values(), legend.keys(), loc="lower center", ncol=len(legend), fontsize=8, frameon=False)
+    figure.tight_layout(rect=(0, 0.07 / rows, 1, 1))
     return save_figure(Path(path), figure)
 
 
