@@ -26,6 +26,7 @@ from kadv.attack import (
 )
 from kadv.cli.common import (
     check_render_config,
+    model_from_config,
     reports_user_errors,
     scene_from_config,
     settings_from_node,
@@ -34,7 +35,6 @@ from kadv.cli.common import (
 from kadv.device import resolve_device
 from kadv.io import atomic_write
 from kadv.losses import depth_loss
-from kadv.models import load_model
 from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
 from kadv.report.run import SUMMARY, is_complete, load_partial_results, save_partial_result, write_run
 from kadv.runtime import configure_runtime
@@ -100,7 +100,7 @@ def main(cfg: DictConfig) -> float:
                                    **OmegaConf.to_container(cfg.render.differentiable, resolve=True))
     scene = scene_from_config(cfg.scene)
     renderer = ExactRenderer(scene, shading_from_config(cfg.render.shading))
-    model = load_model(cfg.model.name, cfg.model.get("weights"))
+    model = model_from_config(cfg.model)
     loss = depth_loss(cfg.loss.kind, cfg.loss.get("vgg_weights"), int(cfg.loss.get("window_size", 11)))
     objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space, device=device)
     config_text = OmegaConf.to_yaml(cfg, resolve=True)

@@ -25,6 +25,7 @@ from omegaconf.errors import OmegaConfBaseException
 from kadv.errors import WeightsUnavailable
 from kadv.geometry import look_at
 from kadv.io import write_json
+from kadv.models import DepthModel, load_custom, load_model
 from kadv.render import Shading
 from kadv.scenes import Scene, box_room, load_scene
 
@@ -34,6 +35,7 @@ __all__ = [
     "settings_from_node",
     "check_render_config",
     "dirname",
+    "model_from_config",
     "reports_user_errors",
     "scene_from_config",
     "shading_from_config",
@@ -166,3 +168,12 @@ def settings_from_node(cls: type, node: dict | None, prefix: str) -> Any:
         raise ValueError(f"unknown key(s) {', '.join(f'{prefix}.{k}' for k in unknown)}; "
                          f"{prefix} takes {', '.join(sorted(known)) or 'no keys'}")
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in node.items()})
+
+
+def model_from_config(node: Any) -> DepthModel:
+    """The ``model`` node's model: ``model=custom`` instantiates ``model.target(**model.args)``
+    with its declared ``model.output_kind``; any other preset loads by name (and ``model.weights``)."""
+    node = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else dict(node)
+    if node.get("name") == "custom":
+        return load_custom(node.get("target") or "", node.get("output_kind", "disparity"), node.get("args"))
+    return load_model(node["name"], node.get("weights"))

@@ -7,9 +7,8 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from kadv.cli.common import USER_ERRORS, scene_from_config, shading_from_config
+from kadv.cli.common import USER_ERRORS, model_from_config, scene_from_config, shading_from_config
 from kadv.losses import depth_loss
-from kadv.models import load_model
 from kadv.render import ExactRenderer
 from kadv.report.html import save_mean_curves, write_html
 from kadv.report.sweep import RunRecord, collect_runs, method_table, methods_of, table2, table3
@@ -61,7 +60,7 @@ def report(paths: list[str], out: Path | None, transfer: bool = True, progress: 
 
         def model_of(run: RunRecord):
             if run.model not in models:
-                models[run.model] = load_model(run.config["model"]["name"], run.config["model"].get("weights"))
+                models[run.model] = model_from_config(run.config["model"])
             return models[run.model]
 
         loss_config = runs[0].config["loss"]

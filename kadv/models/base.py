@@ -55,7 +55,8 @@ class DepthModel(nn.Module):
     """rgb (B, 3, H, W) in [0, 1] -> (B, 1, H, W) prediction at the input size, differentiable in rgb.
 
     Subclasses implement :meth:`predict` on the preprocessed tensor; the base class resizes with
-    kornia, normalises, and resizes the output back. Parameters are frozen and the module stays in
+    kornia, normalises, and resizes the output back (a ``preprocess`` of None passes the image
+    through as it is). Parameters are frozen and the module stays in
     eval mode.
 
     Attributes:
@@ -65,7 +66,7 @@ class DepthModel(nn.Module):
 
     output_kind: str = "disparity"
 
-    def __init__(self, preprocess: Preprocess, output_kind: str, name: str) -> None:
+    def __init__(self, preprocess: Preprocess | None, output_kind: str, name: str) -> None:
         super().__init__()
         if output_kind not in ("disparity", "depth"):
             raise ValueError(f"output_kind must be 'disparity' or 'depth', got {output_kind!r}")
@@ -92,10 +93,15 @@ class DepthModel(nn.Module):
         check_shape(rgb, "B 3 H W", "rgb")
         height, width = rgb.shape[-2:]
         p = self.preprocess
-        x = rgb.to(next(self.parameters()).device)
-        shape = resized_shape(height, width, p.size, p.keep_aspect_ratio, p.multiple)
-        x = resize(x, shape, interpolation=p.interpolation, align_corners=False) if shape != (height, width) else x
-        out = self.predict(p.normalize(x))
-        if out.ndim == 3:
+        parameter = next(self.parameters(), None)
+        x = rgb if parameter is None else rgb.to(parameter.device)
+        if p is not None:
+            shape = resized_shape(height, width, p.size, p.keep_aspect_ratio, p.multiple)
+            x = resize(x, shape, interpolation=p.interpolation, align_corners=False) if shape != (height, width) else x
+            x = p.normalize(x)
+        out = self.predict(x)
+        if isinstance(out, torch.Tensor) and out.ndim == 3:
             out = out.unsqueeze(1)
-        return resize(out, (height, width), interpolation="bilinear", align_corners=False).to(rgb.device)
+        if p is not None and isinstance(out, torch.Tensor) and out.ndim == 4:
+            out = resize(out, (height, width), interpolation="bilinear", align_corners=False)
+        return out.to(rgb.device) if isinstance(out, torch.Tensor) else out

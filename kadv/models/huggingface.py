@@ -17,7 +17,8 @@ from transformers.utils import cached_file
 from kadv.errors import WeightsUnavailable
 from kadv.models.base import DepthModel, Preprocess
 
-__all__ = ["HuggingFaceDepthModel", "ModelWeightsUnavailable", "hub_offline", "load_huggingface"]
+__all__ = ["METRIC_FAMILIES", "REFUSED_FAMILIES", "HuggingFaceDepthModel", "ModelWeightsUnavailable", "hub_offline",
+           "load_huggingface", "output_kind"]
 
 # Per architecture, what the original image processors do when a checkpoint carries no
 # preprocessor_config.json (e.g. a config saved with save_pretrained alone).
@@ -81,8 +82,29 @@ class HuggingFaceDepthModel(DepthModel):
         return self.network(pixel_values=pixel_values).predicted_depth
 
 
-def _output_kind(config: object) -> str:
-    if config.model_type == "zoedepth" or getattr(config, "depth_estimation_type", "relative") == "metric":
+# transformers depth families whose head predicts metric depth (the others: relative inverse depth)
+METRIC_FAMILIES = frozenset({"glpn", "tipsv2_dpt", "zoedepth"})
+# families that are not single-image scene-depth estimators kadv can attack as they are, and why
+REFUSED_FAMILIES = {
+    "chmv2": "CHMv2 is a canopy-height model for aerial images (height above ground), not scene depth from one view",
+    "prompt_depth_anything": "Prompt Depth Anything needs a prompt depth map (e.g. LiDAR) beside the image, "
+                             "which kadv does not supply",
+}
+
+
+def output_kind(config: object) -> str:
+    """What a transformers depth model's ``predicted_depth`` holds: "depth" (metres) or "disparity".
+
+    Depth Anything declares it in ``depth_estimation_type``; DepthPro's raw output is a canonical
+    inverse depth, so it is compared as disparity (alignment supplies its scale).
+
+    Raises:
+        ValueError: a family kadv refuses (see ``REFUSED_FAMILIES``).
+    """
+    family = config.model_type
+    if family in REFUSED_FAMILIES:
+        raise ValueError(f"model family {family!r} is not supported: {REFUSED_FAMILIES[family]}")
+    if family in METRIC_FAMILIES or getattr(config, "depth_estimation_type", "relative") == "metric":
         return "depth"
     return "disparity"
 
@@ -110,9 +132,10 @@ def load_huggingface(source: str, name: str | None = None, hub_id: str | None = 
             break
         try:
             config = AutoConfig.from_pretrained(location, local_files_only=local_only)
+            kind = output_kind(config)
             network = AutoModelForDepthEstimation.from_pretrained(location, local_files_only=local_only)
             preprocess = _preprocess(location, config.model_type, local_only)
-            return HuggingFaceDepthModel(network, preprocess, _output_kind(config), name)
+            return HuggingFaceDepthModel(network, preprocess, kind, name)
         except OSError as error:
             last_error = error
     where = f"the directory {local_dir}" if local_dir.is_dir() else f"the Hugging Face cache ({hub_id or source})"

@@ -133,6 +133,8 @@ BAD_INPUTS = [
     ("kadv-attack", ["model.name=no_such_model"], "no_such_model"),
     ("kadv-attack", ["render.supersample=0"], "render.supersample"),
     ("kadv-attack", ["model=depth_anything_v2_small"], "depth_anything_v2_small"),
+    ("kadv-attack", ["model=custom", "model.target=no_such_package_kadv.make"], "no_such_package_kadv"),
+    ("kadv-attack", ["model=custom", "model.target={wrong_model}:make"], "must map rgb"),
     ("kadv-attack", ["init.params={inside}"], "inside an object"),
     ("kadv-attack", ["init.params=/no/such/init_params.json"], "/no/such/init_params.json"),
     ("kadv-attack", ["device=tpu"], "device='tpu'"),
@@ -153,7 +155,9 @@ _SIZE = {"kadv-attack": SMALL[:2], "kadv-render": SMALL[:2]}
 def test_bad_input_gives_one_line_and_exit_status_2(tool, overrides, named, tmp_path: Path) -> None:
     corrupt = tmp_path / "corrupt.xml"
     corrupt.write_text("<scene version='0.6.0'><shape type='obj'>")
-    values = {"corrupt": corrupt, "inside": _inside_box_params(tmp_path)}
+    wrong_model = tmp_path / "wrong_model.py"
+    wrong_model.write_text("import torch\n\ndef make():\n    return torch.nn.Conv2d(3, 2, 1)\n")
+    values = {"corrupt": corrupt, "inside": _inside_box_params(tmp_path), "wrong_model": wrong_model}
     overrides = [o.format(**values) for o in overrides]
     offline = {"HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf"), "HYDRA_FULL_ERROR": "0"}
     result = _run(tool, tmp_path, "run", *_SIZE.get(tool, []), *overrides, env=offline)

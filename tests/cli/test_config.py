@@ -42,7 +42,9 @@ def test_every_group_option_composes_into_valid_settings() -> None:
             DiffRenderConfig(supersample=cfg.render.supersample, **OmegaConf.to_container(cfg.render.differentiable))
             shading_from_config(cfg.render.shading)
             assert cfg.loss.kind in ("ssim", "perceptual") and cfg.loss.space in ("disparity", "depth")
-            assert OmegaConf.is_missing(cfg.model, "name") or cfg.model.name in {*PRESETS, "kadv_tiny"}
+            assert OmegaConf.is_missing(cfg.model, "name") or cfg.model.name in {*PRESETS, "kadv_tiny"} or (
+                cfg.model.name == "custom" and OmegaConf.is_missing(cfg.model, "target")
+                and cfg.model.output_kind in ("disparity", "depth"))
             assert cfg.scene.kind in ("box_room", "file")
             if group == "attack":  # each method's YAML node is its settings dataclass, defaults included
                 assert attack.method == option and attack.settings == get_method(option).settings()

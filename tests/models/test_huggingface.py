@@ -23,6 +23,7 @@ from transformers import (
 from transformers.models.dpt.image_processing_pil_dpt import get_resize_output_image_size
 
 from kadv.models import load_model, resized_shape
+from kadv.models.huggingface import output_kind
 
 VIT = dict(hidden_size=32, num_hidden_layers=4, num_attention_heads=2, intermediate_size=64, image_size=64, patch_size=16)
 
@@ -158,3 +159,28 @@ def test_unknown_model_name() -> None:
 def test_a_missing_path_is_reported_as_a_missing_directory_not_a_hub_id(path: str) -> None:
     with pytest.raises(FileNotFoundError, match="no such model directory"):
         load_model(path)
+
+
+@pytest.mark.parametrize("family, config, kind", [
+    ("glpn", "GLPNConfig", "depth"), ("zoedepth", "ZoeDepthConfig", "depth"), ("tipsv2_dpt", "Tipsv2DptConfig", "depth"),
+    ("dpt", "DPTConfig", "disparity"), ("depth_pro", "DepthProConfig", "disparity"),
+    ("depth_anything", "DepthAnythingConfig", "disparity")])
+def test_each_family_declares_what_its_output_holds(family: str, config: str, kind: str) -> None:
+    import transformers
+
+    built = getattr(transformers, config)()
+    assert built.model_type == family and output_kind(built) == kind
+
+
+def test_metric_depth_anything_is_depth() -> None:
+    assert output_kind(DepthAnythingConfig(depth_estimation_type="metric")) == "depth"
+
+
+@pytest.mark.parametrize("config, why", [("CHMv2Config", "canopy-height"), ("PromptDepthAnythingConfig", "prompt depth")])
+def test_families_kadv_cannot_attack_are_refused_in_one_line(config: str, why: str, tmp_path: Path) -> None:
+    import transformers
+
+    getattr(transformers, config)().save_pretrained(tmp_path / "model")
+    with pytest.raises(ValueError, match=why) as error:
+        load_model(str(tmp_path / "model"))
+    assert "\n" not in str(error.value)
