@@ -21,7 +21,7 @@ from kadv.render import DifferentiableRenderer, RenderOutput
 __all__ = ["DEFAULT_METHOD", "AttackConfig", "Clock", "SearchContext", "check_settings"]
 
 # The method that led the anytime benchmark at its full budget (benchmarks/search_anytime.py).
-DEFAULT_METHOD = "random"
+DEFAULT_METHOD = "hybrid"
 
 
 def check_settings(settings: Any, node: str) -> None:
