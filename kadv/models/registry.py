@@ -42,6 +42,18 @@ PRESETS = {
                                      (518, 518)),
     "depth_anything_v2_large": Preset("depth-anything/Depth-Anything-V2-Large-hf", "depth_anything", "disparity",
                                       (518, 518)),
+    "depth_anything_v2_metric_indoor_small": Preset(
+        "depth-anything/Depth-Anything-V2-Metric-Indoor-Small-hf", "depth_anything", "depth", (518, 518)),
+    "depth_anything_v2_metric_indoor_base": Preset(
+        "depth-anything/Depth-Anything-V2-Metric-Indoor-Base-hf", "depth_anything", "depth", (518, 518)),
+    "depth_anything_v2_metric_indoor_large": Preset(
+        "depth-anything/Depth-Anything-V2-Metric-Indoor-Large-hf", "depth_anything", "depth", (518, 518)),
+    "depth_anything_v2_metric_outdoor_small": Preset(
+        "depth-anything/Depth-Anything-V2-Metric-Outdoor-Small-hf", "depth_anything", "depth", (518, 518)),
+    "depth_anything_v2_metric_outdoor_base": Preset(
+        "depth-anything/Depth-Anything-V2-Metric-Outdoor-Base-hf", "depth_anything", "depth", (518, 518)),
+    "depth_anything_v2_metric_outdoor_large": Preset(
+        "depth-anything/Depth-Anything-V2-Metric-Outdoor-Large-hf", "depth_anything", "depth", (518, 518)),
 }
 KADV_TINY = Preset("", "kadv_tiny", "disparity", TINY_PREPROCESS.size)
 
