@@ -100,8 +100,8 @@ class DepthModel(nn.Module):
             x = resize(x, shape, interpolation=p.interpolation, align_corners=False) if shape != (height, width) else x
             x = p.normalize(x)
         out = self.predict(x)
-        if isinstance(out, torch.Tensor) and out.ndim == 3:
+        if out.ndim == 3:
             out = out.unsqueeze(1)
-        if p is not None and isinstance(out, torch.Tensor) and out.ndim == 4:
+        if p is not None:
             out = resize(out, (height, width), interpolation="bilinear", align_corners=False)
-        return out.to(rgb.device) if isinstance(out, torch.Tensor) else out
+        return out.to(rgb.device)

@@ -32,7 +32,10 @@ class ModuleDepthModel(DepthModel):
         self.freeze()
 
     def predict(self, pixel_values: torch.Tensor) -> torch.Tensor:
-        return self.module(pixel_values)
+        out = self.module(pixel_values)
+        if not isinstance(out, torch.Tensor):  # a user's module may return anything; say what
+            raise TypeError(f"expected a tensor (B, 1, H, W), got {type(out).__name__}")
+        return out
 
 
 def check_depth_model(model: DepthModel) -> DepthModel:
