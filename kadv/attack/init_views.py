@@ -210,7 +210,7 @@ def score_views(model: DepthModel, renderer: ExactRenderer, poses: torch.Tensor,
             chunk = slice(start, start + batch_size)
             K = torch.stack([intrinsics_from_fov(float(f), height, width) for f in fov_x_deg[chunk]])
             out = renderer.render(poses[chunk], K, height, width)
-            prediction = model(out.rgb)
+            prediction = model(out.rgb, K)
             scores["delta1"].append(depth_metrics(prediction.double(), out.depth.double(), out.mask,
                                                   model.output_kind)["delta1"])
             depth = out.depth.double()

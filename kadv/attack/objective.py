@@ -78,11 +78,11 @@ class Objective:
         return self.loss(gt.float(), pred.float()).double()
 
     def __call__(self, rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
-                 world_T_cam: torch.Tensor) -> ObjectiveTerms:
-        return self.forward(rgb, depth, mask, world_T_cam)
+                 world_T_cam: torch.Tensor, K: torch.Tensor | None = None) -> ObjectiveTerms:
+        return self.forward(rgb, depth, mask, world_T_cam, K)
 
     def forward(self, rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
-                world_T_cam: torch.Tensor) -> ObjectiveTerms:
+                world_T_cam: torch.Tensor, K: torch.Tensor | None = None) -> ObjectiveTerms:
         """Evaluate B views.
 
         Args:
@@ -90,9 +90,10 @@ class Objective:
             depth: (B, 1, H, W) ground-truth z-depth in metres (0 invalid).
             mask: (B, 1, H, W) bool, valid ground truth.
             world_T_cam: (B, 4, 4) the views' poses; the penalty's gradient flows to their centres.
+            K: (3, 3) or (B, 3, 3) intrinsics, for models whose metric scale needs the focal length.
         """
         rgb, depth, mask = rgb.to(self.device), depth.to(self.device), mask.to(self.device)
-        prediction = self.model(rgb.float())
+        prediction = self.model(rgb.float(), K)
         l_depth = self.l_depth(depth, prediction, mask).cpu()
         distance = distance_to_surface(self.renderer, world_T_cam[:, :3, 3])
         l_dist = shortcut_penalty(distance, self.penalty.d_th)

@@ -250,7 +250,7 @@ class SearchContext:
             pose = perturb_world_T_cam(self.base(len(params)), params[:, :3], params[:, 3:])
             out = self.renderer.render(pose, self.K, self.height, self.width,
                                        supersample=self.differentiable.config.supersample)
-            terms = self.objective(out.rgb, out.depth, out.mask, pose)
+            terms = self.objective(out.rgb, out.depth, out.mask, pose, self.K)
         rows = self.records(step, params, pose, terms, fraction, lanes=lanes, render=out)
         self.clock.spent(len(params), time.perf_counter() - started)
         return rows

@@ -27,6 +27,7 @@ from kadv.attack import (
 from kadv.cli.common import (
     check_render_config,
     model_from_config,
+    checks_group_options,
     reports_user_errors,
     scene_from_config,
     settings_from_node,
@@ -81,6 +82,7 @@ def _table(summary: dict) -> str:
     return "\n".join(lines)
 
 
+@checks_group_options("kadv-attack")
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_attack")
 @reports_user_errors("kadv-attack")
 def main(cfg: DictConfig) -> float:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import importlib.resources
 import json
 import logging
 import math
@@ -25,7 +26,8 @@ from omegaconf.errors import OmegaConfBaseException
 from kadv.errors import WeightsUnavailable
 from kadv.geometry import look_at
 from kadv.io import write_json
-from kadv.models import DepthModel, load_custom, load_model
+from kadv.models import PRESETS, DepthModel, load_custom, load_model
+from kadv.models.registry import KADV_TINY
 from kadv.render import Shading
 from kadv.scenes import Scene, box_room, load_scene
 
@@ -36,6 +38,7 @@ __all__ = [
     "check_render_config",
     "dirname",
     "model_from_config",
+    "checks_group_options",
     "reports_user_errors",
     "scene_from_config",
     "shading_from_config",
@@ -80,6 +83,31 @@ def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]],
                 write_json(failure, {"job": hydra_config.job.num, "overrides": list(hydra_config.overrides.task),
                                      "error": message})
                 return None
+        return wrapped
+    return decorate
+
+
+def checks_group_options(command: str) -> Callable[[Callable[[], Any]], Callable[[], Any]]:
+    """Decorate a ``hydra.main`` entry point so that ``group=option`` naming no ``conf/group/option.yaml``
+    (``model=no_such_preset``) prints ``<command>: error: ...`` in one line and exits 2, before
+    Hydra's composition would fail with a multi-line message."""
+    def decorate(entry: Callable[[], Any]) -> Callable[[], Any]:
+        @functools.wraps(entry)
+        def wrapped() -> Any:
+            conf = importlib.resources.files("kadv.conf")
+            for argument in sys.argv[1:]:
+                group, equals, options = argument.partition("=")
+                if not equals or not re.fullmatch(r"[a-z_]+", group) or not conf.joinpath(group).is_dir():
+                    continue
+                known = sorted(p.name.removesuffix(".yaml") for p in conf.joinpath(group).iterdir()
+                               if p.name.endswith(".yaml"))
+                for option in options.split(","):
+                    if re.fullmatch(r"[A-Za-z0-9_]+", option) and option not in known:
+                        listing = " (kadv-models lists the model presets)" if group == "model" else ""
+                        print(f"{command}: error: {group}={option}: no such option in {group}/; one of: "
+                              f"{', '.join(known)}{listing}", file=sys.stderr)
+                        sys.exit(2)
+            return entry()
         return wrapped
     return decorate
 
@@ -176,4 +204,9 @@ def model_from_config(node: Any) -> DepthModel:
     node = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else dict(node)
     if node.get("name") == "custom":
         return load_custom(node.get("target") or "", node.get("output_kind", "disparity"), node.get("args"))
+    preset = KADV_TINY if node["name"] == "kadv_tiny" else PRESETS.get(node["name"])
+    for key in ("hub_id", "output_kind"):
+        if preset is not None and node.get(key) is not None and node[key] != getattr(preset, key):
+            raise ValueError(f"model.{key}: the preset {node['name']!r} has {key} {getattr(preset, key)!r}, fixed by its "
+                             f"checkpoint, not {node[key]!r}; for other weights use model=huggingface model.name=<id or dir>")
     return load_model(node["name"], node.get("weights"))

@@ -22,6 +22,7 @@ from kadv.attack import PenaltyConfig, clear_file_camera
 from kadv.cli.common import (
     camera_from_config,
     check_render_config,
+    checks_group_options,
     reports_user_errors,
     scene_from_config,
     shading_from_config,
@@ -36,6 +37,7 @@ from kadv.runtime import configure_runtime
 log = logging.getLogger(__name__)
 
 
+@checks_group_options("kadv-render")
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_render")
 @reports_user_errors("kadv-render")
 def main(cfg: DictConfig) -> None:

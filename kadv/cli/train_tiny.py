@@ -9,7 +9,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from kadv.cli.common import reports_user_errors
+from kadv.cli.common import checks_group_options, reports_user_errors
 from kadv.models.tiny import TINY_WEIGHTS, save_kadv_tiny
 from kadv.models.train_tiny import TinyTrainConfig, train_tiny
 from kadv.report import atomic_write
@@ -18,6 +18,7 @@ from kadv.runtime import configure_runtime
 log = logging.getLogger(__name__)
 
 
+@checks_group_options("kadv-train-tiny")
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_train_tiny")
 @reports_user_errors("kadv-train-tiny")
 def main(cfg: DictConfig) -> None:

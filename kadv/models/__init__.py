@@ -1,7 +1,8 @@
 """Depth models: the interface, Hugging Face adapters, and the embedded kadv-tiny."""
 from __future__ import annotations
 
-from kadv.models.base import DepthModel, Preprocess, resized_shape
+from kadv.models.base import DepthModel
+from kadv.models.preprocess import NetworkLayout, Preprocess, resized_shape
 from kadv.models.custom import ModuleDepthModel, check_depth_model, load_custom, wrap_model
 from kadv.models.huggingface import HuggingFaceDepthModel, ModelWeightsUnavailable, load_huggingface
 from kadv.models.registry import PRESETS, Preset, load_model, preset_table
@@ -14,6 +15,7 @@ __all__ = [
     "KadvTiny",
     "ModelWeightsUnavailable",
     "ModuleDepthModel",
+    "NetworkLayout",
     "Preprocess",
     "Preset",
     "TinyDepthNet",

@@ -15,7 +15,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from kadv.models.base import DepthModel, Preprocess
+from kadv.models.base import DepthModel
+from kadv.models.preprocess import Preprocess
 
 __all__ = ["ModuleDepthModel", "check_depth_model", "load_custom", "wrap_model"]
 

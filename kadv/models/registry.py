@@ -20,42 +20,40 @@ class Preset:
         hub_id: its Hugging Face id ("" for the embedded kadv-tiny).
         family: its transformers model type.
         output_kind: "disparity" or "depth".
-        input_size: the network input (height, width) its processor aims for.
+        input_size: the network input its processor aims for, e.g. "518x518 keep-aspect /14"; what
+            the checkpoint's own preprocessor_config.json says is what kadv uses.
     """
 
     hub_id: str
     family: str
     output_kind: str
-    input_size: tuple[int, int]
+    input_size: str
 
 
+_DA = "518x518 keep-aspect /14"
+_DINOV2_DPT = "image size, padded to /14"
 PRESETS = {
-    "midas_dpt_large": Preset("Intel/dpt-large", "dpt", "disparity", (384, 384)),
-    "midas_dpt_hybrid": Preset("Intel/dpt-hybrid-midas", "dpt", "disparity", (384, 384)),
-    "zoedepth_nk": Preset("Intel/zoedepth-nyu-kitti", "zoedepth", "depth", (384, 512)),
-    "depth_anything_v1_small": Preset("LiheYoung/depth-anything-small-hf", "depth_anything", "disparity", (518, 518)),
-    "depth_anything_v1_base": Preset("LiheYoung/depth-anything-base-hf", "depth_anything", "disparity", (518, 518)),
-    "depth_anything_v1_large": Preset("LiheYoung/depth-anything-large-hf", "depth_anything", "disparity", (518, 518)),
-    "depth_anything_v2_small": Preset("depth-anything/Depth-Anything-V2-Small-hf", "depth_anything", "disparity",
-                                      (518, 518)),
-    "depth_anything_v2_base": Preset("depth-anything/Depth-Anything-V2-Base-hf", "depth_anything", "disparity",
-                                     (518, 518)),
-    "depth_anything_v2_large": Preset("depth-anything/Depth-Anything-V2-Large-hf", "depth_anything", "disparity",
-                                      (518, 518)),
-    "depth_anything_v2_metric_indoor_small": Preset(
-        "depth-anything/Depth-Anything-V2-Metric-Indoor-Small-hf", "depth_anything", "depth", (518, 518)),
-    "depth_anything_v2_metric_indoor_base": Preset(
-        "depth-anything/Depth-Anything-V2-Metric-Indoor-Base-hf", "depth_anything", "depth", (518, 518)),
-    "depth_anything_v2_metric_indoor_large": Preset(
-        "depth-anything/Depth-Anything-V2-Metric-Indoor-Large-hf", "depth_anything", "depth", (518, 518)),
-    "depth_anything_v2_metric_outdoor_small": Preset(
-        "depth-anything/Depth-Anything-V2-Metric-Outdoor-Small-hf", "depth_anything", "depth", (518, 518)),
-    "depth_anything_v2_metric_outdoor_base": Preset(
-        "depth-anything/Depth-Anything-V2-Metric-Outdoor-Base-hf", "depth_anything", "depth", (518, 518)),
-    "depth_anything_v2_metric_outdoor_large": Preset(
-        "depth-anything/Depth-Anything-V2-Metric-Outdoor-Large-hf", "depth_anything", "depth", (518, 518)),
+    "midas_dpt_large": Preset("Intel/dpt-large", "dpt", "disparity", "384x384"),
+    "midas_dpt_hybrid": Preset("Intel/dpt-hybrid-midas", "dpt", "disparity", "384x384"),
+    "dpt_beit_large_512": Preset("Intel/dpt-beit-large-512", "dpt", "disparity", "512x512"),
+    "dpt_beit_large_384": Preset("Intel/dpt-beit-large-384", "dpt", "disparity", "384x384"),
+    "dpt_beit_base_384": Preset("Intel/dpt-beit-base-384", "dpt", "disparity", "384x384"),
+    **{f"dpt_dinov2_{size}_{data}": Preset(f"facebook/dpt-dinov2-{size}-{data}", "dpt", "depth", _DINOV2_DPT)
+       for size in ("small", "base", "large") for data in ("nyu", "kitti")},
+    "zoedepth_nk": Preset("Intel/zoedepth-nyu-kitti", "zoedepth", "depth", "384x512 keep-aspect /32, reflect-padded"),
+    "glpn_nyu": Preset("vinvino02/glpn-nyu", "glpn", "depth", "image size, floored to /32"),
+    "glpn_kitti": Preset("vinvino02/glpn-kitti", "glpn", "depth", "image size, floored to /32"),
+    "depth_pro": Preset("apple/DepthPro-hf", "depth_pro", "depth", "1536x1536"),
+    "tipsv2_b14_dpt": Preset("google/tipsv2-b14-dpt", "tipsv2_dpt", "depth", "448x448"),
+    **{f"depth_anything_v1_{size}": Preset(f"LiheYoung/depth-anything-{size}-hf", "depth_anything", "disparity", _DA)
+       for size in ("small", "base", "large")},
+    **{f"depth_anything_v2_{size}": Preset(f"depth-anything/Depth-Anything-V2-{size.title()}-hf", "depth_anything",
+                                           "disparity", _DA) for size in ("small", "base", "large")},
+    **{f"depth_anything_v2_metric_{where}_{size}": Preset(
+        f"depth-anything/Depth-Anything-V2-Metric-{where.title()}-{size.title()}-hf", "depth_anything", "depth", _DA)
+       for where in ("indoor", "outdoor") for size in ("small", "base", "large")},
 }
-KADV_TINY = Preset("", "kadv_tiny", "disparity", TINY_PREPROCESS.size)
+KADV_TINY = Preset("", "kadv_tiny", "disparity", "x".join(map(str, TINY_PREPROCESS.size)) + " keep-aspect /32")
 
 
 def weights_cached(hub_id: str) -> bool:
@@ -66,10 +64,10 @@ def weights_cached(hub_id: str) -> bool:
 def preset_table() -> list[dict[str, str]]:
     """One row per preset (kadv_tiny first): name, hub id, family, output kind, input size, cached."""
     rows = [{"name": "kadv_tiny", "hub id": "(embedded)", "family": KADV_TINY.family, "output": KADV_TINY.output_kind,
-             "input": "x".join(map(str, KADV_TINY.input_size)), "weights": "in the package"}]
+             "input": KADV_TINY.input_size, "weights": "in the package"}]
     for name, preset in PRESETS.items():
         rows.append({"name": name, "hub id": preset.hub_id, "family": preset.family, "output": preset.output_kind,
-                     "input": "x".join(map(str, preset.input_size)),
+                     "input": preset.input_size,
                      "weights": "cached" if weights_cached(preset.hub_id) else "not cached"})
     return rows
 

@@ -13,7 +13,8 @@ from safetensors.torch import load_file, save_file
 from torch import nn
 from torch.nn import functional as F
 
-from kadv.models.base import DepthModel, Preprocess
+from kadv.models.base import DepthModel
+from kadv.models.preprocess import Preprocess
 
 __all__ = ["TINY_WEIGHTS", "TinyDepthNet", "KadvTiny", "load_kadv_tiny", "save_kadv_tiny"]
 

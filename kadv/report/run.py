@@ -100,7 +100,7 @@ class _ViewRenderer:
         K = intrinsics_from_fov(init.fov_x_deg, self.height, self.width)
         with torch.no_grad():
             out = self.objective.renderer.render(poses, K, self.height, self.width, supersample=self.supersample)
-            prediction = self.objective.model(out.rgb)
+            prediction = self.objective.model(out.rgb, K)
             aligned = aligned_depth(prediction.double(), out.depth.double(), out.mask, self.objective.model.output_kind)
         return {"rgb": out.rgb.permute(0, 2, 3, 1).numpy(), "depth": out.depth[:, 0].numpy(),
                 "prediction": prediction[:, 0].numpy(), "aligned": aligned[:, 0].float().numpy(),

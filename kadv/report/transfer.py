@@ -55,7 +55,7 @@ def transfer_tables(runs: list[RunRecord], renderer_of: Callable[[RunRecord], Ex
                 for name in names:
                     model = model_of(models[name])
                     objective = Objective(model, loss, renderer, PenaltyConfig(), space)
-                    prediction = model(out.rgb)
+                    prediction = model(out.rgb, Ks)
                     l_depth = objective.l_depth(out.depth.double(), prediction.double(), out.mask)
                     delta1 = depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)["delta1"]
                     scores[run.model, name]["delta1"] += delta1.tolist()

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from transformers import CHMv2Config
 from PIL import Image
 
 from kadv import box_room
@@ -133,6 +134,9 @@ BAD_INPUTS = [
     ("kadv-attack", ["model.name=no_such_model"], "no_such_model"),
     ("kadv-attack", ["render.supersample=0"], "render.supersample"),
     ("kadv-attack", ["model=depth_anything_v2_small"], "depth_anything_v2_small"),
+    ("kadv-attack", ["model=no_such_preset"], "no_such_preset"),
+    ("kadv-attack", ["model=huggingface", "model.name={canopy}"], "canopy-height model"),
+    ("kadv-attack", ["model=depth_pro", "model.output_kind=disparity"], "model.output_kind"),
     ("kadv-attack", ["model=custom", "model.target=no_such_package_kadv.make"], "no_such_package_kadv"),
     ("kadv-attack", ["model=custom", "model.target={wrong_model}:make"], "must map rgb"),
     ("kadv-attack", ["init.params={inside}"], "inside an object"),
@@ -157,7 +161,9 @@ def test_bad_input_gives_one_line_and_exit_status_2(tool, overrides, named, tmp_
     corrupt.write_text("<scene version='0.6.0'><shape type='obj'>")
     wrong_model = tmp_path / "wrong_model.py"
     wrong_model.write_text("import torch\n\ndef make():\n    return torch.nn.Conv2d(3, 2, 1)\n")
-    values = {"corrupt": corrupt, "inside": _inside_box_params(tmp_path), "wrong_model": wrong_model}
+    canopy = tmp_path / "canopy"
+    CHMv2Config().save_pretrained(canopy)  # refused on its config, before any weights are read
+    values = {"corrupt": corrupt, "inside": _inside_box_params(tmp_path), "wrong_model": wrong_model, "canopy": canopy}
     overrides = [o.format(**values) for o in overrides]
     offline = {"HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf"), "HYDRA_FULL_ERROR": "0"}
     result = _run(tool, tmp_path, "run", *_SIZE.get(tool, []), *overrides, env=offline)

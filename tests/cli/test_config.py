@@ -50,6 +50,13 @@ def test_every_group_option_composes_into_valid_settings() -> None:
                 assert attack.method == option and attack.settings == get_method(option).settings()
 
 
+def test_every_preset_has_a_config_naming_its_hub_id_and_output_kind() -> None:
+    assert set(_options("model")) == {*PRESETS, "kadv_tiny", "huggingface", "custom"}
+    for name, preset in PRESETS.items():
+        node = _compose("kadv_attack", f"model={name}").model
+        assert (node.name, node.hub_id, node.output_kind) == (name, preset.hub_id, preset.output_kind)
+
+
 def test_yaml_defaults_equal_the_library_defaults() -> None:
     cfg = _compose("kadv_attack", "~experiment")
     init = OmegaConf.to_container(cfg.init)

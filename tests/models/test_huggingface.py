@@ -1,7 +1,6 @@
 """Every adapter family, loaded from tiny random configs through the same path real checkpoints take."""
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -9,90 +8,24 @@ from pathlib import Path
 
 import pytest
 import torch
-from transformers import (
-    BeitConfig,
-    BitConfig,
-    DepthAnythingConfig,
-    DepthAnythingForDepthEstimation,
-    Dinov2Config,
-    DPTConfig,
-    DPTForDepthEstimation,
-    ZoeDepthConfig,
-    ZoeDepthForDepthEstimation,
-)
+from transformers import DepthAnythingConfig, Dinov2Config, DPTConfig
 from transformers.models.dpt.image_processing_pil_dpt import get_resize_output_image_size
 
 from kadv.models import load_model, resized_shape
-from kadv.models.huggingface import output_kind
-
-VIT = dict(hidden_size=32, num_hidden_layers=4, num_attention_heads=2, intermediate_size=64, image_size=64, patch_size=16)
-
-
-def _dpt() -> torch.nn.Module:
-    return DPTForDepthEstimation(DPTConfig(**VIT, backbone_out_indices=[0, 1, 2, 3], neck_hidden_sizes=[16, 16, 32, 32],
-                                           fusion_hidden_size=16, reassemble_factors=[4, 2, 1, 0.5]))
-
-
-def _dpt_hybrid() -> torch.nn.Module:
-    bit = BitConfig(embedding_size=32, hidden_sizes=[64, 64, 64], depths=[1, 1, 1], layer_type="bottleneck", num_groups=8,
-                    global_padding="same", out_features=["stage1", "stage2", "stage3"], embedding_dynamic_padding=True)
-    return DPTForDepthEstimation(DPTConfig(**VIT, is_hybrid=True, backbone_config=bit, backbone_out_indices=[0, 1, 2, 3],
-                                           neck_hidden_sizes=[64, 64, 32, 32], fusion_hidden_size=32,
-                                           reassemble_factors=[1, 1, 1, 0.5], readout_type="project",
-                                           backbone_featmap_shape=[1, 64, 4, 4]))
-
-
-def _zoedepth() -> torch.nn.Module:
-    beit = BeitConfig(**VIT, out_indices=[1, 2, 3, 4], use_relative_position_bias=True, reshape_hidden_states=False)
-    bins = [{"name": "nyu", "n_bins": 8, "min_depth": 1e-3, "max_depth": 10.0},
-            {"name": "kitti", "n_bins": 8, "min_depth": 1e-3, "max_depth": 80.0}]
-    return ZoeDepthForDepthEstimation(ZoeDepthConfig(
-        backbone_config=beit, neck_hidden_sizes=[16, 16, 32, 32], fusion_hidden_size=16, reassemble_factors=[4, 2, 1, 0.5],
-        bottleneck_features=16, num_relative_features=8, bin_embedding_dim=16, num_attractors=[4, 2, 2, 2],
-        num_patch_transformer_layers=4, patch_transformer_hidden_size=128, patch_transformer_intermediate_size=128,
-        patch_transformer_num_attention_heads=2, bin_configurations=bins))
-
-
-def _depth_anything(out_indices: list[int], **extra) -> torch.nn.Module:
-    dino = Dinov2Config(hidden_size=32, num_hidden_layers=8, num_attention_heads=2, intermediate_size=64, image_size=56,
-                        patch_size=14, out_indices=out_indices, apply_layernorm=True, reshape_hidden_states=False)
-    return DepthAnythingForDepthEstimation(DepthAnythingConfig(
-        backbone_config=dino, reassemble_hidden_size=32, patch_size=14, neck_hidden_sizes=[8, 16, 32, 32],
-        fusion_hidden_size=16, head_hidden_size=8, **extra))
-
-
-# v1 reads the last four backbone layers, v2 four evenly spaced ones (as the original code does).
-FAMILIES = {
-    "dpt_vit": (_dpt, None, "disparity"),
-    "dpt_hybrid": (_dpt_hybrid, {"size": {"height": 64, "width": 64}, "keep_aspect_ratio": False, "ensure_multiple_of": 1,
-                                 "image_mean": [0.5] * 3, "image_std": [0.5] * 3}, "disparity"),
-    "zoedepth": (_zoedepth, {"size": {"height": 64, "width": 96}, "keep_aspect_ratio": True, "ensure_multiple_of": 32,
-                             "image_mean": [0.5] * 3, "image_std": [0.5] * 3}, "depth"),
-    "depth_anything_v1": (lambda: _depth_anything([5, 6, 7, 8]), {"size": {"height": 56, "width": 56},
-                          "keep_aspect_ratio": True, "ensure_multiple_of": 14}, "disparity"),
-    "depth_anything_v2": (lambda: _depth_anything([2, 4, 6, 8]), {"size": {"height": 70, "width": 70},
-                          "keep_aspect_ratio": True, "ensure_multiple_of": 14}, "disparity"),
-    "depth_anything_v2_metric": (lambda: _depth_anything([2, 4, 6, 8], depth_estimation_type="metric", max_depth=20),
-                                 None, "depth"),
-}
+from kadv.models.huggingface import family_preprocess, output_kind
+from tests.models.tiny_families import FAMILIES, save_family
 
 
 @pytest.fixture(scope="module", params=sorted(FAMILIES))
 def saved(request, tmp_path_factory) -> tuple[str, Path]:
-    build, processor, _ = FAMILIES[request.param]
-    torch.manual_seed(0)
-    directory = tmp_path_factory.mktemp(request.param)
-    build().save_pretrained(directory)
-    if processor is not None:
-        (directory / "preprocessor_config.json").write_text(json.dumps(processor))
-    return request.param, directory
+    return request.param, save_family(request.param, tmp_path_factory.mktemp(request.param))
 
 
-@pytest.mark.parametrize("size", [(48, 48), (40, 70), (37, 53)], ids=["square", "wide", "odd"])
+@pytest.mark.parametrize("size", [(48, 48), (37, 53)], ids=["square", "odd"])
 def test_loads_from_save_pretrained_and_keeps_the_input_size(saved, size) -> None:
     family, directory = saved
     model = load_model(directory)
-    assert model.output_kind == FAMILIES[family][2]
+    assert model.output_kind == FAMILIES[family].kind
     assert not model.training and not any(p.requires_grad for p in model.parameters())
     rgb = torch.rand(2, 3, *size, requires_grad=True)
     out = model(rgb)
@@ -104,14 +37,31 @@ def test_loads_from_save_pretrained_and_keeps_the_input_size(saved, size) -> Non
 
 def test_preprocessor_config_is_honoured(saved) -> None:
     family, directory = saved
-    model = load_model(directory)
-    processor = FAMILIES[family][1]
-    if processor is None:  # architecture defaults of the original processors
-        expected = {"dpt_vit": (384, 384), "depth_anything_v2_metric": (518, 518)}[family]
-        assert model.preprocess.size == expected
-    else:
+    model, processor = load_model(directory), FAMILIES[family].processor or {}
+    if family == "depth_pro":  # no processor file: the fixed square of its patching, patch_size / min(ratio)
+        assert model.preprocess.size == (64 / 0.5, 64 / 0.5)
+    if "height" in processor.get("size", {}):
         assert model.preprocess.size == (processor["size"]["height"], processor["size"]["width"])
-        assert model.preprocess.multiple == processor["ensure_multiple_of"]
+    assert model.preprocess.multiple == processor.get("ensure_multiple_of", 1)
+
+
+@pytest.mark.parametrize("config, processor, expected", [
+    ("GLPNConfig", {"size_divisor": 32}, dict(size=None, floor_multiple=32, mean=None)),
+    ("ZoeDepthConfig", {"do_pad": False}, dict(reflect_pad=False, size=(384, 512))),
+    ("DPTConfig", {"do_resize": False, "do_pad": True, "size_divisor": 14}, dict(size=None, pad_multiple=14)),
+    ("DPTConfig", {"do_normalize": False, "resample": 2}, dict(mean=None, std=None, interpolation="bilinear")),
+    ("DPTConfig", {"size": 256, "keep_aspect_ratio": True, "ensure_multiple_of": 14}, dict(size=(256, 256), multiple=14))],
+    ids=["glpn", "zoedepth_no_pad", "dinov2_pad", "no_normalize", "int_size"])
+def test_processor_settings_become_the_preprocess(config, processor, expected) -> None:
+    import transformers
+
+    preprocess = family_preprocess(getattr(transformers, config)(), processor)
+    assert {key: getattr(preprocess, key) for key in expected} == expected
+
+
+def test_a_resampling_filter_kadv_cannot_reproduce_is_refused() -> None:
+    with pytest.raises(ValueError, match="resample=1"):
+        family_preprocess(DPTConfig(), {"resample": 1})
 
 
 @pytest.mark.parametrize("shape", [(480, 640), (240, 320), (181, 333), (518, 518)])
@@ -163,7 +113,7 @@ def test_a_missing_path_is_reported_as_a_missing_directory_not_a_hub_id(path: st
 
 @pytest.mark.parametrize("family, config, kind", [
     ("glpn", "GLPNConfig", "depth"), ("zoedepth", "ZoeDepthConfig", "depth"), ("tipsv2_dpt", "Tipsv2DptConfig", "depth"),
-    ("dpt", "DPTConfig", "disparity"), ("depth_pro", "DepthProConfig", "disparity"),
+    ("dpt", "DPTConfig", "disparity"), ("depth_pro", "DepthProConfig", "depth"),
     ("depth_anything", "DepthAnythingConfig", "disparity")])
 def test_each_family_declares_what_its_output_holds(family: str, config: str, kind: str) -> None:
     import transformers
@@ -172,8 +122,16 @@ def test_each_family_declares_what_its_output_holds(family: str, config: str, ki
     assert built.model_type == family and output_kind(built) == kind
 
 
-def test_metric_depth_anything_is_depth() -> None:
+def test_metric_depth_anything_and_dinov2_dpt_heads_are_depth() -> None:
     assert output_kind(DepthAnythingConfig(depth_estimation_type="metric")) == "depth"
+    assert output_kind(DPTConfig(backbone_config=Dinov2Config())) == "depth"
+
+
+def test_a_family_kadv_does_not_know_is_refused_with_what_to_do() -> None:
+    config = DPTConfig()
+    config.model_type = "future_depth"
+    with pytest.raises(ValueError, match="'future_depth' is not one kadv knows.*wrap_model"):
+        output_kind(config)
 
 
 @pytest.mark.parametrize("config, why", [("CHMv2Config", "canopy-height"), ("PromptDepthAnythingConfig", "prompt depth")])

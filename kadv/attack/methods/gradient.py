@@ -74,7 +74,7 @@ def gradient_ascent(context: SearchContext, start: torch.Tensor, steps: int, lr_
         started = time.perf_counter()
         params = torch.cat([omega, delta], dim=1)
         out = context.differentiable(params, base, context.K, context.height, context.width)
-        terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam)
+        terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
         records += context.records(first_step + step, params, out.world_T_cam, terms, fraction,
                                    (out.coverage, out.rgb_error, out.depth_error), out.refreshed, render=out.exact)
         bar.set_postfix(L_depth=f"{float(terms.l_depth.detach().max()):.4f}", refresh=False)
