@@ -26,8 +26,8 @@ from kadv.attack import (
 )
 from kadv.cli.common import (
     check_render_config,
-    model_from_config,
     checks_group_options,
+    model_from_config,
     reports_user_errors,
     scene_from_config,
     settings_from_node,
@@ -36,8 +36,14 @@ from kadv.cli.common import (
 from kadv.device import resolve_device
 from kadv.io import atomic_write
 from kadv.losses import depth_loss
-from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
-from kadv.report.run import SUMMARY, is_complete, load_partial_results, save_partial_result, write_run
+from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
+from kadv.report.run import (
+    SUMMARY,
+    is_complete,
+    load_partial_results,
+    save_partial_result,
+    write_run,
+)
 from kadv.runtime import configure_runtime
 
 log = logging.getLogger(__name__)

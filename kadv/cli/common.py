@@ -26,21 +26,20 @@ from omegaconf.errors import OmegaConfBaseException
 from kadv.errors import WeightsUnavailable
 from kadv.geometry import look_at
 from kadv.io import write_json
-from kadv.models import PRESETS, DepthModel, load_custom, load_model
-from kadv.models.registry import KADV_TINY
+from kadv.models import KADV_TINY, PRESETS, DepthModel, load_custom, load_model
 from kadv.render import Shading
 from kadv.scenes import Scene, box_room, load_scene
 
 __all__ = [
     "FAILURE",
     "camera_from_config",
-    "settings_from_node",
     "check_render_config",
+    "checks_group_options",
     "dirname",
     "model_from_config",
-    "checks_group_options",
     "reports_user_errors",
     "scene_from_config",
+    "settings_from_node",
     "shading_from_config",
 ]
 

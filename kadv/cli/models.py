@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from kadv.models import preset_table
+from kadv.models.presets import preset_table
 
 __all__ = ["main"]
 

@@ -7,11 +7,23 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from kadv.cli.common import USER_ERRORS, model_from_config, scene_from_config, shading_from_config
+from kadv.cli.common import (
+    USER_ERRORS,
+    model_from_config,
+    scene_from_config,
+    shading_from_config,
+)
 from kadv.losses import depth_loss
 from kadv.render import ExactRenderer
 from kadv.report.html import save_mean_curves, write_html
-from kadv.report.sweep import RunRecord, collect_runs, method_table, methods_of, table2, table3
+from kadv.report.sweep import (
+    RunRecord,
+    collect_runs,
+    method_table,
+    methods_of,
+    table2,
+    table3,
+)
 from kadv.report.transfer import transfer_tables
 from kadv.runtime import configure_runtime
 

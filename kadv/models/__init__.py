@@ -1,31 +1,43 @@
-"""Depth models: the interface, Hugging Face adapters, and the embedded kadv-tiny."""
+"""Depth models: the interface, Hugging Face adapters, your own modules, and the embedded kadv-tiny.
+
+The names below load on first use, so that the preset list (``kadv.models.presets``) is read
+without importing torch or transformers.
+"""
 from __future__ import annotations
 
-from kadv.models.base import DepthModel
-from kadv.models.preprocess import NetworkLayout, Preprocess, resized_shape
-from kadv.models.custom import ModuleDepthModel, check_depth_model, load_custom, wrap_model
-from kadv.models.huggingface import HuggingFaceDepthModel, ModelWeightsUnavailable, load_huggingface
-from kadv.models.registry import PRESETS, Preset, load_model, preset_table
-from kadv.models.tiny import KadvTiny, TinyDepthNet, load_kadv_tiny, save_kadv_tiny
+import importlib
 
-__all__ = [
-    "PRESETS",
-    "DepthModel",
-    "HuggingFaceDepthModel",
-    "KadvTiny",
-    "ModelWeightsUnavailable",
-    "ModuleDepthModel",
-    "NetworkLayout",
-    "Preprocess",
-    "Preset",
-    "TinyDepthNet",
-    "check_depth_model",
-    "load_custom",
-    "load_huggingface",
-    "load_kadv_tiny",
-    "load_model",
-    "preset_table",
-    "resized_shape",
-    "save_kadv_tiny",
-    "wrap_model",
-]
+_EXPORTS = {
+    "DepthModel": "kadv.models.base",
+    "HuggingFaceDepthModel": "kadv.models.huggingface",
+    "KADV_TINY": "kadv.models.presets",
+    "KadvTiny": "kadv.models.tiny",
+    "ModelWeightsUnavailable": "kadv.models.huggingface",
+    "ModuleDepthModel": "kadv.models.custom",
+    "NetworkLayout": "kadv.models.preprocess",
+    "PRESETS": "kadv.models.presets",
+    "Preprocess": "kadv.models.preprocess",
+    "Preset": "kadv.models.presets",
+    "TinyDepthNet": "kadv.models.tiny",
+    "check_depth_model": "kadv.models.custom",
+    "load_custom": "kadv.models.custom",
+    "load_huggingface": "kadv.models.huggingface",
+    "load_kadv_tiny": "kadv.models.tiny",
+    "load_model": "kadv.models.registry",
+    "preset_table": "kadv.models.presets",
+    "resized_shape": "kadv.models.preprocess",
+    "save_kadv_tiny": "kadv.models.tiny",
+    "wrap_model": "kadv.models.custom",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> object:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'kadv.models' has no attribute {name!r}")
+    return getattr(importlib.import_module(_EXPORTS[name]), name)
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

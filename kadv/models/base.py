@@ -37,7 +37,7 @@ class DepthModel(nn.Module):
             parameter.requires_grad_(False)
         return self.eval()
 
-    def train(self, mode: bool = True) -> DepthModel:  # noqa: FBT001, FBT002
+    def train(self, mode: bool = True) -> DepthModel:
         """Stays in eval mode: attacks need deterministic, batch-independent predictions."""
         return super().train(False)
 

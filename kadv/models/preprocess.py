@@ -107,7 +107,7 @@ class Preprocess:
         """(rgb - mean) / std per channel for rgb (B, 3, h, w); unchanged without a mean."""
         if self.mean is None or self.std is None:
             return rgb
-        as_tensor = lambda values: torch.tensor(values, dtype=rgb.dtype, device=rgb.device)  # noqa: E731
+        as_tensor = lambda values: torch.tensor(values, dtype=rgb.dtype, device=rgb.device)
         return normalize(rgb, as_tensor(self.mean), as_tensor(self.std))
 
     def _resize(self, x: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:

@@ -1,75 +1,14 @@
 """``load_model``: presets, hub ids, local directories, and the embedded kadv-tiny model."""
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
-
-from huggingface_hub import try_to_load_from_cache
 
 from kadv.models.base import DepthModel
 from kadv.models.huggingface import load_huggingface
-from kadv.models.tiny import TINY_PREPROCESS, load_kadv_tiny
+from kadv.models.presets import PRESETS
+from kadv.models.tiny import load_kadv_tiny
 
-__all__ = ["PRESETS", "Preset", "load_model", "preset_table", "weights_cached"]
-
-@dataclass(frozen=True)
-class Preset:
-    """A named checkpoint.
-
-    Attributes:
-        hub_id: its Hugging Face id ("" for the embedded kadv-tiny).
-        family: its transformers model type.
-        output_kind: "disparity" or "depth".
-        input_size: the network input its processor aims for, e.g. "518x518 keep-aspect /14"; what
-            the checkpoint's own preprocessor_config.json says is what kadv uses.
-    """
-
-    hub_id: str
-    family: str
-    output_kind: str
-    input_size: str
-
-
-_DA = "518x518 keep-aspect /14"
-_DINOV2_DPT = "image size, padded to /14"
-PRESETS = {
-    "midas_dpt_large": Preset("Intel/dpt-large", "dpt", "disparity", "384x384"),
-    "midas_dpt_hybrid": Preset("Intel/dpt-hybrid-midas", "dpt", "disparity", "384x384"),
-    "dpt_beit_large_512": Preset("Intel/dpt-beit-large-512", "dpt", "disparity", "512x512"),
-    "dpt_beit_large_384": Preset("Intel/dpt-beit-large-384", "dpt", "disparity", "384x384"),
-    "dpt_beit_base_384": Preset("Intel/dpt-beit-base-384", "dpt", "disparity", "384x384"),
-    **{f"dpt_dinov2_{size}_{data}": Preset(f"facebook/dpt-dinov2-{size}-{data}", "dpt", "depth", _DINOV2_DPT)
-       for size in ("small", "base", "large") for data in ("nyu", "kitti")},
-    "zoedepth_nk": Preset("Intel/zoedepth-nyu-kitti", "zoedepth", "depth", "384x512 keep-aspect /32, reflect-padded"),
-    "glpn_nyu": Preset("vinvino02/glpn-nyu", "glpn", "depth", "image size, floored to /32"),
-    "glpn_kitti": Preset("vinvino02/glpn-kitti", "glpn", "depth", "image size, floored to /32"),
-    "depth_pro": Preset("apple/DepthPro-hf", "depth_pro", "depth", "1536x1536"),
-    "tipsv2_b14_dpt": Preset("google/tipsv2-b14-dpt", "tipsv2_dpt", "depth", "448x448"),
-    **{f"depth_anything_v1_{size}": Preset(f"LiheYoung/depth-anything-{size}-hf", "depth_anything", "disparity", _DA)
-       for size in ("small", "base", "large")},
-    **{f"depth_anything_v2_{size}": Preset(f"depth-anything/Depth-Anything-V2-{size.title()}-hf", "depth_anything",
-                                           "disparity", _DA) for size in ("small", "base", "large")},
-    **{f"depth_anything_v2_metric_{where}_{size}": Preset(
-        f"depth-anything/Depth-Anything-V2-Metric-{where.title()}-{size.title()}-hf", "depth_anything", "depth", _DA)
-       for where in ("indoor", "outdoor") for size in ("small", "base", "large")},
-}
-KADV_TINY = Preset("", "kadv_tiny", "disparity", "x".join(map(str, TINY_PREPROCESS.size)) + " keep-aspect /32")
-
-
-def weights_cached(hub_id: str) -> bool:
-    """Whether the Hugging Face cache holds ``hub_id``'s config (offline: it only reads the disk)."""
-    return isinstance(try_to_load_from_cache(hub_id, "config.json"), str)
-
-
-def preset_table() -> list[dict[str, str]]:
-    """One row per preset (kadv_tiny first): name, hub id, family, output kind, input size, cached."""
-    rows = [{"name": "kadv_tiny", "hub id": "(embedded)", "family": KADV_TINY.family, "output": KADV_TINY.output_kind,
-             "input": KADV_TINY.input_size, "weights": "in the package"}]
-    for name, preset in PRESETS.items():
-        rows.append({"name": name, "hub id": preset.hub_id, "family": preset.family, "output": preset.output_kind,
-                     "input": preset.input_size,
-                     "weights": "cached" if weights_cached(preset.hub_id) else "not cached"})
-    return rows
+__all__ = ["load_model"]
 
 
 def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> DepthModel:

@@ -16,7 +16,7 @@ from torch.nn import functional as F
 from kadv.models.base import DepthModel
 from kadv.models.preprocess import Preprocess
 
-__all__ = ["TINY_WEIGHTS", "TinyDepthNet", "KadvTiny", "load_kadv_tiny", "save_kadv_tiny"]
+__all__ = ["TINY_WEIGHTS", "KadvTiny", "TinyDepthNet", "load_kadv_tiny", "save_kadv_tiny"]
 
 TINY_WEIGHTS = Path(__file__).parent / "weights" / "kadv_tiny.safetensors"
 DEFAULT_CHANNELS = (16, 32, 64, 128, 256)

@@ -13,7 +13,13 @@ from tqdm import tqdm
 from kadv.datasets import ViewBatch, render_procedural_views
 from kadv.losses import ssi_loss
 from kadv.models.evaluation import evaluate
-from kadv.models.tiny import DEFAULT_CHANNELS, TINY_PREPROCESS, KadvTiny, TinyDepthNet, load_kadv_tiny
+from kadv.models.tiny import (
+    DEFAULT_CHANNELS,
+    TINY_PREPROCESS,
+    KadvTiny,
+    TinyDepthNet,
+    load_kadv_tiny,
+)
 
 __all__ = ["TinyTrainConfig", "fit", "train_tiny"]
 

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from transformers import CHMv2Config
 from PIL import Image
+from transformers import CHMv2Config
 
 from kadv import box_room
 

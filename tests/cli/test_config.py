@@ -4,7 +4,6 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import pytest
 from hydra import compose, initialize_config_module
 from omegaconf import OmegaConf
 

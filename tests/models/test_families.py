@@ -14,7 +14,14 @@ import torch.nn.functional as F
 from transformers import AutoImageProcessor, AutoModelForDepthEstimation
 
 from kadv import DifferentiableRenderer, ExactRenderer, load_model
-from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
+from kadv.attack import (
+    AttackConfig,
+    GradientSettings,
+    Objective,
+    PenaltyConfig,
+    attack,
+    file_init_views,
+)
 from kadv.geometry import intrinsics_from_fov
 from kadv.losses import depth_loss, depth_metrics
 from tests.models.tiny_families import FAMILIES, save_family

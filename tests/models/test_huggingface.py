@@ -9,7 +9,9 @@ from pathlib import Path
 import pytest
 import torch
 from transformers import DepthAnythingConfig, Dinov2Config, DPTConfig
-from transformers.models.dpt.image_processing_pil_dpt import get_resize_output_image_size
+from transformers.models.dpt.image_processing_pil_dpt import (
+    get_resize_output_image_size,
+)
 
 from kadv.models import load_model, resized_shape
 from kadv.models.huggingface import family_preprocess, output_kind

@@ -4,8 +4,8 @@ import pytest
 import torch
 
 from kadv.datasets import render_procedural_views
-from kadv.models import TinyDepthNet, load_kadv_tiny, save_kadv_tiny
 from kadv.losses import gradient_matching, ssi_loss
+from kadv.models import TinyDepthNet, load_kadv_tiny, save_kadv_tiny
 from kadv.models.train_tiny import TinyTrainConfig, fit, train_tiny
 
 
