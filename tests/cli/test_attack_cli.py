@@ -6,6 +6,7 @@ import signal
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -155,18 +156,32 @@ BAD_INPUTS = [
 _SIZE = {"kadv-attack": SMALL[:2], "kadv-render": SMALL[:2]}
 
 
-@pytest.mark.parametrize("tool, overrides, named", BAD_INPUTS, ids=[" ".join(o) for _, o, _ in BAD_INPUTS])
-def test_bad_input_gives_one_line_and_exit_status_2(tool, overrides, named, tmp_path: Path) -> None:
-    corrupt = tmp_path / "corrupt.xml"
+@pytest.fixture(scope="module")
+def bad_input_results(tmp_path_factory) -> dict[int, subprocess.CompletedProcess]:
+    """Every BAD_INPUTS case run once; side by side, since each spends its seconds importing."""
+    root = tmp_path_factory.mktemp("bad_inputs")
+    corrupt = root / "corrupt.xml"
     corrupt.write_text("<scene version='0.6.0'><shape type='obj'>")
-    wrong_model = tmp_path / "wrong_model.py"
+    wrong_model = root / "wrong_model.py"
     wrong_model.write_text("import torch\n\ndef make():\n    return torch.nn.Conv2d(3, 2, 1)\n")
-    canopy = tmp_path / "canopy"
+    canopy = root / "canopy"
     CHMv2Config().save_pretrained(canopy)  # refused on its config, before any weights are read
-    values = {"corrupt": corrupt, "inside": _inside_box_params(tmp_path), "wrong_model": wrong_model, "canopy": canopy}
-    overrides = [o.format(**values) for o in overrides]
-    offline = {"HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf"), "HYDRA_FULL_ERROR": "0"}
-    result = _run(tool, tmp_path, "run", *_SIZE.get(tool, []), *overrides, env=offline)
+    values = {"corrupt": corrupt, "inside": _inside_box_params(root), "wrong_model": wrong_model, "canopy": canopy}
+    offline = {"HF_HUB_OFFLINE": "1", "HF_HOME": str(root / "hf"), "HYDRA_FULL_ERROR": "0"}
+
+    def run(case: int) -> subprocess.CompletedProcess:
+        tool, overrides, _ = BAD_INPUTS[case]
+        overrides = [o.format(**values) for o in overrides]
+        return _run(tool, root, f"run{case}", *_SIZE.get(tool, []), *overrides, env=offline)
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        return dict(enumerate(pool.map(run, range(len(BAD_INPUTS)))))
+
+
+@pytest.mark.parametrize("case", range(len(BAD_INPUTS)), ids=[" ".join(o) for _, o, _ in BAD_INPUTS])
+def test_bad_input_gives_one_line_and_exit_status_2(case: int, bad_input_results) -> None:
+    tool, _, named = BAD_INPUTS[case]
+    result = bad_input_results[case]
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr

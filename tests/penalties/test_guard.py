@@ -9,7 +9,7 @@ from kadv.geometry import intrinsics_from_fov, look_at
 from kadv.penalties import step_guard, view_validity
 from kadv.render import ExactRenderer
 from kadv.scenes import MeshPart, assemble_scene, box_room
-from kadv.scenes.box_room import quad_part
+from kadv.scenes.parts import quad_part
 
 WALL_X = 3.0
 

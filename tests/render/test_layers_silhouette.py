@@ -8,7 +8,7 @@ from kadv.render import ExactRenderer, find_edge_pairs, render_anchor
 from kadv.render.layers import guard_band_intrinsics
 from kadv.render.silhouette import edge_crossings
 from kadv.scenes import Material, assemble_scene
-from kadv.scenes.box_room import quad_part
+from kadv.scenes.parts import quad_part
 
 
 def _panel_before_wall() -> ExactRenderer:

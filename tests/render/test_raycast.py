@@ -7,7 +7,7 @@ import torch
 from kadv.geometry import intrinsics_from_fov, look_at, pixel_rays
 from kadv.render import ExactRenderer, Shading
 from kadv.scenes import Material, assemble_scene, box_room
-from kadv.scenes.box_room import quad_part
+from kadv.scenes.parts import quad_part
 
 FLAT = Shading(ambient=1.0, diffuse=0.0, background=(0.25, 0.5, 0.75))
 RED, BLUE = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])

@@ -1,0 +1,70 @@
+"""Building blocks of generated scenes: textured quads and boxes as :class:`MeshPart` s."""
+from __future__ import annotations
+
+import numpy as np
+
+from kadv.scenes.scene import MeshPart
+
+__all__ = ["box_parts", "facing", "overlapped", "planar_quad", "quad_part"]
+
+_QUAD_FACES = np.array([[0, 2, 1], [0, 3, 2]])
+
+
+def quad_part(corners: np.ndarray, material: int, name: str, uv_extent: tuple[float, float] = (1.0, 1.0)) -> MeshPart:
+    """Two triangles of the quad ``corners`` (4, 3), UVs spanning ``uv_extent``.
+
+    The front face's normal is (c3 - c0) x (c1 - c0); corner 0 has uv (0, 0), corner 1 (u, 0).
+    """
+    u, v = uv_extent
+    uv = np.array([[0, 0], [u, 0], [u, v], [0, v]], np.float64)
+    return MeshPart(np.asarray(corners, np.float64), _QUAD_FACES, uv[_QUAD_FACES], None, material, name)
+
+
+def overlapped(corners: np.ndarray, margin: float = 1e-3) -> np.ndarray:
+    """Grow a quad by ``margin`` past its edges: faces that merely touch leave float cracks rays slip through."""
+    u = corners[1] - corners[0]
+    v = corners[3] - corners[0]
+    u_hat, v_hat = u / np.linalg.norm(u), v / np.linalg.norm(v)
+    signs = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], np.float64)
+    return corners + margin * (signs[:, :1] * u_hat + signs[:, 1:] * v_hat)
+
+
+def facing(corners: np.ndarray, toward: np.ndarray) -> np.ndarray:
+    """The quad ``corners`` (4, 3), reordered if needed so its front face looks along ``toward`` (3,)."""
+    corners = np.asarray(corners, np.float64)
+    normal = np.cross(corners[3] - corners[0], corners[1] - corners[0])
+    return corners if normal @ np.asarray(toward, np.float64) > 0 else corners[[0, 3, 2, 1]]
+
+
+def planar_quad(corners: np.ndarray, material: int, name: str, tile: float) -> MeshPart:
+    """A quad whose UVs are its world position along its edges over ``tile`` metres.
+
+    Pieces of one plane (a wall around its window) so share one continuous texture placement.
+    """
+    corners = overlapped(np.asarray(corners, np.float64))
+    u_hat = corners[1] - corners[0]
+    v_hat = corners[3] - corners[0]
+    axes = np.stack([u_hat / np.linalg.norm(u_hat), v_hat / np.linalg.norm(v_hat)], axis=1)
+    uv = corners @ axes / tile
+    return MeshPart(corners, _QUAD_FACES, uv[_QUAD_FACES], None, material, name)
+
+
+def box_parts(lo: np.ndarray, hi: np.ndarray, material: int, name: str, tile: float) -> list[MeshPart]:
+    """The six outward-facing faces of the axis-aligned box ``lo`` (3,) - ``hi`` (3,), one texture
+    repeat per ``tile`` metres from each face's corner."""
+    x0, y0, z0 = lo
+    x1, y1, z1 = hi
+    faces = np.array([
+        [[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0]],
+        [[x1, y0, z1], [x0, y0, z1], [x0, y1, z1], [x1, y1, z1]],
+        [[x0, y0, z1], [x0, y0, z0], [x0, y1, z0], [x0, y1, z1]],
+        [[x1, y0, z0], [x1, y0, z1], [x1, y1, z1], [x1, y1, z0]],
+        [[x0, y1, z0], [x1, y1, z0], [x1, y1, z1], [x0, y1, z1]],
+        [[x0, y0, z1], [x1, y0, z1], [x1, y0, z0], [x0, y0, z0]],
+    ], np.float64)
+    parts = []
+    for index, corners in enumerate(faces):
+        corners = overlapped(corners)
+        extent = (np.linalg.norm(corners[1] - corners[0]) / tile, np.linalg.norm(corners[3] - corners[0]) / tile)
+        parts.append(quad_part(corners, material, f"{name}.face{index}", extent))
+    return parts
