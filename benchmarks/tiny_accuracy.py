@@ -1,42 +1,80 @@
-"""kadv-tiny delta1 (after scale-and-shift alignment) on held-out procedural views and real scenes.
+"""delta1 (after scale-and-shift alignment) of the embedded models on held-out generated rooms and
+on the three shared scenes, which no training run ever sees.
 
-The 200 procedural views come from rooms no training run uses (seed 7); the real scenes are
-rendered from their file cameras and reported as measured, with no threshold.
-Run: .venv/bin/python benchmarks/tiny_accuracy.py
+- Generated: 200 views of furnished rooms and 200 of box rooms from seed 7 (training draws seeds 0
+  and 1), at 240 x 320.
+- Shared scenes: each scene's file camera plus 20 valid views drawn as the attack draws init-view
+  candidates (``sample_valid_views``, seed 0, unranked), at 180 x 320; the mean is over all 63 views.
+
+Run: .venv/bin/python benchmarks/tiny_accuracy.py [--kadv-tiny FILE] [--kadv-tiny-dpt DIR]
+(other weights than the shipped ones, e.g. a training run's).
 """
 from __future__ import annotations
 
-import sys
+import argparse
 
 import torch
 from common import REAL_SCENES, scenes_root
 
-from kadv.datasets import render_procedural_views
+from kadv.attack import InitViewConfig, sample_valid_views
+from kadv.datasets import ViewBatch, render_procedural_views
+from kadv.geometry import intrinsics_from_fov
 from kadv.losses import depth_metrics
 from kadv.models import load_model
-from kadv.models.evaluation import evaluate
+from kadv.penalties import PenaltyConfig
 from kadv.render import ExactRenderer
 from kadv.scenes import load_scene
 
 HELD_OUT_SEED = 7
+SAMPLED_VIEWS = 20
+HEIGHT, WIDTH = 180, 320
 
 
-def main(weights: str | None = None) -> None:
-    model = load_model("kadv_tiny", weights=weights)
-    held_out = render_procedural_views(200, HELD_OUT_SEED, 240, 320, progress=False)
-    procedural = evaluate(model, held_out)
-    print(f"procedural held-out views: 200  delta1 {procedural:.3f}")
-    real = []
-    for name in REAL_SCENES:
-        scene = load_scene(scenes_root() / name / "scene.xml")
-        camera = scene.cameras[0]
-        out = ExactRenderer(scene).render(camera.world_T_cam, camera.intrinsics(180, 320), 180, 320, supersample=2)
-        with torch.no_grad():
-            metrics = depth_metrics(model(out.rgb), out.depth, out.mask)
-        real.append(float(metrics["delta1"][0]))
-        print(f"{name:<20} file camera  delta1 {real[-1]:.3f}  abs_rel {float(metrics['abs_rel'][0]):.3f}")
-    print(f"kadv_tiny delta1_procedural={procedural:.3f} delta1_real_mean={sum(real) / len(real):.3f}")
+def shared_scene_views(name: str) -> ViewBatch:
+    """The file camera and ``SAMPLED_VIEWS`` sampled valid views of a shared scene."""
+    scene = load_scene(scenes_root() / name / "scene.xml")
+    renderer = ExactRenderer(scene)
+    config = InitViewConfig()
+    camera = scene.cameras[0]
+    sampled = sample_valid_views(renderer, SAMPLED_VIEWS, 0, config, PenaltyConfig(), HEIGHT, WIDTH)
+    outputs = [renderer.render(camera.world_T_cam, camera.intrinsics(HEIGHT, WIDTH), HEIGHT, WIDTH, supersample=2),
+               renderer.render(sampled, intrinsics_from_fov(config.fov_x_deg, HEIGHT, WIDTH), HEIGHT, WIDTH,
+                               supersample=2)]
+    return ViewBatch(*(torch.cat([getattr(out, key) for out in outputs]) for key in ("rgb", "depth", "mask")))
+
+
+def per_view_delta1(model: torch.nn.Module, views: ViewBatch) -> torch.Tensor:
+    with torch.no_grad():
+        return torch.cat([depth_metrics(model(views.rgb[i:i + 16]), views.depth[i:i + 16], views.mask[i:i + 16])["delta1"]
+                          for i in range(0, len(views.rgb), 16)])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--kadv-tiny", default=None, help="kadv-tiny weights file (default: the shipped one)")
+    parser.add_argument("--kadv-tiny-dpt", default=None, help="kadv-tiny-dpt directory (default: the shipped one)")
+    parser.add_argument("--models", nargs="+", default=["kadv_tiny", "kadv_tiny_dpt"], choices=["kadv_tiny", "kadv_tiny_dpt"])
+    args = parser.parse_args()
+    weights = {"kadv_tiny": args.kadv_tiny, "kadv_tiny_dpt": args.kadv_tiny_dpt}
+    models = {name: load_model(name, weights=weights[name]) for name in args.models}
+    held_out = {"furnished": render_procedural_views(200, HELD_OUT_SEED, 240, 320, furnished_share=1.0, progress=False),
+                "box rooms": render_procedural_views(200, HELD_OUT_SEED, 240, 320, furnished_share=0.0, progress=False)}
+    shared = {name: shared_scene_views(name) for name in REAL_SCENES}
+    columns = [*held_out, *(f"{name} file" for name in shared), *(f"{name} sampled" for name in shared), "shared mean"]
+    print("| model | " + " | ".join(columns) + " |")
+    print("|---" * (len(columns) + 1) + "|")
+    results = {}
+    for label, model in models.items():
+        generated = {key: float(per_view_delta1(model, views).mean()) for key, views in held_out.items()}
+        scores = {name: per_view_delta1(model, views) for name, views in shared.items()}
+        real = float(torch.cat(list(scores.values())).mean())
+        cells = [*generated.values(), *(float(s[0]) for s in scores.values()), *(float(s[1:].mean()) for s in scores.values()),
+                 real]
+        print(f"| {label} | " + " | ".join(f"{value:.3f}" for value in cells) + " |")
+        results[label] = (real, generated["furnished"])
+    print("tiny_accuracy " + " ".join([f"{label}_real={real:.3f}" for label, (real, _) in results.items()]
+                                      + [f"{label}_procedural={procedural:.3f}" for label, (_, procedural) in results.items()]))
 
 
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else None)
+    main()

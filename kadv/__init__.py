@@ -21,6 +21,7 @@ _EXPORTS = {
     "load_model": "kadv.models",
     "load_scene": "kadv.scenes",
     "look_at": "kadv.geometry",
+    "procedural_room": "kadv.scenes",
 }
 
 __all__ = sorted(_EXPORTS)

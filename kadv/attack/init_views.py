@@ -31,6 +31,7 @@ __all__ = [
     "file_init_views",
     "load_init_params",
     "sample_init_views",
+    "sample_valid_views",
     "save_init_params",
     "score_views",
     "ViewScores",
@@ -229,9 +230,9 @@ def score_views(model: DepthModel, renderer: ExactRenderer, poses: torch.Tensor,
 def _candidate_poses(renderer: ExactRenderer, config: InitViewConfig, count: int, rng: np.random.Generator,
                      clearance: float) -> torch.Tensor:
     """Up to ``count`` candidate poses; their centres stand at eye height above the surface found
-    straight below a random point of the bounds (a scene's bounds may hold far more than its rooms:
-    a garden, a street), so rooms at any level of any scene get candidates."""
-    lo, hi = renderer.scene.bounds
+    straight below a random point of the camera region (a scene's bounds may hold far more than its
+    rooms: a garden, a street), so rooms at any level of any scene get candidates."""
+    lo, hi = renderer.scene.camera_region
     points = rng.uniform(lo + clearance, np.maximum(hi - clearance, lo + clearance), size=(count, 3))
     down = np.broadcast_to(np.array([0.0, -1.0, 0.0]), points.shape)
     below = renderer.cast(points, down)
@@ -251,29 +252,19 @@ def _candidate_poses(renderer: ExactRenderer, config: InitViewConfig, count: int
     return poses
 
 
-def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, seed: int, config: InitViewConfig,
-                      penalty: PenaltyConfig, height: int, width: int) -> list[InitView]:
-    """Draw ``config.candidates`` seeded candidate views and keep the ``count`` best: views the model
-    predicts well that show something.
-
-    A candidate's centre is in free space with clearance above ``config.clearance`` (default
-    2 * d_th), its height, pitch and roll within the configured ranges; its view must be valid
-    (an uninformative view is not) and hit a surface in at least ``min_hit_fraction`` of its
-    pixels. Candidates are ranked by delta1 + ``content_weight`` * :meth:`ViewScores.content`:
-    ranking by accuracy alone rewards views with nothing in them (a bare wall, a plain corner).
-
-    Raises:
-        InitViewError: if fewer than ``count`` acceptable candidates turn up.
-    """
-    if count <= 0:
-        return []
+def sample_valid_views(renderer: ExactRenderer, count: int, seed: int, config: InitViewConfig, penalty: PenaltyConfig,
+                       height: int, width: int) -> torch.Tensor:
+    """Up to ``count`` seeded candidate poses (N, 4, 4), unranked, in the order drawn: centres in free
+    space with clearance above ``config.clearance`` (default 2 * d_th), height, pitch and roll within
+    the configured ranges, views valid (an uninformative view is not) and hitting a surface in at
+    least ``config.min_hit_fraction`` of their pixels."""
     rng = np.random.default_rng([seed, 7919])
     clearance = 2.0 * penalty.d_th if config.clearance is None else config.clearance
     small_h, small_w = max(8, height // 4), max(8, width // 4)
     K = intrinsics_from_fov(config.fov_x_deg, small_h, small_w)
     accepted: list[torch.Tensor] = []
     for _ in range(_SAMPLING_ROUNDS):
-        needed = config.candidates - len(accepted)
+        needed = count - len(accepted)
         if needed <= 0:
             break
         poses = _candidate_poses(renderer, config, 8 * needed, rng, clearance)
@@ -281,10 +272,28 @@ def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, se
         validity = view_validity(renderer, poses, K, small_h, small_w, **penalty.validity_options())
         keep = validity.valid & (distance > clearance) & (1.0 - validity.miss_fraction >= config.min_hit_fraction)
         accepted += list(poses[keep][:needed])
-    if len(accepted) < count:
-        raise InitViewError(f"scene {renderer.scene.name!r}: only {len(accepted)} of {count} sampled init views are "
+    return torch.stack(accepted) if accepted else torch.zeros(0, 4, 4, dtype=torch.float64)
+
+
+def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, seed: int, config: InitViewConfig,
+                      penalty: PenaltyConfig, height: int, width: int) -> list[InitView]:
+    """Draw ``config.candidates`` seeded candidate views and keep the ``count`` best: views the model
+    predicts well that show something.
+
+    Candidates come from :func:`sample_valid_views` and are ranked by delta1 + ``content_weight`` *
+    :meth:`ViewScores.content`: ranking by accuracy alone rewards views with nothing in them (a bare
+    wall, a plain corner).
+
+    Raises:
+        InitViewError: if fewer than ``count`` acceptable candidates turn up.
+    """
+    if count <= 0:
+        return []
+    poses = sample_valid_views(renderer, config.candidates, seed, config, penalty, height, width)
+    if len(poses) < count:
+        clearance = 2.0 * penalty.d_th if config.clearance is None else config.clearance
+        raise InitViewError(f"scene {renderer.scene.name!r}: only {len(poses)} of {count} sampled init views are "
                             f"valid with clearance {clearance} m (check init.eye_height and the scene's scale)")
-    poses = torch.stack(accepted)
     fov = torch.full((len(poses),), config.fov_x_deg, dtype=torch.float64)
     scores = score_views(model, renderer, poses, fov, height, width)
     content = scores.content()

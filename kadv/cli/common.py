@@ -26,9 +26,9 @@ from omegaconf.errors import OmegaConfBaseException
 from kadv.errors import WeightsUnavailable
 from kadv.geometry import look_at
 from kadv.io import write_json
-from kadv.models import KADV_TINY, PRESETS, DepthModel, load_custom, load_model
+from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
 from kadv.render import Shading
-from kadv.scenes import Scene, box_room, load_scene
+from kadv.scenes import Scene, box_room, load_scene, procedural_room
 
 __all__ = [
     "FAILURE",
@@ -122,13 +122,15 @@ OmegaConf.register_new_resolver("kadv_dirname", dirname, replace=True)
 
 
 def scene_from_config(cfg: DictConfig) -> Scene:
-    """Build the scene a ``scene/`` config node describes (``kind: box_room`` or ``kind: file``)."""
+    """Build the scene a ``scene/`` config node describes (``kind``: box_room, procedural or file)."""
     if cfg.kind == "box_room":
         return box_room(seed=int(cfg.seed), num_boxes=int(cfg.num_boxes))
+    if cfg.kind == "procedural":
+        return procedural_room(seed=int(cfg.seed))
     if cfg.kind == "file":
         options = OmegaConf.to_container(cfg.get("options") or {}, resolve=True)
         return load_scene(Path(cfg.path).expanduser(), **options)
-    raise ValueError(f"scene.kind must be 'box_room' or 'file', got {cfg.kind!r}")
+    raise ValueError(f"scene.kind must be 'box_room', 'procedural' or 'file', got {cfg.kind!r}")
 
 
 def shading_from_config(cfg: DictConfig) -> Shading:
@@ -203,7 +205,7 @@ def model_from_config(node: Any) -> DepthModel:
     node = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else dict(node)
     if node.get("name") == "custom":
         return load_custom(node.get("target") or "", node.get("output_kind", "disparity"), node.get("args"))
-    preset = KADV_TINY if node["name"] == "kadv_tiny" else PRESETS.get(node["name"])
+    preset = EMBEDDED.get(node["name"]) or PRESETS.get(node["name"])
     for key in ("hub_id", "output_kind"):
         if preset is not None and node.get(key) is not None and node[key] != getattr(preset, key):
             raise ValueError(f"model.{key}: the preset {node['name']!r} has {key} {getattr(preset, key)!r}, fixed by its "

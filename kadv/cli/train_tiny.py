@@ -1,4 +1,5 @@
-"""``kadv-train-tiny``: train kadv-tiny on procedural rooms; writes weights and a log to the run directory."""
+"""``kadv-train-tiny``: train an embedded model (kadv-tiny, or kadv-tiny-dpt with ``train.architecture=dpt``) on
+generated rooms; writes its weights and a log to the run directory."""
 from __future__ import annotations
 
 import json
@@ -11,6 +12,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from kadv.cli.common import checks_group_options, reports_user_errors
 from kadv.models.tiny import TINY_WEIGHTS, save_kadv_tiny
+from kadv.models.tiny_dpt import TINY_DPT_DIR, save_kadv_tiny_dpt
 from kadv.models.train_tiny import TinyTrainConfig, train_tiny
 from kadv.report import atomic_write
 from kadv.runtime import configure_runtime
@@ -22,18 +24,20 @@ log = logging.getLogger(__name__)
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_train_tiny")
 @reports_user_errors("kadv-train-tiny")
 def main(cfg: DictConfig) -> None:
-    """Train kadv-tiny; weights and the training log go into the run directory."""
+    """Train an embedded model; its weights and the training log go into the run directory."""
     configure_runtime()
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     config = TinyTrainConfig(**OmegaConf.to_container(cfg.train, resolve=True))
-    network, training_log = train_tiny(config)
+    model, training_log = train_tiny(config)
     summary = {k: v for k, v in training_log.items() if k != "losses"}
-    weights = save_kadv_tiny(network, out_dir / "kadv_tiny.safetensors", metadata=summary)
+    save, name, shipped = ((save_kadv_tiny_dpt, "kadv_tiny_dpt", TINY_DPT_DIR) if config.architecture == "dpt"
+                           else (save_kadv_tiny, "kadv_tiny.safetensors", TINY_WEIGHTS))
+    weights = save(model.network, out_dir / name, metadata=summary)
     atomic_write(out_dir / "train_log.json", lambda tmp: tmp.write_text(json.dumps(training_log, indent=1)))
     if cfg.replace_shipped_weights:
-        save_kadv_tiny(network, TINY_WEIGHTS, metadata=summary)
-        log.info("replaced the shipped weights: %s", TINY_WEIGHTS)
-    log.info("kadv-tiny: val delta1 %.3f, render %.0f s, train %.0f s -> %s", summary["val_delta1"],
+        save(model.network, shipped, metadata=summary)
+        log.info("replaced the shipped weights: %s", shipped)
+    log.info("%s: val delta1 %.3f, render %.0f s, train %.0f s -> %s", model.name, summary["val_delta1"],
              summary["render_seconds"], summary["train_seconds"], weights)
 
 

@@ -1,4 +1,4 @@
-"""RGB-D views of procedural box rooms from random valid cameras (kadv-tiny's only training data)."""
+"""RGB-D views of generated rooms from random valid cameras (the embedded models' only training data)."""
 from __future__ import annotations
 
 import math
@@ -11,7 +11,7 @@ from tqdm import tqdm
 from kadv.geometry import intrinsics_from_fov
 from kadv.penalties import random_valid_poses
 from kadv.render import ExactRenderer, Shading
-from kadv.scenes import box_room
+from kadv.scenes import box_room, procedural_room
 
 __all__ = ["ViewBatch", "render_procedural_views"]
 
@@ -26,19 +26,30 @@ class ViewBatch:
 
 
 def render_procedural_views(count: int, seed: int, height: int, width: int, views_per_room: int = 8,
-                            progress: bool = True) -> ViewBatch:
-    """Render ``count`` views from rooms ``box_room(seed * 100003 + i)`` with random shading.
+                            furnished_share: float = 0.0, progress: bool = True) -> ViewBatch:
+    """Render ``count`` views, ``views_per_room`` per generated room, under random shading.
 
-    Deterministic for a seed; distinct seeds give disjoint rooms (held-out evaluation uses another seed).
+    Room ``i`` is ``procedural_room(seed * 100003 + i)`` (furnished, lit at its lamps and windows)
+    for a ``furnished_share`` of the rooms, spread evenly, else ``box_room(seed * 100003 + i)``
+    lit from a random point. Deterministic for a seed; distinct seeds give disjoint rooms
+    (held-out evaluation uses another seed).
     """
+    if not 0.0 <= furnished_share <= 1.0:
+        raise ValueError(f"furnished_share must be in [0, 1], got {furnished_share}")
     rng = np.random.default_rng(seed)
     rgb, depth, mask = [], [], []
     rooms = math.ceil(count / views_per_room)
     for index in tqdm(range(rooms), desc="rendering rooms", disable=not progress):
-        scene = box_room(seed=seed * 100003 + index, num_boxes=int(rng.integers(2, 8)))
-        lo, hi = scene.bounds
-        light = rng.uniform(lo + 0.3, hi - 0.3)
-        shading = Shading(ambient=float(rng.uniform(0.3, 0.6)), diffuse=float(rng.uniform(0.3, 0.7)), lights=(tuple(light),))
+        room_seed = seed * 100003 + index
+        # room i is furnished when the running share first reaches the next whole room
+        if math.floor((index + 1) * furnished_share) > math.floor(index * furnished_share):
+            scene = procedural_room(seed=room_seed)
+            lights = None  # the room's own: its lamps and windows
+        else:
+            scene = box_room(seed=room_seed, num_boxes=int(rng.integers(2, 8)))
+            lo, hi = scene.bounds
+            lights = (tuple(rng.uniform(lo + 0.3, hi - 0.3)),)
+        shading = Shading(ambient=float(rng.uniform(0.3, 0.6)), diffuse=float(rng.uniform(0.3, 0.7)), lights=lights)
         renderer = ExactRenderer(scene, shading)
         fov = float(rng.uniform(55, 85))
         n = min(views_per_room, count - index * views_per_room)

@@ -1,4 +1,4 @@
-"""Depth models: the interface, Hugging Face adapters, your own modules, and the embedded kadv-tiny.
+"""Depth models: the interface, Hugging Face adapters, your own modules, and the embedded kadv-tiny and kadv-tiny-dpt.
 
 The names below load on first use, so that the preset list (``kadv.models.presets``) is read
 without importing torch or transformers.
@@ -10,7 +10,7 @@ import importlib
 _EXPORTS = {
     "DepthModel": "kadv.models.base",
     "HuggingFaceDepthModel": "kadv.models.huggingface",
-    "KADV_TINY": "kadv.models.presets",
+    "EMBEDDED": "kadv.models.presets",
     "KadvTiny": "kadv.models.tiny",
     "ModelWeightsUnavailable": "kadv.models.huggingface",
     "ModuleDepthModel": "kadv.models.custom",
@@ -23,10 +23,12 @@ _EXPORTS = {
     "load_custom": "kadv.models.custom",
     "load_huggingface": "kadv.models.huggingface",
     "load_kadv_tiny": "kadv.models.tiny",
+    "load_kadv_tiny_dpt": "kadv.models.tiny_dpt",
     "load_model": "kadv.models.registry",
     "preset_table": "kadv.models.presets",
     "resized_shape": "kadv.models.preprocess",
     "save_kadv_tiny": "kadv.models.tiny",
+    "save_kadv_tiny_dpt": "kadv.models.tiny_dpt",
     "wrap_model": "kadv.models.custom",
 }
 

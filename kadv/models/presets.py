@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 from huggingface_hub import try_to_load_from_cache
 
-__all__ = ["KADV_TINY", "PRESETS", "Preset", "preset_table", "weights_cached"]
+__all__ = ["EMBEDDED", "PRESETS", "Preset", "preset_table", "weights_cached"]
 
 
 @dataclass(frozen=True)
@@ -16,7 +16,7 @@ class Preset:
     """A named checkpoint.
 
     Attributes:
-        hub_id: its Hugging Face id ("" for the embedded kadv-tiny).
+        hub_id: its Hugging Face id ("" for the embedded models).
         family: its transformers model type.
         output_kind: "disparity" or "depth".
         input_size: the network input its processor aims for, e.g. "518x518 keep-aspect /14"; what
@@ -52,8 +52,9 @@ PRESETS = {
         f"depth-anything/Depth-Anything-V2-Metric-{where.title()}-{size.title()}-hf", "depth_anything", "depth", _DA)
        for where in ("indoor", "outdoor") for size in ("small", "base", "large")},
 }
-# the embedded model (kadv.models.tiny: TINY_PREPROCESS)
-KADV_TINY = Preset("", "kadv_tiny", "disparity", "128x160 keep-aspect /32")
+# the embedded models, shipped in the package (kadv.models.tiny: TINY_PREPROCESS; kadv.models.tiny_dpt: TINY_DPT_PROCESSOR)
+EMBEDDED = {"kadv_tiny": Preset("", "kadv_tiny", "disparity", "128x160 keep-aspect /32"),
+            "kadv_tiny_dpt": Preset("", "dpt", "disparity", "160x160")}
 
 
 def weights_cached(hub_id: str) -> bool:
@@ -62,9 +63,9 @@ def weights_cached(hub_id: str) -> bool:
 
 
 def preset_table() -> list[dict[str, str]]:
-    """One row per preset (kadv_tiny first): name, hub id, family, output kind, input size, cached."""
-    rows = [{"name": "kadv_tiny", "hub id": "(embedded)", "family": KADV_TINY.family, "output": KADV_TINY.output_kind,
-             "input": KADV_TINY.input_size, "weights": "in the package"}]
+    """One row per preset (the embedded ones first): name, hub id, family, output kind, input size, cached."""
+    rows = [{"name": name, "hub id": "(embedded)", "family": preset.family, "output": preset.output_kind,
+             "input": preset.input_size, "weights": "in the package"} for name, preset in EMBEDDED.items()]
     for name, preset in PRESETS.items():
         rows.append({"name": name, "hub id": preset.hub_id, "family": preset.family, "output": preset.output_kind,
                      "input": preset.input_size,

@@ -7,6 +7,7 @@ from kadv.models.base import DepthModel
 from kadv.models.huggingface import load_huggingface
 from kadv.models.presets import PRESETS
 from kadv.models.tiny import load_kadv_tiny
+from kadv.models.tiny_dpt import load_kadv_tiny_dpt
 
 __all__ = ["load_model"]
 
@@ -16,9 +17,9 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
 
     Args:
         name_or_path: a preset (``midas_dpt_large``, ``zoedepth_nk``, ``depth_anything_v2_small``, ...,
-            ``kadv_tiny``), any Hugging Face depth-estimation id, or a local ``save_pretrained`` directory.
+            and the embedded ``kadv_tiny`` and ``kadv_tiny_dpt``), any Hugging Face depth-estimation id, or a local ``save_pretrained`` directory.
         weights: an explicit local directory (or, for ``kadv_tiny``, a weights file) that overrides
-            the cache and the hub.
+            the cache, the hub, or the shipped copy of an embedded model.
 
     Raises:
         ModelWeightsUnavailable: weights neither given, cached nor downloadable.
@@ -30,6 +31,8 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
         raise ValueError("model name is empty")
     if name == "kadv_tiny":
         return load_kadv_tiny(weights)
+    if name == "kadv_tiny_dpt":
+        return load_kadv_tiny_dpt(weights)
     if weights is not None:
         return load_huggingface(str(weights), name=name, hub_id=PRESETS[name].hub_id if name in PRESETS else name)
     if Path(name).expanduser().is_dir():
@@ -39,6 +42,6 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
     if name in PRESETS:
         return load_huggingface(PRESETS[name].hub_id, name=name, hub_id=PRESETS[name].hub_id)
     if "/" not in name:
-        raise ValueError(f"unknown model {name!r}: not a preset ({', '.join(sorted(PRESETS))}, kadv_tiny), "
+        raise ValueError(f"unknown model {name!r}: not a preset ({', '.join(sorted(PRESETS))}, kadv_tiny, kadv_tiny_dpt), "
                          "not a local directory, and not a Hugging Face id (owner/name)")
     return load_huggingface(name, name=name, hub_id=name)

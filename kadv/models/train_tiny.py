@@ -1,4 +1,5 @@
-"""Training kadv-tiny on procedural rooms with a scale-and-shift-invariant disparity loss."""
+"""Training the embedded models (kadv-tiny, kadv-tiny-dpt) on generated rooms with a scale-and-shift-invariant
+disparity loss."""
 from __future__ import annotations
 
 import math
@@ -12,6 +13,7 @@ from tqdm import tqdm
 
 from kadv.datasets import ViewBatch, render_procedural_views
 from kadv.losses import ssi_loss
+from kadv.models.base import DepthModel
 from kadv.models.evaluation import evaluate
 from kadv.models.tiny import (
     DEFAULT_CHANNELS,
@@ -20,16 +22,22 @@ from kadv.models.tiny import (
     TinyDepthNet,
     load_kadv_tiny,
 )
+from kadv.models.tiny_dpt import load_kadv_tiny_dpt, tiny_dpt_model, tiny_dpt_network
 
-__all__ = ["TinyTrainConfig", "fit", "train_tiny"]
+__all__ = ["ARCHITECTURES", "TinyTrainConfig", "fit", "render_training_views", "train_tiny"]
+
+ARCHITECTURES = ("unet", "dpt")
 
 
 @dataclass
 class TinyTrainConfig:
-    """Everything that determines a kadv-tiny training run (same config, same weights).
+    """Everything that determines a training run of an embedded model (same config, same weights).
 
-    ``init_weights`` continues from an earlier run's weights file (its channels win over
-    ``channels``), so a long training can be done, and reproduced, in stages.
+    ``architecture`` is "unet" (kadv-tiny, ``channels`` wide) or "dpt" (kadv-tiny-dpt, a small
+    hybrid DPT). ``furnished_share`` of the rooms are furnished rooms, the rest box rooms.
+    ``init_weights`` continues from an earlier run's weights (a kadv-tiny file, whose channels win
+    over ``channels``, or a kadv-tiny-dpt directory), so a long training can be done, and
+    reproduced, in stages.
     """
 
     seed: int = 0
@@ -43,6 +51,8 @@ class TinyTrainConfig:
     gradient_weight: float = 0.5
     channels: tuple[int, ...] = DEFAULT_CHANNELS
     init_weights: str | None = None
+    architecture: str = "unet"
+    furnished_share: float = 0.75
 
     def __post_init__(self) -> None:
         # checked here, before the minutes of rendering that come first in train_tiny
@@ -57,8 +67,12 @@ class TinyTrainConfig:
                 raise ValueError(f"train.{name} must be >= 0, got {getattr(self, name)}")
         if not self.channels or any(not isinstance(c, int) or c < 1 for c in self.channels):
             raise ValueError(f"train.channels must be positive integers, got {list(self.channels)}")
-        if self.init_weights is not None and not Path(self.init_weights).expanduser().is_file():
-            raise FileNotFoundError(f"train.init_weights: no such weights file: {self.init_weights}")
+        if self.architecture not in ARCHITECTURES:
+            raise ValueError(f"train.architecture must be one of {', '.join(ARCHITECTURES)}, got {self.architecture!r}")
+        if not 0.0 <= self.furnished_share <= 1.0:
+            raise ValueError(f"train.furnished_share must be in [0, 1], got {self.furnished_share}")
+        if self.init_weights is not None and not Path(self.init_weights).expanduser().exists():
+            raise FileNotFoundError(f"train.init_weights: no such weights file or directory: {self.init_weights}")
 
 
 def _augment(rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor, generator: torch.Generator):
@@ -69,52 +83,78 @@ def _augment(rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor, generat
     return (rgb * gain + bias).clamp(0, 1), depth, mask
 
 
-def fit(network: TinyDepthNet, train: ViewBatch, config: TinyTrainConfig, progress: bool = True) -> list[float]:
-    """Optimise ``network`` in place on ``train`` for ``config.steps`` steps; returns the loss per step."""
+def fit(model: DepthModel, train: ViewBatch, config: TinyTrainConfig, progress: bool = True) -> list[float]:
+    """Optimise ``model.network`` in place on ``train`` for ``config.steps`` steps; returns the loss per step.
+
+    kadv-tiny takes the views (at its input size) normalised; other models through their own preprocessing.
+    """
+    network = model.network
     # channels-last convolutions train about 30% faster on CPU (oneDNN).
-    network.train().to(memory_format=torch.channels_last)
+    network.train().requires_grad_(True).to(memory_format=torch.channels_last)
     optimiser = torch.optim.AdamW(network.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, max_lr=config.lr, total_steps=config.steps)
     generator = torch.Generator().manual_seed(config.seed)
     losses: list[float] = []
-    bar = tqdm(range(config.steps), desc="training kadv-tiny", disable=not progress)
+    bar = tqdm(range(config.steps), desc=f"training {model.name}", disable=not progress)
     for _ in bar:
         index = torch.randint(len(train.rgb), (config.batch_size,), generator=generator)
         rgb, depth, mask = _augment(train.rgb[index], train.depth[index], train.mask[index], generator)
-        pixels = TINY_PREPROCESS.normalize(rgb).contiguous(memory_format=torch.channels_last)
-        loss = ssi_loss(network(pixels), depth, mask, config.gradient_weight)
+        loss = ssi_loss(_predict(model, rgb), depth, mask, config.gradient_weight)
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
         schedule.step()
         losses.append(loss.item())
         bar.set_postfix(loss=f"{np.mean(losses[-50:]):.4f}")
-    network.eval()
+    model.freeze()
     return losses
 
 
-def train_tiny(config: TinyTrainConfig, progress: bool = True) -> tuple[TinyDepthNet, dict[str, object]]:
-    """Render the data, train, and return the network with a log (losses, delta1, timings)."""
+def _predict(model: DepthModel, rgb: torch.Tensor) -> torch.Tensor:
+    """(B, 1, H, W) predictions for views (B, 3, H, W), differentiable in the weights."""
+    if isinstance(model, KadvTiny):  # its views are at its input size: normalising is all its preprocessing does
+        return model.predict(model.preprocess.normalize(rgb).contiguous(memory_format=torch.channels_last))
+    return model(rgb)
+
+
+def render_training_views(config: TinyTrainConfig, progress: bool = True) -> tuple[ViewBatch, ViewBatch]:
+    """The training and validation views ``config`` names, at kadv-tiny's working size."""
     height, width = TINY_PREPROCESS.size
-    start = time.perf_counter()
-    train = render_procedural_views(config.train_views, config.seed, height, width, progress=progress)
-    val = render_procedural_views(config.val_views, config.val_seed, height, width, progress=progress)
-    render_seconds = time.perf_counter() - start
+    train = render_procedural_views(config.train_views, config.seed, height, width,
+                                    furnished_share=config.furnished_share, progress=progress)
+    val = render_procedural_views(config.val_views, config.val_seed, height, width,
+                                  furnished_share=config.furnished_share, progress=progress)
+    return train, val
+
+
+def _initial_model(config: TinyTrainConfig) -> DepthModel:
     torch.manual_seed(config.seed)  # here, so the initial weights do not depend on what rendering drew
+    if config.architecture == "dpt":
+        if config.init_weights is None:
+            return tiny_dpt_model(tiny_dpt_network())
+        return load_kadv_tiny_dpt(Path(config.init_weights).expanduser())
     if config.init_weights is None:
-        network = TinyDepthNet(tuple(config.channels))
-    else:
-        network = load_kadv_tiny(config.init_weights).network
-        network.requires_grad_(True)
+        return KadvTiny(TinyDepthNet(tuple(config.channels)))
+    return load_kadv_tiny(config.init_weights)
+
+
+def train_tiny(config: TinyTrainConfig, progress: bool = True,
+               views: tuple[ViewBatch, ViewBatch] | None = None) -> tuple[DepthModel, dict[str, object]]:
+    """Render the data (unless ``views`` gives what :func:`render_training_views` would), train,
+    and return the model with a log (losses, delta1, timings)."""
     start = time.perf_counter()
-    losses = fit(network, train, config, progress)
+    train, val = render_training_views(config, progress) if views is None else views
+    render_seconds = time.perf_counter() - start
+    model = _initial_model(config)
+    start = time.perf_counter()
+    losses = fit(model, train, config, progress)
     train_seconds = time.perf_counter() - start
     log = {
         "config": asdict(config),
         "render_seconds": render_seconds,
         "train_seconds": train_seconds,
         "final_loss": float(np.mean(losses[-100:])),
-        "val_delta1": evaluate(KadvTiny(network), val),
+        "val_delta1": evaluate(model, val),
         "losses": losses,
     }
-    return network, log
+    return model, log

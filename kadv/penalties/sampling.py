@@ -17,10 +17,10 @@ def random_valid_poses(renderer: ExactRenderer, count: int, rng: np.random.Gener
                        min_clearance: float = 0.3) -> torch.Tensor:
     """``count`` poses (count, 4, 4) inside the scene bounds that :func:`view_validity` accepts.
 
-    Centres are uniform in the bounds shrunk by ``min_clearance``; headings uniform, pitch in
-    [-35, 15] degrees, roll within +-5 degrees.
+    Centres are uniform in the scene's camera region (its interior if declared, else its bounds)
+    shrunk by ``min_clearance``; headings uniform, pitch in [-35, 15] degrees, roll within +-5 degrees.
     """
-    lo, hi = renderer.scene.bounds + np.array([[min_clearance] * 3, [-min_clearance] * 3])
+    lo, hi = renderer.scene.camera_region + np.array([[min_clearance] * 3, [-min_clearance] * 3])
     accepted: list[torch.Tensor] = []
     K = intrinsics_from_fov(fov_x_deg, 24, 32)
     for _ in range(100):

@@ -1,7 +1,7 @@
 """Generated materials: textures from scikit-image's bundled images and procedural patterns."""
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import skimage.data
@@ -19,7 +19,7 @@ def _downsample(image: np.ndarray, size: int = 256) -> np.ndarray:
     return image[::step, ::step]
 
 
-@lru_cache(maxsize=None)
+@cache
 def _image(name: str) -> np.ndarray:
     image = _downsample(getattr(skimage.data, name)())
     image.setflags(write=False)

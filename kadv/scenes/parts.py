@@ -30,10 +30,11 @@ def overlapped(corners: np.ndarray, margin: float = 1e-3) -> np.ndarray:
 
 
 def facing(corners: np.ndarray, toward: np.ndarray) -> np.ndarray:
-    """The quad ``corners`` (4, 3), reordered if needed so its front face looks along ``toward`` (3,)."""
+    """The quad ``corners`` (4, 3), mirrored if needed (corners 0 and 1 swap, 2 and 3) so its front
+    face looks along ``toward`` (3,); the edge from corner 0 to 3 keeps its direction."""
     corners = np.asarray(corners, np.float64)
     normal = np.cross(corners[3] - corners[0], corners[1] - corners[0])
-    return corners if normal @ np.asarray(toward, np.float64) > 0 else corners[[0, 3, 2, 1]]
+    return corners if normal @ np.asarray(toward, np.float64) > 0 else corners[[1, 0, 3, 2]]
 
 
 def planar_quad(corners: np.ndarray, material: int, name: str, tile: float) -> MeshPart:

@@ -89,6 +89,9 @@ class Scene:
         cameras: cameras the file defines (may be empty).
         lights: (L, 3) float64 positions of the file's light sources (may be empty).
         name: a label for reports.
+        interior: optional (2, 3) box (minimum corner, maximum corner) where cameras belong, for
+            scenes that know it (generated rooms, whose windows look onto courtyards); None: the
+            bounds.
     """
 
     vertices: np.ndarray
@@ -100,6 +103,7 @@ class Scene:
     cameras: list[Camera] = field(default_factory=list)
     lights: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     name: str = "scene"
+    interior: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, np.float64).reshape(-1, 3)
@@ -121,6 +125,10 @@ class Scene:
         if float(areas.sum()) <= 1e-12:
             raise ValueError(f"scene {self.name!r}: total surface area is zero (degenerate triangles only)")
         self.face_normals = face_normals.astype(np.float32)
+        if self.interior is not None:
+            self.interior = np.asarray(self.interior, np.float64)
+            if self.interior.shape != (2, 3) or not np.all(self.interior[0] < self.interior[1]):
+                raise ValueError(f"scene {self.name!r}: interior must be (2, 3) with min < max, got {self.interior}")
 
     @property
     def num_triangles(self) -> int:
@@ -130,6 +138,11 @@ class Scene:
     def bounds(self) -> np.ndarray:
         """(2, 3) axis-aligned bounds: row 0 the minimum corner, row 1 the maximum."""
         return np.stack([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    @property
+    def camera_region(self) -> np.ndarray:
+        """(2, 3) box that camera samplers draw centres from: the interior if known, else the bounds."""
+        return self.interior if self.interior is not None else self.bounds
 
 
 def _rotation_to_y_up(up_axis: str) -> np.ndarray:
@@ -152,6 +165,7 @@ def assemble_scene(
     up_axis: str = "y",
     drop_transparent: bool = True,
     drop_emitters: bool = True,
+    interior: np.ndarray | None = None,
 ) -> Scene:
     """Concatenate mesh parts into a :class:`Scene`, applying the load options.
 
@@ -164,6 +178,7 @@ def assemble_scene(
         up_axis: the file's up axis, ``"y"`` or ``"z"``; the scene is rotated to y-up.
         drop_transparent: leave out triangles of transparent (glass) materials.
         drop_emitters: leave out light-source surfaces (their centroids become lights).
+        interior: (2, 3) box where cameras belong, in file coordinates (see :class:`Scene`).
 
     Raises:
         ValueError: on NaN/inf coordinates, a non-positive scale, or nothing left to render.
@@ -215,6 +230,9 @@ def assemble_scene(
         pose[:3, 3] = rotation @ pose[:3, 3] * scale
         moved_cameras.append(Camera(pose, camera.fov_x_deg, camera.width, camera.height, camera.name))
     all_lights = np.concatenate(light_list) if light_list else np.zeros((0, 3))
+    if interior is not None:  # the rotated box's bounds: the rotation only permutes and flips axes
+        turned = np.asarray(interior, np.float64).reshape(2, 3) @ rotation.T * scale
+        interior = np.stack([turned.min(axis=0), turned.max(axis=0)])
     return Scene(
         vertices=all_vertices,
         faces=all_faces,
@@ -225,4 +243,5 @@ def assemble_scene(
         cameras=moved_cameras,
         lights=all_lights @ rotation.T * scale,
         name=name,
+        interior=interior,
     )

@@ -10,7 +10,7 @@ from omegaconf import OmegaConf
 from kadv.attack import DEFAULT_METHOD, AttackConfig, InitViewConfig, get_method
 from kadv.cli.attack import attack_settings
 from kadv.cli.common import shading_from_config
-from kadv.models import PRESETS
+from kadv.models import EMBEDDED, PRESETS
 from kadv.models.train_tiny import TinyTrainConfig
 from kadv.penalties import PenaltyConfig
 from kadv.render import DiffRenderConfig, Shading
@@ -41,16 +41,16 @@ def test_every_group_option_composes_into_valid_settings() -> None:
             DiffRenderConfig(supersample=cfg.render.supersample, **OmegaConf.to_container(cfg.render.differentiable))
             shading_from_config(cfg.render.shading)
             assert cfg.loss.kind in ("ssim", "perceptual") and cfg.loss.space in ("disparity", "depth")
-            assert OmegaConf.is_missing(cfg.model, "name") or cfg.model.name in {*PRESETS, "kadv_tiny"} or (
+            assert OmegaConf.is_missing(cfg.model, "name") or cfg.model.name in {*PRESETS, *EMBEDDED} or (
                 cfg.model.name == "custom" and OmegaConf.is_missing(cfg.model, "target")
                 and cfg.model.output_kind in ("disparity", "depth"))
-            assert cfg.scene.kind in ("box_room", "file")
+            assert cfg.scene.kind in ("box_room", "procedural", "file")
             if group == "attack":  # each method's YAML node is its settings dataclass, defaults included
                 assert attack.method == option and attack.settings == get_method(option).settings()
 
 
 def test_every_preset_has_a_config_naming_its_hub_id_and_output_kind() -> None:
-    assert set(_options("model")) == {*PRESETS, "kadv_tiny", "huggingface", "custom"}
+    assert set(_options("model")) == {*PRESETS, *EMBEDDED, "huggingface", "custom"}
     for name, preset in PRESETS.items():
         node = _compose("kadv_attack", f"model={name}").model
         assert (node.name, node.hub_id, node.output_kind) == (name, preset.hub_id, preset.output_kind)

@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from kadv.cli.models import main
-from kadv.models import KADV_TINY, PRESETS, preset_table
+from kadv.models import EMBEDDED, PRESETS, preset_table
 
 
 def test_every_preset_is_listed_with_its_cache_state(tmp_path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
@@ -17,7 +17,7 @@ def test_every_preset_is_listed_with_its_cache_state(tmp_path, monkeypatch: pyte
     main([])
     rows = [line.split(" | ") for line in capsys.readouterr().out.splitlines() if line.startswith("| ")][1:]
     names = {row[0].strip("| ") for row in rows}
-    assert names == {*PRESETS, "kadv_tiny"}
+    assert names == {*PRESETS, *EMBEDDED}
     by_name = {row[0].strip("| "): row for row in rows}
     assert by_name["zoedepth_nk"][3] == "depth" and by_name["midas_dpt_large"][3] == "disparity"
     assert all(by_name[name][5].strip(" |") == "not cached" for name in PRESETS)
@@ -43,7 +43,10 @@ def test_listing_presets_imports_neither_torch_nor_transformers(tmp_path) -> Non
     assert result.stdout.splitlines()[-1] == "HEAVY []" and "| depth_pro |" in result.stdout
 
 
-def test_the_embedded_model_row_states_its_real_input_size() -> None:
+def test_the_embedded_model_rows_state_their_real_input_size() -> None:
     from kadv.models.tiny import TINY_PREPROCESS
+    from kadv.models.tiny_dpt import TINY_DPT_PROCESSOR
 
-    assert KADV_TINY.input_size.startswith("x".join(map(str, TINY_PREPROCESS.size)))
+    assert EMBEDDED["kadv_tiny"].input_size.startswith("x".join(map(str, TINY_PREPROCESS.size)))
+    size = TINY_DPT_PROCESSOR["size"]
+    assert EMBEDDED["kadv_tiny_dpt"].input_size == f"{size['height']}x{size['width']}"

@@ -5,7 +5,7 @@ import torch
 
 from kadv.datasets import render_procedural_views
 from kadv.losses import gradient_matching, ssi_loss
-from kadv.models import TinyDepthNet, load_kadv_tiny, save_kadv_tiny
+from kadv.models import KadvTiny, TinyDepthNet, load_kadv_tiny, load_kadv_tiny_dpt, save_kadv_tiny, save_kadv_tiny_dpt
 from kadv.models.train_tiny import TinyTrainConfig, fit, train_tiny
 
 
@@ -44,7 +44,7 @@ def test_fit_is_deterministic_and_learns() -> None:
     for _ in range(2):
         torch.manual_seed(0)
         network = TinyDepthNet(config.channels)
-        losses = fit(network, views, config, progress=False)
+        losses = fit(KadvTiny(network), views, config, progress=False)
         weights.append(torch.cat([p.detach().flatten() for p in network.parameters()]))
     assert torch.equal(weights[0], weights[1])
     assert sum(losses[-10:]) < 0.7 * sum(losses[:10]), losses
@@ -54,15 +54,28 @@ def test_train_tiny_continues_from_init_weights(tmp_path) -> None:
     torch.manual_seed(1)
     start = save_kadv_tiny(TinyDepthNet((8, 8, 8, 8, 16)), tmp_path / "start.safetensors")
     config = TinyTrainConfig(train_views=8, val_views=8, steps=3, batch_size=2, init_weights=str(start))
-    network, log = train_tiny(config, progress=False)
+    model, log = train_tiny(config, progress=False)
+    network = model.network
     assert network.channels == (8, 8, 8, 8, 16)  # the file's architecture, not config.channels
     initial = load_kadv_tiny(start).network.state_dict()
     changed = [not torch.equal(initial[k], v) for k, v in network.state_dict().items()]
     assert any(changed) and 0.0 <= log["val_delta1"] <= 1.0 and len(log["losses"]) == 3
 
 
+def test_the_dpt_trains_through_its_own_preprocessing_and_continues_from_a_directory(tmp_path) -> None:
+    config = TinyTrainConfig(train_views=8, val_views=8, steps=3, batch_size=2, architecture="dpt", furnished_share=1.0)
+    model, log = train_tiny(config, progress=False)
+    start = save_kadv_tiny_dpt(model.network, tmp_path / "start")
+    again, _ = train_tiny(TinyTrainConfig(**{**config.__dict__, "init_weights": str(start)}), progress=False)
+    initial = load_kadv_tiny_dpt(start).network.state_dict()
+    assert any(not torch.equal(initial[k], v) for k, v in again.network.state_dict().items())
+    assert model.name == "kadv_tiny_dpt" and len(log["losses"]) == 3 and 0.0 <= log["val_delta1"] <= 1.0
+    assert not any(p.requires_grad for p in again.parameters())  # handed back frozen, as loaded models are
+
+
 @pytest.mark.parametrize("field, value", [("steps", 0), ("train_views", -4), ("batch_size", 1.5), ("lr", 0.0),
-                                          ("weight_decay", -1e-4), ("channels", ()), ("init_weights", "/no/such/file")])
+                                          ("weight_decay", -1e-4), ("channels", ()), ("init_weights", "/no/such/file"),
+                                          ("architecture", "resnet"), ("furnished_share", 1.5)])
 def test_bad_settings_are_refused_before_any_rendering(field, value) -> None:
     with pytest.raises((ValueError, FileNotFoundError), match=rf"train\.{field}"):
         TinyTrainConfig(**{field: value})
