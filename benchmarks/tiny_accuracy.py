@@ -12,15 +12,19 @@ Run: .venv/bin/python benchmarks/tiny_accuracy.py [--kadv-tiny FILE] [--kadv-tin
 from __future__ import annotations
 
 import argparse
+import statistics
+from pathlib import Path
 
 import torch
-from common import REAL_SCENES, scenes_root
+from common import REAL_SCENES, scenes_root, timings
 
 from kadv.attack import InitViewConfig, sample_valid_views
 from kadv.datasets import ViewBatch, render_procedural_views
 from kadv.geometry import intrinsics_from_fov
 from kadv.losses import depth_metrics
 from kadv.models import load_model
+from kadv.models.tiny import TINY_WEIGHTS
+from kadv.models.tiny_dpt import TINY_DPT_DIR
 from kadv.penalties import PenaltyConfig
 from kadv.render import ExactRenderer
 from kadv.scenes import load_scene
@@ -49,6 +53,10 @@ def per_view_delta1(model: torch.nn.Module, views: ViewBatch) -> torch.Tensor:
                           for i in range(0, len(views.rgb), 16)])
 
 
+def weights_megabytes(path: Path) -> float:
+    return sum(f.stat().st_size for f in ([path] if path.is_file() else path.iterdir())) / 1e6
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--kadv-tiny", default=None, help="kadv-tiny weights file (default: the shipped one)")
@@ -72,6 +80,15 @@ def main() -> None:
                  real]
         print(f"| {label} | " + " | ".join(f"{value:.3f}" for value in cells) + " |")
         results[label] = (real, generated["furnished"])
+    print()
+    print("| model | weights | forward at 240x320 (median of 20, batch 1) |")
+    print("|---|---|---|")
+    shipped = {"kadv_tiny": args.kadv_tiny or TINY_WEIGHTS, "kadv_tiny_dpt": args.kadv_tiny_dpt or TINY_DPT_DIR}
+    image = torch.rand(1, 3, 240, 320)
+    for label, model in models.items():
+        with torch.no_grad():
+            milliseconds = 1000 * statistics.median(timings(lambda model=model: model(image), repeats=20, warmup=3))
+        print(f"| {label} | {weights_megabytes(Path(shipped[label])):.1f} MB | {milliseconds:.1f} ms |")
     print("tiny_accuracy " + " ".join([f"{label}_real={real:.3f}" for label, (real, _) in results.items()]
                                       + [f"{label}_procedural={procedural:.3f}" for label, (_, procedural) in results.items()]))
 

@@ -24,6 +24,7 @@ from kornia.geometry.linalg import transform_points
 from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.vector import dot
 from kadv.render.layers import AnchorLayers, guard_band_intrinsics
+from kadv.render.straight_through import straight_through
 
 __all__ = ["Reprojection", "reproject"]
 
@@ -108,8 +109,8 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
     smooth_total = smooth_total.clamp_min(1e-12)[:, None]
     smooth_colour, smooth_point = smooth_colour / smooth_total, smooth_point / smooth_total
     value_weight = total.clamp_min(1e-12)[:, None]
-    colour = colour / value_weight + smooth_colour - smooth_colour.detach()
-    point = point / value_weight + smooth_point - smooth_point.detach()
+    colour = straight_through(smooth_colour, onto=colour / value_weight)
+    point = straight_through(smooth_point, onto=point / value_weight)
     return colour, point, total
 
 
@@ -205,7 +206,7 @@ def _anchor_layer_pixels(anchor: AnchorLayers, layer: int, expected: torch.Tenso
     colour = colour + shift[:, 0:1] * mean_x + shift[:, 1:2] * mean_y
     # the depth also moves with P_T_A at fixed anchor points
     moved = transform_points(P_T_A[:, None], point.flatten(2).transpose(1, 2))[..., 2].reshape(batch, 1, height, width)
-    z = z + shift[:, 0:1] * depth_x + shift[:, 1:2] * depth_y + (moved - moved.detach())
+    z = z + shift[:, 0:1] * depth_x + shift[:, 1:2] * depth_y + straight_through(moved)
     return colour.flatten(2), z.flatten(1), ok.flatten(1)
 
 
@@ -285,7 +286,7 @@ def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, 
         # pixel centres, shaped as one sub-sample per pixel
         centres = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K.to(device, _DTYPE)), normalize_points=False)
         _, q = _project_to_anchor(anchor, centres[:, :, None, :, None, :], A_T_P)
-        shift = (q - q.detach()).transpose(1, 2).reshape(batch, 2, height, width)
+        shift = straight_through(q).transpose(1, 2).reshape(batch, 2, height, width)
 
         def layer_pixels(layer: int) -> tuple[torch.Tensor, ...]:
             return _anchor_layer_pixels(anchor, layer, expected, shift, P_T_A, plane_tolerance)

@@ -19,6 +19,7 @@ from kadv.render.dibr import reproject
 from kadv.render.layers import RING, AnchorLayers, camera_face_normals, render_anchor, ring_view
 from kadv.render.raycast import ExactRenderer, RenderOutput
 from kadv.render.silhouette import find_edge_pairs, silhouette_term
+from kadv.render.straight_through import straight_through
 
 __all__ = ["DiffRenderConfig", "DiffRenderOutput", "DifferentiableRenderer", "WarpAgreement"]
 
@@ -175,8 +176,8 @@ class DifferentiableRenderer:
         self._steps_since_refresh += 1
         valid = warp.valid
         if c.values == "exact":
-            rgb = rgb_exact + torch.where(valid, warp.rgb - warp.rgb.detach(), torch.zeros_like(warp.rgb))
-            depth = depth_exact + torch.where(valid, warp.depth - warp.depth.detach(), torch.zeros_like(warp.depth))
+            rgb = rgb_exact + torch.where(valid, straight_through(warp.rgb), torch.zeros_like(warp.rgb))
+            depth = depth_exact + torch.where(valid, straight_through(warp.depth), torch.zeros_like(warp.depth))
         else:
             rgb = torch.where(valid, warp.rgb, rgb_exact)
             depth = torch.where(valid, warp.depth, depth_exact)

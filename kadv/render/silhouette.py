@@ -21,6 +21,7 @@ from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import check_world_T_cam
 from kadv.geometry.vector import dot, mat_vec
 from kadv.render.raycast import ExactRenderer, RenderOutput
+from kadv.render.straight_through import straight_through
 
 __all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term"]
 
@@ -125,7 +126,7 @@ class _Candidates:
 def _candidate_pairs(renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, pose: np.ndarray, K_inv: np.ndarray,
                      horizontal: bool) -> _Candidates:
     """Neighbours (x, x+1) or (y, y+1) on different triangles whose depths (B, H, W) jump."""
-    batch, height, width = z.shape
+    batch, _, width = z.shape
     za, zb = (z[:, :, :-1], z[:, :, 1:]) if horizontal else (z[:, :-1, :], z[:, 1:, :])
     ia, ib = (ids[:, :, :-1], ids[:, :, 1:]) if horizontal else (ids[:, :-1, :], ids[:, 1:, :])
     near, far = np.minimum(za, zb), np.maximum(za, zb)
@@ -202,7 +203,7 @@ def _occluder_edge(renderer: ExactRenderer, pairs: _Candidates, occluder: np.nda
     faces = renderer.scene.faces[np.maximum(occluder, 0)]
     edges = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1)  # (N, 3, 2)
     vertices_cam = mat_vec(R.swapaxes(1, 2), renderer.scene.vertices[edges] - c[:, None, None])
-    three = lambda array: torch.from_numpy(np.repeat(array, 3, axis=0))  # noqa: E731
+    three = lambda array: torch.from_numpy(np.repeat(array, 3, axis=0))
     t_all, ok_all = edge_crossings(torch.from_numpy(vertices_cam.reshape(-1, 2, 3)), three(pairs.rays_a),
                                    three(pairs.rays_b), three(K[bi]), three(pairs.uv_a), three(pairs.uv_b))
     n = len(bi)
@@ -279,5 +280,5 @@ def silhouette_term(renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torc
     va, vb = flat[bi, torch.from_numpy(pairs.a).to(device)], flat[bi, torch.from_numpy(pairs.b).to(device)]
     blend = coefficient[:, None] * torch.where(far_b[:, None], va - vb, vb - va)
     target = bi * height * width + torch.from_numpy(np.where(pairs.t > 0.5, pairs.b, pairs.a)).to(device)
-    term = term.index_add(0, target, blend - blend.detach())
+    term = term.index_add(0, target, straight_through(blend))
     return term.view(batch, height, width, channels).permute(0, 3, 1, 2).to(values.dtype)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import logging
 import platform
 from dataclasses import asdict, fields
 from importlib import metadata
@@ -29,6 +30,9 @@ __all__ = ["SUMMARY", "is_complete", "load_partial_results", "save_partial_resul
 
 SUMMARY = "summary.json"
 _PARTIAL = "partial"
+# bumped whenever InitViewResult or ViewRecord changes shape: older partial files are recomputed
+PARTIAL_SCHEMA = 1
+log = logging.getLogger(__name__)
 _PACKAGES = ("kadv", "torch", "kornia", "open3d-cpu", "trimesh", "transformers", "numpy", "cma", "nevergrad")
 _MAX_VIDEO_FRAMES = 200
 
@@ -41,6 +45,7 @@ def is_complete(run_dir: str | Path) -> bool:
 def save_partial_result(run_dir: str | Path, index: int, result: InitViewResult) -> Path:
     """Save one init view's search result (``partial/init<index>.json``)."""
     data = {
+        "schema": PARTIAL_SCHEMA,
         "init": result.init.to_dict(),
         "records": [asdict(r) for r in result.records],
         "top": [[r.step, r.restart] for r in result.top],
@@ -50,16 +55,33 @@ def save_partial_result(run_dir: str | Path, index: int, result: InitViewResult)
     return write_json(Path(run_dir) / _PARTIAL / f"init{index}.json", data)
 
 
+def _read_partial(path: Path) -> InitViewResult:
+    data = json.loads(path.read_text())
+    if not isinstance(data, dict) or data.get("schema") != PARTIAL_SCHEMA:
+        found = data.get("schema", "none") if isinstance(data, dict) else "none"
+        raise ValueError(f"schema version {found}, this kadv writes {PARTIAL_SCHEMA}")
+    records = [ViewRecord(**r) for r in data["records"]]
+    by_key = {(r.step, r.restart): r for r in records}
+    return InitViewResult(InitView.from_dict(data["init"]), records, [by_key[tuple(key)] for key in data["top"]],
+                          Budget(**data["budget"]), [by_key[tuple(key)] for key in data["path"]])
+
+
 def load_partial_results(run_dir: str | Path) -> dict[int, InitViewResult]:
-    """The init views' results an earlier (possibly interrupted) run saved, by index."""
+    """The init views' results an earlier (possibly interrupted) run saved, by index.
+
+    A file that cannot be read (cut short, edited, or written by a kadv whose results had another
+    shape) is named in one warning, moved aside as ``init<i>.json.unreadable``, and its init view
+    is left to be computed again.
+    """
     results = {}
     for path in sorted((Path(run_dir) / _PARTIAL).glob("init*.json")):
-        data = json.loads(path.read_text())
-        records = [ViewRecord(**r) for r in data["records"]]
-        by_key = {(r.step, r.restart): r for r in records}
-        results[int(path.stem.removeprefix("init"))] = InitViewResult(
-            InitView.from_dict(data["init"]), records, [by_key[tuple(key)] for key in data["top"]],
-            Budget(**data["budget"]), [by_key[tuple(key)] for key in data["path"]])
+        try:
+            results[int(path.stem.removeprefix("init"))] = _read_partial(path)
+        except (ValueError, KeyError, TypeError) as error:  # json's decode errors are ValueErrors
+            aside = path.with_name(path.name + ".unreadable")
+            path.replace(aside)
+            log.warning("%s cannot be read (%s): moved aside to %s; its init view is computed again", path,
+                        error, aside.name)
     return results
 
 

@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -105,6 +106,25 @@ def test_a_killed_run_resumes_without_redoing_finished_init_views(demo_runs: Pat
     assert part.stat().st_mtime_ns == written
     assert sorted(p.name for p in (tmp_path / "run" / "partial").iterdir()) == ["init0.json", "init1.json"]
     assert (tmp_path / "run" / "trajectory.csv").read_bytes() == (demo_runs / "first" / "trajectory.csv").read_bytes()
+
+
+def test_unreadable_partial_files_are_set_aside_and_recomputed(demo_runs: Path, tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(demo_runs / "second", run)
+    (run / "summary.json").unlink()
+    cut = run / "partial" / "init0.json"
+    cut.write_text(cut.read_text()[:100])  # a file cut short mid-write by something other than kadv
+    older = run / "partial" / "init1.json"
+    data = json.loads(older.read_text())
+    older.write_text(json.dumps({**data, "schema": data["schema"] - 1}))  # a kadv whose results had another shape
+    result = _run("kadv-attack", tmp_path, "run", *SMALL, "video=false")
+    assert result.returncode == 0, result.stderr
+    warnings = [line for line in (result.stdout + result.stderr).splitlines() if "cannot be read" in line]
+    assert len(warnings) == 2 and "init0.json" in warnings[0] and "init1.json" in warnings[1], warnings
+    assert "Expecting" in warnings[0] and "schema version" in warnings[1]
+    assert (run / "partial" / "init0.json.unreadable").is_file() and (run / "partial" / "init1.json.unreadable").is_file()
+    assert json.loads((run / "summary.json").read_text())["resumed_init_views"] == []
+    assert (run / "trajectory.csv").read_bytes() == (demo_runs / "first" / "trajectory.csv").read_bytes()
 
 
 def test_help_says_what_the_command_does_and_writes() -> None:
