@@ -2,15 +2,15 @@ from __future__ import annotations
 
 import os
 
-from kadv.runtime import configure_runtime  # noqa: E402  (before torch loads)
+from kadv.runtime import configure_runtime  # before torch loads
 
 configure_runtime()
 
-from pathlib import Path  # noqa: E402
+from pathlib import Path
 
-import pytest  # noqa: E402
+import pytest
 
-from kadv.scenes import Scene, box_room, load_scene  # noqa: E402
+from kadv.scenes import Scene, box_room, load_scene
 
 REAL_SCENES = ("grey_white_room", "modern_hall", "japanese_classroom")
 
@@ -46,18 +46,3 @@ def grey_white_room() -> Scene:
 @pytest.fixture(scope="session")
 def room() -> Scene:
     return box_room(seed=0)
-
-
-_REAL_SCENE_USES = ("scenes_root(", "cached_real_scene(", "real_scene_root", "grey_white_room")
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark the tests of every module that reads the real scenes ``real_scenes``, so that
-    ``pytest -m "not real_scenes"`` runs the rest where the scenes are absent."""
-    sources: dict[Path, str] = {}
-    for item in items:
-        path = Path(str(item.fspath))
-        if path not in sources:
-            sources[path] = path.read_text() if path.suffix == ".py" else ""
-        if any(use in sources[path] for use in _REAL_SCENE_USES):
-            item.add_marker(pytest.mark.real_scenes)

@@ -16,6 +16,7 @@ def test_the_readme_has_python_blocks() -> None:
     assert len(BLOCKS) >= 4
 
 
+@pytest.mark.real_scenes
 @pytest.mark.parametrize("index", range(len(BLOCKS)))
 def test_readme_python_block_runs(index: int, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(ROOT)

@@ -37,6 +37,7 @@ def test_a_camera_at_a_wall_moves_along_its_axis_away_from_it(tiny_objective, fa
     assert torch.allclose(cleared[:3, 3] - pose[:3, 3], moved * pose[:3, 2])
 
 
+@pytest.mark.real_scenes
 @pytest.mark.parametrize("name", ["grey_white_room", "japanese_classroom"])
 def test_real_file_cameras_next_to_a_wall_are_moved_clear_and_valid(name) -> None:
     renderer = ExactRenderer(cached_real_scene(name))

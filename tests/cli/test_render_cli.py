@@ -14,6 +14,8 @@ from PIL import Image
 
 from tests.conftest import scenes_root
 
+pytestmark = pytest.mark.real_scenes
+
 SCRIPT = Path(sys.executable).parent / "kadv-render"
 README = Path(__file__).resolve().parents[2] / "README.md"
 

@@ -89,6 +89,7 @@ def _reference_classes(scene, centres: np.ndarray, directions: int = 4096) -> li
     return classes
 
 
+@pytest.mark.real_scenes
 def test_grey_white_room_classification_agrees_with_brute_force(grey_white_room) -> None:
     renderer = ExactRenderer(grey_white_room)
     lo, hi = grey_white_room.bounds

@@ -60,6 +60,7 @@ def test_bad_pose_params(room_renderer: ExactRenderer) -> None:
         DiffRenderConfig(values="magic")
 
 
+@pytest.mark.real_scenes
 def test_warp_mode_tracks_exact_render_along_a_trajectory(grey_white_room) -> None:
     renderer = ExactRenderer(grey_white_room)
     base = random_valid_poses(renderer, 1, np.random.default_rng(3), 70.0, min_clearance=0.5)

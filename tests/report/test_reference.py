@@ -63,6 +63,7 @@ def test_a_mirrored_camera_would_be_caught(old_style_scene):
     assert np.median(np.abs(mitsuba_depth(scene, 0, 24, 32) - ours) / ours) > 1e-2
 
 
+@pytest.mark.real_scenes
 def test_real_scene_depth_agrees_at_the_file_camera(tmp_path):
     """japanese_classroom: a sunsky, rough conductors with extEta, and a camera 2 cm from a wall."""
     name = "japanese_classroom"

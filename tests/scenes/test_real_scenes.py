@@ -12,6 +12,8 @@ from kadv.render import ExactRenderer
 from kadv.scenes import load_scene
 from tests.conftest import REAL_SCENES, cached_real_scene
 
+pytestmark = pytest.mark.real_scenes
+
 # Fraction of pixels hit at 320x180 from the file camera, measured by an independent reference.
 REFERENCE_HIT_FRACTION = {"grey_white_room": 0.940, "modern_hall": 0.963, "japanese_classroom": 0.972}
 
