@@ -21,7 +21,7 @@ from tqdm import tqdm
 from kadv.attack import InitViewConfig, PenaltyConfig, file_init_views, sample_init_views
 from kadv.models import load_model
 from kadv.render import ExactRenderer
-from kadv.report.reference import compare_view, load_mitsuba_scene, save_comparison
+from kadv.diagnostics.reference import compare_view, load_mitsuba_scene, save_comparison
 from kadv.report.sweep import Table
 
 

@@ -11,10 +11,10 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
 from kadv.cli.common import checks_group_options, reports_user_errors
+from kadv.io import atomic_write
 from kadv.models.tiny import TINY_WEIGHTS, save_kadv_tiny
 from kadv.models.tiny_dpt import TINY_DPT_DIR, save_kadv_tiny_dpt
 from kadv.models.train_tiny import TinyTrainConfig, train_tiny
-from kadv.report import atomic_write
 from kadv.runtime import configure_runtime
 
 log = logging.getLogger(__name__)

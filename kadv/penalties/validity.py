@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from kadv.checks import check_shape
 from kadv.geometry.camera import pixel_rays
 from kadv.geometry.pose import check_world_T_cam
 from kadv.penalties.config import PenaltyConfig
@@ -167,8 +168,7 @@ def view_validity(
         view_back = renderer.back_facing(hits, directions).reshape(batch, -1)
         near_hit = hit & (hits.t.reshape(batch, -1) < near)
     else:
-        if tuple(render.depth.shape) != (batch, 1, height, width):
-            raise ValueError(f"render: expected depth ({batch}, 1, {height}, {width}), got {tuple(render.depth.shape)}")
+        check_shape(render.depth, f"B 1 {height} {width}", "render.depth", {"B": batch})
         triangle_ids = render.triangle_ids.reshape(batch, -1).numpy()
         hit = triangle_ids >= 0
         view_back = render.back_face.reshape(batch, -1).numpy()

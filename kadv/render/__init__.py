@@ -1,8 +1,8 @@
 """Rendering: the exact ray-cast renderer, anchor layers, reprojection and the differentiable façade."""
 from __future__ import annotations
 
-from kadv.render.differentiable import DiffRenderConfig, DiffRenderOutput, DifferentiableRenderer
 from kadv.render.dibr import Reprojection, reproject
+from kadv.render.differentiable import DifferentiableRenderer, DiffRenderConfig, DiffRenderOutput
 from kadv.render.layers import AnchorLayers, render_anchor
 from kadv.render.raycast import ExactRenderer, RayHits, RenderOutput
 from kadv.render.shading import Shading, sample_texture, scene_lights

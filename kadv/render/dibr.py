@@ -21,6 +21,7 @@ from kornia.geometry.camera.perspective import project_points
 from kornia.geometry.depth import depth_to_3d_v2
 from kornia.geometry.linalg import transform_points
 
+from kadv.checks import check_shape
 from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.vector import dot
 from kadv.render.layers import AnchorLayers, guard_band_intrinsics
@@ -272,6 +273,9 @@ def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, 
         plane_tolerance: relative distance from a tap's surface plane above which the tap is
             taken to belong to another surface.
     """
+    sizes = check_shape(depth, "B 1 H W", "depth")
+    check_shape(normals, "B 3 H W", "normals", sizes)
+    check_shape(A_T_P, "B 4 4", "A_T_P", sizes)
     batch, _, height, width = depth.shape
     device = depth.device
     depth = depth.detach().to(_DTYPE)

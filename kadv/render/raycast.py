@@ -12,6 +12,7 @@ import open3d as o3d
 import torch
 from torch.nn import functional as F
 
+from kadv.checks import check_shape
 from kadv.geometry.camera import pixel_rays
 from kadv.geometry.vector import dot
 from kadv.render.shading import Shading, albedo, mip_pyramid, sample_texture, scene_lights, shade, uv_density
@@ -284,9 +285,9 @@ class ExactRenderer:
                 values.reshape(batch, height, width, channels).transpose(0, 3, 1, 2)))
 
         if sub_rgb is not None:
-            if s == 1 or tuple(sub_rgb.shape) != (batch, 3, s * height, s * width):
-                raise ValueError(f"sub_rgb: expected ({batch}, 3, {s * height}, {s * width}) with supersample > 1, "
-                                 f"got {tuple(sub_rgb.shape)}")
+            if s == 1:
+                raise ValueError("sub_rgb: given with supersample 1, where there are no sub-pixel rays")
+            check_shape(sub_rgb, f"B 3 {s * height} {s * width}", "sub_rgb", {"B": batch})
         elif s > 1:
             sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s)
             sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s,

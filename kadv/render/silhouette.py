@@ -17,6 +17,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 
+from kadv.checks import check_shape
 from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import check_world_T_cam
 from kadv.geometry.vector import dot, mat_vec
@@ -253,6 +254,7 @@ def silhouette_term(renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torc
         values: (B, C, H, W) exact per-pixel values (detached) whose jumps the edges carry; the
             term is built on their device.
     """
+    check_shape(world_T_cam, "B 4 4", "world_T_cam", check_shape(values, "B C H W", "values"))
     batch, channels, height, width = values.shape
     device = values.device
     term = torch.zeros(batch * height * width, channels, dtype=torch.float64, device=device)

@@ -1,7 +1,6 @@
-"""Run artefacts: images written atomically."""
+"""Run artefacts: images, the run directory, sweep tables and the HTML report."""
 from __future__ import annotations
 
-from kadv.io import atomic_write
 from kadv.report.images import save_depth_png, save_rgb_png
 
-__all__ = ["atomic_write", "save_depth_png", "save_rgb_png"]
+__all__ = ["save_depth_png", "save_rgb_png"]

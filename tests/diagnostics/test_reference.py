@@ -1,4 +1,4 @@
-"""kadv.report.reference: Mitsuba 3 renders the same scene from the same camera as kadv does."""
+"""kadv.diagnostics.reference: Mitsuba 3 renders the same scene from the same camera as kadv does."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,7 +9,7 @@ from kadv.attack import file_init_views
 from kadv.geometry import intrinsics_from_fov, look_at
 from kadv.models import load_model
 from kadv.render import ExactRenderer
-from kadv.report.reference import compare_view, load_mitsuba_scene, mitsuba_depth, save_comparison
+from kadv.diagnostics.reference import compare_view, load_mitsuba_scene, mitsuba_depth, save_comparison
 from kadv.scenes import load_scene
 from tests.conftest import cached_real_scene, scenes_root
 

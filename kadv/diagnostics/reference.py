@@ -7,10 +7,8 @@ images (PSNR and SSIM after exposure matching) and a model's predictions on the 
 after alignment).
 
 Mitsuba 3 is an optional extra (``pip install kadv[reference]``). It loads the 0.5/0.6-era gallery
-files only through a sanitised copy: the file's sensors and integrator are replaced by ours, an
-``envmap`` whose image is absent becomes a constant sky, the old ``sunsky`` (whose parameters
-Mitsuba 3 no longer takes) becomes a constant sky plus a directional sun, texture filters Mitsuba 3
-dropped become bilinear, and properties it no longer knows are removed.
+files only through a sanitised copy (:mod:`kadv.scenes.mitsuba_sanitiser`), from which properties
+it no longer knows are removed as it names them.
 """
 from __future__ import annotations
 
@@ -31,16 +29,12 @@ from kadv.losses import aligned_depth, depth_metrics
 from kadv.models import DepthModel
 from kadv.render import ExactRenderer
 from kadv.report.figures import depth_colour_map, depth_range, save_figure
+from kadv.scenes.mitsuba_sanitiser import sanitised_scene_root
 from kadv.scenes.textures import linear_to_srgb, srgb_to_linear
 
-__all__ = ["ReferenceComparison", "compare_view", "load_mitsuba_scene", "mitsuba_depth", "sanitised_scene_xml",
-           "save_comparison"]
+__all__ = ["ReferenceComparison", "compare_view", "load_mitsuba_scene", "mitsuba_depth", "save_comparison"]
 
 log = logging.getLogger(__name__)
-
-# Mitsuba's camera looks along +z with +y up and +x to the left: OpenCV's camera turned half a turn about z.
-_CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0, 1.0])
-_MAX_DEPTH = 8  # path tracer bounces
 
 
 def _mitsuba():
@@ -56,61 +50,6 @@ def _mitsuba():
     if mi.variant() is None:
         mi.set_variant("scalar_rgb")
     return mi
-
-
-def _sensor(world_T_cam: np.ndarray, fov_x_deg: float, height: int, width: int, spp: int) -> ET.Element:
-    matrix = " ".join(f"{v:.17g}" for v in (world_T_cam @ _CV_TO_MITSUBA).ravel())
-    return ET.fromstring(f"""<sensor type="perspective">
-        <float name="fov" value="{fov_x_deg:.17g}"/><string name="fovAxis" value="x"/>
-        <transform name="toWorld"><matrix value="{matrix}"/></transform>
-        <sampler type="independent"><integer name="sampleCount" value="{spp}"/></sampler>
-        <film type="hdrfilm"><integer name="width" value="{width}"/><integer name="height" value="{height}"/>
-            <rfilter type="box"/></film></sensor>""")
-
-
-def sanitised_scene_xml(path: str | Path, views: list[tuple[np.ndarray, float]], height: int, width: int,
-                        spp: int, max_depth: int = _MAX_DEPTH) -> str:
-    """The scene file with our sensors (one per (world_T_cam, fov_x_deg) view) and a path tracer.
-
-    The scene must have been loaded by kadv with the default options (metres = file units, y up),
-    so that kadv's world frame is the file's.
-    """
-    return ET.tostring(_sanitised_root(Path(path), views, height, width, spp, max_depth), encoding="unicode")
-
-
-def _sanitised_root(path: Path, views: list[tuple[np.ndarray, float]], height: int, width: int, spp: int,
-                    max_depth: int) -> ET.Element:
-    root = ET.parse(path).getroot()
-    for tag in ("sensor", "integrator"):
-        for element in root.findall(tag):
-            root.remove(element)
-    for emitter in root.findall("emitter"):
-        kind = emitter.get("type")
-        names = {child.get("name"): child for child in emitter}
-        if kind == "envmap" and not (path.parent / names["filename"].get("value")).is_file():
-            root.remove(emitter)
-            root.append(ET.fromstring('<emitter type="constant"><rgb name="radiance" value="1"/></emitter>'))
-        elif kind == "sunsky":
-            root.remove(emitter)
-            sky = float(names["skyScale"].get("value")) if "skyScale" in names else 1.0
-            root.append(ET.fromstring(f'<emitter type="constant"><rgb name="radiance" value="{0.1 * sky}"/></emitter>'))
-            sun = names.get("sunDirection")
-            if sun is not None:
-                direction = [-float(sun.get(axis)) for axis in "xyz"]
-                scale = float(names["sunScale"].get("value")) if "sunScale" in names else 1.0
-                root.append(ET.fromstring(f'<emitter type="directional"><vector name="direction" x="{direction[0]}" '
-                                          f'y="{direction[1]}" z="{direction[2]}"/><rgb name="irradiance" '
-                                          f'value="{scale}"/></emitter>'))
-    for texture in root.iter("texture"):
-        for child in texture:
-            # Mitsuba 0.6's "trilinear" and "ewa" mip-map filters are gone; bilinear is the nearest left
-            if child.get("name") in ("filterType", "filter_type") and child.get("value") not in ("nearest", "bilinear"):
-                child.set("value", "bilinear")
-    integrator = f'<integrator type="path"><integer name="maxDepth" value="{max_depth}"/></integrator>'
-    root.insert(0, ET.fromstring(integrator))
-    for index, (world_T_cam, fov) in enumerate(views):
-        root.insert(1 + index, _sensor(world_T_cam, fov, height, width, spp))
-    return root
 
 
 _UNREFERENCED = re.compile(r'unreferenced propert(?:y|ies) in (\w+) plugin of type "(\w+)"')
@@ -132,7 +71,7 @@ def load_mitsuba_scene(path: str | Path, views: list[tuple[np.ndarray, float]], 
     folder = str(Path(path).resolve().parent)
     if folder not in [str(p) for p in resolver]:
         resolver.prepend(folder)
-    root = _sanitised_root(Path(path), views, height, width, spp, _MAX_DEPTH)
+    root = sanitised_scene_root(Path(path), views, height, width, spp)
     while True:
         try:
             return mi.load_string(ET.tostring(root, encoding="unicode"))
@@ -221,7 +160,7 @@ def compare_view(mitsuba_scene, sensor: int, renderer: ExactRenderer, model: Dep
     linear = np.array(mi.render(mitsuba_scene, sensor=sensor, spp=spp, seed=seed))[..., :3]
     kadv_rgb = ours.rgb[0].permute(1, 2, 0).numpy()
     mitsuba_rgb = linear_to_srgb(linear * _exposure(linear, kadv_rgb)).astype(np.float32)
-    as_tensor = lambda image: torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()  # noqa: E731
+    as_tensor = lambda image: torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
     image_psnr = float(psnr(as_tensor(kadv_rgb), as_tensor(mitsuba_rgb), 1.0))
     image_ssim = float(ssim(as_tensor(kadv_rgb), as_tensor(mitsuba_rgb), 11).mean())
     with torch.no_grad():
