@@ -12,9 +12,9 @@ def configure_runtime() -> None:
     - ``OMP_WAIT_POLICY=PASSIVE`` (unless set): idle OpenMP threads (torch's) sleep instead of
       spinning, so they leave the cores to Open3D's ray casts between network calls. libgomp reads
       it when torch is first imported, so it takes effect only when this runs before that: the
-      tests and benchmarks call it first (``import kadv`` itself loads no torch). The commands call
-      it at the start of ``main``, after their imports loaded torch; for them, export the variable
-      in the shell.
+      commands (through ``kadv.cli``), the tests and the benchmarks call it first (``import kadv``
+      itself loads no torch). A program of your own that imports torch before kadv sets
+      ``OMP_WAIT_POLICY=PASSIVE`` in its shell instead.
     - matplotlib's Agg backend: figures go to files and no display is needed.
     """
     os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")

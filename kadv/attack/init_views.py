@@ -26,6 +26,7 @@ __all__ = [
     "InitView",
     "InitViewConfig",
     "InitViewError",
+    "ViewScores",
     "check_init_views",
     "clear_file_camera",
     "file_init_views",
@@ -34,13 +35,19 @@ __all__ = [
     "sample_valid_views",
     "save_init_params",
     "score_views",
-    "ViewScores",
 ]
 
 
 # Candidates are drawn in rounds until enough pass; a scene whose bounds are mostly outdoors or
 # solid needs several rounds, one with no free space at eye height needs all of them.
 _SAMPLING_ROUNDS = 30
+# A file camera too near a surface moves along its axis in steps of at least 5 mm (the distance
+# field's resolution near a surface), each 5% past the shortfall so that rounding cannot leave it
+# a hair inside the margin.
+_MIN_CLEARING_STEP = 0.005
+_CLEARING_OVERSHOOT = 1.05
+# Missed pixels hold depth 0; a view's depth range divides by at least this.
+_MIN_DEPTH = 1e-6
 
 
 class InitViewError(ValueError):
@@ -148,7 +155,7 @@ def clear_file_camera(renderer: ExactRenderer, world_T_cam: torch.Tensor, margin
     sign = 1.0 if float(probe.grad[0] @ axis) >= 0 else -1.0
     moved = 0.0
     while distance < margin:
-        step = max(margin - distance, 0.005) * 1.05
+        step = max(margin - distance, _MIN_CLEARING_STEP) * _CLEARING_OVERSHOOT
         proposed = centre + sign * step * axis
         check = step_guard(renderer, centre[None], proposed[None], margin=0.0)
         if not bool(check.allowed[0]) or abs(moved) + step > max_move:
@@ -217,7 +224,7 @@ def score_views(model: DepthModel, renderer: ExactRenderer, poses: torch.Tensor,
             depth = out.depth.double()
             far = torch.where(out.mask, depth, torch.zeros_like(depth)).amax(dim=(1, 2, 3))
             near = torch.where(out.mask, depth, torch.full_like(depth, torch.inf)).amin(dim=(1, 2, 3))
-            scores["depth_range"].append(torch.log(far.clamp_min(1e-6) / near.clamp_min(1e-6)))
+            scores["depth_range"].append(torch.log(far.clamp_min(_MIN_DEPTH) / near.clamp_min(_MIN_DEPTH)))
             ids = out.triangle_ids.reshape(len(depth), -1).numpy()
             scores["surfaces"].append(torch.tensor([
                 float((np.bincount(labels[row[row >= 0]]) >= _SURFACE_SHARE * max((row >= 0).sum(), 1)).sum())

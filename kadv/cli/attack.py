@@ -44,7 +44,6 @@ from kadv.report.run import (
     save_partial_result,
     write_run,
 )
-from kadv.runtime import configure_runtime
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +92,6 @@ def _table(summary: dict) -> str:
 @reports_user_errors("kadv-attack")
 def main(cfg: DictConfig) -> float:
     """Run the configured attack; returns the mean adversarial L_depth (for Hydra sweepers)."""
-    configure_runtime()
     run_dir = Path(HydraConfig.get().runtime.output_dir)
     if is_complete(run_dir):
         summary = json.loads((run_dir / SUMMARY).read_text())

@@ -32,7 +32,6 @@ from kadv.io import atomic_write
 from kadv.penalties import view_validity
 from kadv.render import ExactRenderer
 from kadv.report import save_depth_png, save_rgb_png
-from kadv.runtime import configure_runtime
 
 log = logging.getLogger(__name__)
 
@@ -42,7 +41,6 @@ log = logging.getLogger(__name__)
 @reports_user_errors("kadv-render")
 def main(cfg: DictConfig) -> None:
     """Render the configured scene from the configured camera."""
-    configure_runtime()
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     scene = scene_from_config(cfg.scene)
     world_T_cam, fov = camera_from_config(cfg.camera, scene)

@@ -25,7 +25,6 @@ from kadv.report.sweep import (
     table3,
 )
 from kadv.report.transfer import transfer_tables
-from kadv.runtime import configure_runtime
 
 DESCRIPTION = """kadv-report: turns kadv-attack run directories into the study's tables and more.
 Writes to OUT (default: <first path>/report), for each search method M in the runs:
@@ -88,7 +87,6 @@ def report(paths: list[str], out: Path | None, transfer: bool = True, progress: 
 
 def main(argv: list[str] | None = None) -> None:
     """Write the report of the runs named on the command line."""
-    configure_runtime()
     args = _parser().parse_args(argv)
     try:
         written = report(args.paths, args.out, transfer=not args.no_transfer, progress=not args.no_progress)

@@ -15,7 +15,6 @@ from kadv.io import atomic_write
 from kadv.models.tiny import TINY_WEIGHTS, save_kadv_tiny
 from kadv.models.tiny_dpt import TINY_DPT_DIR, save_kadv_tiny_dpt
 from kadv.models.train_tiny import TinyTrainConfig, train_tiny
-from kadv.runtime import configure_runtime
 
 log = logging.getLogger(__name__)
 
@@ -25,7 +24,6 @@ log = logging.getLogger(__name__)
 @reports_user_errors("kadv-train-tiny")
 def main(cfg: DictConfig) -> None:
     """Train an embedded model; its weights and the training log go into the run directory."""
-    configure_runtime()
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     config = TinyTrainConfig(**OmegaConf.to_container(cfg.train, resolve=True))
     model, training_log = train_tiny(config)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from transformers import BitConfig, DPTConfig, DPTForDepthEstimation, DPTImageProcessor
+from transformers import BitConfig, DPTConfig, DPTForDepthEstimation, DPTImageProcessorPil
 
 from kadv.models.huggingface import (
     HuggingFaceDepthModel,
@@ -67,7 +67,7 @@ def save_kadv_tiny_dpt(network: DPTForDepthEstimation, directory: str | Path,
     in ``training.json``."""
     directory = Path(directory)
     network.save_pretrained(directory)
-    DPTImageProcessor(**TINY_DPT_PROCESSOR).save_pretrained(directory)
+    DPTImageProcessorPil(**TINY_DPT_PROCESSOR).save_pretrained(directory)
     (directory / "training.json").write_text(json.dumps(metadata or {}, indent=1, default=str))
     return directory
 

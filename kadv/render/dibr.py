@@ -213,6 +213,9 @@ def _anchor_layer_pixels(anchor: AnchorLayers, layer: int, expected: torch.Tenso
 
 # below this cosine between a sub-pixel ray and its pixel's plane, the ray grazes the plane and
 # keeps the pixel-centre depth instead of meeting the plane far away
+# Pixel coordinates of points that do not project (behind the anchor, at infinity): far outside
+# every image, so each lookup there finds nothing, yet finite, so no NaN reaches the gradient.
+_OFF_IMAGE = -1e6
 _GRAZING_COSINE = 1e-3
 _MIN_TAP_WEIGHT = 1e-9  # a sub-sample whose taps all lie on other surfaces found nothing
 
@@ -252,7 +255,7 @@ def _project_to_anchor(anchor: AnchorLayers, sub_points_P: torch.Tensor,
     sub_points_A = transform_points(A_T_P[:, None, None].to(device, _DTYPE), sub_points_P.reshape(batch, height, -1, 3))
     sub_points_A = sub_points_A.reshape(batch, -1, 3)
     q = project_points(sub_points_A, anchor.K[:, None].to(device, _DTYPE))
-    q = torch.where(torch.isfinite(q), q, torch.full_like(q, -1e6))
+    q = torch.where(torch.isfinite(q), q, torch.full_like(q, _OFF_IMAGE))
     return sub_points_A.transpose(1, 2), q
 
 

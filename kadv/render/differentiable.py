@@ -15,13 +15,16 @@ from kadv.checks import check_shape
 from kadv.device import resolve_device
 from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import perturb_world_T_cam
-from kadv.render.dibr import reproject
+from kadv.render.dibr import Reprojection, reproject
 from kadv.render.layers import RING, AnchorLayers, camera_face_normals, render_anchor, ring_view
 from kadv.render.raycast import ExactRenderer, RenderOutput
 from kadv.render.silhouette import find_edge_pairs, silhouette_term
 from kadv.render.straight_through import straight_through
 
 __all__ = ["DiffRenderConfig", "DiffRenderOutput", "DifferentiableRenderer", "WarpAgreement"]
+
+# Missed pixels hold depth 0; the relative depth error divides by at least this (they are invalid anyway).
+_MIN_DEPTH = 1e-6
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,8 @@ class DiffRenderConfig:
         supersample: s x s samples per pixel for the anchor, the exact RGB and the warp's box filter.
         silhouette: add the occlusion-edge term.
         depth_tolerance: relative warped-vs-exact depth disagreement that invalidates a pixel.
+        plane_tolerance: relative distance from a tap's surface plane above which the warp takes
+            the tap to belong to another surface.
     """
 
     values: str = "exact"
@@ -56,6 +61,7 @@ class DiffRenderConfig:
     supersample: int = 2
     silhouette: bool = True
     depth_tolerance: float = 0.01
+    plane_tolerance: float = 0.02
 
     def __post_init__(self) -> None:
         if self.values not in ("exact", "warp"):
@@ -64,6 +70,9 @@ class DiffRenderConfig:
             raise ValueError(f"render.refresh must be 'always', 'on_drift' or 'every_k', got {self.refresh!r}")
         if self.layers < 1 or self.supersample < 1 or self.guard_band < 0 or self.every_k < 1:
             raise ValueError("render.layers, supersample and every_k must be >= 1 and guard_band >= 0")
+        if not (self.depth_tolerance > 0 and self.plane_tolerance > 0):
+            raise ValueError("render.differentiable.depth_tolerance and plane_tolerance must be positive, got "
+                             f"{self.depth_tolerance} and {self.plane_tolerance}")
 
 
 @dataclass
@@ -90,6 +99,24 @@ class DiffRenderOutput:
     rgb_error: torch.Tensor
     depth_error: torch.Tensor
     refreshed: bool
+
+
+@dataclass
+class _ExactFrame:
+    """One call's exact render: ``rendered`` (the frame and its ring, on the CPU), ``exact`` (the
+    frame), ``K`` of ``rendered``, the index of the frame ``inside`` it, and on the renderer's device
+    the ring's rgb (B, 3, ...) and depth, the frame's rgb, depth, mask and camera-frame normals."""
+
+    rendered: RenderOutput
+    exact: RenderOutput
+    K: torch.Tensor
+    inside: tuple
+    rgb_rendered: torch.Tensor
+    depth_rendered: torch.Tensor
+    rgb: torch.Tensor
+    depth: torch.Tensor
+    mask: torch.Tensor
+    normals: torch.Tensor
 
 
 class DifferentiableRenderer:
@@ -147,48 +174,65 @@ class DifferentiableRenderer:
         check_shape(pose_params, "B 6", "pose_params")
         if not bool(torch.isfinite(pose_params.detach()).all()):
             raise ValueError("pose_params: contain NaN or inf")
-        c = self.config
         base = torch.as_tensor(base_world_T_cam, dtype=torch.float64).reshape(-1, 4, 4)
         world_T_cam = perturb_world_T_cam(base, pose_params[:, :3].double(), pose_params[:, 3:].double())
         K = batched_intrinsics(K, base.shape[0])
         current = world_T_cam.detach()
-        refreshed = (self.anchor is None or _view_key(K, height, width) != self._anchor_key or c.refresh == "always"
-                     or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k))
+        refreshed = self._due_for_refresh(K, height, width)
         anchor = self._refresh(current, K, height, width) if refreshed else None
+        frame = self._exact_frame(current, K, height, width, anchor)
+        warp, agreement, refreshed = self._checked_warp(frame, world_T_cam, K, height, width, refreshed)
+        self._steps_since_refresh += 1
+        rgb, depth = self._values(frame, warp)
+        if self.config.silhouette:
+            pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K)
+            term = silhouette_term(self.renderer, pairs, world_T_cam, frame.K,
+                                   torch.cat([frame.rgb_rendered, frame.depth_rendered], dim=1))[frame.inside]
+            rgb, depth = rgb + term[:, :3], depth + term[:, 3:]
+        return DiffRenderOutput(rgb=rgb, depth=depth, mask=frame.mask, exact=frame.exact, world_T_cam=world_T_cam,
+                                coverage=agreement.coverage.cpu(), rgb_error=agreement.rgb_error.cpu(),
+                                depth_error=agreement.depth_error.cpu(), refreshed=refreshed)
+
+    def _due_for_refresh(self, K: torch.Tensor, height: int, width: int) -> bool:
+        c = self.config
+        return (self.anchor is None or _view_key(K, height, width) != self._anchor_key or c.refresh == "always"
+                or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k))
+
+    def _exact_frame(self, current: torch.Tensor, K: torch.Tensor, height: int, width: int,
+                     anchor: AnchorLayers | None) -> _ExactFrame:
+        """The exact render at the current poses and what the device needs of it, moved once."""
         # with silhouettes, the frame is rendered with a ring around it (the frame is its interior)
-        border = RING if c.silhouette else 0
-        K_render, render_height, render_width = ring_view(K, height, width) if c.silhouette else (K, height, width)
+        border = RING if self.config.silhouette else 0
+        K_render, render_height, render_width = ring_view(K, height, width) if border else (K, height, width)
         rendered = self._exact_render(current, K_render, render_height, render_width, border, anchor)
         exact = rendered.cropped(border) if border else rendered
         normals = camera_face_normals(self.renderer.scene, exact.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
-        normals = normals.to(self.device)
-        # what the device needs of the exact render, moved once
         inside = (..., slice(border, render_height - border), slice(border, render_width - border))
         rgb_rendered, depth_rendered = rendered.rgb.to(self.device), rendered.depth.to(self.device)
-        rgb_exact, depth_exact, mask = rgb_rendered[inside], depth_rendered[inside], exact.mask.to(self.device)
-        warp = self._warp(depth_exact, normals, world_T_cam, K)
-        agreement = WarpAgreement.of(warp, rgb_exact, depth_exact, mask)
-        if c.refresh == "on_drift" and not refreshed and agreement.drifted(c):
-            self._refresh(current, K, height, width)
+        return _ExactFrame(rendered, exact, K_render, inside, rgb_rendered, depth_rendered, rgb_rendered[inside],
+                           depth_rendered[inside], exact.mask.to(self.device), normals.to(self.device))
+
+    def _checked_warp(self, frame: _ExactFrame, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
+                      refreshed: bool) -> tuple[Reprojection, WarpAgreement, bool]:
+        """The warp to the current poses and its agreement with the exact frame; with ``on_drift``,
+        an anchor that drifted too far is rendered again first."""
+        warp = self._warp(frame.depth, frame.normals, world_T_cam, K)
+        agreement = WarpAgreement.of(warp, frame.rgb, frame.depth, frame.mask)
+        if self.config.refresh == "on_drift" and not refreshed and agreement.drifted(self.config):
+            self._refresh(world_T_cam.detach(), K, height, width)
             refreshed = True
-            warp = self._warp(depth_exact, normals, world_T_cam, K)
-            agreement = WarpAgreement.of(warp, rgb_exact, depth_exact, mask)
-        self._steps_since_refresh += 1
+            warp = self._warp(frame.depth, frame.normals, world_T_cam, K)
+            agreement = WarpAgreement.of(warp, frame.rgb, frame.depth, frame.mask)
+        return warp, agreement, refreshed
+
+    def _values(self, frame: _ExactFrame, warp: Reprojection) -> tuple[torch.Tensor, torch.Tensor]:
+        """rgb and depth: the exact values with the warp's gradient, or the warp's values where valid."""
         valid = warp.valid
-        if c.values == "exact":
-            rgb = rgb_exact + torch.where(valid, straight_through(warp.rgb), torch.zeros_like(warp.rgb))
-            depth = depth_exact + torch.where(valid, straight_through(warp.depth), torch.zeros_like(warp.depth))
-        else:
-            rgb = torch.where(valid, warp.rgb, rgb_exact)
-            depth = torch.where(valid, warp.depth, depth_exact)
-        if c.silhouette:
-            pairs = find_edge_pairs(self.renderer, rendered, current, K_render)
-            term = silhouette_term(self.renderer, pairs, world_T_cam, K_render,
-                                   torch.cat([rgb_rendered, depth_rendered], dim=1))[inside]
-            rgb, depth = rgb + term[:, :3], depth + term[:, 3:]
-        return DiffRenderOutput(rgb=rgb, depth=depth, mask=mask, exact=exact, world_T_cam=world_T_cam,
-                                coverage=agreement.coverage.cpu(), rgb_error=agreement.rgb_error.cpu(),
-                                depth_error=agreement.depth_error.cpu(), refreshed=refreshed)
+        if self.config.values == "exact":
+            rgb = frame.rgb + torch.where(valid, straight_through(warp.rgb), torch.zeros_like(warp.rgb))
+            depth = frame.depth + torch.where(valid, straight_through(warp.depth), torch.zeros_like(warp.depth))
+            return rgb, depth
+        return torch.where(valid, warp.rgb, frame.rgb), torch.where(valid, warp.depth, frame.depth)
 
     def _exact_render(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, border: int,
                       anchor: AnchorLayers | None) -> RenderOutput:
@@ -202,7 +246,8 @@ class DifferentiableRenderer:
 
     def _warp(self, depth: torch.Tensor, normals: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor):
         A_T_P = torch.linalg.inv(self.anchor.world_T_cam) @ world_T_cam
-        return reproject(self.anchor, depth, normals, A_T_P, K, depth_tolerance=self.config.depth_tolerance)
+        return reproject(self.anchor, depth, normals, A_T_P, K, depth_tolerance=self.config.depth_tolerance,
+                         plane_tolerance=self.config.plane_tolerance)
 
 
 def _view_key(K: torch.Tensor, height: int, width: int) -> tuple:
@@ -232,7 +277,7 @@ class WarpAgreement:
         count = valid.sum(dim=(1, 2, 3)).clamp_min(1)
         coverage = valid.sum(dim=(1, 2, 3)) / hit
         rgb_error = ((warp.rgb.detach() - rgb).abs().mean(1, keepdim=True) * valid).sum(dim=(1, 2, 3)) / count
-        relative = (warp.depth.detach() - depth).abs() / depth.clamp_min(1e-6)
+        relative = (warp.depth.detach() - depth).abs() / depth.clamp_min(_MIN_DEPTH)
         depth_error = (relative * valid).sum(dim=(1, 2, 3)) / count
         return cls(coverage.double(), rgb_error.double(), depth_error.double())
 

@@ -82,19 +82,29 @@ def _plane_depth(renderer: ExactRenderer, ids: np.ndarray, rays_world: np.ndarra
     return _plane_z(ids, offset, dot(normal, rays_world))
 
 
+# An edge parallel to the plane of the segment's rays (|m . (v1 - v0)| below this) has no crossing.
+_PARALLEL = 1e-12
+# Image coordinates divide by z; points this close to the camera plane are clamped, not divided by 0.
+_MIN_PROJECTED_Z = 1e-9
+# A crossing this close past an edge's end, or this close to the camera plane, still counts: float
+# rounding must not drop a crossing that lies exactly on a vertex.
+_ENDPOINT_SLACK = 1e-6
+
+
 def edge_crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: torch.Tensor, K: torch.Tensor,
                    uv_a: torch.Tensor, uv_b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Crossing t (N,) of edges (N, 2, 3) (camera frame) with the segment a->b, and whether it is genuine."""
     m = torch.linalg.cross(rays_a, rays_b)
     v0, v1 = vertices_cam[:, 0], vertices_cam[:, 1]
     denominator = dot(m, v1 - v0)
-    s = -dot(m, v0) / torch.where(denominator.abs() > 1e-12, denominator, torch.ones_like(denominator))
+    s = -dot(m, v0) / torch.where(denominator.abs() > _PARALLEL, denominator, torch.ones_like(denominator))
     point = v0 + s[:, None] * (v1 - v0)
     projected = (K @ point[..., None])[..., 0]
-    uv = projected[:, :2] / projected[:, 2:3].clamp_min(1e-9)
+    uv = projected[:, :2] / projected[:, 2:3].clamp_min(_MIN_PROJECTED_Z)
     direction = uv_b - uv_a
     t = ((uv - uv_a) * direction).sum(-1) / (direction * direction).sum(-1)
-    genuine = (denominator.abs() > 1e-12) & (s >= -1e-6) & (s <= 1 + 1e-6) & (point[:, 2] > 1e-6)
+    genuine = ((denominator.abs() > _PARALLEL) & (s >= -_ENDPOINT_SLACK) & (s <= 1 + _ENDPOINT_SLACK)
+               & (point[:, 2] > _ENDPOINT_SLACK))
     return t, genuine
 
 
