@@ -14,12 +14,20 @@ from kadv.scenes import procedural_room
 EMBEDDED = ("kadv_tiny", "kadv_tiny_dpt")
 
 
-@pytest.fixture(scope="module")
-def room_view():
-    scene = procedural_room(seed=11)  # a room no training run drew (they use seeds 0 and 1 times 100003, plus i)
+# rooms no training run drew (training draws seeds 100003 * s + i for s = 0, 1, 2 and i < 600)
+UNSEEN = (11, 12, 13, 14)
+
+
+def _file_view(seed: int):
+    scene = procedural_room(seed=seed)
     camera = scene.cameras[0]
     renderer = ExactRenderer(scene)
     return renderer, camera, renderer.render(camera.world_T_cam, camera.intrinsics(90, 120), 90, 120, supersample=2)
+
+
+@pytest.fixture(scope="module")
+def room_view():
+    return _file_view(UNSEEN[0])
 
 
 @pytest.mark.parametrize("name", EMBEDDED)
@@ -41,11 +49,17 @@ def test_the_dpt_goes_through_the_hugging_face_adapter() -> None:
 
 
 @pytest.mark.parametrize("name", EMBEDDED)
-def test_predicts_the_structure_of_an_unseen_room(name: str, room_view) -> None:
-    _, _, out = room_view
+def test_predicts_the_structure_of_unseen_rooms(name: str) -> None:
+    # delta1 after alignment is lenient on room views: a disparity ramp rising down the image (floor
+    # near, ceiling far) already scores about 0.55 here. A model must beat that guess clearly;
+    # benchmarks/tiny_accuracy.py measures the models on 200 held-out views and on the shared scenes.
+    model = load_model(name)
+    views = [_file_view(seed)[2] for seed in UNSEEN]
     with torch.no_grad():
-        delta1 = depth_metrics(load_model(name)(out.rgb), out.depth, out.mask)["delta1"]
-    assert float(delta1) > 0.8
+        scores = [float(depth_metrics(model(out.rgb), out.depth, out.mask)["delta1"]) for out in views]
+    ramp = torch.linspace(0.2, 1.0, 90)[None, None, :, None].expand(1, 1, 90, 120)
+    guesses = [float(depth_metrics(ramp, out.depth, out.mask)["delta1"]) for out in views]
+    assert sum(scores) / len(scores) > sum(guesses) / len(guesses) + 0.1, (scores, guesses)
 
 
 @pytest.mark.parametrize("name", EMBEDDED)
