@@ -1,6 +1,11 @@
 """``kadv-attack``: find camera views where a depth model fails; writes the run directory."""
 from __future__ import annotations
 
+# before anything loads torch: the wait policy is read when torch starts its thread pool
+from kadv.runtime import configure_runtime
+
+configure_runtime()
+
 import json
 import logging
 from pathlib import Path

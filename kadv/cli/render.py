@@ -9,6 +9,11 @@ first moved along its optical axis until it is clear, as the attack's init views
 """
 from __future__ import annotations
 
+# before anything loads torch: the wait policy is read when torch starts its thread pool
+from kadv.runtime import configure_runtime
+
+configure_runtime()
+
 import json
 import logging
 from pathlib import Path

@@ -1,6 +1,11 @@
 """``kadv-report``: the study's tables, method comparison, transfer matrix and one HTML page for a sweep."""
 from __future__ import annotations
 
+# before anything loads torch: the wait policy is read when torch starts its thread pool
+from kadv.runtime import configure_runtime
+
+configure_runtime()
+
 import argparse
 import sys
 from pathlib import Path
