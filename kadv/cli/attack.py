@@ -6,7 +6,6 @@ from kadv.runtime import configure_runtime
 
 configure_runtime()
 
-import json
 import logging
 from pathlib import Path
 
@@ -49,6 +48,7 @@ from kadv.report.run import (
     save_partial_result,
     write_run,
 )
+from kadv.report.summary import RunInfo, RunSummary
 
 log = logging.getLogger(__name__)
 
@@ -83,12 +83,12 @@ def _init_views(cfg: DictConfig, run_dir: Path, renderer: ExactRenderer, model, 
     return views
 
 
-def _table(summary: dict) -> str:
+def _table(summary: RunSummary) -> str:
     lines = ["| init view | L_depth init | L_depth adv | delta1 init | delta1 adv |", "|---|---|---|---|---|"]
-    for view in summary["init_views"]:
-        adv = view["adversarial_mean"]
-        lines.append(f"| {view['name']} | {view['init']['l_depth']:.4f} | {adv['l_depth']:.4f} | "
-                     f"{view['init']['delta1']:.3f} | {adv['delta1']:.3f} |")
+    for view in summary.init_views:
+        adv = view.adversarial_mean
+        lines.append(f"| {view.name} | {view.init.l_depth:.4f} | {adv['l_depth']:.4f} | "
+                     f"{view.init.delta1:.3f} | {adv['delta1']:.3f} |")
     return "\n".join(lines)
 
 
@@ -99,9 +99,9 @@ def main(cfg: DictConfig) -> float:
     """Run the configured attack; returns the mean adversarial L_depth (for Hydra sweepers)."""
     run_dir = Path(HydraConfig.get().runtime.output_dir)
     if is_complete(run_dir):
-        summary = json.loads((run_dir / SUMMARY).read_text())
+        summary = RunSummary.read(run_dir / SUMMARY)
         print(f"already complete, skipped: {run_dir}\n{_table(summary)}")
-        return float(summary["adversarial_l_depth"])
+        return summary.adversarial_l_depth
     device = resolve_device(cfg.device)
     height, width, supersample = check_render_config(cfg.render)
     attack_config = attack_settings(cfg.attack)
@@ -123,11 +123,10 @@ def main(cfg: DictConfig) -> float:
     result = attack(objective, DifferentiableRenderer(renderer, diff_config, device), views, height, width, attack_config,
                     int(cfg.seed), completed=completed,
                     on_result=lambda index, view: save_partial_result(run_dir, index, view), progress=cfg.progress)
-    info = {"scene": scene.name, "model": model.name, "loss": cfg.loss.kind, "seed": int(cfg.seed),
-            "device": str(device), "height": height, "width": width, "resumed_init_views": sorted(completed)}
-    summary = write_run(run_dir, result, objective, height, width, supersample, info, video=cfg.video)
+    info = RunInfo(scene.name, model.name, cfg.loss.kind, int(cfg.seed), str(device), height, width, sorted(completed))
+    summary = write_run(run_dir, result, objective, info, supersample, video=cfg.video)
     print(f"run directory: {run_dir}\n{_table(summary)}")
-    return float(summary["adversarial_l_depth"])
+    return summary.adversarial_l_depth
 
 
 if __name__ == "__main__":

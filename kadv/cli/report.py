@@ -12,24 +12,11 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from kadv.cli.common import (
-    USER_ERRORS,
-    model_from_config,
-    scene_from_config,
-    shading_from_config,
-)
-from kadv.losses import depth_loss
+from kadv.cli.common import USER_ERRORS, model_from_config, scene_from_config, shading_from_config
+from kadv.models import DepthModel
 from kadv.render import ExactRenderer
-from kadv.report.html import save_mean_curves, write_html
-from kadv.report.sweep import (
-    RunRecord,
-    collect_runs,
-    method_table,
-    methods_of,
-    table2,
-    table3,
-)
-from kadv.report.transfer import transfer_tables
+from kadv.report.build import write_report
+from kadv.report.sweep import RunRecord
 
 DESCRIPTION = """kadv-report: turns kadv-attack run directories into the study's tables and more.
 Writes to OUT (default: <first path>/report), for each search method M in the runs:
@@ -51,50 +38,33 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def report(paths: list[str], out: Path | None, transfer: bool = True, progress: bool = True) -> list[Path]:
-    """Write every table, the curves and ``report.html``; returns the files written."""
-    runs = collect_runs(paths)
-    out = out or Path(paths[0]) / "report"
-    tables, stems = [], []
-    for method in methods_of(runs):
-        tables += [table2(runs, method), table3(runs, method)]
-        stems += [f"table2_{method}", f"table3_{method}"]
-    methods = method_table(runs)
-    if methods is not None:
-        tables.append(methods)
-        stems.append("methods")
-    if transfer:
-        renderers: dict[str, ExactRenderer] = {}
-        models: dict[str, object] = {}
+class _FromConfig:
+    """A run's renderer and model, built from its saved config, once per scene and per model."""
 
-        def renderer_of(run: RunRecord) -> ExactRenderer:
-            if run.scene not in renderers:
-                config = OmegaConf.create(run.config)
-                renderers[run.scene] = ExactRenderer(scene_from_config(config.scene),
-                                                     shading_from_config(config.render.shading))
-            return renderers[run.scene]
+    def __init__(self) -> None:
+        self.renderers: dict[str, ExactRenderer] = {}
+        self.models: dict[str, DepthModel] = {}
 
-        def model_of(run: RunRecord):
-            if run.model not in models:
-                models[run.model] = model_from_config(run.config["model"])
-            return models[run.model]
+    def renderer_of(self, run: RunRecord) -> ExactRenderer:
+        if run.scene not in self.renderers:
+            config = OmegaConf.create(run.config)
+            self.renderers[run.scene] = ExactRenderer(scene_from_config(config.scene),
+                                                      shading_from_config(config.render.shading))
+        return self.renderers[run.scene]
 
-        loss_config = runs[0].config["loss"]
-        loss = depth_loss(loss_config["kind"], loss_config.get("vgg_weights"), int(loss_config.get("window_size", 11)))
-        tables += transfer_tables(runs, renderer_of, model_of, loss, loss_config.get("space", "disparity"), progress)
-        stems += ["transfer_delta1", "transfer_l_depth"]
-    written = [path for table, stem in zip(tables, stems) for path in table.write(out, stem)]
-    curves = save_mean_curves(out / "curves.png", runs)
-    written.append(curves)
-    written.append(write_html(out / "report.html", tables, curves, runs))
-    return written
+    def model_of(self, run: RunRecord) -> DepthModel:
+        if run.model not in self.models:
+            self.models[run.model] = model_from_config(run.config["model"])
+        return self.models[run.model]
 
 
 def main(argv: list[str] | None = None) -> None:
     """Write the report of the runs named on the command line."""
     args = _parser().parse_args(argv)
     try:
-        written = report(args.paths, args.out, transfer=not args.no_transfer, progress=not args.no_progress)
+        sources = None if args.no_transfer else _FromConfig()
+        written = write_report(args.paths, args.out, sources and sources.renderer_of, sources and sources.model_of,
+                               progress=not args.no_progress)
     except USER_ERRORS as error:
         print(f"kadv-report: error: {' '.join(str(error).split())}", file=sys.stderr)
         sys.exit(2)

@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from kadv.io import atomic_write
+from kadv.report.summary import ViewMetrics
 from kadv.report.sweep import RunRecord, Table
 
 __all__ = ["save_mean_curves", "write_html"]
@@ -19,10 +20,9 @@ __all__ = ["save_mean_curves", "write_html"]
 def _anytime_gains(run: RunRecord, seconds: np.ndarray) -> list[np.ndarray]:
     """Per init view: the best valid L_depth found by each time on ``seconds``, less the init view's."""
     gains = []
-    for view in run.summary["init_views"]:
-        points = view["anytime"]
-        times = np.array([p["seconds"] for p in points])
-        values = np.array([p["l_depth"] for p in points]) - view["init"]["l_depth"]
+    for view in run.summary.init_views:
+        times = np.array([p.seconds for p in view.anytime])
+        values = np.array([p.l_depth for p in view.anytime]) - view.init.l_depth
         gains.append(values[np.clip(np.searchsorted(times, seconds, side="right") - 1, 0, None)])
     return gains
 
@@ -30,7 +30,7 @@ def _anytime_gains(run: RunRecord, seconds: np.ndarray) -> list[np.ndarray]:
 def save_mean_curves(path: Path, runs: list[RunRecord]) -> Path:
     """Anytime curves: the mean gain in L_depth of the best valid view found so far against seconds,
     per model and method, with the 25-75% band across runs and init views."""
-    longest = max(view["budget"]["seconds"] for run in runs for view in run.summary["init_views"])
+    longest = max(view.budget.seconds for run in runs for view in run.summary.init_views)
     seconds = np.linspace(0.0, longest, 101)
     groups: dict[str, list[np.ndarray]] = defaultdict(list)
     for run in runs:
@@ -57,16 +57,16 @@ def _data_uri(path: Path) -> str:
 def _gallery(runs: list[RunRecord], out_dir: Path) -> list[dict]:
     """Per model x scene: the strongest adversarial view of any method (adversarial views are valid,
     so never uninformative)."""
-    best: dict[tuple[str, str], tuple[float, RunRecord, dict]] = {}
+    best: dict[tuple[str, str], tuple[float, RunRecord, ViewMetrics]] = {}
     for run in runs:
-        for view in run.summary["init_views"]:
-            if view["adversarial"]:
-                top = view["adversarial"][0]
+        for view in run.summary.init_views:
+            if view.adversarial:
+                top = view.adversarial[0]
                 key = (run.model, run.scene)
-                if key not in best or top["l_depth"] > best[key][0]:
-                    best[key] = (top["l_depth"], run, top)
-    return [{"model": model, "scene": scene, "method": run.method, "l_depth": l_depth, "delta1": top["delta1"],
-             "image": _data_uri(run.path / top["png"]), "map": _data_uri(run.path / "map.png"),
+                if key not in best or top.l_depth > best[key][0]:
+                    best[key] = (top.l_depth, run, top)
+    return [{"model": model, "scene": scene, "method": run.method, "l_depth": l_depth, "delta1": top.delta1,
+             "image": _data_uri(run.path / top.png), "map": _data_uri(run.path / "map.png"),
              "href": Path(os.path.relpath(run.path, out_dir)).as_posix() + "/"}
             for (model, scene), (l_depth, run, top) in sorted(best.items())]
 

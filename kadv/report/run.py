@@ -8,10 +8,9 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import logging
 import platform
-from dataclasses import asdict, fields
+from dataclasses import fields
 from importlib import metadata
 from pathlib import Path
 
@@ -21,17 +20,16 @@ import torch
 from kadv.attack import AttackResult, InitView, InitViewResult, Objective, ViewRecord, best_so_far
 from kadv.attack.records import Budget
 from kadv.geometry import intrinsics_from_fov
-from kadv.io import atomic_write, write_json
+from kadv.io import atomic_write
 from kadv.losses import aligned_depth
 from kadv.penalties.validity import UNINFORMATIVE
 from kadv.report.figures import annotate, colourise, save_curves, save_four_panel, save_map, save_video
+from kadv.report.summary import AnytimePoint, InitViewSummary, RunInfo, RunSummary, ViewMetrics, read_partial, write_partial
 
 __all__ = ["SUMMARY", "is_complete", "load_partial_results", "save_partial_result", "trajectory_rows", "write_run"]
 
 SUMMARY = "summary.json"
 _PARTIAL = "partial"
-# bumped whenever InitViewResult or ViewRecord changes shape: older partial files are recomputed
-PARTIAL_SCHEMA = 1
 log = logging.getLogger(__name__)
 _PACKAGES = ("kadv", "torch", "kornia", "open3d-cpu", "trimesh", "transformers", "numpy", "cma", "nevergrad")
 _MAX_VIDEO_FRAMES = 200
@@ -44,44 +42,24 @@ def is_complete(run_dir: str | Path) -> bool:
 
 def save_partial_result(run_dir: str | Path, index: int, result: InitViewResult) -> Path:
     """Save one init view's search result (``partial/init<index>.json``)."""
-    data = {
-        "schema": PARTIAL_SCHEMA,
-        "init": result.init.to_dict(),
-        "records": [asdict(r) for r in result.records],
-        "top": [[r.step, r.restart] for r in result.top],
-        "path": [[r.step, r.restart] for r in result.path],
-        "budget": result.budget.to_dict(),
-    }
-    return write_json(Path(run_dir) / _PARTIAL / f"init{index}.json", data)
-
-
-def _read_partial(path: Path) -> InitViewResult:
-    data = json.loads(path.read_text())
-    if not isinstance(data, dict) or data.get("schema") != PARTIAL_SCHEMA:
-        found = data.get("schema", "none") if isinstance(data, dict) else "none"
-        raise ValueError(f"schema version {found}, this kadv writes {PARTIAL_SCHEMA}")
-    records = [ViewRecord(**r) for r in data["records"]]
-    by_key = {(r.step, r.restart): r for r in records}
-    return InitViewResult(InitView.from_dict(data["init"]), records, [by_key[tuple(key)] for key in data["top"]],
-                          Budget(**data["budget"]), [by_key[tuple(key)] for key in data["path"]])
+    return write_partial(Path(run_dir) / _PARTIAL / f"init{index}.json", result)
 
 
 def load_partial_results(run_dir: str | Path) -> dict[int, InitViewResult]:
     """The init views' results an earlier (possibly interrupted) run saved, by index.
 
-    A file that cannot be read (cut short, edited, or written by a kadv whose results had another
-    shape) is named in one warning, moved aside as ``init<i>.json.unreadable``, and its init view
-    is left to be computed again.
+    A file that cannot be read (cut short, edited, or of another schema version) is named in one
+    warning, moved aside as ``init<i>.json.unreadable``, and its init view is left to be computed again.
     """
     results = {}
     for path in sorted((Path(run_dir) / _PARTIAL).glob("init*.json")):
         try:
-            results[int(path.stem.removeprefix("init"))] = _read_partial(path)
-        except (ValueError, KeyError, TypeError) as error:  # json's decode errors are ValueErrors
+            results[int(path.stem.removeprefix("init"))] = read_partial(path)
+        except ValueError as error:
             aside = path.with_name(path.name + ".unreadable")
             path.replace(aside)
             log.warning("%s cannot be read (%s): moved aside to %s; its init view is computed again", path,
-                        error, aside.name)
+                        str(error).removeprefix(f"{path}: "), aside.name)
     return results
 
 
@@ -176,61 +154,56 @@ def _versions() -> dict[str, str]:
     return versions
 
 
-def _metrics(record: ViewRecord) -> dict:
-    return {"l_depth": record.l_depth, "l_dist": record.l_dist, "objective": record.objective,
-            "delta1": record.delta1, "abs_rel": record.abs_rel, "theta": record.theta, "centre": record.centre,
-            "step": record.step, "restart": record.restart}
-
-
-def write_run(run_dir: str | Path, result: AttackResult, objective: Objective, height: int, width: int,
-              supersample: int, info: dict, video: bool = True) -> dict:
+def write_run(run_dir: str | Path, result: AttackResult, objective: Objective, info: RunInfo, supersample: int,
+              video: bool = True) -> RunSummary:
     """Write the run's artefacts and, last, ``summary.json``; returns the summary.
 
     Args:
         run_dir: the run directory.
         result: the attack's result.
         objective: the objective (its renderer and model re-render the views for pictures).
-        height, width, supersample: the attack's image size and supersampling.
-        info: extra summary fields (scene, model, loss, seed, device, ...).
+        info: what the run was; its image size is the attack's.
+        supersample: the attack's supersampling.
         video: also write ``trajectory.mp4`` of the run with the largest gain.
     """
     run_dir = Path(run_dir)
-    render = _ViewRenderer(objective, height, width, supersample)
+    render = _ViewRenderer(objective, info.height, info.width, supersample)
     _write_csv(run_dir / "trajectory.csv", trajectory_rows(result))
-    per_view = []
-    for index, view in enumerate(result.views):
-        pictures = _save_views(run_dir / "views", index, view, render)
-        init = view.init_record
-        adversarial = [_metrics(r) | {"png": png} for r, png in zip(view.top, pictures[1:])]
-        gain = (view.top[0].l_depth - init.l_depth) if view.top else 0.0
-        per_view.append({
-            "index": index, "name": view.init.name, "source": view.init.source, "note": view.init.note,
-            "fov_x_deg": view.init.fov_x_deg, "init_world_T_cam": view.init.world_T_cam.tolist(),
-            "init": _metrics(init) | {"png": pictures[0]},
-            "adversarial": adversarial,
-            "adversarial_mean": {k: float(np.mean([a[k] for a in adversarial])) if adversarial else None
-                                 for k in ("l_depth", "delta1", "abs_rel")},
-            "l_depth_gain": gain,
-            "anytime": [dict(zip(("evaluations", "seconds", "l_depth", "delta1"), point))
-                        for point in best_so_far(view.records)],
-            "evaluations": len(view.records),
-            "invalid_views": sum(not r.valid for r in view.records),
-            "uninformative_views": sum(r.verdict == UNINFORMATIVE for r in view.records),
-            "guarded_steps": sum(r.guard_fraction < 1.0 for r in view.records),
-            "budget": view.budget.to_dict(),
-        })
+    per_view = [_init_view_summary(index, view, _save_views(run_dir / "views", index, view, render))
+                for index, view in enumerate(result.views)]
     save_curves(run_dir / "loss.png", result.views)
     save_map(run_dir / "map.png", objective.renderer.scene, result.views)
     if video:
         best = max(result.views, key=lambda v: (v.top[0].l_depth - v.init_record.l_depth) if v.top else -np.inf)
         save_video(run_dir / "trajectory.mp4", _video_frames(best, render))
-    means = {f"{stage}_{key}": float(np.mean([v[stage if stage == "init" else "adversarial_mean"][key]
-                                             for v in per_view if v["adversarial_mean"]["l_depth"] is not None]))
-             for stage in ("init", "adversarial") for key in ("l_depth", "delta1")}
-    summary = {
-        "complete": True, "method": result.method, **info, **means,
-        "budget": {k: sum(v["budget"][k] for v in per_view) for k in ("forward", "backward", "seconds")},
-        "versions": _versions(), "init_views": per_view,
-    }
-    write_json(run_dir / SUMMARY, summary)
+    kept = [v for v in per_view if v.adversarial]
+    summary = RunSummary(
+        **vars(info), method=result.method,
+        init_l_depth=_mean(v.init.l_depth for v in kept), init_delta1=_mean(v.init.delta1 for v in kept),
+        adversarial_l_depth=_mean(v.adversarial_mean["l_depth"] for v in kept),
+        adversarial_delta1=_mean(v.adversarial_mean["delta1"] for v in kept),
+        budget=Budget(*(sum(getattr(v.budget, k) for v in per_view) for k in ("forward", "backward", "seconds"))),
+        versions=_versions(), init_views=per_view)
+    summary.write(run_dir / SUMMARY)
     return summary
+
+
+def _mean(values) -> float:
+    return float(np.mean(list(values)))
+
+
+def _init_view_summary(index: int, view: InitViewResult, pictures: list[str]) -> InitViewSummary:
+    adversarial = [ViewMetrics.of(r, png) for r, png in zip(view.top, pictures[1:])]
+    return InitViewSummary(
+        index=index, name=view.init.name, source=view.init.source, note=view.init.note,
+        fov_x_deg=view.init.fov_x_deg, init_world_T_cam=view.init.world_T_cam.tolist(),
+        init=ViewMetrics.of(view.init_record, pictures[0]), adversarial=adversarial,
+        adversarial_mean={k: _mean(getattr(a, k) for a in adversarial) if adversarial else None
+                          for k in ("l_depth", "delta1", "abs_rel")},
+        l_depth_gain=(view.top[0].l_depth - view.init_record.l_depth) if view.top else 0.0,
+        anytime=[AnytimePoint(*point) for point in best_so_far(view.records)],
+        evaluations=len(view.records),
+        invalid_views=sum(not r.valid for r in view.records),
+        uninformative_views=sum(r.verdict == UNINFORMATIVE for r in view.records),
+        guarded_steps=sum(r.guard_fraction < 1.0 for r in view.records),
+        budget=view.budget)

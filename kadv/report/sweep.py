@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import statistics
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -18,6 +17,7 @@ import yaml
 
 from kadv.io import atomic_write
 from kadv.report.run import SUMMARY
+from kadv.report.summary import RunSummary
 
 __all__ = ["RunRecord", "Table", "collect_runs", "main_method", "method_table", "methods_of", "table2", "table3"]
 
@@ -27,20 +27,20 @@ class RunRecord:
     """One complete run directory: its summary, its resolved config and where it is."""
 
     path: Path
-    summary: dict
+    summary: RunSummary
     config: dict
 
     @property
     def model(self) -> str:
-        return self.summary["model"]
+        return self.summary.model
 
     @property
     def scene(self) -> str:
-        return self.summary["scene"]
+        return self.summary.scene
 
     @property
     def method(self) -> str:
-        return self.summary["method"]
+        return self.summary.method
 
 
 @dataclass
@@ -77,7 +77,7 @@ def collect_runs(paths: list[str | Path]) -> list[RunRecord]:
 
     Raises:
         FileNotFoundError: a path that does not exist.
-        ValueError: no complete run under any of the paths.
+        ValueError: no complete run under any of the paths, or a summary this kadv cannot read.
     """
     runs, seen = [], set()
     for path in map(Path, paths):
@@ -90,7 +90,7 @@ def collect_runs(paths: list[str | Path]) -> list[RunRecord]:
             seen.add(run_dir)
             config_file = run_dir / "config.yaml"
             config = yaml.safe_load(config_file.read_text()) if config_file.is_file() else {}
-            runs.append(RunRecord(run_dir, json.loads(summary.read_text()), config))
+            runs.append(RunRecord(run_dir, RunSummary.read(summary), config))
     if not runs:
         raise ValueError(f"no complete run (a folder with {SUMMARY}) under {', '.join(map(str, paths))}")
     return runs
@@ -151,16 +151,16 @@ def table2(runs: list[RunRecord], method: str) -> Table:
     """The study's Table 2 for one method's runs: adversarial L_depth (higher: worse for the model)
     and delta1 (lower: worse)."""
     return _paired_table(f"Table 2: adversarial views ({method} attack)", runs, method,
-                         ("L_depth", lambda r: r.summary["adversarial_l_depth"]),
-                         ("delta1", lambda r: r.summary["adversarial_delta1"]))
+                         ("L_depth", lambda r: r.summary.adversarial_l_depth),
+                         ("delta1", lambda r: r.summary.adversarial_delta1))
 
 
 def table3(runs: list[RunRecord], method: str) -> Table:
     """The study's Table 3 for one method's runs: adversarial - init for L_depth, init - adversarial
     for delta1."""
     return _paired_table(f"Table 3: change from the init views ({method} attack)", runs, method,
-                         ("dL_depth", lambda r: r.summary["adversarial_l_depth"] - r.summary["init_l_depth"]),
-                         ("ddelta1", lambda r: r.summary["init_delta1"] - r.summary["adversarial_delta1"]))
+                         ("dL_depth", lambda r: r.summary.adversarial_l_depth - r.summary.init_l_depth),
+                         ("ddelta1", lambda r: r.summary.init_delta1 - r.summary.adversarial_delta1))
 
 
 def method_table(runs: list[RunRecord]) -> Table | None:
@@ -173,12 +173,12 @@ def method_table(runs: list[RunRecord]) -> Table | None:
     table = Table("Methods at equal budget", ["model", "scene", "method", "L_depth gain", "delta1 drop",
                                               "evaluations / init view", "seconds / init view"])
     for (model, scene, method), group in sorted(cells.items()):
-        views = [v for run in group for v in run.summary["init_views"]]
+        views = [v for run in group for v in run.summary.init_views]
         table.rows.append([
             model, scene, method,
-            statistics.mean(r.summary["adversarial_l_depth"] - r.summary["init_l_depth"] for r in group),
-            statistics.mean(r.summary["init_delta1"] - r.summary["adversarial_delta1"] for r in group),
-            statistics.mean(v["budget"]["forward"] for v in views),
-            statistics.mean(v["budget"]["seconds"] for v in views),
+            statistics.mean(r.summary.adversarial_l_depth - r.summary.init_l_depth for r in group),
+            statistics.mean(r.summary.init_delta1 - r.summary.adversarial_delta1 for r in group),
+            statistics.mean(v.budget.forward for v in views),
+            statistics.mean(v.budget.seconds for v in views),
         ])
     return table

@@ -22,9 +22,9 @@ __all__ = ["transfer_tables"]
 def _adversarial_poses(run: RunRecord) -> tuple[torch.Tensor, torch.Tensor]:
     """The run's adversarial poses (N, 4, 4) and intrinsics (N, 3, 3), from the views' .npz files."""
     poses, Ks = [], []
-    for view in run.summary["init_views"]:
-        for adversarial in view["adversarial"]:
-            arrays = np.load(run.path / adversarial["png"].replace(".png", ".npz"))
+    for view in run.summary.init_views:
+        for adversarial in view.adversarial:
+            arrays = np.load(run.path / adversarial.png.replace(".png", ".npz"))
             poses.append(torch.from_numpy(arrays["world_T_cam"]).double())
             Ks.append(torch.from_numpy(arrays["K"]).double())
     return torch.stack(poses), torch.stack(Ks)
@@ -48,7 +48,7 @@ def transfer_tables(runs: list[RunRecord], renderer_of: Callable[[RunRecord], Ex
         for run in runs:
             renderer = renderer_of(run)
             poses, Ks = _adversarial_poses(run)
-            height, width = run.summary["height"], run.summary["width"]
+            height, width = run.summary.height, run.summary.width
             supersample = int(run.config.get("render", {}).get("supersample", 1))
             with torch.no_grad():
                 out = renderer.render(poses, Ks, height, width, supersample=supersample)

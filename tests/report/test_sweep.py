@@ -1,34 +1,54 @@
 """The sweep report on synthetic summary.json files of two methods, without a browser."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 from PIL import Image
 
-from kadv.cli.report import report
+from kadv.attack.records import Budget
+from kadv.report import write_report
+from kadv.report.summary import SCHEMA_VERSION, AnytimePoint, InitViewSummary, RunSummary, ViewMetrics
 
 
-def _run(folder: Path, method: str, init: float, adversarial: float, delta1: tuple[float, float]) -> None:
+def _metrics(l_depth: float, delta1: float, png: str) -> ViewMetrics:
+    return ViewMetrics(l_depth, 0.0, l_depth, delta1, 0.1, [0.0, 0.0, 0.0], [1.0, 1.5, 1.0], 0, 0, png)
+
+
+def _run(folder: Path, method: str, init: float, adversarial: float, delta1: tuple[float, float]) -> RunSummary:
     (folder / "views").mkdir(parents=True)
     Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(folder / "views" / "init0_adv0.png")
     Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(folder / "map.png")
-    view = {"index": 0, "name": "file0", "init": {"l_depth": init, "delta1": delta1[0]},
-            "adversarial": [{"l_depth": adversarial, "delta1": delta1[1], "png": "views/init0_adv0.png"}],
-            "anytime": [{"evaluations": 1, "seconds": 0.1, "l_depth": init, "delta1": delta1[0]},
-                        {"evaluations": 9, "seconds": 2.0, "l_depth": adversarial, "delta1": delta1[1]}],
-            "budget": {"forward": 10, "backward": 0, "seconds": 3.0}}
-    summary = {"complete": True, "method": method, "model": "kadv_tiny", "scene": "box_room_0",
-               "init_l_depth": init, "adversarial_l_depth": adversarial, "init_delta1": delta1[0],
-               "adversarial_delta1": delta1[1], "init_views": [view]}
-    (folder / "summary.json").write_text(json.dumps(summary))
+    view = InitViewSummary(
+        index=0, name="file0", source="file", note="", fov_x_deg=70.0, init_world_T_cam=np.eye(4).tolist(),
+        init=_metrics(init, delta1[0], "views/init0.png"), adversarial=[_metrics(adversarial, delta1[1],
+                                                                                 "views/init0_adv0.png")],
+        adversarial_mean={"l_depth": adversarial, "delta1": delta1[1], "abs_rel": 0.1}, l_depth_gain=adversarial - init,
+        anytime=[AnytimePoint(1, 0.1, init, delta1[0]), AnytimePoint(9, 2.0, adversarial, delta1[1])],
+        evaluations=10, invalid_views=0, uninformative_views=0, guarded_steps=0, budget=Budget(10, 0, 3.0))
+    summary = RunSummary("box_room_0", "kadv_tiny", "ssim", 0, "cpu", 96, 128, [], method, init, delta1[0], adversarial,
+                         delta1[1], Budget(10, 0, 3.0), {"kadv": "0"}, [view])
+    summary.write(folder / "summary.json")
+    return summary
+
+
+def test_a_summary_reads_back_equal_and_other_schemas_are_refused(tmp_path: Path) -> None:
+    summary = _run(tmp_path / "run", "random", 0.05, 0.35, (0.98, 0.40))
+    assert RunSummary.read(tmp_path / "run" / "summary.json") == summary
+    text = (tmp_path / "run" / "summary.json").read_text()
+    (tmp_path / "run" / "summary.json").write_text(text.replace(f'"schema": {SCHEMA_VERSION}', '"schema": 0'))
+    with pytest.raises(ValueError, match=r"summary.json: schema version 0, this kadv reads"):
+        RunSummary.read(tmp_path / "run" / "summary.json")
+    (tmp_path / "run" / "summary.json").write_text(text.replace('"l_depth_gain"', '"gain"'))
+    with pytest.raises(ValueError, match=r"summary.json: not a kadv run summary"):
+        RunSummary.read(tmp_path / "run" / "summary.json")
 
 
 def test_tables_for_each_method_delta1_drop_and_anytime_curves(tmp_path: Path) -> None:
     _run(tmp_path / "sweep" / "a", "gradient", 0.05, 0.15, (0.98, 0.80))
     _run(tmp_path / "sweep" / "b", "random", 0.05, 0.35, (0.98, 0.40))
-    written = report([str(tmp_path / "sweep")], tmp_path / "out", transfer=False, progress=False)
+    written = write_report([tmp_path / "sweep"], tmp_path / "out", progress=False)
     names = {path.name for path in written}
     assert {"table2_gradient.md", "table2_random.md", "table3_gradient.md", "table3_random.md", "methods.md",
             "curves.png", "report.html"} <= names

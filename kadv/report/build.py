@@ -1,0 +1,47 @@
+"""``kadv-report``'s work: every table, the anytime curves and ``report.html`` for a set of runs."""
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+from kadv.losses import depth_loss
+from kadv.models import DepthModel
+from kadv.render import ExactRenderer
+from kadv.report.html import save_mean_curves, write_html
+from kadv.report.sweep import RunRecord, collect_runs, method_table, methods_of, table2, table3
+from kadv.report.transfer import transfer_tables
+
+__all__ = ["write_report"]
+
+
+def write_report(paths: list[str | Path], out: str | Path | None = None,
+                 renderer_of: Callable[[RunRecord], ExactRenderer] | None = None,
+                 model_of: Callable[[RunRecord], DepthModel] | None = None, progress: bool = True) -> list[Path]:
+    """Write Tables 2 and 3 per method, the method table, the transfer matrix, ``curves.png`` and
+    ``report.html`` for the complete runs under ``paths``; returns the files written.
+
+    Args:
+        paths: sweep or run directories.
+        out: output folder (default: ``<first path>/report``).
+        renderer_of, model_of: the renderer of a run's scene and its model, to re-render and score
+            the adversarial views for the transfer matrix; without both, no transfer matrix.
+        progress: show a progress bar while re-rendering.
+    """
+    runs = collect_runs(paths)
+    out = Path(out) if out is not None else Path(paths[0]) / "report"
+    tables, stems = [], []
+    for method in methods_of(runs):
+        tables += [table2(runs, method), table3(runs, method)]
+        stems += [f"table2_{method}", f"table3_{method}"]
+    methods = method_table(runs)
+    if methods is not None:
+        tables.append(methods)
+        stems.append("methods")
+    if renderer_of is not None and model_of is not None:
+        loss_config = runs[0].config["loss"]
+        loss = depth_loss(loss_config["kind"], loss_config.get("vgg_weights"), int(loss_config.get("window_size", 11)))
+        tables += transfer_tables(runs, renderer_of, model_of, loss, loss_config.get("space", "disparity"), progress)
+        stems += ["transfer_delta1", "transfer_l_depth"]
+    written = [path for table, stem in zip(tables, stems) for path in table.write(out, stem)]
+    curves = save_mean_curves(out / "curves.png", runs)
+    return [*written, curves, write_html(out / "report.html", tables, curves, runs)]

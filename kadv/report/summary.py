@@ -1,0 +1,183 @@
+"""The two JSON files of a run directory, as typed dataclasses: ``summary.json`` and ``partial/init<i>.json``.
+
+Both carry :data:`SCHEMA_VERSION`; a file of another version (or none) is refused on reading with
+an error naming it, so a report never reads a field that changed meaning and a resumed run never
+reuses a result of another shape.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from kadv.attack import InitView, InitViewResult, ViewRecord
+from kadv.attack.records import Budget
+from kadv.io import write_json
+
+__all__ = [
+    "SCHEMA_VERSION", "AnytimePoint", "InitViewSummary", "RunInfo", "RunSummary", "ViewMetrics", "read_partial",
+    "write_partial",
+]
+
+# bumped whenever a field below, InitViewResult or ViewRecord changes shape
+SCHEMA_VERSION = 1
+
+
+def _check_schema(data: object, path: Path) -> dict:
+    if not isinstance(data, dict) or data.get("schema") != SCHEMA_VERSION:
+        found = data.get("schema", "none") if isinstance(data, dict) else "none"
+        raise ValueError(f"{path}: schema version {found}, this kadv reads {SCHEMA_VERSION}")
+    return data
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        return _check_schema(json.loads(path.read_text()), path)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: not JSON ({error})") from error
+
+
+@dataclass
+class ViewMetrics:
+    """One evaluated view as a summary reports it: the objective's terms, accuracy and pose."""
+
+    l_depth: float
+    l_dist: float
+    objective: float
+    delta1: float
+    abs_rel: float
+    theta: list[float]
+    centre: list[float]
+    step: int
+    restart: int
+    png: str
+
+    @classmethod
+    def of(cls, record: ViewRecord, png: str) -> ViewMetrics:
+        return cls(record.l_depth, record.l_dist, record.objective, record.delta1, record.abs_rel, record.theta,
+                   record.centre, record.step, record.restart, png)
+
+
+@dataclass
+class AnytimePoint:
+    """The best valid view so far, each time it improved: after how many evaluations and seconds."""
+
+    evaluations: int
+    seconds: float
+    l_depth: float
+    delta1: float
+
+
+@dataclass
+class InitViewSummary:
+    """One init view's search: where it started, the adversarial views kept and what it cost."""
+
+    index: int
+    name: str
+    source: str
+    note: str
+    fov_x_deg: float
+    init_world_T_cam: list[list[float]]
+    init: ViewMetrics
+    adversarial: list[ViewMetrics]
+    adversarial_mean: dict[str, float | None]
+    l_depth_gain: float
+    anytime: list[AnytimePoint]
+    evaluations: int
+    invalid_views: int
+    uninformative_views: int
+    guarded_steps: int
+    budget: Budget
+
+    @classmethod
+    def from_dict(cls, data: dict) -> InitViewSummary:
+        return cls(**data | {"init": ViewMetrics(**data["init"]),
+                             "adversarial": [ViewMetrics(**a) for a in data["adversarial"]],
+                             "anytime": [AnytimePoint(**p) for p in data["anytime"]],
+                             "budget": Budget(**data["budget"])})
+
+
+@dataclass
+class RunInfo:
+    """What a run was: scene, model, loss, seed, device, image size, and the init views it resumed."""
+
+    scene: str
+    model: str
+    loss: str
+    seed: int
+    device: str
+    height: int
+    width: int
+    resumed_init_views: list[int]
+
+
+@dataclass
+class RunSummary(RunInfo):
+    """``summary.json``: a finished run. Written last, so a run directory holding it is complete.
+
+    The means are over the init views that kept an adversarial view; ``budget`` is the run's total.
+    """
+
+    method: str
+    init_l_depth: float
+    init_delta1: float
+    adversarial_l_depth: float
+    adversarial_delta1: float
+    budget: Budget
+    versions: dict[str, str]
+    init_views: list[InitViewSummary]
+    complete: bool = True
+    schema: int = SCHEMA_VERSION
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> RunSummary:
+        return cls(**data | {"budget": Budget(**data["budget"]),
+                             "init_views": [InitViewSummary.from_dict(v) for v in data["init_views"]]})
+
+    def write(self, path: str | Path) -> Path:
+        return write_json(Path(path), self.to_dict())
+
+    @classmethod
+    def read(cls, path: str | Path) -> RunSummary:
+        """The summary in ``path``.
+
+        Raises:
+            ValueError: the file is not JSON, has another schema version, or fields of another shape.
+        """
+        path = Path(path)
+        try:
+            return cls.from_dict(_read_json(path))
+        except (KeyError, TypeError) as error:
+            raise ValueError(f"{path}: not a kadv run summary ({error})") from error
+
+
+def write_partial(path: str | Path, result: InitViewResult) -> Path:
+    """Save one init view's full search result (``partial/init<i>.json``), to resume from."""
+    return write_json(Path(path), {
+        "schema": SCHEMA_VERSION,
+        "init": result.init.to_dict(),
+        "records": [asdict(r) for r in result.records],
+        "top": [[r.step, r.restart] for r in result.top],
+        "path": [[r.step, r.restart] for r in result.path],
+        "budget": result.budget.to_dict(),
+    })
+
+
+def read_partial(path: str | Path) -> InitViewResult:
+    """The result :func:`write_partial` saved.
+
+    Raises:
+        ValueError: the file is not JSON, has another schema version, or fields of another shape.
+    """
+    path = Path(path)
+    data = _read_json(path)
+    try:
+        records = [ViewRecord(**r) for r in data["records"]]
+        by_key = {(r.step, r.restart): r for r in records}
+        return InitViewResult(InitView.from_dict(data["init"]), records, [by_key[tuple(key)] for key in data["top"]],
+                              Budget(**data["budget"]), [by_key[tuple(key)] for key in data["path"]])
+    except (KeyError, TypeError) as error:
+        raise ValueError(f"{path}: not a kadv partial result ({error})") from error
