@@ -18,6 +18,7 @@ per restart-step for batches of B = 1, 2, 4, 8 restarts (the fastest of two step
 
 Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,8 +29,8 @@ import time
 from collections.abc import Callable
 
 import torch
-from torch.optim.optimizer import register_optimizer_step_post_hook
 from common import fastest_seconds, load_bench_scene, timings
+from torch.optim.optimizer import register_optimizer_step_post_hook
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
 from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
@@ -38,7 +39,7 @@ from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam
 from kadv.losses import VGG16_TAPS, PerceptualLoss, depth_loss, vgg16_features
 from kadv.models import DepthModel, load_model
 from kadv.penalties import distance_to_surface, shortcut_penalty, step_guard, view_validity
-from kadv.render import DiffRenderConfig, DiffRenderOutput, DifferentiableRenderer, ExactRenderer
+from kadv.render import DifferentiableRenderer, DiffRenderConfig, DiffRenderOutput, ExactRenderer
 
 HEIGHT, WIDTH = 240, 320
 STEPS = 5
@@ -49,12 +50,28 @@ BATCHES = (1, 2, 4, 8)
 def depth_anything_v2_small(folder: str) -> DepthModel:
     """The Depth Anything V2 Small architecture with random weights, loaded as a user's checkpoint is."""
     torch.manual_seed(0)
-    dino = Dinov2Config(hidden_size=384, num_hidden_layers=12, num_attention_heads=6, intermediate_size=1536,
-                        image_size=518, patch_size=14, out_indices=[3, 6, 9, 12], apply_layernorm=True,
-                        reshape_hidden_states=False)
-    network = DepthAnythingForDepthEstimation(DepthAnythingConfig(
-        backbone_config=dino, reassemble_hidden_size=384, patch_size=14, neck_hidden_sizes=[48, 96, 192, 384],
-        fusion_hidden_size=64, head_hidden_size=32, depth_estimation_type="relative"))
+    dino = Dinov2Config(
+        hidden_size=384,
+        num_hidden_layers=12,
+        num_attention_heads=6,
+        intermediate_size=1536,
+        image_size=518,
+        patch_size=14,
+        out_indices=[3, 6, 9, 12],
+        apply_layernorm=True,
+        reshape_hidden_states=False,
+    )
+    network = DepthAnythingForDepthEstimation(
+        DepthAnythingConfig(
+            backbone_config=dino,
+            reassemble_hidden_size=384,
+            patch_size=14,
+            neck_hidden_sizes=[48, 96, 192, 384],
+            fusion_hidden_size=64,
+            head_hidden_size=32,
+            depth_estimation_type="relative",
+        )
+    )
     network.save_pretrained(folder)
     return load_model(folder)
 
@@ -66,15 +83,23 @@ def random_perceptual_loss() -> PerceptualLoss:
 
 def synchronised(fn: Callable[[], object], device: torch.device) -> Callable[[], None]:
     """``fn`` followed by a wait for the device, so that its kernels are inside the timing."""
+
     def run() -> None:
         fn()
         if device.type == "cuda":
             torch.cuda.synchronize(device)
+
     return run
 
 
-def step_seconds(objective: Objective, differentiable: DifferentiableRenderer, view, steps: int, restarts: int,
-                 between: Callable[[], float] | None = None) -> tuple[list[float], list[float]]:
+def step_seconds(
+    objective: Objective,
+    differentiable: DifferentiableRenderer,
+    view,
+    steps: int,
+    restarts: int,
+    between: Callable[[], float] | None = None,
+) -> tuple[list[float], list[float]]:
     """Seconds of each step but the first of a gradient run of ``steps`` steps of ``restarts`` batched
     restarts from ``view`` (the times between consecutive optimiser updates, less what the hook
     spent), and the seconds ``between()`` reports when the hook calls it after each update."""
@@ -106,25 +131,33 @@ class FixedRender:
     def reset(self) -> None:
         """Nothing to forget (the attack calls it before each init view)."""
 
-    def __call__(self, params: torch.Tensor, base: torch.Tensor, K: torch.Tensor, height: int,
-                 width: int) -> DiffRenderOutput:
-        world_T_cam = perturb_world_T_cam(torch.as_tensor(base, dtype=torch.float64).reshape(-1, 4, 4),
-                                          params[:, :3].double(), params[:, 3:].double())
+    def __call__(
+        self, params: torch.Tensor, base: torch.Tensor, K: torch.Tensor, height: int, width: int
+    ) -> DiffRenderOutput:
+        world_T_cam = perturb_world_T_cam(
+            torch.as_tensor(base, dtype=torch.float64).reshape(-1, 4, 4), params[:, :3].double(), params[:, 3:].double()
+        )
         zero = (0 * params.sum()).float()
-        return dataclasses.replace(self.output, rgb=self.output.rgb.detach() + zero,
-                                   depth=self.output.depth.detach() + zero, world_T_cam=world_T_cam)
+        return dataclasses.replace(
+            self.output,
+            rgb=self.output.rgb.detach() + zero,
+            depth=self.output.depth.detach() + zero,
+            world_T_cam=world_T_cam,
+        )
 
 
-def paired_overheads(objective: Objective, differentiable, view, networks: Callable[[], float],
-                     rounds: int) -> tuple[list[float], list[float], list[float]]:
+def paired_overheads(
+    objective: Objective, differentiable, view, networks: Callable[[], float], rounds: int
+) -> tuple[list[float], list[float], list[float]]:
     """Steps of ``rounds`` gradient runs of 1 + STEPS steps with a ``networks()`` call timed after every
     optimiser update: the steps' and the calls' seconds, and each step's (step - networks) /
     networks against the mean of the calls just before and just after it."""
     steps, calls, own = [], [], []
     for _ in range(rounds):
         run_steps, run_calls = step_seconds(objective, differentiable, view, 1 + STEPS, 1, networks)
-        own += [step / (0.5 * (before + after)) - 1.0
-                for step, before, after in zip(run_steps, run_calls, run_calls[1:])]
+        own += [
+            step / (0.5 * (before + after)) - 1.0 for step, before, after in zip(run_steps, run_calls, run_calls[1:])
+        ]
         steps, calls = steps + run_steps, calls + run_calls
     return steps, calls, own
 
@@ -134,8 +167,9 @@ def per_restart_step(objective: Objective, differentiable: DifferentiableRendere
     return {batch: min(step_seconds(objective, differentiable, view, 3, batch)[0]) / batch for batch in BATCHES}
 
 
-def measure(label: str, objective: Objective, differentiable: DifferentiableRenderer,
-            view) -> tuple[dict[str, float], float]:
+def measure(
+    label: str, objective: Objective, differentiable: DifferentiableRenderer, view
+) -> tuple[dict[str, float], float]:
     renderer, device = objective.renderer, objective.device
     K = intrinsics_from_fov(view.fov_x_deg, HEIGHT, WIDTH)
     base = view.world_T_cam[None]
@@ -174,13 +208,18 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
     step_seconds(objective, differentiable, view, 2, 1)  # warm-up: first calls allocate and pick kernels
     steps, networks, own = paired_overheads(objective, differentiable, view, lambda: timed(networks_step), REPEATS)
     # the same with the render's output fixed: what the attack's own bookkeeping adds to the networks
-    _, _, own_fixed = paired_overheads(objective, FixedRender(differentiable, out), view, lambda: timed(networks_step),
-                                       1)
-    parts = {"step": min(steps), "networks": min(networks),
-             "model fwd+bwd": fastest_seconds(synchronised(model_step, device), REPEATS),
-             "loss fwd+bwd": fastest_seconds(synchronised(loss_step, device), REPEATS)}
+    _, _, own_fixed = paired_overheads(
+        objective, FixedRender(differentiable, out), view, lambda: timed(networks_step), 1
+    )
+    parts = {
+        "step": min(steps),
+        "networks": min(networks),
+        "model fwd+bwd": fastest_seconds(synchronised(model_step, device), REPEATS),
+        "loss fwd+bwd": fastest_seconds(synchronised(loss_step, device), REPEATS),
+    }
     parts["exact render (s=2, ring)"] = fastest_seconds(
-        lambda: renderer.render(base, K, HEIGHT + 2, WIDTH + 2, supersample=differentiable.config.supersample), 3)
+        lambda: renderer.render(base, K, HEIGHT + 2, WIDTH + 2, supersample=differentiable.config.supersample), 3
+    )
     parts["render fwd (exact+warp+silhouettes)"] = fastest_seconds(synchronised(render_forward, device), 3)
     parts["render fwd+bwd"] = fastest_seconds(synchronised(render_forward_backward, device), 3)
     centre = base[:, :3, 3].clone()
@@ -192,22 +231,33 @@ def measure(label: str, objective: Objective, differentiable: DifferentiableRend
 
     parts["penalty + guard"] = fastest_seconds(penalty_guard, 3)
     parts["view validity (on the step's render)"] = fastest_seconds(
-        lambda: view_validity(renderer, base, K, HEIGHT, WIDTH, render=out.exact, **penalty.validity_options()), 3)
-    accounted = (parts["render fwd+bwd"] + parts["networks"] + parts["penalty + guard"]
-                 + parts["view validity (on the step's render)"])
+        lambda: view_validity(renderer, base, K, HEIGHT, WIDTH, render=out.exact, **penalty.validity_options()), 3
+    )
+    accounted = (
+        parts["render fwd+bwd"]
+        + parts["networks"]
+        + parts["penalty + guard"]
+        + parts["view validity (on the step's render)"]
+    )
     parts["optimiser, metrics, records, rest"] = parts["step"] - accounted
     overhead = statistics.median(own)
     print(f"\n{label} at {HEIGHT}x{WIDTH} on {device}, one restart (ms)")
     for name, seconds in parts.items():
         print(f"  {name:<40} {seconds * 1e3:>9.1f}")
-    print(f"  (step - networks) / networks, median of {len(own)} steps against the calls beside them: "
-          f"{overhead:.3f} (fastest step against fastest call: "
-          f"{parts['step'] / parts['networks'] - 1.0:.3f})")
-    print(f"  the same with the render's output fixed (median of {len(own_fixed)} steps): "
-          f"{statistics.median(own_fixed):.3f}")
+    print(
+        f"  (step - networks) / networks, median of {len(own)} steps against the calls beside them: "
+        f"{overhead:.3f} (fastest step against fastest call: "
+        f"{parts['step'] / parts['networks'] - 1.0:.3f})"
+    )
+    print(
+        f"  the same with the render's output fixed (median of {len(own_fixed)} steps): "
+        f"{statistics.median(own_fixed):.3f}"
+    )
     scaling = per_restart_step(objective, differentiable, view)
-    print("  per restart-step with B restarts batched: "
-          + ", ".join(f"B={b} {seconds * 1e3:.0f} ms" for b, seconds in scaling.items()))
+    print(
+        "  per restart-step with B restarts batched: "
+        + ", ".join(f"B={b} {seconds * 1e3:.0f} ms" for b, seconds in scaling.items())
+    )
     return parts, overhead
 
 
@@ -225,18 +275,23 @@ def main() -> None:
     results = {}
     with tempfile.TemporaryDirectory() as folder:
         configurations = {
-            "Depth Anything V2 Small (random) + perceptual (random VGG-16)":
-                (depth_anything_v2_small(folder), random_perceptual_loss()),
+            "Depth Anything V2 Small (random) + perceptual (random VGG-16)": (
+                depth_anything_v2_small(folder),
+                random_perceptual_loss(),
+            ),
             "kadv-tiny + SSIM": (load_model("kadv_tiny"), depth_loss("ssim")),
         }
         for label, (model, loss) in configurations.items():
             objective = Objective(model, loss, renderer, penalty, device=device)
-            results[label] = measure(label, objective, DifferentiableRenderer(renderer, DiffRenderConfig(), device),
-                                     view)
+            results[label] = measure(
+                label, objective, DifferentiableRenderer(renderer, DiffRenderConfig(), device), view
+            )
     (parts, overhead), (_, overhead_tiny) = results.values()
     render, networks = parts["render fwd+bwd"], parts["networks"]
-    print(f"\nattack_step overhead={overhead:.2f} render_ms={render * 1e3:.0f} networks_ms={networks * 1e3:.0f} "
-          f"overhead_tiny={overhead_tiny:.2f} device={device.type}")
+    print(
+        f"\nattack_step overhead={overhead:.2f} render_ms={render * 1e3:.0f} networks_ms={networks * 1e3:.0f} "
+        f"overhead_tiny={overhead_tiny:.2f} device={device.type}"
+    )
 
 
 if __name__ == "__main__":

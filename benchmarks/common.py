@@ -1,18 +1,19 @@
 """Shared helpers for the benchmark scripts (timing, scene discovery)."""
+
 from __future__ import annotations
 
 import os
 
-from kadv.runtime import configure_runtime  # noqa: E402  (before torch loads)
+from kadv.runtime import configure_runtime
 
 configure_runtime()
 
-import statistics  # noqa: E402
-import time  # noqa: E402
-from collections.abc import Callable  # noqa: E402
-from pathlib import Path  # noqa: E402
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
 
-from kadv.scenes import Scene, box_room, load_scene  # noqa: E402
+from kadv.scenes import Scene, box_room, load_scene
 
 REAL_SCENES = ("grey_white_room", "modern_hall", "japanese_classroom")
 

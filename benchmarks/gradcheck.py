@@ -9,6 +9,7 @@ full, cosine of analytic vs reference 6-vectors (the smaller of the rotation and
 blocks). Prints a table of medians for the plain warp and the final method (warp + silhouettes).
 Run: .venv/bin/python benchmarks/gradcheck.py [poses] [height] [width] [device]
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -23,7 +24,6 @@ from common import scenes_root
 from kadv.diagnostics import FUNCTIONALS, gradient_check_poses
 from kadv.render import DiffRenderConfig, ExactRenderer
 from kadv.scenes import box_room, load_scene
-
 
 
 def render_preset(name: str) -> DiffRenderConfig:
@@ -43,13 +43,25 @@ CONFIGS = {
 
 
 def main(poses: int = 10, height: int = 96, width: int = 128, device: str = "cpu") -> None:
-    scenes = {"box_room": box_room(seed=0), "grey_white_room": load_scene(scenes_root() / "grey_white_room" / "scene.xml")}
+    scenes = {
+        "box_room": box_room(seed=0),
+        "grey_white_room": load_scene(scenes_root() / "grey_white_room" / "scene.xml"),
+    }
     medians: dict[tuple[str, str], dict[str, float]] = {}
     print(f"{'scene':<16} {'method':<18} " + " ".join(f"{f:>15}" for f in FUNCTIONALS) + "   seconds")
     for scene_name, scene in scenes.items():
         start = time.perf_counter()
-        results = gradient_check_poses(ExactRenderer(scene), poses, seed=0, fov_x_deg=70.0, height=height,
-                                       width=width, configs=CONFIGS, reference_supersample=8, device=device)
+        results = gradient_check_poses(
+            ExactRenderer(scene),
+            poses,
+            seed=0,
+            fov_x_deg=70.0,
+            height=height,
+            width=width,
+            configs=CONFIGS,
+            reference_supersample=8,
+            device=device,
+        )
         seconds = time.perf_counter() - start
         for method, checks in results.items():
             medians[scene_name, method] = {f: float(np.median([c.score(f) for c in checks])) for f in FUNCTIONALS}
@@ -59,8 +71,10 @@ def main(poses: int = 10, height: int = 96, width: int = 128, device: str = "cpu
     interior = min(medians[s, m][f] for s in scenes for m in checked for f in ("rgb_interior", "depth_interior"))
     full_box = min(medians["box_room", m][f] for m in checked for f in ("rgb_full", "depth_full"))
     full_real = min(medians["grey_white_room", m][f] for m in checked for f in ("rgb_full", "depth_full"))
-    print(f"gradcheck interior_median_cos={interior:.3f} full_box_median_cos={full_box:.3f} "
-          f"full_real_median_cos={full_real:.3f}")
+    print(
+        f"gradcheck interior_median_cos={interior:.3f} full_box_median_cos={full_box:.3f} "
+        f"full_real_median_cos={full_real:.3f}"
+    )
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 Run: .venv/bin/python benchmarks/penalty.py
 """
+
 from __future__ import annotations
 
 import numpy as np

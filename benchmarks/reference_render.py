@@ -9,6 +9,7 @@ view under ``--out``.
 
 Needs the ``reference`` extra (Mitsuba 3). Run: .venv/bin/python benchmarks/reference_render.py
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,9 +20,9 @@ from common import REAL_SCENES, load_bench_scene, scenes_root
 from tqdm import tqdm
 
 from kadv.attack import InitViewConfig, PenaltyConfig, file_init_views, sample_init_views
+from kadv.diagnostics.reference import compare_view, load_mitsuba_scene, save_comparison
 from kadv.models import load_model
 from kadv.render import ExactRenderer
-from kadv.diagnostics.reference import compare_view, load_mitsuba_scene, save_comparison
 from kadv.report.sweep import Table
 
 
@@ -41,24 +42,38 @@ def main() -> None:
         renderer = ExactRenderer(load_bench_scene(name))
         views = file_init_views(renderer, penalty.margin)[:1]
         views += sample_init_views(renderer, model, args.sampled, 0, InitViewConfig(), penalty, args.height, args.width)
-        scene = load_mitsuba_scene(scenes_root() / name / "scene.xml",
-                                   [(v.world_T_cam.numpy(), v.fov_x_deg) for v in views], args.height, args.width, args.spp)
+        scene = load_mitsuba_scene(
+            scenes_root() / name / "scene.xml",
+            [(v.world_T_cam.numpy(), v.fov_x_deg) for v in views],
+            args.height,
+            args.width,
+            args.spp,
+        )
         table = Table(f"{name}: Mitsuba 3 ({args.spp} spp) against kadv, {args.height}x{args.width}, kadv-tiny", header)
         for index, view in enumerate(tqdm(views, desc=name)):
-            c = compare_view(scene, index, renderer, model, view.world_T_cam, view.fov_x_deg, args.height, args.width,
-                             args.spp)
+            c = compare_view(
+                scene, index, renderer, model, view.world_T_cam, view.fov_x_deg, args.height, args.width, args.spp
+            )
             table.rows.append([view.name, f"{c.depth_rel_err:.1e}", c.psnr, c.ssim, c.pred_delta1])
-            save_comparison(args.out / name / f"{view.name}.png", c,
-                            f"{name} {view.name}: depth rel. err {c.depth_rel_err:.1e}, PSNR {c.psnr:.1f} dB, "
-                            f"SSIM {c.ssim:.3f}, delta1(pred Mitsuba, pred kadv) {c.pred_delta1:.3f}")
+            save_comparison(
+                args.out / name / f"{view.name}.png",
+                c,
+                f"{name} {view.name}: depth rel. err {c.depth_rel_err:.1e}, PSNR {c.psnr:.1f} dB, "
+                f"SSIM {c.ssim:.3f}, delta1(pred Mitsuba, pred kadv) {c.pred_delta1:.3f}",
+            )
             depth_errors.append(c.depth_rel_err)
             delta1s.append(c.pred_delta1)
             if view.source == "file":
                 file_errors.append(c.depth_rel_err)
         table.write(args.out / name, "reference")
         print(f"\n{table.markdown()}")
-        overall.rows.append([name, f"{max(depth_errors[-len(views):]):.1e}",
-                             *(statistics.median(r[k] for r in table.rows) for k in (2, 3, 4))])
+        overall.rows.append(
+            [
+                name,
+                f"{max(depth_errors[-len(views) :]):.1e}",
+                *(statistics.median(r[k] for r in table.rows) for k in (2, 3, 4)),
+            ]
+        )
     overall.write(args.out, "reference")
     print(overall.markdown())
     print(f"file cameras: depth_rel_err_max={max(file_errors):.2e}")

@@ -2,6 +2,7 @@
 
 Run: .venv/bin/python benchmarks/render.py
 """
+
 from __future__ import annotations
 
 import statistics
@@ -10,7 +11,7 @@ import torch
 from common import bench_scenes, median_seconds
 
 from kadv.geometry import pixel_rays
-from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
+from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
 
 SIZES = ((240, 320), (480, 640))
 
@@ -25,7 +26,10 @@ def exact_timings(scenes) -> None:
             origins, directions = pixel_rays(camera.world_T_cam, K, height, width)
             render = median_seconds(lambda: renderer.render(camera.world_T_cam, K, height, width))
             cast = median_seconds(lambda: renderer.cast(origins, directions))
-            print(f"{scene.name:<22} {height:>4}x{width:<4} {scene.num_triangles:>10} {render * 1e3:>10.1f} {cast * 1e3:>9.1f}")
+            print(
+                f"{scene.name:<22} {height:>4}x{width:<4} {scene.num_triangles:>10} "
+                f"{render * 1e3:>10.1f} {cast * 1e3:>9.1f}"
+            )
 
 
 def differentiable_timings(scenes, height: int = 240, width: int = 320) -> dict[str, list[float]]:
@@ -63,8 +67,10 @@ def main() -> None:
     scenes = bench_scenes()
     exact_timings(scenes)
     summary = differentiable_timings(scenes)
-    print(f"render exact_ms_mean={statistics.mean(summary['exact']):.0f} "
-          f"differentiable_default_ms_mean={statistics.mean(summary['default']):.0f}")
+    print(
+        f"render exact_ms_mean={statistics.mean(summary['exact']):.0f} "
+        f"differentiable_default_ms_mean={statistics.mean(summary['default']):.0f}"
+    )
 
 
 if __name__ == "__main__":

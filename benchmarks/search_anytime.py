@@ -17,6 +17,7 @@ random, cma and nevergrad on each measure.
 
 Run: .venv/bin/python benchmarks/search_anytime.py [--gradient-steps 100] [--methods ...] [--device cpu]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -27,11 +28,11 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from common import REAL_SCENES, load_bench_scene  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from common import REAL_SCENES, load_bench_scene
 
-from kadv.attack import (  # noqa: E402
+from kadv.attack import (
     AttackConfig,
     GradientSettings,
     InitViewConfig,
@@ -43,10 +44,10 @@ from kadv.attack import (  # noqa: E402
     get_method,
     sample_init_views,
 )
-from kadv.device import resolve_device  # noqa: E402
-from kadv.losses import depth_loss  # noqa: E402
-from kadv.models import load_model  # noqa: E402
-from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer  # noqa: E402
+from kadv.device import resolve_device
+from kadv.losses import depth_loss
+from kadv.models import load_model
+from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
 
 BASELINES = ("random", "cma", "nevergrad")
 FRACTIONS = (0.1, 0.25, 0.5, 1.0)
@@ -79,26 +80,42 @@ def run(args: argparse.Namespace) -> dict:
         views = file_init_views(renderer, penalty.margin)[:1]
         views += sample_init_views(renderer, model, args.sampled, 0, InitViewConfig(), penalty, args.height, args.width)
         for view in views:
+
             def search(config: AttackConfig):
-                return attack(objective, differentiable, [view], args.height, args.width, config, 0, progress=False).views[0]
+                return attack(
+                    objective, differentiable, [view], args.height, args.width, config, 0, progress=False
+                ).views[0]
 
             if curves["budget_seconds"] is None:
-                timed = search(AttackConfig("gradient", GradientSettings(steps=args.gradient_steps, restarts=3),
-                                            budget_evaluations=None))
+                timed = search(
+                    AttackConfig(
+                        "gradient", GradientSettings(steps=args.gradient_steps, restarts=3), budget_evaluations=None
+                    )
+                )
                 curves["budget_seconds"] = timed.budget.seconds
-                print(f"budget: {args.gradient_steps} gradient steps x 3 restarts took {timed.budget.seconds:.1f} s",
-                      flush=True)
+                print(
+                    f"budget: {args.gradient_steps} gradient steps x 3 restarts took {timed.budget.seconds:.1f} s",
+                    flush=True,
+                )
             entry = {"scene": name, "view": view.name, "methods": {}}
             for method in args.methods.split(","):
                 settings = GradientSettings(steps=2**31) if method == "gradient" else None
-                result = search(AttackConfig(method, settings, budget_evaluations=None,
-                                             budget_seconds=curves["budget_seconds"]))
+                result = search(
+                    AttackConfig(method, settings, budget_evaluations=None, budget_seconds=curves["budget_seconds"])
+                )
                 init = result.init_record
-                entry["methods"][method] = {"init_l_depth": init.l_depth, "init_delta1": init.delta1,
-                                            "curve": best_so_far(result.records), "evaluations": result.budget.forward}
+                entry["methods"][method] = {
+                    "init_l_depth": init.l_depth,
+                    "init_delta1": init.delta1,
+                    "curve": best_so_far(result.records),
+                    "evaluations": result.budget.forward,
+                }
                 best = entry["methods"][method]["curve"][-1]
-                print(f"{name:<20} {view.name:<9} {method:<10} init {init.l_depth:.4f} best {best[2]:.4f} "
-                      f"(delta1 {init.delta1:.3f} -> {best[3]:.3f}) {result.budget.forward:>5} views", flush=True)
+                print(
+                    f"{name:<20} {view.name:<9} {method:<10} init {init.l_depth:.4f} best {best[2]:.4f} "
+                    f"(delta1 {init.delta1:.3f} -> {best[3]:.3f}) {result.budget.forward:>5} views",
+                    flush=True,
+                )
             curves["views"].append(entry)
     return curves
 
@@ -121,7 +138,7 @@ def summarise(curves: dict, out: Path) -> str:
             by_count.append(step_curve([(c[0], c[2] - entry["init_l_depth"]) for c in curve], evaluations))
             drops.append(step_curve([(c[1], entry["init_delta1"] - c[3]) for c in curve], seconds))
         for axis, x, samples in ((axes[0], seconds, np.array(by_time)), (axes[1], evaluations, np.array(by_count))):
-            line, = axis.plot(x, samples.mean(axis=0), label=method)
+            (line,) = axis.plot(x, samples.mean(axis=0), label=method)
             axis.fill_between(x, *bootstrap_band(samples, rng), color=line.get_color(), alpha=0.2)
         gain[method], drop[method] = np.array(by_time).mean(axis=0), np.array(drops).mean(axis=0)
     axes[0].set_xlabel("seconds per init view")
@@ -133,12 +150,23 @@ def summarise(curves: dict, out: Path) -> str:
     figure.tight_layout()
     figure.savefig(out / "search_anytime.png", dpi=90)
     plt.close(figure)
-    columns = [int(round(f * (GRID - 1))) for f in FRACTIONS]
-    lines = ["| method | " + " | ".join(f"gain {f:.0%}" for f in FRACTIONS) + " | "
-             + " | ".join(f"delta1 drop {f:.0%}" for f in FRACTIONS) + " |", "|---" * (1 + 2 * len(FRACTIONS)) + "|"]
+    columns = [round(f * (GRID - 1)) for f in FRACTIONS]
+    lines = [
+        "| method | "
+        + " | ".join(f"gain {f:.0%}" for f in FRACTIONS)
+        + " | "
+        + " | ".join(f"delta1 drop {f:.0%}" for f in FRACTIONS)
+        + " |",
+        "|---" * (1 + 2 * len(FRACTIONS)) + "|",
+    ]
     for method in methods:
-        lines.append(f"| {method} | " + " | ".join(f"{gain[method][c]:.4f}" for c in columns) + " | "
-                     + " | ".join(f"{drop[method][c]:.3f}" for c in columns) + " |")
+        lines.append(
+            f"| {method} | "
+            + " | ".join(f"{gain[method][c]:.4f}" for c in columns)
+            + " | "
+            + " | ".join(f"{drop[method][c]:.3f}" for c in columns)
+            + " |"
+        )
     table = "\n".join(lines) + "\n"
     (out / "search_anytime.md").write_text(f"Budget {budget:.1f} s per init view.\n\n{table}")
     final = {m: (gain[m][-1], drop[m][-1]) for m in methods}
@@ -148,8 +176,10 @@ def summarise(curves: dict, out: Path) -> str:
     best_gain = max(final[m][0] for m in baselines)
     best_drop = max(final[m][1] for m in baselines)
     print(table)
-    return (f"search_anytime default={default} gain_vs_best_baseline={final[default][0] / best_gain:.2f} "
-            f"delta1_drop_vs_best_baseline={final[default][1] / best_drop:.2f}")
+    return (
+        f"search_anytime default={default} gain_vs_best_baseline={final[default][0] / best_gain:.2f} "
+        f"delta1_drop_vs_best_baseline={final[default][1] / best_drop:.2f}"
+    )
 
 
 def main() -> None:
@@ -160,7 +190,9 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=128)
     parser.add_argument("--scenes", default=",".join(("box_room", *REAL_SCENES)))
     parser.add_argument("--sampled", type=int, default=2, help="sampled init views per scene (beside the file camera)")
-    parser.add_argument("--gradient-steps", type=int, default=100, help="the budget: this many gradient steps x 3 restarts")
+    parser.add_argument(
+        "--gradient-steps", type=int, default=100, help="the budget: this many gradient steps x 3 restarts"
+    )
     parser.add_argument("--methods", default="gradient,random,cma,nevergrad,hybrid")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", default="search_anytime_out")

@@ -9,6 +9,7 @@ on the three shared scenes, which no training run ever sees.
 Run: .venv/bin/python benchmarks/tiny_accuracy.py [--kadv-tiny FILE] [--kadv-tiny-dpt DIR]
 (other weights than the shipped ones, e.g. a training run's).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -41,16 +42,21 @@ def shared_scene_views(name: str) -> ViewBatch:
     config = InitViewConfig()
     camera = scene.cameras[0]
     sampled = sample_valid_views(renderer, SAMPLED_VIEWS, 0, config, PenaltyConfig(), HEIGHT, WIDTH)
-    outputs = [renderer.render(camera.world_T_cam, camera.intrinsics(HEIGHT, WIDTH), HEIGHT, WIDTH, supersample=2),
-               renderer.render(sampled, intrinsics_from_fov(config.fov_x_deg, HEIGHT, WIDTH), HEIGHT, WIDTH,
-                               supersample=2)]
+    outputs = [
+        renderer.render(camera.world_T_cam, camera.intrinsics(HEIGHT, WIDTH), HEIGHT, WIDTH, supersample=2),
+        renderer.render(sampled, intrinsics_from_fov(config.fov_x_deg, HEIGHT, WIDTH), HEIGHT, WIDTH, supersample=2),
+    ]
     return ViewBatch(*(torch.cat([getattr(out, key) for out in outputs]) for key in ("rgb", "depth", "mask")))
 
 
 def per_view_delta1(model: torch.nn.Module, views: ViewBatch) -> torch.Tensor:
     with torch.no_grad():
-        return torch.cat([depth_metrics(model(views.rgb[i:i + 16]), views.depth[i:i + 16], views.mask[i:i + 16])["delta1"]
-                          for i in range(0, len(views.rgb), 16)])
+        return torch.cat(
+            [
+                depth_metrics(model(views.rgb[i : i + 16]), views.depth[i : i + 16], views.mask[i : i + 16])["delta1"]
+                for i in range(0, len(views.rgb), 16)
+            ]
+        )
 
 
 def weights_megabytes(path: Path) -> float:
@@ -61,12 +67,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--kadv-tiny", default=None, help="kadv-tiny weights file (default: the shipped one)")
     parser.add_argument("--kadv-tiny-dpt", default=None, help="kadv-tiny-dpt directory (default: the shipped one)")
-    parser.add_argument("--models", nargs="+", default=["kadv_tiny", "kadv_tiny_dpt"], choices=["kadv_tiny", "kadv_tiny_dpt"])
+    parser.add_argument(
+        "--models", nargs="+", default=["kadv_tiny", "kadv_tiny_dpt"], choices=["kadv_tiny", "kadv_tiny_dpt"]
+    )
     args = parser.parse_args()
     weights = {"kadv_tiny": args.kadv_tiny, "kadv_tiny_dpt": args.kadv_tiny_dpt}
     models = {name: load_model(name, weights=weights[name]) for name in args.models}
-    held_out = {"furnished": render_procedural_views(200, HELD_OUT_SEED, 240, 320, furnished_share=1.0, progress=False),
-                "box rooms": render_procedural_views(200, HELD_OUT_SEED, 240, 320, furnished_share=0.0, progress=False)}
+    held_out = {
+        "furnished": render_procedural_views(200, HELD_OUT_SEED, 240, 320, furnished_share=1.0, progress=False),
+        "box rooms": render_procedural_views(200, HELD_OUT_SEED, 240, 320, furnished_share=0.0, progress=False),
+    }
     shared = {name: shared_scene_views(name) for name in REAL_SCENES}
     columns = [*held_out, *(f"{name} file" for name in shared), *(f"{name} sampled" for name in shared), "shared mean"]
     print("| model | " + " | ".join(columns) + " |")
@@ -76,8 +86,12 @@ def main() -> None:
         generated = {key: float(per_view_delta1(model, views).mean()) for key, views in held_out.items()}
         scores = {name: per_view_delta1(model, views) for name, views in shared.items()}
         real = float(torch.cat(list(scores.values())).mean())
-        cells = [*generated.values(), *(float(s[0]) for s in scores.values()), *(float(s[1:].mean()) for s in scores.values()),
-                 real]
+        cells = [
+            *generated.values(),
+            *(float(s[0]) for s in scores.values()),
+            *(float(s[1:].mean()) for s in scores.values()),
+            real,
+        ]
         print(f"| {label} | " + " | ".join(f"{value:.3f}" for value in cells) + " |")
         results[label] = (real, generated["furnished"])
     print()
@@ -89,8 +103,13 @@ def main() -> None:
         with torch.no_grad():
             milliseconds = 1000 * statistics.median(timings(lambda model=model: model(image), repeats=20, warmup=3))
         print(f"| {label} | {weights_megabytes(Path(shipped[label])):.1f} MB | {milliseconds:.1f} ms |")
-    print("tiny_accuracy " + " ".join([f"{label}_real={real:.3f}" for label, (real, _) in results.items()]
-                                      + [f"{label}_procedural={procedural:.3f}" for label, (_, procedural) in results.items()]))
+    print(
+        "tiny_accuracy "
+        + " ".join(
+            [f"{label}_real={real:.3f}" for label, (real, _) in results.items()]
+            + [f"{label}_procedural={procedural:.3f}" for label, (_, procedural) in results.items()]
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 The names below load on first use, so that ``import kadv.runtime`` runs before torch is imported.
 """
+
 from __future__ import annotations
 
 import importlib

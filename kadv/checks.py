@@ -1,4 +1,5 @@
 """Declared shape checks, in the spirit of kornia's ``KORNIA_CHECK_SHAPE``."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -7,8 +8,9 @@ import torch
 __all__ = ["check_shape"]
 
 
-def check_shape(x: torch.Tensor | np.ndarray, spec: str, name: str,
-                sizes: dict[str, int] | None = None) -> dict[str, int]:
+def check_shape(
+    x: torch.Tensor | np.ndarray, spec: str, name: str, sizes: dict[str, int] | None = None
+) -> dict[str, int]:
     """Check that ``x`` has the shape ``spec`` declares, e.g. ``"B 6"`` or ``"B 3 H W"``.
 
     Each space-separated entry is a size (``3``) or a name (``B``) that any size satisfies; a name

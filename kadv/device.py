@@ -8,6 +8,7 @@ matrices, float64) stay on the CPU, where the optimiser and the step guard use t
 objective comes back to the CPU as (B,) scalars. Dtypes: poses and geometry float64; images,
 networks and the reprojection's per-sample arithmetic float32 (``benchmarks/gradcheck.py`` holds).
 """
+
 from __future__ import annotations
 
 import torch

@@ -1,4 +1,5 @@
 """Errors that name a user's input and say how to fix it (commands report them in one line)."""
+
 from __future__ import annotations
 
 __all__ = ["WeightsUnavailable"]

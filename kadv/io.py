@@ -1,4 +1,5 @@
 """Files written atomically, so that an interrupted run never leaves a truncated file."""
+
 from __future__ import annotations
 
 import json

@@ -1,4 +1,5 @@
 """Process settings that every entry point (the commands, the benchmarks, the tests) makes first."""
+
 from __future__ import annotations
 
 import os

@@ -1,4 +1,5 @@
 """kadv.checks.check_shape: declared shapes, named sizes that must repeat."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -2,6 +2,7 @@
 
 The placement tests run on every device this machine has: the CPU, and CUDA where present.
 """
+
 from __future__ import annotations
 
 import pytest

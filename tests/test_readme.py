@@ -1,4 +1,5 @@
 """Every Python block of README.md runs as written, on its own (so the README cannot drift)."""
+
 from __future__ import annotations
 
 import re

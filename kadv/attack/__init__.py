@@ -1,10 +1,12 @@
 """The adversarial viewpoint attack: objective, init views, and search methods behind one registry."""
+
 from __future__ import annotations
 
 from kadv.attack.init_views import (
     InitView,
     InitViewConfig,
     InitViewError,
+    ViewScores,
     check_init_views,
     clear_file_camera,
     file_init_views,
@@ -13,7 +15,6 @@ from kadv.attack.init_views import (
     sample_valid_views,
     save_init_params,
     score_views,
-    ViewScores,
 )
 from kadv.attack.loop import Proposer, fitness, proposer_search
 from kadv.attack.methods.cma import CMASettings

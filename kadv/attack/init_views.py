@@ -4,6 +4,7 @@ Sources: the scene file's cameras (moved along their optical axis until clear of
 automatic seeded sampler that keeps the candidates the model predicts best, or an
 ``init_params.json`` written by an earlier run.
 """
+
 from __future__ import annotations
 
 import json
@@ -130,8 +131,9 @@ class InitViewConfig:
         intrinsics_from_fov(self.fov_x_deg, 1, 1)
 
 
-def clear_file_camera(renderer: ExactRenderer, world_T_cam: torch.Tensor, margin: float,
-                      max_move: float = 1.0) -> tuple[torch.Tensor, float]:
+def clear_file_camera(
+    renderer: ExactRenderer, world_T_cam: torch.Tensor, margin: float, max_move: float = 1.0
+) -> tuple[torch.Tensor, float]:
     """Move a camera along its optical axis until its centre is at least ``margin`` from every surface.
 
     It moves the way the nearest surface's normal points (forward when a wall is behind it, back
@@ -159,8 +161,10 @@ def clear_file_camera(renderer: ExactRenderer, world_T_cam: torch.Tensor, margin
         proposed = centre + sign * step * axis
         check = step_guard(renderer, centre[None], proposed[None], margin=0.0)
         if not bool(check.allowed[0]) or abs(moved) + step > max_move:
-            raise InitViewError(f"a camera {distance:.3f} m from a surface cannot be moved clear along its "
-                                f"optical axis within {max_move} m")
+            raise InitViewError(
+                f"a camera {distance:.3f} m from a surface cannot be moved clear along its "
+                f"optical axis within {max_move} m"
+            )
         centre, moved = proposed, moved + sign * step
         distance = float(distance_to_surface(renderer, centre[None])[0])
     pose[:3, 3] = centre
@@ -197,9 +201,11 @@ class ViewScores:
         """What a view shows, in [0, 1]: the mean of its surfaces (6 or more score 1), its depth
         range (a far/near ratio of 4 or more scores 1) and its image structure (a mean gradient of
         0.1 or more scores 1): saturating terms, so no single one buys a view its place."""
-        return (torch.clamp(self.surfaces / _FULL_SURFACES, max=1.0)
-                + torch.clamp(self.depth_range / math.log(_FULL_DEPTH_RATIO), max=1.0)
-                + torch.clamp(self.structure / _FULL_STRUCTURE, max=1.0)) / 3.0
+        return (
+            torch.clamp(self.surfaces / _FULL_SURFACES, max=1.0)
+            + torch.clamp(self.depth_range / math.log(_FULL_DEPTH_RATIO), max=1.0)
+            + torch.clamp(self.structure / _FULL_STRUCTURE, max=1.0)
+        ) / 3.0
 
 
 # where each content term saturates (see ViewScores.content)
@@ -208,8 +214,15 @@ _FULL_SURFACES, _FULL_DEPTH_RATIO, _FULL_STRUCTURE = 6.0, 4.0, 0.1
 _SURFACE_SHARE = 0.05
 
 
-def score_views(model: DepthModel, renderer: ExactRenderer, poses: torch.Tensor, fov_x_deg: torch.Tensor,
-                height: int, width: int, batch_size: int = 8) -> ViewScores:
+def score_views(
+    model: DepthModel,
+    renderer: ExactRenderer,
+    poses: torch.Tensor,
+    fov_x_deg: torch.Tensor,
+    height: int,
+    width: int,
+    batch_size: int = 8,
+) -> ViewScores:
     """Score N views at poses (N, 4, 4) with fields of view (N,) at the given size."""
     labels = plane_labels(renderer)
     scores: dict[str, list[torch.Tensor]] = {"delta1": [], "surfaces": [], "depth_range": [], "structure": []}
@@ -219,23 +232,31 @@ def score_views(model: DepthModel, renderer: ExactRenderer, poses: torch.Tensor,
             K = torch.stack([intrinsics_from_fov(float(f), height, width) for f in fov_x_deg[chunk]])
             out = renderer.render(poses[chunk], K, height, width)
             prediction = model(out.rgb, K)
-            scores["delta1"].append(depth_metrics(prediction.double(), out.depth.double(), out.mask,
-                                                  model.output_kind)["delta1"])
+            scores["delta1"].append(
+                depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)["delta1"]
+            )
             depth = out.depth.double()
             far = torch.where(out.mask, depth, torch.zeros_like(depth)).amax(dim=(1, 2, 3))
             near = torch.where(out.mask, depth, torch.full_like(depth, torch.inf)).amin(dim=(1, 2, 3))
             scores["depth_range"].append(torch.log(far.clamp_min(_MIN_DEPTH) / near.clamp_min(_MIN_DEPTH)))
             ids = out.triangle_ids.reshape(len(depth), -1).numpy()
-            scores["surfaces"].append(torch.tensor([
-                float((np.bincount(labels[row[row >= 0]]) >= _SURFACE_SHARE * max((row >= 0).sum(), 1)).sum())
-                for row in ids], dtype=torch.float64))
+            scores["surfaces"].append(
+                torch.tensor(
+                    [
+                        float((np.bincount(labels[row[row >= 0]]) >= _SURFACE_SHARE * max((row >= 0).sum(), 1)).sum())
+                        for row in ids
+                    ],
+                    dtype=torch.float64,
+                )
+            )
             gradient = kornia.filters.sobel(kornia.color.rgb_to_grayscale(out.rgb.float()))
             scores["structure"].append(gradient.mean(dim=(1, 2, 3)).double())
     return ViewScores(**{key: torch.cat(values) for key, values in scores.items()})
 
 
-def _candidate_poses(renderer: ExactRenderer, config: InitViewConfig, count: int, rng: np.random.Generator,
-                     clearance: float) -> torch.Tensor:
+def _candidate_poses(
+    renderer: ExactRenderer, config: InitViewConfig, count: int, rng: np.random.Generator, clearance: float
+) -> torch.Tensor:
     """Up to ``count`` candidate poses; their centres stand at eye height above the surface found
     straight below a random point of the camera region (a scene's bounds may hold far more than its
     rooms: a garden, a street), so rooms at any level of any scene get candidates."""
@@ -259,8 +280,15 @@ def _candidate_poses(renderer: ExactRenderer, config: InitViewConfig, count: int
     return poses
 
 
-def sample_valid_views(renderer: ExactRenderer, count: int, seed: int, config: InitViewConfig, penalty: PenaltyConfig,
-                       height: int, width: int) -> torch.Tensor:
+def sample_valid_views(
+    renderer: ExactRenderer,
+    count: int,
+    seed: int,
+    config: InitViewConfig,
+    penalty: PenaltyConfig,
+    height: int,
+    width: int,
+) -> torch.Tensor:
     """Up to ``count`` seeded candidate poses (N, 4, 4), unranked, in the order drawn: centres in free
     space with clearance above ``config.clearance`` (default 2 * d_th), height, pitch and roll within
     the configured ranges, views valid (an uninformative view is not) and hitting a surface in at
@@ -282,8 +310,16 @@ def sample_valid_views(renderer: ExactRenderer, count: int, seed: int, config: I
     return torch.stack(accepted) if accepted else torch.zeros(0, 4, 4, dtype=torch.float64)
 
 
-def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, seed: int, config: InitViewConfig,
-                      penalty: PenaltyConfig, height: int, width: int) -> list[InitView]:
+def sample_init_views(
+    renderer: ExactRenderer,
+    model: DepthModel,
+    count: int,
+    seed: int,
+    config: InitViewConfig,
+    penalty: PenaltyConfig,
+    height: int,
+    width: int,
+) -> list[InitView]:
     """Draw ``config.candidates`` seeded candidate views and keep the ``count`` best: views the model
     predicts well that show something.
 
@@ -299,27 +335,41 @@ def sample_init_views(renderer: ExactRenderer, model: DepthModel, count: int, se
     poses = sample_valid_views(renderer, config.candidates, seed, config, penalty, height, width)
     if len(poses) < count:
         clearance = 2.0 * penalty.d_th if config.clearance is None else config.clearance
-        raise InitViewError(f"scene {renderer.scene.name!r}: only {len(poses)} of {count} sampled init views are "
-                            f"valid with clearance {clearance} m (check init.eye_height and the scene's scale)")
+        raise InitViewError(
+            f"scene {renderer.scene.name!r}: only {len(poses)} of {count} sampled init views are "
+            f"valid with clearance {clearance} m (check init.eye_height and the scene's scale)"
+        )
     fov = torch.full((len(poses),), config.fov_x_deg, dtype=torch.float64)
     scores = score_views(model, renderer, poses, fov, height, width)
     content = scores.content()
     rank_by = scores.delta1 + config.content_weight * content
     order = sorted(range(len(poses)), key=lambda i: -float(rank_by[i]))[:count]
-    return [InitView(f"sampled{rank}", "sampled", poses[i], config.fov_x_deg, float(scores.delta1[i]),
-                     note=f"best {rank + 1} of {len(poses)} candidates by delta1 + {config.content_weight} x content "
-                          f"(content {float(content[i]):.2f})") for rank, i in enumerate(order)]
+    return [
+        InitView(
+            f"sampled{rank}",
+            "sampled",
+            poses[i],
+            config.fov_x_deg,
+            float(scores.delta1[i]),
+            note=f"best {rank + 1} of {len(poses)} candidates by delta1 + {config.content_weight} x content "
+            f"(content {float(content[i]):.2f})",
+        )
+        for rank, i in enumerate(order)
+    ]
 
 
-def check_init_views(renderer: ExactRenderer, views: list[InitView], penalty: PenaltyConfig, height: int,
-                     width: int) -> None:
+def check_init_views(
+    renderer: ExactRenderer, views: list[InitView], penalty: PenaltyConfig, height: int, width: int
+) -> None:
     """Raise :class:`InitViewError` naming the first init view whose view is not valid."""
     for view in views:
         K = intrinsics_from_fov(view.fov_x_deg, height, width)
         result = view_validity(renderer, view.world_T_cam, K, height, width, **penalty.validity_options())
         if not bool(result.valid[0]):
-            raise InitViewError(f"init view {view.name!r} at {[round(v, 3) for v in view.world_T_cam[:3, 3].tolist()]} "
-                                f"is {result.verdicts[0]}: {result.reasons[0]}")
+            raise InitViewError(
+                f"init view {view.name!r} at {[round(v, 3) for v in view.world_T_cam[:3, 3].tolist()]} "
+                f"is {result.verdicts[0]}: {result.reasons[0]}"
+            )
 
 
 def save_init_params(path: str | Path, views: list[InitView]) -> Path:

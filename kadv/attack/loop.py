@@ -5,6 +5,7 @@ parameters, moves there through the step guard, renders, evaluates and records e
 (with its validity verdict), and tells the proposer the records, until the evaluation or
 seconds budget ends. Proposers only propose.
 """
+
 from __future__ import annotations
 
 import math
@@ -44,8 +45,9 @@ class Proposer:
         """The records of the poses last asked for (possibly fewer, when the budget cut the batch)."""
 
 
-def proposer_search(proposer_class: type[Proposer], context: SearchContext, rng: np.random.Generator,
-                    bar: tqdm) -> InitViewResult:
+def proposer_search(
+    proposer_class: type[Proposer], context: SearchContext, rng: np.random.Generator, bar: tqdm
+) -> InitViewResult:
     """Run a proposer from one init view within the context's budget."""
     proposer = proposer_class(context, rng)
     records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64))

@@ -3,6 +3,7 @@
 Per sample (B,), so that the restarts of one init view go through renderer, model and loss as
 one batch.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -58,9 +59,15 @@ class Objective:
             Inputs may live anywhere; the terms come back on the CPU, where the pose is.
     """
 
-    def __init__(self, model: DepthModel, loss: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
-                 renderer: ExactRenderer, penalty: PenaltyConfig, space: str = "disparity",
-                 device: str | torch.device = "cpu") -> None:
+    def __init__(
+        self,
+        model: DepthModel,
+        loss: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+        renderer: ExactRenderer,
+        penalty: PenaltyConfig,
+        space: str = "disparity",
+        device: str | torch.device = "cpu",
+    ) -> None:
         if space not in ("disparity", "depth"):
             raise ValueError(f"loss.space must be 'disparity' or 'depth', got {space!r}")
         self.device = resolve_device(device)
@@ -77,12 +84,24 @@ class Objective:
         pred = minmax_normalize(to_comparison_space(prediction, self.model.output_kind, self.space, mask), mask)
         return self.loss(gt.float(), pred.float()).double()
 
-    def __call__(self, rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
-                 world_T_cam: torch.Tensor, K: torch.Tensor | None = None) -> ObjectiveTerms:
+    def __call__(
+        self,
+        rgb: torch.Tensor,
+        depth: torch.Tensor,
+        mask: torch.Tensor,
+        world_T_cam: torch.Tensor,
+        K: torch.Tensor | None = None,
+    ) -> ObjectiveTerms:
         return self.forward(rgb, depth, mask, world_T_cam, K)
 
-    def forward(self, rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor,
-                world_T_cam: torch.Tensor, K: torch.Tensor | None = None) -> ObjectiveTerms:
+    def forward(
+        self,
+        rgb: torch.Tensor,
+        depth: torch.Tensor,
+        mask: torch.Tensor,
+        world_T_cam: torch.Tensor,
+        K: torch.Tensor | None = None,
+    ) -> ObjectiveTerms:
         """Evaluate B views.
 
         Args:

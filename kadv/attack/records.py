@@ -5,6 +5,7 @@ of the method (a gradient restart, a view's place in a black-box batch); step 0,
 always the init view itself. Each result names its *path*: the views a report follows as the
 search's trajectory (a gradient run's best restart, a black-box search's successive best views).
 """
+
 from __future__ import annotations
 
 import math
@@ -15,8 +16,16 @@ import torch
 from kadv.attack.init_views import InitView
 from kadv.geometry import axis_angle_to_matrix, perturb_world_T_cam
 
-__all__ = ["AttackResult", "Budget", "InitViewResult", "ViewRecord", "best_so_far", "incumbent_path", "select_top_views",
-           "separated"]
+__all__ = [
+    "AttackResult",
+    "Budget",
+    "InitViewResult",
+    "ViewRecord",
+    "best_so_far",
+    "incumbent_path",
+    "select_top_views",
+    "separated",
+]
 
 
 @dataclass
@@ -145,8 +154,9 @@ def separated(a: ViewRecord, b: ViewRecord, min_distance: float, min_angle_deg: 
     return distance >= min_distance or math.degrees(_angle_between(a.theta, b.theta)) >= min_angle_deg
 
 
-def select_top_views(records: list[ViewRecord], count: int, min_distance: float,
-                     min_angle_deg: float) -> list[ViewRecord]:
+def select_top_views(
+    records: list[ViewRecord], count: int, min_distance: float, min_angle_deg: float
+) -> list[ViewRecord]:
     """Up to ``count`` valid views of highest L_depth, each separated from those chosen before it.
 
     Greedy in order of L_depth (ties keep evaluation order), so the result is deterministic.

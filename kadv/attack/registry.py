@@ -5,6 +5,7 @@ A method is a function ``search(context, rng, bar) -> InitViewResult`` with a se
 (:class:`kadv.attack.loop.Proposer`) and registered with :func:`register_proposer`; the shared
 loop owns the budgets, the init view at step 0, the step guard, validity and records.
 """
+
 from __future__ import annotations
 
 import functools
@@ -43,12 +44,15 @@ class SearchMethod:
 METHODS: dict[str, SearchMethod] = {}
 
 
-def register_method(name: str, settings: type = NoSettings,
-                    evaluations: Callable[[Any], int | None] = lambda settings: None) -> Callable:
+def register_method(
+    name: str, settings: type = NoSettings, evaluations: Callable[[Any], int | None] = lambda settings: None
+) -> Callable:
     """Decorator: register ``search(context, rng, bar)`` as method ``name``."""
+
     def decorate(search: Callable) -> Callable:
         METHODS[name] = SearchMethod(name, settings, search, evaluations)
         return search
+
     return decorate
 
 
@@ -60,6 +64,7 @@ def register_proposer(name: str, settings: type = NoSettings) -> Callable[[type]
     def decorate(proposer: type) -> type:
         register_method(name, settings)(functools.partial(proposer_search, proposer))
         return proposer
+
     return decorate
 
 

@@ -1,4 +1,5 @@
 """``attack``: run one search method from every init view, resumably."""
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -16,9 +17,18 @@ from kadv.render import DifferentiableRenderer
 __all__ = ["attack"]
 
 
-def attack(objective: Objective, differentiable: DifferentiableRenderer, init_views: list[InitView], height: int,
-           width: int, config: AttackConfig, seed: int, completed: dict[int, InitViewResult] | None = None,
-           on_result: Callable[[int, InitViewResult], None] | None = None, progress: bool = True) -> AttackResult:
+def attack(
+    objective: Objective,
+    differentiable: DifferentiableRenderer,
+    init_views: list[InitView],
+    height: int,
+    width: int,
+    config: AttackConfig,
+    seed: int,
+    completed: dict[int, InitViewResult] | None = None,
+    on_result: Callable[[int, InitViewResult], None] | None = None,
+    progress: bool = True,
+) -> AttackResult:
     """Search for adversarial views from every init view with ``config.method``.
 
     Each init view's search is seeded by (seed, its index) alone, so a run resumed after an
@@ -40,8 +50,13 @@ def attack(objective: Objective, differentiable: DifferentiableRenderer, init_vi
     completed = dict(completed or {})
     result = AttackResult(config.method)
     per_view = config.evaluations
-    with tqdm(total=len(init_views) * per_view if per_view else None, desc=f"{config.method} attack",
-              disable=not progress, unit="view", dynamic_ncols=True) as bar:
+    with tqdm(
+        total=len(init_views) * per_view if per_view else None,
+        desc=f"{config.method} attack",
+        disable=not progress,
+        unit="view",
+        dynamic_ncols=True,
+    ) as bar:
         for index, init in enumerate(init_views):
             if index in completed:
                 bar.update(per_view or 0)

@@ -1,5 +1,6 @@
 """What every search method shares: the attack's settings, pose bounds, the budget, the guarded
 move, view evaluation and recording."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -78,8 +79,9 @@ class AttackConfig:
         if self.settings is None:
             object.__setattr__(self, "settings", method.settings())
         elif not isinstance(self.settings, method.settings):
-            raise ValueError(f"attack.{self.method}: expected {method.settings.__name__}, "
-                             f"got {type(self.settings).__name__}")
+            raise ValueError(
+                f"attack.{self.method}: expected {method.settings.__name__}, got {type(self.settings).__name__}"
+            )
         check_settings(self.settings, f"attack.{self.method}")
         if not isinstance(self.top_n, int) or self.top_n < 1:
             raise ValueError(f"attack.top_n must be an integer >= 1, got {self.top_n!r}")
@@ -90,9 +92,12 @@ class AttackConfig:
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise ValueError(f"attack.{name} must be positive or null, got {value}")
-        if self.budget_evaluations is not None and (not isinstance(self.budget_evaluations, int)
-                                                    or self.budget_evaluations < 1):
-            raise ValueError(f"attack.budget_evaluations must be an integer >= 1 or null, got {self.budget_evaluations!r}")
+        if self.budget_evaluations is not None and (
+            not isinstance(self.budget_evaluations, int) or self.budget_evaluations < 1
+        ):
+            raise ValueError(
+                f"attack.budget_evaluations must be an integer >= 1 or null, got {self.budget_evaluations!r}"
+            )
         if self.evaluations is None and self.budget_seconds is None:
             raise ValueError(f"attack.method={self.method} needs attack.budget_evaluations or attack.budget_seconds")
 
@@ -116,7 +121,9 @@ class AttackConfig:
         """Pull pose parameters (B, 6) back within the rotation-angle and distance bounds."""
         omega, delta = params[:, :3], params[:, 3:]
         if self.max_angle_deg is not None:
-            omega = omega * (math.radians(self.max_angle_deg) / omega.norm(dim=1, keepdim=True).clamp_min(1e-12)).clamp(max=1.0)
+            omega = omega * (math.radians(self.max_angle_deg) / omega.norm(dim=1, keepdim=True).clamp_min(1e-12)).clamp(
+                max=1.0
+            )
         if self.max_distance is not None:
             delta = delta * (self.max_distance / delta.norm(dim=1, keepdim=True).clamp_min(1e-12)).clamp(max=1.0)
         return torch.cat([omega, delta], dim=1)
@@ -183,8 +190,15 @@ class SearchContext:
         config: the attack's settings (bounds, budgets).
     """
 
-    def __init__(self, objective: Objective, differentiable: DifferentiableRenderer, init: InitView, height: int,
-                 width: int, config: AttackConfig) -> None:
+    def __init__(
+        self,
+        objective: Objective,
+        differentiable: DifferentiableRenderer,
+        init: InitView,
+        height: int,
+        width: int,
+        config: AttackConfig,
+    ) -> None:
         self.objective = objective
         self.differentiable = differentiable
         self.renderer = differentiable.renderer
@@ -216,27 +230,51 @@ class SearchContext:
             shortened = old + fraction[:, None] * (new - old)
         return shortened, fraction
 
-    def records(self, step: int, params: torch.Tensor, world_T_cam: torch.Tensor, terms: ObjectiveTerms,
-                guard_fraction: torch.Tensor, stats: tuple[torch.Tensor, ...] | None = None,
-                refreshed: bool = False, lanes: list[int] | range | None = None,
-                render: RenderOutput | None = None) -> list[ViewRecord]:
+    def records(
+        self,
+        step: int,
+        params: torch.Tensor,
+        world_T_cam: torch.Tensor,
+        terms: ObjectiveTerms,
+        guard_fraction: torch.Tensor,
+        stats: tuple[torch.Tensor, ...] | None = None,
+        refreshed: bool = False,
+        lanes: list[int] | range | None = None,
+        render: RenderOutput | None = None,
+    ) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view, with the view's validity verdict (from ``render``, the
         views' exact render, when given) and the search's clock."""
         pose = world_T_cam.detach()
-        validity = view_validity(self.renderer, pose, self.K, self.height, self.width, render=render,
-                                 **self.validity_options)
+        validity = view_validity(
+            self.renderer, pose, self.K, self.height, self.width, render=render, **self.validity_options
+        )
         theta = matrix_to_axis_angle(pose[:, :3, :3])
         lanes = lanes if lanes is not None else range(len(pose))
         seconds = self.clock.elapsed()
         rows = []
         for b, lane in enumerate(lanes):
             coverage, rgb_error, depth_error = (float(s[b]) for s in stats) if stats else (math.nan,) * 3
-            rows.append(ViewRecord(
-                step=step, restart=lane, params=params[b].detach().tolist(), theta=theta[b].tolist(),
-                centre=pose[b, :3, 3].tolist(), l_depth=float(terms.l_depth[b].detach()), l_dist=float(terms.l_dist[b].detach()),
-                objective=float(terms.objective[b].detach()), delta1=float(terms.delta1[b]), abs_rel=float(terms.abs_rel[b]),
-                verdict=validity.verdicts[b], guard_fraction=float(guard_fraction[b]), coverage=coverage,
-                rgb_error=rgb_error, depth_error=depth_error, refreshed=refreshed, seconds=seconds))
+            rows.append(
+                ViewRecord(
+                    step=step,
+                    restart=lane,
+                    params=params[b].detach().tolist(),
+                    theta=theta[b].tolist(),
+                    centre=pose[b, :3, 3].tolist(),
+                    l_depth=float(terms.l_depth[b].detach()),
+                    l_dist=float(terms.l_dist[b].detach()),
+                    objective=float(terms.objective[b].detach()),
+                    delta1=float(terms.delta1[b]),
+                    abs_rel=float(terms.abs_rel[b]),
+                    verdict=validity.verdicts[b],
+                    guard_fraction=float(guard_fraction[b]),
+                    coverage=coverage,
+                    rgb_error=rgb_error,
+                    depth_error=depth_error,
+                    refreshed=refreshed,
+                    seconds=seconds,
+                )
+            )
         return rows
 
     def evaluate(self, step: int, params: torch.Tensor, lanes: list[int] | range | None = None) -> list[ViewRecord]:
@@ -248,8 +286,9 @@ class SearchContext:
         params = torch.cat([params[:, :3], reached], dim=1)
         with torch.no_grad():
             pose = perturb_world_T_cam(self.base(len(params)), params[:, :3], params[:, 3:])
-            out = self.renderer.render(pose, self.K, self.height, self.width,
-                                       supersample=self.differentiable.config.supersample)
+            out = self.renderer.render(
+                pose, self.K, self.height, self.width, supersample=self.differentiable.config.supersample
+            )
             terms = self.objective(out.rgb, out.depth, out.mask, pose, self.K)
         rows = self.records(step, params, pose, terms, fraction, lanes=lanes, render=out)
         self.clock.spent(len(params), time.perf_counter() - started)

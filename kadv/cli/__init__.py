@@ -1,4 +1,5 @@
 """Hydra entry points; the only place kadv imports Hydra."""
+
 from __future__ import annotations
 
 __all__: list[str] = []

@@ -1,4 +1,5 @@
 """``kadv-attack``: find camera views where a depth model fails; writes the run directory."""
+
 from __future__ import annotations
 
 # before anything loads torch: the wait policy is read when torch starts its thread pool
@@ -66,8 +67,16 @@ def attack_settings(cfg: DictConfig) -> AttackConfig:
     return settings_from_node(AttackConfig, {"method": method.name, "settings": settings, **node}, "attack")
 
 
-def _init_views(cfg: DictConfig, run_dir: Path, renderer: ExactRenderer, model, penalty: PenaltyConfig,
-                init_config: InitViewConfig, height: int, width: int) -> list:
+def _init_views(
+    cfg: DictConfig,
+    run_dir: Path,
+    renderer: ExactRenderer,
+    model,
+    penalty: PenaltyConfig,
+    init_config: InitViewConfig,
+    height: int,
+    width: int,
+) -> list:
     """The run's init views: those saved in the run directory (a resumed run), a given file, or chosen now."""
     saved = run_dir / INIT_PARAMS
     if saved.is_file():
@@ -76,8 +85,9 @@ def _init_views(cfg: DictConfig, run_dir: Path, renderer: ExactRenderer, model, 
         views = load_init_params(init_config.params)
     else:
         views = file_init_views(renderer, penalty.margin)[: init_config.count] if init_config.file_cameras else []
-        views += sample_init_views(renderer, model, init_config.count - len(views), int(cfg.seed), init_config,
-                                   penalty, height, width)
+        views += sample_init_views(
+            renderer, model, init_config.count - len(views), int(cfg.seed), init_config, penalty, height, width
+        )
     check_init_views(renderer, views, penalty, height, width)
     save_init_params(saved, views)
     return views
@@ -87,8 +97,10 @@ def _table(summary: RunSummary) -> str:
     lines = ["| init view | L_depth init | L_depth adv | delta1 init | delta1 adv |", "|---|---|---|---|---|"]
     for view in summary.init_views:
         adv = view.adversarial_mean
-        lines.append(f"| {view.name} | {view.init.l_depth:.4f} | {adv['l_depth']:.4f} | "
-                     f"{view.init.delta1:.3f} | {adv['delta1']:.3f} |")
+        lines.append(
+            f"| {view.name} | {view.init.l_depth:.4f} | {adv['l_depth']:.4f} | "
+            f"{view.init.delta1:.3f} | {adv['delta1']:.3f} |"
+        )
     return "\n".join(lines)
 
 
@@ -107,8 +119,9 @@ def main(cfg: DictConfig) -> float:
     attack_config = attack_settings(cfg.attack)
     init_config = settings_from_node(InitViewConfig, OmegaConf.to_container(cfg.init, resolve=True), "init")
     penalty = settings_from_node(PenaltyConfig, OmegaConf.to_container(cfg.penalty, resolve=True), "penalty")
-    diff_config = DiffRenderConfig(supersample=supersample,
-                                   **OmegaConf.to_container(cfg.render.differentiable, resolve=True))
+    diff_config = DiffRenderConfig(
+        supersample=supersample, **OmegaConf.to_container(cfg.render.differentiable, resolve=True)
+    )
     scene = scene_from_config(cfg.scene)
     renderer = ExactRenderer(scene, shading_from_config(cfg.render.shading))
     model = model_from_config(cfg.model)
@@ -120,9 +133,18 @@ def main(cfg: DictConfig) -> float:
     completed = load_partial_results(run_dir)
     if completed:
         log.info("resuming: %d of %d init views already done", len(completed), len(views))
-    result = attack(objective, DifferentiableRenderer(renderer, diff_config, device), views, height, width, attack_config,
-                    int(cfg.seed), completed=completed,
-                    on_result=lambda index, view: save_partial_result(run_dir, index, view), progress=cfg.progress)
+    result = attack(
+        objective,
+        DifferentiableRenderer(renderer, diff_config, device),
+        views,
+        height,
+        width,
+        attack_config,
+        int(cfg.seed),
+        completed=completed,
+        on_result=lambda index, view: save_partial_result(run_dir, index, view),
+        progress=cfg.progress,
+    )
     info = RunInfo(scene.name, model.name, cfg.loss.kind, int(cfg.seed), str(device), height, width, sorted(completed))
     summary = write_run(run_dir, result, objective, info, supersample, video=cfg.video)
     print(f"run directory: {run_dir}\n{_table(summary)}")

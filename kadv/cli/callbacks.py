@@ -1,4 +1,5 @@
 """Hydra callbacks of the kadv commands."""
+
 from __future__ import annotations
 
 import json
@@ -31,8 +32,11 @@ class SweepFailures(Callback):
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         sweep_dir = Path(config.hydra.sweep.dir)
-        failures = [json.loads(path.read_text()) for path in sorted(sweep_dir.glob(f"*/{FAILURE}"))
-                    if path.stat().st_mtime_ns >= self.started_ns]
+        failures = [
+            json.loads(path.read_text())
+            for path in sorted(sweep_dir.glob(f"*/{FAILURE}"))
+            if path.stat().st_mtime_ns >= self.started_ns
+        ]
         summary = sweep_dir / FAILURES
         if not failures:
             summary.unlink(missing_ok=True)

@@ -2,6 +2,7 @@
 
 This is the edge where Hydra meets the library; nothing under ``kadv/`` but ``cli/`` imports Hydra.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -62,6 +63,7 @@ def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]],
     written to the job's ``failure.json`` (the sweep's callback gathers them into ``failures.json``)
     and the job returns. ``HYDRA_FULL_ERROR=1`` re-raises errors with their traceback.
     """
+
     def decorate(task: Callable[[DictConfig], Any]) -> Callable[[DictConfig], Any]:
         @functools.wraps(task)
         def wrapped(cfg: DictConfig) -> Any:
@@ -79,10 +81,14 @@ def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]],
                 if not multirun:
                     sys.exit(2)
                 logging.getLogger(command).error("job failed", exc_info=error)
-                write_json(failure, {"job": hydra_config.job.num, "overrides": list(hydra_config.overrides.task),
-                                     "error": message})
+                write_json(
+                    failure,
+                    {"job": hydra_config.job.num, "overrides": list(hydra_config.overrides.task), "error": message},
+                )
                 return None
+
         return wrapped
+
     return decorate
 
 
@@ -90,6 +96,7 @@ def checks_group_options(command: str) -> Callable[[Callable[[], Any]], Callable
     """Decorate a ``hydra.main`` entry point so that ``group=option`` naming no ``conf/group/option.yaml``
     (``model=no_such_preset``) prints ``<command>: error: ...`` in one line and exits 2, before
     Hydra's composition would fail with a multi-line message."""
+
     def decorate(entry: Callable[[], Any]) -> Callable[[], Any]:
         @functools.wraps(entry)
         def wrapped() -> Any:
@@ -98,16 +105,22 @@ def checks_group_options(command: str) -> Callable[[Callable[[], Any]], Callable
                 group, equals, options = argument.partition("=")
                 if not equals or not re.fullmatch(r"[a-z_]+", group) or not conf.joinpath(group).is_dir():
                     continue
-                known = sorted(p.name.removesuffix(".yaml") for p in conf.joinpath(group).iterdir()
-                               if p.name.endswith(".yaml"))
+                known = sorted(
+                    p.name.removesuffix(".yaml") for p in conf.joinpath(group).iterdir() if p.name.endswith(".yaml")
+                )
                 for option in options.split(","):
                     if re.fullmatch(r"[A-Za-z0-9_]+", option) and option not in known:
                         listing = " (kadv-models lists the model presets)" if group == "model" else ""
-                        print(f"{command}: error: {group}={option}: no such option in {group}/; one of: "
-                              f"{', '.join(known)}{listing}", file=sys.stderr)
+                        print(
+                            f"{command}: error: {group}={option}: no such option in {group}/; one of: "
+                            f"{', '.join(known)}{listing}",
+                            file=sys.stderr,
+                        )
                         sys.exit(2)
             return entry()
+
         return wrapped
+
     return decorate
 
 
@@ -194,8 +207,10 @@ def settings_from_node(cls: type, node: dict | None, prefix: str) -> Any:
     known = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(node) - known)
     if unknown:
-        raise ValueError(f"unknown key(s) {', '.join(f'{prefix}.{k}' for k in unknown)}; "
-                         f"{prefix} takes {', '.join(sorted(known)) or 'no keys'}")
+        raise ValueError(
+            f"unknown key(s) {', '.join(f'{prefix}.{k}' for k in unknown)}; "
+            f"{prefix} takes {', '.join(sorted(known)) or 'no keys'}"
+        )
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in node.items()})
 
 
@@ -208,6 +223,8 @@ def model_from_config(node: Any) -> DepthModel:
     preset = EMBEDDED.get(node["name"]) or PRESETS.get(node["name"])
     for key in ("hub_id", "output_kind"):
         if preset is not None and node.get(key) is not None and node[key] != getattr(preset, key):
-            raise ValueError(f"model.{key}: the preset {node['name']!r} has {key} {getattr(preset, key)!r}, fixed by its "
-                             f"checkpoint, not {node[key]!r}; for other weights use model=huggingface model.name=<id or dir>")
+            raise ValueError(
+                f"model.{key}: the preset {node['name']!r} has {key} {getattr(preset, key)!r}, fixed by its "
+                f"checkpoint, not {node[key]!r}; for other weights use model=huggingface model.name=<id or dir>"
+            )
     return load_model(node["name"], node.get("weights"))

@@ -1,5 +1,6 @@
 """``kadv-models``: every model preset with its hub id, family, output kind, input size and whether
 its weights are on this machine. It reads only the local cache, so it answers offline."""
+
 from __future__ import annotations
 
 import argparse
@@ -16,8 +17,10 @@ def main(argv: list[str] | None = None) -> None:
     print("| " + " | ".join(columns) + " |\n|" + "---|" * len(columns))
     for row in rows:
         print("| " + " | ".join(row[c] for c in columns) + " |")
-    print("\nAny other transformers depth checkpoint: model=huggingface model.name=<hub id or directory>; "
-          "your own torch module: model=custom model.target=<factory>.")
+    print(
+        "\nAny other transformers depth checkpoint: model=huggingface model.name=<hub id or directory>; "
+        "your own torch module: model=custom model.target=<factory>."
+    )
 
 
 if __name__ == "__main__":

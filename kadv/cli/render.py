@@ -7,6 +7,7 @@ A view that is not valid (the eye inside an object, outside the scene, or on a s
 unless ``camera.allow_invalid=true``; a file camera nearer to a surface than ``penalty.margin`` is
 first moved along its optical axis until it is clear, as the attack's init views are.
 """
+
 from __future__ import annotations
 
 # before anything loads torch: the wait policy is read when torch starts its thread pool
@@ -56,14 +57,17 @@ def main(cfg: DictConfig) -> None:
     if cfg.camera.world_T_cam is None and cfg.camera.eye is None:
         world_T_cam, moved = clear_file_camera(renderer, world_T_cam, penalty.margin)
         note = f"file camera {int(cfg.camera.index)}" + (
-            f", moved {moved:+.3f} m along its optical axis to clear {penalty.margin} m" if moved else "")
+            f", moved {moved:+.3f} m along its optical axis to clear {penalty.margin} m" if moved else ""
+        )
     K = intrinsics_from_fov(fov, height, width)
     out = renderer.render(world_T_cam, K, height, width, supersample=supersample)
     validity = view_validity(renderer, world_T_cam, K, height, width, render=out, **penalty.validity_options())
     verdict, reason = validity.verdicts[0], validity.reasons[0]
     if verdict != "valid" and not cfg.camera.allow_invalid:
-        raise ValueError(f"camera: the view is {verdict} ({reason}); "
-                         "move the camera, or render it anyway with camera.allow_invalid=true")
+        raise ValueError(
+            f"camera: the view is {verdict} ({reason}); "
+            "move the camera, or render it anyway with camera.allow_invalid=true"
+        )
     depth = out.depth[0, 0].numpy()
     mask = out.mask[0, 0].numpy()
     save_rgb_png(out_dir / "rgb.png", out.rgb[0])
@@ -87,8 +91,13 @@ def main(cfg: DictConfig) -> None:
     text = json.dumps(summary, indent=2)
     atomic_write(out_dir / "render.json", lambda tmp: tmp.write_text(text))
     print(f"view: {verdict} ({reason}); camera: {note}")
-    log.info("rendered %s (%d triangles, %.3f of pixels hit) to %s", scene.name, scene.num_triangles,
-             summary["hit_fraction"], out_dir)
+    log.info(
+        "rendered %s (%d triangles, %.3f of pixels hit) to %s",
+        scene.name,
+        scene.num_triangles,
+        summary["hit_fraction"],
+        out_dir,
+    )
 
 
 if __name__ == "__main__":

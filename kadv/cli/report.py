@@ -1,4 +1,5 @@
 """``kadv-report``: the study's tables, method comparison, transfer matrix and one HTML page for a sweep."""
+
 from __future__ import annotations
 
 # before anything loads torch: the wait policy is read when torch starts its thread pool
@@ -29,8 +30,9 @@ their saved poses), curves.png (anytime curves per model and method), and report
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="kadv-report", description=DESCRIPTION,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="kadv-report", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("paths", nargs="+", help="sweep directories or run directories")
     parser.add_argument("-o", "--out", type=Path, help="output folder (default: <first path>/report)")
     parser.add_argument("--no-transfer", action="store_true", help="skip the transfer matrix (no re-rendering)")
@@ -48,8 +50,9 @@ class _FromConfig:
     def renderer_of(self, run: RunRecord) -> ExactRenderer:
         if run.scene not in self.renderers:
             config = OmegaConf.create(run.config)
-            self.renderers[run.scene] = ExactRenderer(scene_from_config(config.scene),
-                                                      shading_from_config(config.render.shading))
+            self.renderers[run.scene] = ExactRenderer(
+                scene_from_config(config.scene), shading_from_config(config.render.shading)
+            )
         return self.renderers[run.scene]
 
     def model_of(self, run: RunRecord) -> DepthModel:
@@ -63,8 +66,13 @@ def main(argv: list[str] | None = None) -> None:
     args = _parser().parse_args(argv)
     try:
         sources = None if args.no_transfer else _FromConfig()
-        written = write_report(args.paths, args.out, sources and sources.renderer_of, sources and sources.model_of,
-                               progress=not args.no_progress)
+        written = write_report(
+            args.paths,
+            args.out,
+            sources and sources.renderer_of,
+            sources and sources.model_of,
+            progress=not args.no_progress,
+        )
     except USER_ERRORS as error:
         print(f"kadv-report: error: {' '.join(str(error).split())}", file=sys.stderr)
         sys.exit(2)

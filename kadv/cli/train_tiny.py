@@ -1,5 +1,6 @@
 """``kadv-train-tiny``: train an embedded model (kadv-tiny, or kadv-tiny-dpt with ``train.architecture=dpt``) on
 generated rooms; writes its weights and a log to the run directory."""
+
 from __future__ import annotations
 
 import json
@@ -28,15 +29,24 @@ def main(cfg: DictConfig) -> None:
     config = TinyTrainConfig(**OmegaConf.to_container(cfg.train, resolve=True))
     model, training_log = train_tiny(config)
     summary = {k: v for k, v in training_log.items() if k != "losses"}
-    save, name, shipped = ((save_kadv_tiny_dpt, "kadv_tiny_dpt", TINY_DPT_DIR) if config.architecture == "dpt"
-                           else (save_kadv_tiny, "kadv_tiny.safetensors", TINY_WEIGHTS))
+    save, name, shipped = (
+        (save_kadv_tiny_dpt, "kadv_tiny_dpt", TINY_DPT_DIR)
+        if config.architecture == "dpt"
+        else (save_kadv_tiny, "kadv_tiny.safetensors", TINY_WEIGHTS)
+    )
     weights = save(model.network, out_dir / name, metadata=summary)
     atomic_write(out_dir / "train_log.json", lambda tmp: tmp.write_text(json.dumps(training_log, indent=1)))
     if cfg.replace_shipped_weights:
         save(model.network, shipped, metadata=summary)
         log.info("replaced the shipped weights: %s", shipped)
-    log.info("%s: val delta1 %.3f, render %.0f s, train %.0f s -> %s", model.name, summary["val_delta1"],
-             summary["render_seconds"], summary["train_seconds"], weights)
+    log.info(
+        "%s: val delta1 %.3f, render %.0f s, train %.0f s -> %s",
+        model.name,
+        summary["val_delta1"],
+        summary["render_seconds"],
+        summary["train_seconds"],
+        weights,
+    )
 
 
 if __name__ == "__main__":

@@ -1,4 +1,5 @@
 """Synthetic training and evaluation data rendered from procedural rooms."""
+
 from __future__ import annotations
 
 from kadv.datasets.procedural import ViewBatch, render_procedural_views

@@ -1,4 +1,5 @@
 """RGB-D views of generated rooms from random valid cameras (the embedded models' only training data)."""
+
 from __future__ import annotations
 
 import math
@@ -25,8 +26,15 @@ class ViewBatch:
     mask: torch.Tensor
 
 
-def render_procedural_views(count: int, seed: int, height: int, width: int, views_per_room: int = 8,
-                            furnished_share: float = 0.0, progress: bool = True) -> ViewBatch:
+def render_procedural_views(
+    count: int,
+    seed: int,
+    height: int,
+    width: int,
+    views_per_room: int = 8,
+    furnished_share: float = 0.0,
+    progress: bool = True,
+) -> ViewBatch:
     """Render ``count`` views, ``views_per_room`` per generated room, under random shading.
 
     Room ``i`` is ``procedural_room(seed * 100003 + i)`` (furnished, lit at its lamps and windows)

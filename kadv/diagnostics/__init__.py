@@ -1,4 +1,5 @@
 """Validation tools: gradient checks of the differentiable renderer against finite differences."""
+
 from __future__ import annotations
 
 from kadv.diagnostics.gradcheck import (

@@ -5,6 +5,7 @@ s x s samples per pixel), with the step confirmed by halving it. Functionals are
 f = sum(W * rgb) and f = sum(W * depth) with fixed smooth random weight maps, in an *interior*
 version (weights zeroed within 2 pixels of occlusion edges) and a *full* one.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -14,15 +15,22 @@ import torch
 from kornia.geometry.transform import resize
 from torch.nn import functional as F
 
-from kadv.penalties import random_valid_poses
 from kadv.geometry.camera import intrinsics_from_fov, pixel_rays
 from kadv.geometry.pose import perturb_world_T_cam
-from kadv.render.differentiable import DiffRenderConfig, DifferentiableRenderer
+from kadv.penalties import random_valid_poses
+from kadv.render.differentiable import DifferentiableRenderer, DiffRenderConfig
 from kadv.render.layers import RING, ring_view
 from kadv.render.raycast import ExactRenderer, RenderOutput, pixel_angle
 
-__all__ = ["FUNCTIONALS", "GradientCheck", "check_pose", "gradient_check_poses", "occlusion_edge_mask",
-           "smooth_weights", "supersampled_maps"]
+__all__ = [
+    "FUNCTIONALS",
+    "GradientCheck",
+    "check_pose",
+    "gradient_check_poses",
+    "occlusion_edge_mask",
+    "smooth_weights",
+    "supersampled_maps",
+]
 
 FUNCTIONALS = ("rgb_interior", "depth_interior", "rgb_full", "depth_full")
 
@@ -39,8 +47,10 @@ def occlusion_edge_mask(exact: RenderOutput, radius: int = 2, jump: float = 0.00
     depth = torch.where(exact.mask, exact.depth.double(), torch.full_like(exact.depth.double(), float("inf")))
     ids = exact.triangle_ids
     edge = torch.zeros_like(exact.mask)
-    for a, b in (((..., slice(None, -1)), (..., slice(1, None))),
-                 ((..., slice(None, -1), slice(None)), (..., slice(1, None), slice(None)))):
+    for a, b in (
+        ((..., slice(None, -1)), (..., slice(1, None))),
+        ((..., slice(None, -1), slice(None)), (..., slice(1, None), slice(None))),
+    ):
         near, far = torch.minimum(depth[a], depth[b]), torch.maximum(depth[a], depth[b])
         jumpy = (ids[a] != ids[b]) & ((far - near) > jump * near)
         edge[a] |= jumpy
@@ -48,8 +58,9 @@ def occlusion_edge_mask(exact: RenderOutput, radius: int = 2, jump: float = 0.00
     return F.max_pool2d(edge.float(), 2 * radius + 1, stride=1, padding=radius) > 0
 
 
-def supersampled_maps(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
-                      supersample: int) -> tuple[torch.Tensor, torch.Tensor]:
+def supersampled_maps(
+    renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Box-averaged RGB (B, 3, H, W) and z-depth (B, 1, H, W) (misses count as depth 0) of s x s samples."""
     origins, directions = pixel_rays(world_T_cam, K, height, width, supersample)
     hits = renderer.cast(origins, directions)
@@ -83,10 +94,20 @@ def _blocks(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return _cos(a[:3], b[:3]), _cos(a[3:], b[3:])
 
 
-def check_pose(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
-               configs: dict[str, DiffRenderConfig], *, weight_seed: int = 0, reference_supersample: int = 4,
-               rotation_step: float = 2e-3, translation_step: float = 4e-3,
-               device: str | torch.device = "cpu") -> dict[str, GradientCheck]:
+def check_pose(
+    renderer: ExactRenderer,
+    world_T_cam: torch.Tensor,
+    K: torch.Tensor,
+    height: int,
+    width: int,
+    configs: dict[str, DiffRenderConfig],
+    *,
+    weight_seed: int = 0,
+    reference_supersample: int = 4,
+    rotation_step: float = 2e-3,
+    translation_step: float = 4e-3,
+    device: str | torch.device = "cpu",
+) -> dict[str, GradientCheck]:
     """Compare analytic and finite-difference gradients of the four functionals at one pose.
 
     The analytic gradients come from a DifferentiableRenderer on ``device``; the reference is exact
@@ -101,8 +122,12 @@ def check_pose(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tens
     # edges just outside the frame enter it when the camera moves: detect them on the ring too
     edges = occlusion_edge_mask(renderer.render(base, *ring_view(K, height, width)))[..., RING:-RING, RING:-RING]
     interior = (~edges).double()
-    weights = {"rgb_interior": (w_rgb * interior, None), "depth_interior": (None, w_depth * interior),
-               "rgb_full": (w_rgb, None), "depth_full": (None, w_depth)}
+    weights = {
+        "rgb_interior": (w_rgb * interior, None),
+        "depth_interior": (None, w_depth * interior),
+        "rgb_full": (w_rgb, None),
+        "depth_full": (None, w_depth),
+    }
 
     def functionals(rgb: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
         return torch.stack([(w * rgb).sum() if w is not None else (v * depth).sum() for w, v in weights.values()])
@@ -132,9 +157,19 @@ def check_pose(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tens
     return results
 
 
-def gradient_check_poses(renderer: ExactRenderer, count: int, seed: int, fov_x_deg: float, height: int, width: int,
-                         configs: dict[str, DiffRenderConfig], *, min_agreement: float = 0.99,
-                         max_attempts: int = 60, **options) -> dict[str, list[GradientCheck]]:
+def gradient_check_poses(
+    renderer: ExactRenderer,
+    count: int,
+    seed: int,
+    fov_x_deg: float,
+    height: int,
+    width: int,
+    configs: dict[str, DiffRenderConfig],
+    *,
+    min_agreement: float = 0.99,
+    max_attempts: int = 60,
+    **options,
+) -> dict[str, list[GradientCheck]]:
     """Gradient checks at ``count`` seeded poses: >= 0.3 m from every surface, >= 90% of pixels hit,
     and a reference whose halved-step estimate agrees to ``min_agreement`` (else the pose is resampled).
     """

@@ -10,6 +10,7 @@ Mitsuba 3 is an optional extra (``pip install kadv[reference]``). It loads the 0
 files only through a sanitised copy (:mod:`kadv.scenes.mitsuba_sanitiser`), from which properties
 it no longer knows are removed as it names them.
 """
+
 from __future__ import annotations
 
 import logging
@@ -104,8 +105,9 @@ def mitsuba_depth(scene, sensor: int, height: int, width: int) -> np.ndarray:
     depth = np.zeros((height, width))
     for row in range(height):
         for column in range(width):
-            ray, _ = camera.sample_ray(0.0, 0.5, mi.Point2f((column + 0.5) / width, (row + 0.5) / height),
-                                       mi.Point2f(0.5, 0.5))
+            ray, _ = camera.sample_ray(
+                0.0, 0.5, mi.Point2f((column + 0.5) / width, (row + 0.5) / height), mi.Point2f(0.5, 0.5)
+            )
             hit = scene.ray_intersect(ray)
             if hit.is_valid():
                 depth[row, column] = float(np.dot(np.array(hit.p) - eye, axis))
@@ -146,8 +148,18 @@ class ReferenceComparison:
     mask: np.ndarray
 
 
-def compare_view(mitsuba_scene, sensor: int, renderer: ExactRenderer, model: DepthModel, world_T_cam: torch.Tensor,
-                 fov_x_deg: float, height: int, width: int, spp: int, seed: int = 0) -> ReferenceComparison:
+def compare_view(
+    mitsuba_scene,
+    sensor: int,
+    renderer: ExactRenderer,
+    model: DepthModel,
+    world_T_cam: torch.Tensor,
+    fov_x_deg: float,
+    height: int,
+    width: int,
+    spp: int,
+    seed: int = 0,
+) -> ReferenceComparison:
     """Render one view with Mitsuba (``sensor`` of the loaded scene) and kadv, and compare them."""
     mi = _mitsuba()
     K = intrinsics_from_fov(fov_x_deg, height, width)
@@ -168,9 +180,17 @@ def compare_view(mitsuba_scene, sensor: int, renderer: ExactRenderer, model: Dep
     mask = ours.mask.expand(2, -1, -1, -1)
     aligned = aligned_depth(predictions.double(), ours.depth.double().expand(2, -1, -1, -1), mask, model.output_kind)
     delta1 = depth_metrics(aligned[:1], aligned[1:], ours.mask, "depth")["delta1"]
-    return ReferenceComparison(depth_rel_err, image_psnr, image_ssim, float(delta1[0]), mitsuba_rgb, kadv_rgb,
-                               aligned[0, 0].float().numpy(), aligned[1, 0].float().numpy(),
-                               ours.mask[0, 0].numpy())
+    return ReferenceComparison(
+        depth_rel_err,
+        image_psnr,
+        image_ssim,
+        float(delta1[0]),
+        mitsuba_rgb,
+        kadv_rgb,
+        aligned[0, 0].float().numpy(),
+        aligned[1, 0].float().numpy(),
+        ours.mask[0, 0].numpy(),
+    )
 
 
 def save_comparison(path: str | Path, comparison: ReferenceComparison, title: str) -> Path:
@@ -182,14 +202,19 @@ def save_comparison(path: str | Path, comparison: ReferenceComparison, title: st
     low, high = depth_range(np.stack([comparison.mitsuba_pred, comparison.kadv_pred]), np.stack([mask, mask]))
     height, width = comparison.kadv_rgb.shape[:2]
     figure, axes = plt.subplots(1, 4, figsize=(4 * 3.2, 3.2 * height / width + 0.9), layout="constrained")
-    panels = [(comparison.mitsuba_rgb, "Mitsuba 3 (path traced)"), (comparison.kadv_rgb, "kadv (exact renderer)"),
-              (comparison.mitsuba_pred, "prediction on Mitsuba"), (comparison.kadv_pred, "prediction on kadv")]
+    panels = [
+        (comparison.mitsuba_rgb, "Mitsuba 3 (path traced)"),
+        (comparison.kadv_rgb, "kadv (exact renderer)"),
+        (comparison.mitsuba_pred, "prediction on Mitsuba"),
+        (comparison.kadv_pred, "prediction on kadv"),
+    ]
     for axis, (image, name) in zip(axes, panels):
         if image.ndim == 3:
             axis.imshow(image)
         else:
-            shown = axis.imshow(np.ma.masked_where(~mask, image), cmap=depth_colour_map(), vmin=low, vmax=high,
-                                interpolation="nearest")
+            shown = axis.imshow(
+                np.ma.masked_where(~mask, image), cmap=depth_colour_map(), vmin=low, vmax=high, interpolation="nearest"
+            )
         axis.set_title(name, fontsize=9)
         axis.set_axis_off()
     figure.colorbar(shown, ax=axes[2:].tolist(), fraction=0.03, pad=0.02, label="aligned depth [m]")

@@ -1,4 +1,5 @@
 """Poses and cameras (OpenCV convention: x right, y down, z forward; metres)."""
+
 from __future__ import annotations
 
 from kadv.geometry.camera import Camera, batched_intrinsics, intrinsics_from_fov, pixel_rays, to_open3d_pinhole

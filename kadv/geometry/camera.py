@@ -1,4 +1,5 @@
 """Pinhole cameras: intrinsics, per-pixel rays, and the conversion to Open3D's conventions."""
+
 from __future__ import annotations
 
 import math
@@ -10,8 +11,15 @@ import torch
 
 from kadv.geometry.pose import check_world_T_cam
 
-__all__ = ["Camera", "batched_intrinsics", "camera_rays", "intrinsics_from_fov", "pixel_rays", "to_open3d_pinhole",
-           "world_rays"]
+__all__ = [
+    "Camera",
+    "batched_intrinsics",
+    "camera_rays",
+    "intrinsics_from_fov",
+    "pixel_rays",
+    "to_open3d_pinhole",
+    "world_rays",
+]
 
 
 def intrinsics_from_fov(fov_x_deg: float, height: int, width: int) -> torch.Tensor:
@@ -27,9 +35,7 @@ def intrinsics_from_fov(fov_x_deg: float, height: int, width: int) -> torch.Tens
     if height <= 0 or width <= 0:
         raise ValueError(f"image size must be positive, got height={height}, width={width}")
     focal = 0.5 * width / math.tan(math.radians(fov_x_deg) / 2.0)
-    return torch.tensor(
-        [[focal, 0.0, width / 2.0], [0.0, focal, height / 2.0], [0.0, 0.0, 1.0]], dtype=torch.float64
-    )
+    return torch.tensor([[focal, 0.0, width / 2.0], [0.0, focal, height / 2.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
 
 
 @dataclass
@@ -84,8 +90,8 @@ def camera_rays(K: torch.Tensor, height: int, width: int, supersample: int = 1) 
     if s < 1:
         raise ValueError(f"supersample must be >= 1, got {supersample}")
     sub = (torch.arange(s, dtype=torch.float64) + 0.5) / s
-    v = (torch.arange(height, dtype=torch.float64)[:, None] + sub[None, :])  # (H, s)
-    u = (torch.arange(width, dtype=torch.float64)[:, None] + sub[None, :])  # (W, s)
+    v = torch.arange(height, dtype=torch.float64)[:, None] + sub[None, :]  # (H, s)
+    u = torch.arange(width, dtype=torch.float64)[:, None] + sub[None, :]  # (W, s)
     vv = v[:, :, None, None].expand(height, s, width, s)
     uu = u[None, None, :, :].expand(height, s, width, s)
     pixels = torch.stack([uu, vv, torch.ones_like(uu)], dim=-1)  # (H, s, W, s, 3)

@@ -3,6 +3,7 @@
 ``world_T_cam`` (..., 4, 4) maps camera-frame points to the world; its rotation block is the
 camera's orientation R and its last column the optical centre c.
 """
+
 from __future__ import annotations
 
 import torch
@@ -48,9 +49,7 @@ def rc_from_world_T_cam(world_T_cam: torch.Tensor) -> tuple[torch.Tensor, torch.
     return world_T_cam[..., :3, :3], world_T_cam[..., :3, 3]
 
 
-def perturb_world_T_cam(
-    world_T_cam: torch.Tensor, omega: torch.Tensor, delta: torch.Tensor
-) -> torch.Tensor:
+def perturb_world_T_cam(world_T_cam: torch.Tensor, omega: torch.Tensor, delta: torch.Tensor) -> torch.Tensor:
     """Apply the attack's pose parameters: R = R0 exp([omega]x) (camera frame), c = c0 + delta.
 
     Args:

@@ -4,6 +4,7 @@ The sums over the last axis are written out: a reduction over an axis of length 
 as long in both libraries (per-ray code calls these on hundreds of thousands of rays), and the
 written-out form adds the same terms in the same order, so results are unchanged to the bit.
 """
+
 from __future__ import annotations
 
 from typing import TypeVar

@@ -1,4 +1,5 @@
 """Depth-discrepancy losses (perceptual VGG-16, SSIM), normalisation, alignment and metrics."""
+
 from __future__ import annotations
 
 from kadv.losses.align import align_scale_shift, minmax_normalize, to_comparison_space

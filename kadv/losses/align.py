@@ -2,6 +2,7 @@
 
 All maps are (B, 1, H, W); ``mask`` (B, 1, H, W) bool marks valid pixels.
 """
+
 from __future__ import annotations
 
 import torch

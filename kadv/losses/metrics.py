@@ -1,4 +1,5 @@
 """Standard depth metrics after scale-and-shift alignment in disparity space."""
+
 from __future__ import annotations
 
 import torch
@@ -8,8 +9,9 @@ from kadv.losses.align import align_scale_shift, to_comparison_space
 __all__ = ["aligned_depth", "depth_metrics"]
 
 
-def aligned_depth(prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor,
-                  prediction_kind: str = "disparity") -> torch.Tensor:
+def aligned_depth(
+    prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor, prediction_kind: str = "disparity"
+) -> torch.Tensor:
     """The prediction as metric depth (B, 1, H, W): converted to disparity, aligned to the ground
     truth's disparity by least squares on ``mask``, and converted back.
 
@@ -24,7 +26,10 @@ def aligned_depth(prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.
 
 
 def depth_metrics(
-    prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor, prediction_kind: str = "disparity",
+    prediction: torch.Tensor,
+    gt_depth: torch.Tensor,
+    mask: torch.Tensor,
+    prediction_kind: str = "disparity",
     min_depth: float = 1e-3,
 ) -> dict[str, torch.Tensor]:
     """delta1/2/3, abs_rel and rmse per map (B,) on valid pixels.

@@ -1,4 +1,5 @@
 """L_depth: perceptual distance between normalised depth maps, and a weight-free SSIM variant."""
+
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
@@ -65,8 +66,9 @@ def ssim_loss(a: torch.Tensor, b: torch.Tensor, window_size: int = 11) -> torch.
     return per_pixel.mean(dim=(1, 2, 3))
 
 
-def depth_loss(kind: str, vgg_weights: str | Path | None = None, window_size: int = 11
-               ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
+def depth_loss(
+    kind: str, vgg_weights: str | Path | None = None, window_size: int = 11
+) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
     """The L_depth discrepancy a ``loss/`` config names: "perceptual" (VGG-16) or "ssim".
 
     Raises:

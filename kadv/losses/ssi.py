@@ -1,4 +1,5 @@
 """MiDaS's scale-and-shift-invariant loss, for training depth models (kadv-tiny)."""
+
 from __future__ import annotations
 
 import torch
@@ -21,8 +22,9 @@ def gradient_matching(residual: torch.Tensor, mask: torch.Tensor, scales: int) -
     return total
 
 
-def ssi_loss(prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor, gradient_weight: float = 0.0,
-             scales: int = 4) -> torch.Tensor:
+def ssi_loss(
+    prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor, gradient_weight: float = 0.0, scales: int = 4
+) -> torch.Tensor:
     """MiDaS-style scale-and-shift-invariant loss in disparity space.
 
     With d the ground-truth disparity and r = (align(pred) - d) / mean(d): mean |r| plus

@@ -2,6 +2,7 @@
 
 Module indices match ``torchvision.models.vgg16().features`` so its state dict loads as is.
 """
+
 from __future__ import annotations
 
 import os

@@ -3,6 +3,7 @@
 The names below load on first use, so that the preset list (``kadv.models.presets``) is read
 without importing torch or transformers.
 """
+
 from __future__ import annotations
 
 import importlib

@@ -1,4 +1,5 @@
 """The depth-model interface every adapter implements."""
+
 from __future__ import annotations
 
 import torch

@@ -5,6 +5,7 @@ From Python, :func:`wrap_model` takes a module mapping rgb (B, 3, H, W) in [0, 1
 model.target=my_package.my_factory`` (or ``path/to/file.py:my_factory``) names a factory that
 returns such a module, called with ``model.args``.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -53,25 +54,31 @@ def check_depth_model(model: DepthModel) -> DepthModel:
         with torch.enable_grad():
             out = model(rgb)
     except Exception as error:  # a user's module may fail in any way; its message is what helps
-        raise ValueError(f"model {model.name!r} fails on a (2, 3, {size[0]}, {size[1]}) image: "
-                         f"{type(error).__name__}: {error}") from error
+        raise ValueError(
+            f"model {model.name!r} fails on a (2, 3, {size[0]}, {size[1]}) image: {type(error).__name__}: {error}"
+        ) from error
     if not isinstance(out, torch.Tensor) or tuple(out.shape) != (2, 1, *size):
         got = tuple(out.shape) if isinstance(out, torch.Tensor) else type(out).__name__
-        raise ValueError(f"model {model.name!r} must map rgb (B, 3, H, W) to (B, 1, H, W): "
-                         f"got {got} for a (2, 3, {size[0]}, {size[1]}) image")
+        raise ValueError(
+            f"model {model.name!r} must map rgb (B, 3, H, W) to (B, 1, H, W): "
+            f"got {got} for a (2, 3, {size[0]}, {size[1]}) image"
+        )
     if not torch.isfinite(out).all():
         raise ValueError(f"model {model.name!r} returns NaN or infinite values")
     if not out.requires_grad:
-        raise ValueError(f"model {model.name!r} is not differentiable: its output carries no gradient to the image "
-                         "(detached, computed under no_grad, or through numpy)")
+        raise ValueError(
+            f"model {model.name!r} is not differentiable: its output carries no gradient to the image "
+            "(detached, computed under no_grad, or through numpy)"
+        )
     (gradient,) = torch.autograd.grad(out.sum(), rgb, allow_unused=True)
     if gradient is None or not torch.isfinite(gradient).all() or not gradient.abs().sum() > 0:
         raise ValueError(f"model {model.name!r} is not differentiable: no finite, non-zero gradient reaches the image")
     return model
 
 
-def wrap_model(module: nn.Module | DepthModel, output_kind: str, preprocess: Preprocess | None = None,
-               name: str | None = None) -> DepthModel:
+def wrap_model(
+    module: nn.Module | DepthModel, output_kind: str, preprocess: Preprocess | None = None, name: str | None = None
+) -> DepthModel:
     """A checked, frozen :class:`DepthModel` from any module.
 
     Args:
@@ -124,8 +131,13 @@ def _resolve(target: str) -> Any:
     return getattr(module, attr)
 
 
-def load_custom(target: str, output_kind: str, args: dict[str, Any] | None = None, name: str | None = None,
-                preprocess: Preprocess | None = None) -> DepthModel:
+def load_custom(
+    target: str,
+    output_kind: str,
+    args: dict[str, Any] | None = None,
+    name: str | None = None,
+    preprocess: Preprocess | None = None,
+) -> DepthModel:
     """Instantiate ``target(**args)`` and wrap it with :func:`wrap_model`.
 
     Raises:
@@ -139,6 +151,7 @@ def load_custom(target: str, output_kind: str, args: dict[str, Any] | None = Non
     try:
         module = factory(**(args or {}))
     except Exception as error:  # the factory is the user's code; say which call failed
-        raise ValueError(f"model.target {target!r} failed when called with {args or {}}: "
-                         f"{type(error).__name__}: {error}") from error
+        raise ValueError(
+            f"model.target {target!r} failed when called with {args or {}}: {type(error).__name__}: {error}"
+        ) from error
     return wrap_model(module, output_kind, preprocess, name or target)

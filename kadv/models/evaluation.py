@@ -1,4 +1,5 @@
 """A depth model's accuracy on rendered views."""
+
 from __future__ import annotations
 
 import torch

@@ -5,6 +5,7 @@ Each family gets its output kind from its config and its image processor's steps
 :class:`Preprocess` (read from the checkpoint's ``preprocessor_config.json`` over the family's
 defaults). Weights resolve from an explicit path, then the Hugging Face cache, then the hub.
 """
+
 from __future__ import annotations
 
 import json
@@ -23,8 +24,18 @@ from kadv.errors import WeightsUnavailable
 from kadv.models.base import DepthModel
 from kadv.models.preprocess import Preprocess
 
-__all__ = ["FAMILY_DEFAULTS", "METRIC_FAMILIES", "REFUSED_FAMILIES", "DepthProDepthModel", "HuggingFaceDepthModel",
-           "ModelWeightsUnavailable", "family_preprocess", "hub_offline", "load_huggingface", "output_kind"]
+__all__ = [
+    "FAMILY_DEFAULTS",
+    "METRIC_FAMILIES",
+    "REFUSED_FAMILIES",
+    "DepthProDepthModel",
+    "HuggingFaceDepthModel",
+    "ModelWeightsUnavailable",
+    "family_preprocess",
+    "hub_offline",
+    "load_huggingface",
+    "output_kind",
+]
 
 _HALF = (0.5, 0.5, 0.5)
 # What each family's image processor does when a checkpoint carries no preprocessor_config.json
@@ -32,12 +43,29 @@ _HALF = (0.5, 0.5, 0.5)
 # The PIL-backend processors (DPT, Depth Anything, GLPN) resample as PIL does, hence antialias.
 FAMILY_DEFAULTS = {
     "dpt": Preprocess(size=(384, 384), mean=_HALF, std=_HALF, antialias=True, output_interpolation="bicubic"),
-    "depth_anything": Preprocess(size=(518, 518), keep_aspect_ratio=True, multiple=14, antialias=True,
-                                 output_interpolation="bicubic"),
-    "zoedepth": Preprocess(size=(384, 512), keep_aspect_ratio=True, multiple=32, reflect_pad=True, mean=_HALF,
-                           std=_HALF, interpolation="bilinear", align_corners=True, output_interpolation="bicubic"),
-    "glpn": Preprocess(size=None, floor_multiple=32, mean=None, std=None, interpolation="bilinear", antialias=True,
-                       output_interpolation="bicubic"),
+    "depth_anything": Preprocess(
+        size=(518, 518), keep_aspect_ratio=True, multiple=14, antialias=True, output_interpolation="bicubic"
+    ),
+    "zoedepth": Preprocess(
+        size=(384, 512),
+        keep_aspect_ratio=True,
+        multiple=32,
+        reflect_pad=True,
+        mean=_HALF,
+        std=_HALF,
+        interpolation="bilinear",
+        align_corners=True,
+        output_interpolation="bicubic",
+    ),
+    "glpn": Preprocess(
+        size=None,
+        floor_multiple=32,
+        mean=None,
+        std=None,
+        interpolation="bilinear",
+        antialias=True,
+        output_interpolation="bicubic",
+    ),
     "depth_pro": Preprocess(size=(1536, 1536), mean=_HALF, std=_HALF, normalize_first=True, interpolation="bilinear"),
     "tipsv2_dpt": Preprocess(size=(448, 448), mean=None, std=None, interpolation="bilinear", antialias=True),
 }
@@ -50,7 +78,9 @@ class ModelWeightsUnavailable(WeightsUnavailable):
 
 
 def hub_offline() -> bool:
-    return any(os.environ.get(k, "").lower() in ("1", "true", "yes", "on") for k in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE"))
+    return any(
+        os.environ.get(k, "").lower() in ("1", "true", "yes", "on") for k in ("HF_HUB_OFFLINE", "TRANSFORMERS_OFFLINE")
+    )
 
 
 def hub_reachable(timeout: float = 3.0) -> bool:
@@ -68,8 +98,13 @@ def hub_reachable(timeout: float = 3.0) -> bool:
 
 
 def _processor_config(source: str, local_only: bool) -> dict[str, Any] | None:
-    file = cached_file(source, "preprocessor_config.json", local_files_only=local_only,
-                       _raise_exceptions_for_missing_entries=False, _raise_exceptions_for_connection_errors=False)
+    file = cached_file(
+        source,
+        "preprocessor_config.json",
+        local_files_only=local_only,
+        _raise_exceptions_for_missing_entries=False,
+        _raise_exceptions_for_connection_errors=False,
+    )
     return None if file is None else json.loads(Path(file).read_text())
 
 
@@ -109,8 +144,10 @@ def family_preprocess(config: Any, processor: dict[str, Any] | None = None) -> P
     changes["std"] = tuple(processor.get("image_std", base.std or (1.0,) * 3)) if normalise else None
     if "resample" in processor:
         if processor["resample"] not in _RESAMPLE:
-            raise ValueError(f"preprocessor_config.json: resample={processor['resample']} cannot be reproduced "
-                             f"differentiably (supported: {sorted(_RESAMPLE)}, PIL's nearest, bilinear, bicubic)")
+            raise ValueError(
+                f"preprocessor_config.json: resample={processor['resample']} cannot be reproduced "
+                f"differentiably (supported: {sorted(_RESAMPLE)}, PIL's nearest, bilinear, bicubic)"
+            )
         changes["interpolation"] = _RESAMPLE[processor["resample"]]
     return replace(base, **changes)
 
@@ -159,7 +196,7 @@ METRIC_FAMILIES = frozenset({"depth_pro", "glpn", "tipsv2_dpt", "zoedepth"})
 REFUSED_FAMILIES = {
     "chmv2": "CHMv2 is a canopy-height model for aerial images (height above ground), not scene depth from one view",
     "prompt_depth_anything": "Prompt Depth Anything needs a prompt depth map (e.g. LiDAR) beside the image, "
-                             "which kadv does not supply",
+    "which kadv does not supply",
 }
 
 
@@ -177,11 +214,16 @@ def output_kind(config: Any) -> str:
     if family in REFUSED_FAMILIES:
         raise ValueError(f"model family {family!r} is not supported: {REFUSED_FAMILIES[family]}")
     if family not in FAMILY_DEFAULTS:
-        raise ValueError(f"model family {family!r} is not one kadv knows ({', '.join(sorted(FAMILY_DEFAULTS))}); "
-                         "wrap it with kadv.models.wrap_model and declare its output kind")
+        raise ValueError(
+            f"model family {family!r} is not one kadv knows ({', '.join(sorted(FAMILY_DEFAULTS))}); "
+            "wrap it with kadv.models.wrap_model and declare its output kind"
+        )
     backbone = getattr(getattr(config, "backbone_config", None), "model_type", None)
-    if family in METRIC_FAMILIES or getattr(config, "depth_estimation_type", "relative") == "metric" or (
-            family == "dpt" and backbone == "dinov2"):
+    if (
+        family in METRIC_FAMILIES
+        or getattr(config, "depth_estimation_type", "relative") == "metric"
+        or (family == "dpt" and backbone == "dinov2")
+    ):
         return "depth"
     return "disparity"
 
@@ -217,8 +259,13 @@ def load_huggingface(source: str, name: str | None = None, hub_id: str | None = 
         except OSError as error:
             last_error = error
     where = f"the directory {local_dir}" if local_dir.is_dir() else f"the Hugging Face cache ({hub_id or source})"
-    reason = ("the hub is offline (HF_HUB_OFFLINE=1)" if hub_offline()
-              else "the hub cannot be reached from here" if unreachable else "the download failed")
+    reason = (
+        "the hub is offline (HF_HUB_OFFLINE=1)"
+        if hub_offline()
+        else "the hub cannot be reached from here"
+        if unreachable
+        else "the download failed"
+    )
     raise ModelWeightsUnavailable(
         f"model {name!r}: weights not found in {where} and {reason}. Provide them by passing a local "
         f"directory in save_pretrained layout (load_model('/path/to/dir') or model.weights=/path/to/dir), or download "

@@ -5,6 +5,7 @@ multiple, padding, normalisation, resampling) and what its ``post_process_depth_
 does to bring the prediction back to the image (undo the padding, resize). Both directions are
 written with kornia and torch so the gradient reaches the image.
 """
+
 from __future__ import annotations
 
 import math
@@ -29,7 +30,9 @@ def constrain_to_multiple(value: float, multiple: int) -> int:
     return int(rounded if rounded >= multiple else math.ceil(value / multiple) * multiple)
 
 
-def resized_shape(height: int, width: int, size: tuple[int, int], keep_aspect_ratio: bool, multiple: int) -> tuple[int, int]:
+def resized_shape(
+    height: int, width: int, size: tuple[int, int], keep_aspect_ratio: bool, multiple: int
+) -> tuple[int, int]:
     """The network input size for an image, following the DPT / Depth Anything processors.
 
     With ``keep_aspect_ratio`` the axis that needs the smaller change sets the scale of both.
@@ -99,8 +102,9 @@ class Preprocess:
     def network_size(self, height: int, width: int) -> tuple[int, int]:
         """The (h, w) an image of (height, width), padding included, is resized to."""
         if self.size is None:
-            return tuple(max(self.floor_multiple, side // self.floor_multiple * self.floor_multiple)
-                         for side in (height, width))
+            return tuple(
+                max(self.floor_multiple, side // self.floor_multiple * self.floor_multiple) for side in (height, width)
+            )
         return resized_shape(height, width, self.size, self.keep_aspect_ratio, self.multiple)
 
     def normalize(self, rgb: torch.Tensor) -> torch.Tensor:
@@ -125,7 +129,10 @@ class Preprocess:
         x = self.normalize(rgb) if self.normalize_first else rgb
         source_pad = (0, 0)
         if self.reflect_pad:
-            source_pad = (int(math.sqrt(height / 2) * _ZOEDEPTH_PAD_FACTOR), int(math.sqrt(width / 2) * _ZOEDEPTH_PAD_FACTOR))
+            source_pad = (
+                int(math.sqrt(height / 2) * _ZOEDEPTH_PAD_FACTOR),
+                int(math.sqrt(width / 2) * _ZOEDEPTH_PAD_FACTOR),
+            )
             x = F.pad(x, (source_pad[1], source_pad[1], source_pad[0], source_pad[0]), mode="reflect")
         x = self._resize(x, self.network_size(*x.shape[-2:]))
         x = x if self.normalize_first else self.normalize(x)
@@ -145,11 +152,13 @@ class Preprocess:
         check_shape(out, "B 1 h w", "out")
         if any(layout.network_pad):
             (h_out, w_out), (h_in, w_in) = out.shape[-2:], layout.network_size
-            top, bottom, left, right = (round(pad * scale) for pad, scale in
-                                        zip(layout.network_pad, (h_out / h_in, h_out / h_in, w_out / w_in, w_out / w_in)))
-            out = out[..., top:h_out - bottom, left:w_out - right]
+            top, bottom, left, right = (
+                round(pad * scale)
+                for pad, scale in zip(layout.network_pad, (h_out / h_in, h_out / h_in, w_out / w_in, w_out / w_in))
+            )
+            out = out[..., top : h_out - bottom, left : w_out - right]
         pad_h, pad_w = layout.source_pad
         padded = (layout.size[0] + 2 * pad_h, layout.size[1] + 2 * pad_w)
         if tuple(out.shape[-2:]) != padded:
             out = resize(out, padded, interpolation=self.output_interpolation, align_corners=False)
-        return out[..., pad_h:padded[0] - pad_h, pad_w:padded[1] - pad_w]
+        return out[..., pad_h : padded[0] - pad_h, pad_w : padded[1] - pad_w]

@@ -1,4 +1,5 @@
 """``load_model``: presets, hub ids, local directories, and the embedded kadv-tiny model."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -17,7 +18,8 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
 
     Args:
         name_or_path: a preset (``midas_dpt_large``, ``zoedepth_nk``, ``depth_anything_v2_small``, ...,
-            and the embedded ``kadv_tiny`` and ``kadv_tiny_dpt``), any Hugging Face depth-estimation id, or a local ``save_pretrained`` directory.
+            and the embedded ``kadv_tiny`` and ``kadv_tiny_dpt``), any Hugging Face depth-estimation id, or a
+            local ``save_pretrained`` directory.
         weights: an explicit local directory (or, for ``kadv_tiny``, a weights file) that overrides
             the cache, the hub, or the shipped copy of an embedded model.
 
@@ -42,6 +44,8 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
     if name in PRESETS:
         return load_huggingface(PRESETS[name].hub_id, name=name, hub_id=PRESETS[name].hub_id)
     if "/" not in name:
-        raise ValueError(f"unknown model {name!r}: not a preset ({', '.join(sorted(PRESETS))}, kadv_tiny, kadv_tiny_dpt), "
-                         "not a local directory, and not a Hugging Face id (owner/name)")
+        raise ValueError(
+            f"unknown model {name!r}: not a preset ({', '.join(sorted(PRESETS))}, kadv_tiny, kadv_tiny_dpt), "
+            "not a local directory, and not a Hugging Face id (owner/name)"
+        )
     return load_huggingface(name, name=name, hub_id=name)

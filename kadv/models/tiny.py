@@ -2,8 +2,10 @@
 
 Its weights ship in ``kadv/models/weights/kadv_tiny.safetensors`` so everything runs offline.
 """
+
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -26,8 +28,12 @@ TINY_PREPROCESS = Preprocess(size=(128, 160), keep_aspect_ratio=True, multiple=3
 
 def _block(c_in: int, c_out: int, stride: int = 1) -> nn.Sequential:
     return nn.Sequential(
-        nn.Conv2d(c_in, c_out, 3, stride=stride, padding=1, bias=False), nn.GroupNorm(8, c_out), nn.GELU(),
-        nn.Conv2d(c_out, c_out, 3, padding=1, bias=False), nn.GroupNorm(8, c_out), nn.GELU(),
+        nn.Conv2d(c_in, c_out, 3, stride=stride, padding=1, bias=False),
+        nn.GroupNorm(8, c_out),
+        nn.GELU(),
+        nn.Conv2d(c_out, c_out, 3, padding=1, bias=False),
+        nn.GroupNorm(8, c_out),
+        nn.GELU(),
     )
 
 
@@ -38,11 +44,12 @@ class TinyDepthNet(nn.Module):
         super().__init__()
         self.channels = tuple(channels)
         self.encoder = nn.ModuleList(
-            [_block(3, channels[0], stride=2)] + [_block(a, b, stride=2) for a, b in zip(channels, channels[1:])]
+            [_block(3, channels[0], stride=2)] + [_block(a, b, stride=2) for a, b in itertools.pairwise(channels)]
         )
-        self.decoder = nn.ModuleList([_block(b + a, a) for a, b in zip(channels[:-1], channels[1:])])
-        self.head = nn.Sequential(nn.Conv2d(channels[0], channels[0], 3, padding=1), nn.GELU(),
-                                  nn.Conv2d(channels[0], 1, 1))
+        self.decoder = nn.ModuleList([_block(b + a, a) for a, b in itertools.pairwise(channels)])
+        self.head = nn.Sequential(
+            nn.Conv2d(channels[0], channels[0], 3, padding=1), nn.GELU(), nn.Conv2d(channels[0], 1, 1)
+        )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         skips = []
@@ -52,7 +59,9 @@ class TinyDepthNet(nn.Module):
         x = skips.pop()
         for block in reversed(self.decoder):
             skip = skips.pop()
-            x = block(torch.cat([F.interpolate(x, size=skip.shape[-2:], mode="bilinear", align_corners=False), skip], 1))
+            x = block(
+                torch.cat([F.interpolate(x, size=skip.shape[-2:], mode="bilinear", align_corners=False), skip], 1)
+            )
         x = F.interpolate(x, scale_factor=2, mode="bilinear", align_corners=False)
         return F.softplus(self.head(x))
 

@@ -1,5 +1,6 @@
 """Training the embedded models (kadv-tiny, kadv-tiny-dpt) on generated rooms with a scale-and-shift-invariant
 disparity loss."""
+
 from __future__ import annotations
 
 import math
@@ -120,10 +121,12 @@ def _predict(model: DepthModel, rgb: torch.Tensor) -> torch.Tensor:
 def render_training_views(config: TinyTrainConfig, progress: bool = True) -> tuple[ViewBatch, ViewBatch]:
     """The training and validation views ``config`` names, at kadv-tiny's working size."""
     height, width = TINY_PREPROCESS.size
-    train = render_procedural_views(config.train_views, config.seed, height, width,
-                                    furnished_share=config.furnished_share, progress=progress)
-    val = render_procedural_views(config.val_views, config.val_seed, height, width,
-                                  furnished_share=config.furnished_share, progress=progress)
+    train = render_procedural_views(
+        config.train_views, config.seed, height, width, furnished_share=config.furnished_share, progress=progress
+    )
+    val = render_procedural_views(
+        config.val_views, config.val_seed, height, width, furnished_share=config.furnished_share, progress=progress
+    )
     return train, val
 
 
@@ -138,8 +141,9 @@ def _initial_model(config: TinyTrainConfig) -> DepthModel:
     return load_kadv_tiny(config.init_weights)
 
 
-def train_tiny(config: TinyTrainConfig, progress: bool = True,
-               views: tuple[ViewBatch, ViewBatch] | None = None) -> tuple[DepthModel, dict[str, object]]:
+def train_tiny(
+    config: TinyTrainConfig, progress: bool = True, views: tuple[ViewBatch, ViewBatch] | None = None
+) -> tuple[DepthModel, dict[str, object]]:
     """Render the data (unless ``views`` gives what :func:`render_training_views` would), train,
     and return the model with a log (losses, delta1, timings)."""
     start = time.perf_counter()

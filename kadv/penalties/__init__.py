@@ -1,4 +1,5 @@
 """Keeping the camera honest: distance to surfaces, the shortcut penalty, step guard, view validity."""
+
 from __future__ import annotations
 
 from kadv.penalties.config import PenaltyConfig

@@ -1,4 +1,5 @@
 """Settings of the shortcut penalty, the step guard and view validity, in one place."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -51,6 +52,11 @@ class PenaltyConfig:
 
     def validity_options(self) -> dict[str, float | int | None]:
         """Keyword arguments of :func:`kadv.penalties.view_validity`."""
-        return {"near": self.near, "min_distance": self.min_distance, "probe_rays": self.probe_rays,
-                "outside_threshold": self.outside_threshold, "inside_threshold": self.inside_threshold,
-                "max_plane_share": self.max_plane_share if self.uninformative else None}
+        return {
+            "near": self.near,
+            "min_distance": self.min_distance,
+            "probe_rays": self.probe_rays,
+            "outside_threshold": self.outside_threshold,
+            "inside_threshold": self.inside_threshold,
+            "max_plane_share": self.max_plane_share if self.uninformative else None,
+        }

@@ -1,4 +1,5 @@
 """Distance from camera centres to the nearest surface, with its analytic gradient, and L_dist."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -19,7 +20,7 @@ class _SurfaceDistance(torch.autograd.Function):
     """
 
     @staticmethod
-    def forward(ctx, centres: torch.Tensor, renderer: ExactRenderer) -> torch.Tensor:  # noqa: ANN001
+    def forward(ctx, centres: torch.Tensor, renderer: ExactRenderer) -> torch.Tensor:
         query = o3d.core.Tensor(centres.detach().cpu().numpy().astype(np.float32))
         closest = torch.from_numpy(renderer.raycasting_scene.compute_closest_points(query)["points"].numpy())
         offset = centres.detach() - closest.to(centres)
@@ -28,7 +29,7 @@ class _SurfaceDistance(torch.autograd.Function):
         return distance
 
     @staticmethod
-    def backward(ctx, grad_output: torch.Tensor) -> tuple[torch.Tensor, None]:  # noqa: ANN001
+    def backward(ctx, grad_output: torch.Tensor) -> tuple[torch.Tensor, None]:
         (direction,) = ctx.saved_tensors
         return grad_output[:, None] * direction, None
 

@@ -1,4 +1,5 @@
 """Step guard: a camera centre may not move through (or too close to) a surface."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -41,7 +42,9 @@ def _perpendicular_basis(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return first, np.cross(direction, first)
 
 
-def step_guard(renderer: ExactRenderer, c_old: torch.Tensor, c_new: torch.Tensor, margin: float = PenaltyConfig.margin) -> StepCheck:
+def step_guard(
+    renderer: ExactRenderer, c_old: torch.Tensor, c_new: torch.Tensor, margin: float = PenaltyConfig.margin
+) -> StepCheck:
     """Check the straight moves c_old -> c_new (B, 3) against the scene's surfaces.
 
     A step is refused when its segment crosses a surface, passes within ``margin`` of the first
@@ -67,7 +70,7 @@ def step_guard(renderer: ExactRenderer, c_old: torch.Tensor, c_new: torch.Tensor
     clear = np.clip(first_hit - margin, 0.0, None)
     fraction = np.where(moving, np.clip(clear / np.maximum(length, 1e-300), 0.0, 1.0), 1.0)
     distances = distance_to_surface(renderer, torch.from_numpy(np.concatenate([old, new]))).numpy()
-    start_distance, end_distance = distances[: len(old)], distances[len(old):]
+    start_distance, end_distance = distances[: len(old)], distances[len(old) :]
     # A camera already within the margin may still back away from the surface.
     allowed = (first_hit > length + margin) & ((end_distance >= margin) | (end_distance > start_distance))
     return StepCheck(torch.from_numpy(allowed), torch.from_numpy(fraction), torch.from_numpy(end_distance))

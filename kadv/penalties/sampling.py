@@ -1,4 +1,5 @@
 """Random camera poses a scene accepts: for gradient checks, training views and experiments."""
+
 from __future__ import annotations
 
 import math
@@ -13,8 +14,9 @@ from kadv.render.raycast import ExactRenderer
 __all__ = ["random_valid_poses"]
 
 
-def random_valid_poses(renderer: ExactRenderer, count: int, rng: np.random.Generator, fov_x_deg: float,
-                       min_clearance: float = 0.3) -> torch.Tensor:
+def random_valid_poses(
+    renderer: ExactRenderer, count: int, rng: np.random.Generator, fov_x_deg: float, min_clearance: float = 0.3
+) -> torch.Tensor:
     """``count`` poses (count, 4, 4) inside the scene bounds that :func:`view_validity` accepts.
 
     Centres are uniform in the scene's camera region (its interior if declared, else its bounds)

@@ -20,6 +20,7 @@ optical centre instead:
   ground truth, min-max normalised, is a ramp that a model's nearly flat guess misses by a wide
   margin while its delta1 stays near 1, so the view's L_depth says nothing about the model.
 """
+
 from __future__ import annotations
 
 import weakref
@@ -98,8 +99,9 @@ def plane_labels(renderer: ExactRenderer) -> np.ndarray:
         sign = np.sign(np.take_along_axis(normal, np.abs(normal).argmax(axis=1)[:, None], axis=1))
         normal *= np.where(sign == 0, 1.0, sign)
         offset = np.einsum("fi,fi->f", normal, corners[:, 0])
-        keys = np.concatenate([np.round(normal / _PLANE_NORMAL_STEP), np.round(offset / _PLANE_OFFSET_STEP)[:, None]],
-                              axis=1)
+        keys = np.concatenate(
+            [np.round(normal / _PLANE_NORMAL_STEP), np.round(offset / _PLANE_OFFSET_STEP)[:, None]], axis=1
+        )
         _PLANE_LABELS[renderer] = np.unique(keys, axis=0, return_inverse=True)[1].reshape(-1)
     return _PLANE_LABELS[renderer]
 
@@ -116,7 +118,9 @@ def plane_shares(renderer: ExactRenderer, triangle_ids: np.ndarray) -> np.ndarra
     return shares
 
 
-def probe_directions_hits(renderer: ExactRenderer, centres: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def probe_directions_hits(
+    renderer: ExactRenderer, centres: np.ndarray, directions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(miss, back) booleans (B, N) for rays from each centre (B, 3) along each direction (N, 3)."""
     origins = np.broadcast_to(centres[:, None, :], (len(centres), len(directions), 3))
     rays = np.broadcast_to(directions[None], origins.shape)
@@ -187,15 +191,17 @@ def view_validity(
             reasons.append(f"{back_frac:.0%} of probe rays first hit a back face (> {inside_threshold:.0%})")
         elif distance[b] < min_distance or near_hit[b].any():
             verdicts.append(TOO_CLOSE)
-            reasons.append(f"centre {distance[b]:.3f} m from a surface, {near_hit[b].mean():.1%} of pixels nearer "
-                           f"than {near} m (limits {min_distance} m, 0 pixels)")
+            reasons.append(
+                f"centre {distance[b]:.3f} m from a surface, {near_hit[b].mean():.1%} of pixels nearer "
+                f"than {near} m (limits {min_distance} m, 0 pixels)"
+            )
         elif max_plane_share is not None and share[b] > max_plane_share:
             verdicts.append(UNINFORMATIVE)
             reasons.append(f"one plane covers {share[b]:.0%} of the surface pixels (> {max_plane_share:.0%})")
         else:
             verdicts.append(VALID)
             reasons.append(f"enclosed ({miss_frac:.0%} escape, {back_frac:.0%} back faces), {distance[b]:.2f} m clear")
-    as_tensor = lambda a: torch.from_numpy(np.asarray(a, np.float64))  # noqa: E731
+    as_tensor = lambda a: torch.from_numpy(np.asarray(a, np.float64))
     return ViewValidity(
         miss_fraction=as_tensor((~hit).mean(axis=1)),
         back_face_fraction=as_tensor(view_back.mean(axis=1)),

@@ -1,4 +1,5 @@
 """Rendering: the exact ray-cast renderer, anchor layers, reprojection and the differentiable façade."""
+
 from __future__ import annotations
 
 from kadv.render.dibr import Reprojection, reproject

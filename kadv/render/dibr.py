@@ -10,6 +10,7 @@ own surface (within a tolerance of its triangle's plane). Taps across an occlusi
 two surfaces and give the gradient of the wrong one; silhouettes get their own term
 (:mod:`kadv.render.silhouette`). Depth is the z of the sampled anchor point mapped back with P_T_A.
 """
+
 from __future__ import annotations
 
 import math
@@ -78,8 +79,13 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
     """
     _, _, _, height, width = anchor.rgb.shape
     # one gather per tap fetches colour, point, normal and mask together
-    maps = torch.cat([anchor.rgb[:, layer], anchor.points[:, layer], anchor.normals[:, layer],
-                      anchor.mask[:, layer]], dim=1).to(_DTYPE).flatten(2)
+    maps = (
+        torch.cat(
+            [anchor.rgb[:, layer], anchor.points[:, layer], anchor.normals[:, layer], anchor.mask[:, layer]], dim=1
+        )
+        .to(_DTYPE)
+        .flatten(2)
+    )
     x, y = q[..., 0] - 0.5, q[..., 1] - 0.5  # continuous pixel index (centres at +0.5)
     x0, y0 = torch.floor(x.detach() - 0.5), torch.floor(y.detach() - 0.5)  # the taps: x0 + {0, 1, 2}
     tolerance = plane_tolerance * expected[:, 2].abs()
@@ -121,8 +127,14 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
 _BAND_SAMPLES = 160_000
 
 
-def _centred_taps(maps: torch.Tensor, expected: torch.Tensor, plane_tolerance: float, value: torch.Tensor,
-                  slope_x: torch.Tensor, slope_y: torch.Tensor) -> None:
+def _centred_taps(
+    maps: torch.Tensor,
+    expected: torch.Tensor,
+    plane_tolerance: float,
+    value: torch.Tensor,
+    slope_x: torch.Tensor,
+    slope_y: torch.Tensor,
+) -> None:
     """Value (B, 7, h, w) = (r, g, b, z, on the surface, x, y) and the blurred lookups' slopes
     (B, 4, h, w) in x and y of (r, g, b, z) at samples on anchor pixel centres, from the maps
     (B, 11, h + 2, w + 2) of :func:`_anchor_layer_pixels` around them and the samples' expected
@@ -138,10 +150,13 @@ def _centred_taps(maps: torch.Tensor, expected: torch.Tensor, plane_tolerance: f
     for j in range(3):
         row = []
         for i in range(3):
-            tap = maps[:, :, j:j + h, i:i + w]
+            tap = maps[:, :, j : j + h, i : i + w]
             # n . expected - n . point, unrolled (a sum over 3 channels is slow)
-            off_plane = torch.addcmul(torch.addcmul(torch.addcmul(-tap[:, 10], expected[:, 0], tap[:, 7]),
-                                                    expected[:, 1], tap[:, 8]), expected[:, 2], tap[:, 9])
+            off_plane = torch.addcmul(
+                torch.addcmul(torch.addcmul(-tap[:, 10], expected[:, 0], tap[:, 7]), expected[:, 1], tap[:, 8]),
+                expected[:, 2],
+                tap[:, 9],
+            )
             # (r, g, b, z, 1) on the expected surface, 0 elsewhere
             row.append(tap[:, 0:5] * ((tap[:, 4] > 0) & (off_plane.abs() <= tolerance))[:, None])
         weighted_rows.append(torch.add(row[0], row[2]).mul_(0.5).add_(row[1]))
@@ -156,11 +171,17 @@ def _centred_taps(maps: torch.Tensor, expected: torch.Tensor, plane_tolerance: f
     torch.div(blurred_x[:, 0:4].sub_(blurred[:, 0:4] * (blurred_x[:, 4:5] / total)), total, out=slope_x)
     torch.div(blurred_y[:, 0:4].sub_(blurred[:, 0:4] * (blurred_y[:, 4:5] / total)), total, out=slope_y)
     value[:, 0:5] = centre
-    torch.mul(maps[:, 5:7, 1:1 + h, 1:1 + w], centre[:, 4:5], out=value[:, 5:7])
+    torch.mul(maps[:, 5:7, 1 : 1 + h, 1 : 1 + w], centre[:, 4:5], out=value[:, 5:7])
 
 
-def _anchor_layer_pixels(anchor: AnchorLayers, layer: int, expected: torch.Tensor, shift: torch.Tensor,
-                         P_T_A: torch.Tensor, plane_tolerance: float) -> tuple[torch.Tensor, ...]:
+def _anchor_layer_pixels(
+    anchor: AnchorLayers,
+    layer: int,
+    expected: torch.Tensor,
+    shift: torch.Tensor,
+    P_T_A: torch.Tensor,
+    plane_tolerance: float,
+) -> tuple[torch.Tensor, ...]:
     """One layer's warp per pixel for views at the anchor's own pose (A = P).
 
     The sub-pixel samples (B, 3, M) ``expected`` (anchor frame) then sit on the anchor's hi-res
@@ -180,8 +201,17 @@ def _anchor_layer_pixels(anchor: AnchorLayers, layer: int, expected: torch.Tenso
     window = (..., slice(start, start + hs + 2), slice(start, start + ws + 2))
     points, normals = anchor.points[:, layer][window].to(_DTYPE), anchor.normals[:, layer][window].to(_DTYPE)
     # channels: the derivative's (r, g, b, z, mask), then x, y and the plane (normal, n . point)
-    maps = torch.cat([anchor.rgb[:, layer][window].to(_DTYPE), points[:, 2:3], anchor.mask[:, layer][window].to(_DTYPE),
-                      points[:, 0:2], normals, (points * normals).sum(1, keepdim=True)], dim=1)
+    maps = torch.cat(
+        [
+            anchor.rgb[:, layer][window].to(_DTYPE),
+            points[:, 2:3],
+            anchor.mask[:, layer][window].to(_DTYPE),
+            points[:, 0:2],
+            normals,
+            (points * normals).sum(1, keepdim=True),
+        ],
+        dim=1,
+    )
     with torch.no_grad():
         expected_image = expected.reshape(batch, 3, hs, ws)
         value, slope_x, slope_y = (maps.new_empty(batch, channels, hs, ws) for channels in (7, 4, 4))
@@ -190,8 +220,14 @@ def _anchor_layer_pixels(anchor: AnchorLayers, layer: int, expected: torch.Tenso
         for top in range(0, hs, band):
             bottom = min(top + band, hs)
             rows = slice(top, bottom)
-            _centred_taps(maps[:, :, top:bottom + 2], expected_image[:, :, rows], plane_tolerance,
-                          value[:, :, rows], slope_x[:, :, rows], slope_y[:, :, rows])
+            _centred_taps(
+                maps[:, :, top : bottom + 2],
+                expected_image[:, :, rows],
+                plane_tolerance,
+                value[:, :, rows],
+                slope_x[:, :, rows],
+                slope_y[:, :, rows],
+            )
         on_surface = value[:, 4:5]
         ok = _block_min(on_surface, s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): every sub-sample
         colour = _block_mean(value[:, 0:3], s)
@@ -246,8 +282,9 @@ def _sub_pixel_points(depth: torch.Tensor, normals: torch.Tensor, K: torch.Tenso
     return (rays + shift) * t
 
 
-def _project_to_anchor(anchor: AnchorLayers, sub_points_P: torch.Tensor,
-                       A_T_P: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def _project_to_anchor(
+    anchor: AnchorLayers, sub_points_P: torch.Tensor, A_T_P: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Anchor-frame points (B, 3, M) and hi-res anchor pixel coordinates q (B, M, 2) of the
     sub-pixel points (B, H, s, W, s, 3), M = H * s * W * s; points behind the anchor land far outside."""
     batch, height = sub_points_P.shape[:2]
@@ -259,8 +296,15 @@ def _project_to_anchor(anchor: AnchorLayers, sub_points_P: torch.Tensor,
     return sub_points_A.transpose(1, 2), q
 
 
-def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, A_T_P: torch.Tensor, K: torch.Tensor,
-              depth_tolerance: float = 0.01, plane_tolerance: float = 0.02) -> Reprojection:
+def reproject(
+    anchor: AnchorLayers,
+    depth: torch.Tensor,
+    normals: torch.Tensor,
+    A_T_P: torch.Tensor,
+    K: torch.Tensor,
+    depth_tolerance: float = 0.01,
+    plane_tolerance: float = 0.02,
+) -> Reprojection:
     """Warp the anchor into current views.
 
     Args:
@@ -302,8 +346,10 @@ def reproject(anchor: AnchorLayers, depth: torch.Tensor, normals: torch.Tensor, 
 
         def layer_pixels(layer: int) -> tuple[torch.Tensor, ...]:
             return _sampled_layer_pixels(anchor, layer, q, expected, P_T_A, plane_tolerance, (height, width))
-    return _composite_layers(layer_pixels, anchor.num_layers, depth.reshape(batch, -1), valid_pixel, (height, width),
-                             depth_tolerance)
+
+    return _composite_layers(
+        layer_pixels, anchor.num_layers, depth.reshape(batch, -1), valid_pixel, (height, width), depth_tolerance
+    )
 
 
 def _at_anchor(anchor: AnchorLayers, A_T_P: torch.Tensor, K: torch.Tensor, height: int, width: int) -> bool:
@@ -313,8 +359,9 @@ def _at_anchor(anchor: AnchorLayers, A_T_P: torch.Tensor, K: torch.Tensor, heigh
     if s * g < 1 or tuple(anchor.rgb.shape[-2:]) != (s * (height + 2 * g), s * (width + 2 * g)):
         return False
     identity = torch.eye(4, dtype=torch.float64).expand(A_T_P.shape[0], 4, 4)
-    return (torch.allclose(A_T_P.detach().double().cpu(), identity, rtol=0.0, atol=_SAME_POSE)
-            and torch.allclose(anchor.K.double().cpu(), guard_band_intrinsics(K, g, s).cpu(), rtol=0.0, atol=_SAME_POSE))
+    return torch.allclose(A_T_P.detach().double().cpu(), identity, rtol=0.0, atol=_SAME_POSE) and torch.allclose(
+        anchor.K.double().cpu(), guard_band_intrinsics(K, g, s).cpu(), rtol=0.0, atol=_SAME_POSE
+    )
 
 
 def _block_mean(image: torch.Tensor, s: int) -> torch.Tensor:
@@ -329,12 +376,19 @@ def _block_min(image: torch.Tensor, s: int) -> torch.Tensor:
     """Least value (B, C, H, W) of each s x s block of a hi-res image (B, C, sH, sW)."""
     least = image[..., 0::s, 0::s]
     for k in range(1, s * s):
-        least = torch.minimum(least, image[..., k // s::s, k % s::s])
+        least = torch.minimum(least, image[..., k // s :: s, k % s :: s])
     return least
 
 
-def _sampled_layer_pixels(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor,
-                          P_T_A: torch.Tensor, plane_tolerance: float, size: tuple[int, int]) -> tuple[torch.Tensor, ...]:
+def _sampled_layer_pixels(
+    anchor: AnchorLayers,
+    layer: int,
+    q: torch.Tensor,
+    expected: torch.Tensor,
+    P_T_A: torch.Tensor,
+    plane_tolerance: float,
+    size: tuple[int, int],
+) -> tuple[torch.Tensor, ...]:
     """One layer's warp per pixel from its sub-pixel samples read by :func:`_sample_layer`:
     colour (B, 3, H * W), z-depth (B, H * W) and whether every sub-sample found its surface (B, H * W)."""
     batch = q.shape[0]
@@ -353,8 +407,14 @@ def _sampled_layer_pixels(anchor: AnchorLayers, layer: int, q: torch.Tensor, exp
     return _block_mean(image(c), s).flatten(2), z.flatten(1), ok.flatten(1)
 
 
-def _composite_layers(layer_pixels: Callable[[int], tuple[torch.Tensor, ...]], layers: int, depth: torch.Tensor,
-                      valid_pixel: torch.Tensor, size: tuple[int, int], depth_tolerance: float) -> Reprojection:
+def _composite_layers(
+    layer_pixels: Callable[[int], tuple[torch.Tensor, ...]],
+    layers: int,
+    depth: torch.Tensor,
+    valid_pixel: torch.Tensor,
+    size: tuple[int, int],
+    depth_tolerance: float,
+) -> Reprojection:
     """Each pixel takes the first of ``layers`` anchor layers (read per pixel by ``layer_pixels``)
     whose samples all find the expected surface and whose depth agrees with the exact depth (B, H*W).
     A pixel straddling an occlusion edge is left to the silhouette term rather than represented by

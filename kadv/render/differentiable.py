@@ -5,6 +5,7 @@ kornia reprojection of the anchor layers (gradient) -> straight-through combinat
 silhouette term at occlusion edges. The anchor is refreshed by policy; every call reports how
 well the warp agrees with the exact render.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -71,8 +72,10 @@ class DiffRenderConfig:
         if self.layers < 1 or self.supersample < 1 or self.guard_band < 0 or self.every_k < 1:
             raise ValueError("render.layers, supersample and every_k must be >= 1 and guard_band >= 0")
         if not (self.depth_tolerance > 0 and self.plane_tolerance > 0):
-            raise ValueError("render.differentiable.depth_tolerance and plane_tolerance must be positive, got "
-                             f"{self.depth_tolerance} and {self.plane_tolerance}")
+            raise ValueError(
+                "render.differentiable.depth_tolerance and plane_tolerance must be positive, got "
+                f"{self.depth_tolerance} and {self.plane_tolerance}"
+            )
 
 
 @dataclass
@@ -129,8 +132,9 @@ class DifferentiableRenderer:
             ray casts stay on the CPU.
     """
 
-    def __init__(self, renderer: ExactRenderer, config: DiffRenderConfig | None = None,
-                 device: str | torch.device = "cpu") -> None:
+    def __init__(
+        self, renderer: ExactRenderer, config: DiffRenderConfig | None = None, device: str | torch.device = "cpu"
+    ) -> None:
         self.renderer = renderer
         self.config = config or DiffRenderConfig()
         self.device = resolve_device(device)
@@ -156,12 +160,14 @@ class DifferentiableRenderer:
         self._steps_since_refresh = 0
         return anchor
 
-    def __call__(self, pose_params: torch.Tensor, base_world_T_cam: torch.Tensor, K: torch.Tensor, height: int,
-                 width: int) -> DiffRenderOutput:
+    def __call__(
+        self, pose_params: torch.Tensor, base_world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int
+    ) -> DiffRenderOutput:
         return self.forward(pose_params, base_world_T_cam, K, height, width)
 
-    def forward(self, pose_params: torch.Tensor, base_world_T_cam: torch.Tensor, K: torch.Tensor, height: int,
-                width: int) -> DiffRenderOutput:
+    def forward(
+        self, pose_params: torch.Tensor, base_world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int
+    ) -> DiffRenderOutput:
         """Render at poses ``base_world_T_cam`` perturbed by ``pose_params``.
 
         Args:
@@ -186,20 +192,34 @@ class DifferentiableRenderer:
         rgb, depth = self._values(frame, warp)
         if self.config.silhouette:
             pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K)
-            term = silhouette_term(self.renderer, pairs, world_T_cam, frame.K,
-                                   torch.cat([frame.rgb_rendered, frame.depth_rendered], dim=1))[frame.inside]
+            term = silhouette_term(
+                self.renderer, pairs, world_T_cam, frame.K, torch.cat([frame.rgb_rendered, frame.depth_rendered], dim=1)
+            )[frame.inside]
             rgb, depth = rgb + term[:, :3], depth + term[:, 3:]
-        return DiffRenderOutput(rgb=rgb, depth=depth, mask=frame.mask, exact=frame.exact, world_T_cam=world_T_cam,
-                                coverage=agreement.coverage.cpu(), rgb_error=agreement.rgb_error.cpu(),
-                                depth_error=agreement.depth_error.cpu(), refreshed=refreshed)
+        return DiffRenderOutput(
+            rgb=rgb,
+            depth=depth,
+            mask=frame.mask,
+            exact=frame.exact,
+            world_T_cam=world_T_cam,
+            coverage=agreement.coverage.cpu(),
+            rgb_error=agreement.rgb_error.cpu(),
+            depth_error=agreement.depth_error.cpu(),
+            refreshed=refreshed,
+        )
 
     def _due_for_refresh(self, K: torch.Tensor, height: int, width: int) -> bool:
         c = self.config
-        return (self.anchor is None or _view_key(K, height, width) != self._anchor_key or c.refresh == "always"
-                or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k))
+        return (
+            self.anchor is None
+            or _view_key(K, height, width) != self._anchor_key
+            or c.refresh == "always"
+            or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k)
+        )
 
-    def _exact_frame(self, current: torch.Tensor, K: torch.Tensor, height: int, width: int,
-                     anchor: AnchorLayers | None) -> _ExactFrame:
+    def _exact_frame(
+        self, current: torch.Tensor, K: torch.Tensor, height: int, width: int, anchor: AnchorLayers | None
+    ) -> _ExactFrame:
         """The exact render at the current poses and what the device needs of it, moved once."""
         # with silhouettes, the frame is rendered with a ring around it (the frame is its interior)
         border = RING if self.config.silhouette else 0
@@ -209,11 +229,22 @@ class DifferentiableRenderer:
         normals = camera_face_normals(self.renderer.scene, exact.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
         inside = (..., slice(border, render_height - border), slice(border, render_width - border))
         rgb_rendered, depth_rendered = rendered.rgb.to(self.device), rendered.depth.to(self.device)
-        return _ExactFrame(rendered, exact, K_render, inside, rgb_rendered, depth_rendered, rgb_rendered[inside],
-                           depth_rendered[inside], exact.mask.to(self.device), normals.to(self.device))
+        return _ExactFrame(
+            rendered,
+            exact,
+            K_render,
+            inside,
+            rgb_rendered,
+            depth_rendered,
+            rgb_rendered[inside],
+            depth_rendered[inside],
+            exact.mask.to(self.device),
+            normals.to(self.device),
+        )
 
-    def _checked_warp(self, frame: _ExactFrame, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
-                      refreshed: bool) -> tuple[Reprojection, WarpAgreement, bool]:
+    def _checked_warp(
+        self, frame: _ExactFrame, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, refreshed: bool
+    ) -> tuple[Reprojection, WarpAgreement, bool]:
         """The warp to the current poses and its agreement with the exact frame; with ``on_drift``,
         an anchor that drifted too far is rendered again first."""
         warp = self._warp(frame.depth, frame.normals, world_T_cam, K)
@@ -234,20 +265,34 @@ class DifferentiableRenderer:
             return rgb, depth
         return torch.where(valid, warp.rgb, frame.rgb), torch.where(valid, warp.depth, frame.depth)
 
-    def _exact_render(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, border: int,
-                      anchor: AnchorLayers | None) -> RenderOutput:
+    def _exact_render(
+        self,
+        world_T_cam: torch.Tensor,
+        K: torch.Tensor,
+        height: int,
+        width: int,
+        border: int,
+        anchor: AnchorLayers | None,
+    ) -> RenderOutput:
         """The exact render of the frame plus ``border`` pixels; an anchor (CPU) just rendered at this
         pose holds the colours of the frame's sub-pixel rays, which are then not cast again."""
         sub_rgb = None
         if anchor is not None and anchor.supersample > 1 and anchor.guard_band >= border:
             s, start = anchor.supersample, anchor.supersample * (anchor.guard_band - border)
-            sub_rgb = anchor.rgb[:, 0, :, start:start + s * height, start:start + s * width]
+            sub_rgb = anchor.rgb[:, 0, :, start : start + s * height, start : start + s * width]
         return self.renderer.render(world_T_cam, K, height, width, supersample=self.config.supersample, sub_rgb=sub_rgb)
 
     def _warp(self, depth: torch.Tensor, normals: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor):
         A_T_P = torch.linalg.inv(self.anchor.world_T_cam) @ world_T_cam
-        return reproject(self.anchor, depth, normals, A_T_P, K, depth_tolerance=self.config.depth_tolerance,
-                         plane_tolerance=self.config.plane_tolerance)
+        return reproject(
+            self.anchor,
+            depth,
+            normals,
+            A_T_P,
+            K,
+            depth_tolerance=self.config.depth_tolerance,
+            plane_tolerance=self.config.plane_tolerance,
+        )
 
 
 def _view_key(K: torch.Tensor, height: int, width: int) -> tuple:
@@ -283,5 +328,8 @@ class WarpAgreement:
 
     def drifted(self, config: DiffRenderConfig) -> bool:
         """Whether any view passed the ``on_drift`` tolerances."""
-        return bool((self.coverage < config.min_coverage).any() or (self.rgb_error > config.max_rgb_error).any()
-                    or (self.depth_error > config.max_depth_error).any())
+        return bool(
+            (self.coverage < config.min_coverage).any()
+            or (self.rgb_error > config.max_rgb_error).any()
+            or (self.depth_error > config.max_depth_error).any()
+        )

@@ -5,6 +5,7 @@ Open3D's ``list_intersections``, sorted per ray), so pixels hidden at the anchor
 found when the camera moves. An optional guard band widens the field of view (same centre,
 same focal length) so that samples near the current view's border have real content.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -108,8 +109,16 @@ def _peel(renderer: ExactRenderer, origins: np.ndarray, directions: np.ndarray, 
     return out
 
 
-def render_anchor(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int,
-                  layers: int = 1, guard_band: int = 0, supersample: int = 1) -> AnchorLayers:
+def render_anchor(
+    renderer: ExactRenderer,
+    world_T_cam: torch.Tensor,
+    K: torch.Tensor,
+    height: int,
+    width: int,
+    layers: int = 1,
+    guard_band: int = 0,
+    supersample: int = 1,
+) -> AnchorLayers:
     """Render anchor layers for views of size (height, width) at ``world_T_cam`` (B, 4, 4).
 
     Args:
@@ -128,7 +137,9 @@ def render_anchor(renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.T
     rays_cam = camera_rays(K_anchor, h, w)
     origins, directions = world_rays(pose, rays_cam)
     rays_cam = rays_cam.reshape(batch, -1, 3)
-    hits_per_layer = [renderer.cast(origins, directions)] if layers == 1 else _peel(renderer, origins, directions, layers)
+    hits_per_layer = (
+        [renderer.cast(origins, directions)] if layers == 1 else _peel(renderer, origins, directions, layers)
+    )
     maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
     for hits in hits_per_layer:
         shaded = renderer.shade_hits(hits, origins, directions, pixel_angle(K_anchor), geometry=False)

@@ -3,6 +3,7 @@
 All cameras of a call are cast in one batch against one ``RaycastingScene`` built per scene.
 Values are exact and bit-identical across runs; nothing here carries a gradient.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
@@ -81,13 +82,15 @@ def _raycasting_scene(vertices: np.ndarray, faces: np.ndarray) -> o3d.t.geometry
     are the rows of ``faces``."""
     raycasting_scene = o3d.t.geometry.RaycastingScene()
     if len(faces):
-        raycasting_scene.add_triangles(o3d.core.Tensor(vertices.astype(np.float32)),
-                                       o3d.core.Tensor(faces.astype(np.uint32)))
+        raycasting_scene.add_triangles(
+            o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32))
+        )
     return raycasting_scene
 
 
-def _cast(raycasting_scene: o3d.t.geometry.RaycastingScene, origins: np.ndarray,
-          directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _cast(
+    raycasting_scene: o3d.t.geometry.RaycastingScene, origins: np.ndarray, directions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """First hits of rays (N, 3): t (inf on a miss), triangle id (-1 on a miss) and barycentrics."""
     result = raycasting_scene.cast_rays(_open3d_rays(origins, directions))
     # Open3D's ids are uint32, 2**32 - 1 on a miss: read as int32, that is -1 (and scenes have far
@@ -126,8 +129,11 @@ class ExactRenderer:
             self._masked_scene = _raycasting_scene(scene.vertices, scene.faces[self._masked_faces])
         # shading reads these per hit: torch copies made once
         self._pyramids = {i: mip_pyramid(m.texture) for i, m in enumerate(scene.materials) if m.texture is not None}
-        self._opacity = {i: torch.from_numpy(np.ascontiguousarray(m.opacity[:, :, None], np.float32))
-                         for i, m in enumerate(scene.materials) if m.opacity is not None}
+        self._opacity = {
+            i: torch.from_numpy(np.ascontiguousarray(m.opacity[:, :, None], np.float32))
+            for i, m in enumerate(scene.materials)
+            if m.opacity is not None
+        }
         self._uv_density = torch.from_numpy(uv_density(scene).astype(np.float32))
         self._uvs = torch.from_numpy(scene.uvs.astype(np.float64))
         self._normals = torch.from_numpy(scene.normals.astype(np.float32))
@@ -157,8 +163,9 @@ class ExactRenderer:
         first opaque texel among the hits on alpha-masked triangles."""
         t, local, bary = _cast(self._opaque_scene, origins, directions)
         ids = np.where(local >= 0, self._opaque_faces[np.maximum(local, 0)], -1)
-        ray_ids, t_masked, ids_masked, bary_masked = self._list_opaque(self._masked_scene, self._masked_faces,
-                                                                       origins, directions)
+        ray_ids, t_masked, ids_masked, bary_masked = self._list_opaque(
+            self._masked_scene, self._masked_faces, origins, directions
+        )
         first = np.r_[True, ray_ids[1:] != ray_ids[:-1]] if len(ray_ids) else np.zeros(0, bool)
         nearer = first & (t_masked < t[ray_ids])
         rays = ray_ids[nearer]
@@ -170,8 +177,13 @@ class ExactRenderer:
         parameter t (M,), triangle id (M,) and barycentrics (M, 2)."""
         return self._list_opaque(self.raycasting_scene, None, origins, directions)
 
-    def _list_opaque(self, raycasting_scene: o3d.t.geometry.RaycastingScene, faces: np.ndarray | None,
-                     origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, ...]:
+    def _list_opaque(
+        self,
+        raycasting_scene: o3d.t.geometry.RaycastingScene,
+        faces: np.ndarray | None,
+        origins: np.ndarray,
+        directions: np.ndarray,
+    ) -> tuple[np.ndarray, ...]:
         """:meth:`intersections` in ``raycasting_scene``, whose triangle i is the scene's ``faces[i]``
         (or i when ``faces`` is None)."""
         result = raycasting_scene.list_intersections(_open3d_rays(origins, directions))
@@ -202,8 +214,10 @@ class ExactRenderer:
     def back_facing(self, hits: RayHits, directions: np.ndarray) -> np.ndarray:
         """(N,) True where a ray (directions (..., 3), N in all) hit the back of a triangle; False on misses."""
         # a copy: the directions may be a read-only broadcast view
-        facing = self._facing(torch.from_numpy(np.maximum(hits.triangle_ids, 0)),
-                              torch.tensor(directions.reshape(-1, 3), dtype=torch.float64))
+        facing = self._facing(
+            torch.from_numpy(np.maximum(hits.triangle_ids, 0)),
+            torch.tensor(directions.reshape(-1, 3), dtype=torch.float64),
+        )
         return hits.hit & (facing > 0).numpy()
 
     def _facing(self, triangle_ids: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
@@ -217,11 +231,21 @@ class ExactRenderer:
         the attributes' dtype."""
         bary = bary.to(per_corner.dtype)
         corners = per_corner.flatten(1).index_select(0, triangle_ids).reshape(-1, *per_corner.shape[1:])
-        return (corners[:, 0] * (1.0 - bary[:, 0:1] - bary[:, 1:2]) + corners[:, 1] * bary[:, 0:1]
-                + corners[:, 2] * bary[:, 1:2])
+        return (
+            corners[:, 0] * (1.0 - bary[:, 0:1] - bary[:, 1:2])
+            + corners[:, 1] * bary[:, 0:1]
+            + corners[:, 2] * bary[:, 1:2]
+        )
 
-    def shade_hits(self, hits: RayHits, origins: np.ndarray, directions: np.ndarray,
-                   pixel_angle: float, colour: bool = True, geometry: bool = True) -> dict[str, np.ndarray]:
+    def shade_hits(
+        self,
+        hits: RayHits,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        pixel_angle: float,
+        colour: bool = True,
+        geometry: bool = True,
+    ) -> dict[str, np.ndarray]:
         """Shade hits; ``pixel_angle`` (radians per sample) selects the texture mip level.
 
         Returns "rgb" (N, 3) float32 and, with ``geometry``, the masked "points", "normals" (N, 3)
@@ -252,12 +276,20 @@ class ExactRenderer:
             rgb = torch.where(hit[:, None], shade(self.shading, self._lights, points, normals, base), background)
         maps = {"rgb": np.ascontiguousarray(rgb.numpy())}
         if geometry:
-            maps.update(points=torch.where(hit[:, None], points, 0.0).numpy(),
-                        normals=torch.where(hit[:, None], normals, 0.0).numpy(), back_face=back.numpy())
+            maps.update(
+                points=torch.where(hit[:, None], points, 0.0).numpy(),
+                normals=torch.where(hit[:, None], normals, 0.0).numpy(),
+                back_face=back.numpy(),
+            )
         return maps
 
     def render(
-        self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int = 1,
+        self,
+        world_T_cam: torch.Tensor,
+        K: torch.Tensor,
+        height: int,
+        width: int,
+        supersample: int = 1,
         sub_rgb: torch.Tensor | None = None,
     ) -> RenderOutput:
         """Render B cameras in one cast.
@@ -281,8 +313,9 @@ class ExactRenderer:
         maps = self.shade_hits(hits, origins, directions, angle, colour=s == 1)
 
         def image(values: np.ndarray, channels: int) -> torch.Tensor:
-            return torch.from_numpy(np.ascontiguousarray(
-                values.reshape(batch, height, width, channels).transpose(0, 3, 1, 2)))
+            return torch.from_numpy(
+                np.ascontiguousarray(values.reshape(batch, height, width, channels).transpose(0, 3, 1, 2))
+            )
 
         if sub_rgb is not None:
             if s == 1:
@@ -290,8 +323,9 @@ class ExactRenderer:
             check_shape(sub_rgb, f"B 3 {s * height} {s * width}", "sub_rgb", {"B": batch})
         elif s > 1:
             sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s)
-            sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s,
-                                  geometry=False)["rgb"]
+            sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s, geometry=False)[
+                "rgb"
+            ]
             sub_rgb = torch.from_numpy(sub).reshape(batch, s * height, s * width, 3).permute(0, 3, 1, 2)
         rgb = F.avg_pool2d(sub_rgb, s).contiguous() if s > 1 else image(maps["rgb"], 3)
 

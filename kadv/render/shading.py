@@ -6,6 +6,7 @@ differentiable reprojection relies on it.
 The per-sample arithmetic runs in torch, float32 for colours, normals and lights (8-bit textures
 need no more) and float64 for texture coordinates, whose tiling can reach hundreds of repeats.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -17,8 +18,16 @@ from torch.nn import functional as F
 from kadv.geometry.vector import dot
 from kadv.scenes.scene import Scene
 
-__all__ = ["Shading", "albedo", "mip_pyramid", "sample_texture", "sample_texture_filtered", "scene_lights", "shade",
-           "uv_density"]
+__all__ = [
+    "Shading",
+    "albedo",
+    "mip_pyramid",
+    "sample_texture",
+    "sample_texture_filtered",
+    "scene_lights",
+    "shade",
+    "uv_density",
+]
 
 
 @dataclass(frozen=True)
@@ -106,8 +115,14 @@ def uv_density(scene: Scene) -> np.ndarray:
     return np.sqrt(uv_area / np.maximum(world, 1e-20))
 
 
-def albedo(scene: Scene, triangle_ids: torch.Tensor, uv: torch.Tensor, footprint: torch.Tensor,
-           pyramids: dict[int, list[torch.Tensor]], density: torch.Tensor) -> torch.Tensor:
+def albedo(
+    scene: Scene,
+    triangle_ids: torch.Tensor,
+    uv: torch.Tensor,
+    footprint: torch.Tensor,
+    pyramids: dict[int, list[torch.Tensor]],
+    density: torch.Tensor,
+) -> torch.Tensor:
     """Base colour (N, 3) float32 of surface points given their triangles (N,) and texture coordinates (N, 2).
 
     Textures are prefiltered (mip-mapped, from ``pyramids`` per material index) to each sample's
@@ -126,7 +141,7 @@ def albedo(scene: Scene, triangle_ids: torch.Tensor, uv: torch.Tensor, footprint
     for index, count in enumerate(counts):
         if not count:
             continue
-        selected = order[start:start + count]
+        selected = order[start : start + count]
         start += count
         material = scene.materials[index]
         base = torch.as_tensor(material.base_color, dtype=torch.float32).expand(count, 3)
@@ -144,8 +159,9 @@ def albedo(scene: Scene, triangle_ids: torch.Tensor, uv: torch.Tensor, footprint
     return colour
 
 
-def shade(shading: Shading, lights: torch.Tensor, points: torch.Tensor, normals: torch.Tensor,
-          base_colour: torch.Tensor) -> torch.Tensor:
+def shade(
+    shading: Shading, lights: torch.Tensor, points: torch.Tensor, normals: torch.Tensor, base_colour: torch.Tensor
+) -> torch.Tensor:
     """Shaded RGB (N, 3) in [0, 1] of surface points (N, 3) with unit normals (N, 3) facing the
     viewer side, under ``lights`` (L, 3)."""
     to_lights = F.normalize(lights[None, :, :] - points[:, None, :], dim=-1, eps=1e-9)

@@ -10,6 +10,7 @@ by |t - 1/2|, so d(image)/dt = value(a) - value(b): the derivative of the pixels
 Horizontal pairs serve edges steeper than 45 degrees and vertical pairs the others, so that each
 edge is counted once.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
@@ -27,9 +28,9 @@ from kadv.render.straight_through import straight_through
 __all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term"]
 
 _BISECTION_STEPS = 6
-_MIN_JUMP = 0.005   # relative depth difference below which neighbours are one surface
+_MIN_JUMP = 0.005  # relative depth difference below which neighbours are one surface
 _CONTINUITY = 0.01  # relative depth gap at the located crossing that makes it an occlusion
-_FG_SHARE = 0.5     # share of the way from the foreground's plane to the background's still foreground
+_FG_SHARE = 0.5  # share of the way from the foreground's plane to the background's still foreground
 _FG_MAX_RATIO = 1.5  # ... and at most this ratio of the foreground plane's depth
 _MAX_CROSSING_ERROR = 0.25  # the chosen edge's exact crossing within a quarter segment of the bisection's
 
@@ -91,8 +92,14 @@ _MIN_PROJECTED_Z = 1e-9
 _ENDPOINT_SLACK = 1e-6
 
 
-def edge_crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: torch.Tensor, K: torch.Tensor,
-                   uv_a: torch.Tensor, uv_b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def edge_crossings(
+    vertices_cam: torch.Tensor,
+    rays_a: torch.Tensor,
+    rays_b: torch.Tensor,
+    K: torch.Tensor,
+    uv_a: torch.Tensor,
+    uv_b: torch.Tensor,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Crossing t (N,) of edges (N, 2, 3) (camera frame) with the segment a->b, and whether it is genuine."""
     m = torch.linalg.cross(rays_a, rays_b)
     v0, v1 = vertices_cam[:, 0], vertices_cam[:, 1]
@@ -103,8 +110,12 @@ def edge_crossings(vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: tor
     uv = projected[:, :2] / projected[:, 2:3].clamp_min(_MIN_PROJECTED_Z)
     direction = uv_b - uv_a
     t = ((uv - uv_a) * direction).sum(-1) / (direction * direction).sum(-1)
-    genuine = ((denominator.abs() > _PARALLEL) & (s >= -_ENDPOINT_SLACK) & (s <= 1 + _ENDPOINT_SLACK)
-               & (point[:, 2] > _ENDPOINT_SLACK))
+    genuine = (
+        (denominator.abs() > _PARALLEL)
+        & (s >= -_ENDPOINT_SLACK)
+        & (s <= 1 + _ENDPOINT_SLACK)
+        & (point[:, 2] > _ENDPOINT_SLACK)
+    )
     return t, genuine
 
 
@@ -134,8 +145,9 @@ class _Candidates:
         return _Candidates(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(_Candidates)))
 
 
-def _candidate_pairs(renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, pose: np.ndarray, K_inv: np.ndarray,
-                     horizontal: bool) -> _Candidates:
+def _candidate_pairs(
+    renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, pose: np.ndarray, K_inv: np.ndarray, horizontal: bool
+) -> _Candidates:
     """Neighbours (x, x+1) or (y, y+1) on different triangles whose depths (B, H, W) jump."""
     batch, _, width = z.shape
     za, zb = (z[:, :, :-1], z[:, :, 1:]) if horizontal else (z[:, :-1, :], z[:, 1:, :])
@@ -148,8 +160,20 @@ def _candidate_pairs(renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, po
     uv_a = np.c_[xi + 0.5, yi + 0.5]
     uv_b = uv_a + ([1.0, 0.0] if horizontal else [0.0, 1.0])
     rays_a, rays_b, R = _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b), pose[bi, :3, :3]
-    pairs = _Candidates(bi, a, a + (1 if horizontal else width), np.full(len(bi), horizontal), uv_a, uv_b, rays_a, rays_b,
-                        mat_vec(R, rays_a), mat_vec(R, rays_b), R, pose[bi, :3, 3])
+    pairs = _Candidates(
+        bi,
+        a,
+        a + (1 if horizontal else width),
+        np.full(len(bi), horizontal),
+        uv_a,
+        uv_b,
+        rays_a,
+        rays_b,
+        mat_vec(R, rays_a),
+        mat_vec(R, rays_b),
+        R,
+        pose[bi, :3, 3],
+    )
     flat_ids, flat_z = ids.reshape(batch, -1), z.reshape(batch, -1)
     # Neighbours on one continuous surface (a grazing floor's triangles) are no edge: the plane of
     # either one's triangle, extended to the other's ray, meets it at its depth. Dropping them here
@@ -162,8 +186,9 @@ def _candidate_pairs(renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, po
     return pairs.subset(~continuous)
 
 
-def _bisect(renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray,
-            flat_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _bisect(
+    renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray, flat_ids: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bisect each segment a -> b with real rays for where the foreground ends.
 
     Returns the occluding triangle (N,), whether the depths on the two sides of the final bracket
@@ -179,7 +204,10 @@ def _bisect(renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray,
     # A ray through a point of the segment is affine in the point's position along it, and so are
     # its dot products with the two planes: everything but the cast is computed once.
     world_a, world_step = pairs.world_a, pairs.world_b - pairs.world_a
-    (fg_normal, fg_offset), (bg_normal, bg_offset) = _planes(renderer, fg_id, pairs.c), _planes(renderer, bg_id, pairs.c)
+    (fg_normal, fg_offset), (bg_normal, bg_offset) = (
+        _planes(renderer, fg_id, pairs.c),
+        _planes(renderer, bg_id, pairs.c),
+    )
     fg_a, fg_step = dot(fg_normal, world_a), dot(fg_normal, world_step)
     bg_a, bg_step = dot(bg_normal, world_a), dot(bg_normal, world_step)
     for _ in range(_BISECTION_STEPS):
@@ -193,18 +221,25 @@ def _bisect(renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray,
             limit = z_fg * np.minimum(1.0 + _FG_SHARE * (z_bg / z_fg - 1.0), _FG_MAX_RATIO)
         mid_z = np.where(hits.hit, hits.t, np.inf)
         same_as_a = (hits.hit & (mid_z < limit)) == a_is_fg
-        lo, id_lo, z_lo = (np.where(same_as_a, mid, lo), np.where(same_as_a, hits.triangle_ids, id_lo),
-                           np.where(same_as_a, mid_z, z_lo))
-        hi, id_hi, z_hi = (np.where(same_as_a, hi, mid), np.where(same_as_a, id_hi, hits.triangle_ids),
-                           np.where(same_as_a, z_hi, mid_z))
+        lo, id_lo, z_lo = (
+            np.where(same_as_a, mid, lo),
+            np.where(same_as_a, hits.triangle_ids, id_lo),
+            np.where(same_as_a, mid_z, z_lo),
+        )
+        hi, id_hi, z_hi = (
+            np.where(same_as_a, hi, mid),
+            np.where(same_as_a, id_hi, hits.triangle_ids),
+            np.where(same_as_a, z_hi, mid_z),
+        )
     occluder = np.where(a_is_fg, id_lo, id_hi)
     near_z, far_z = np.minimum(z_lo, z_hi), np.maximum(z_lo, z_hi)
     occlusion = (occluder >= 0) & np.isfinite(near_z) & ((far_z - near_z) > _CONTINUITY * near_z)
     return occluder, occlusion, 0.5 * (lo + hi)
 
 
-def _occluder_edge(renderer: ExactRenderer, pairs: _Candidates, occluder: np.ndarray, t_star: np.ndarray,
-                   K: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _occluder_edge(
+    renderer: ExactRenderer, pairs: _Candidates, occluder: np.ndarray, t_star: np.ndarray, K: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which of the occluder's three edges crosses the segment at ``t_star``.
 
     Returns its vertex indices (N, 2), how far (in segment units) its exact crossing lies from
@@ -215,8 +250,14 @@ def _occluder_edge(renderer: ExactRenderer, pairs: _Candidates, occluder: np.nda
     edges = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1)  # (N, 3, 2)
     vertices_cam = mat_vec(R.swapaxes(1, 2), renderer.scene.vertices[edges] - c[:, None, None])
     three = lambda array: torch.from_numpy(np.repeat(array, 3, axis=0))
-    t_all, ok_all = edge_crossings(torch.from_numpy(vertices_cam.reshape(-1, 2, 3)), three(pairs.rays_a),
-                                   three(pairs.rays_b), three(K[bi]), three(pairs.uv_a), three(pairs.uv_b))
+    t_all, ok_all = edge_crossings(
+        torch.from_numpy(vertices_cam.reshape(-1, 2, 3)),
+        three(pairs.rays_a),
+        three(pairs.rays_b),
+        three(K[bi]),
+        three(pairs.uv_a),
+        three(pairs.uv_b),
+    )
     n = len(bi)
     error = np.where(ok_all.numpy(), np.abs(t_all.numpy() - np.repeat(t_star, 3)), np.inf).reshape(n, 3)
     best = error.argmin(axis=1)
@@ -227,7 +268,9 @@ def _occluder_edge(renderer: ExactRenderer, pairs: _Candidates, occluder: np.nda
     return chosen, error[np.arange(n), best], np.abs(direction_cam[:, 1]) >= np.abs(direction_cam[:, 0])
 
 
-def find_edge_pairs(renderer: ExactRenderer, exact: RenderOutput, world_T_cam: torch.Tensor, K: torch.Tensor) -> EdgePairs:
+def find_edge_pairs(
+    renderer: ExactRenderer, exact: RenderOutput, world_T_cam: torch.Tensor, K: torch.Tensor
+) -> EdgePairs:
     """Locate occlusion-edge pairs and their occluding triangle edges in exact renders (no gradient).
 
     Three steps: candidate neighbours across a depth jump in each direction, a bisection with real
@@ -241,20 +284,23 @@ def find_edge_pairs(renderer: ExactRenderer, exact: RenderOutput, world_T_cam: t
     K_inv = np.linalg.inv(K)
     z = np.where(depth > 0, depth, np.inf)
     # both directions' candidates in one bisection: its casts are batched
-    pairs = _Candidates.concatenate([_candidate_pairs(renderer, z, ids, pose, K_inv, horizontal)
-                                     for horizontal in (True, False)])
+    pairs = _Candidates.concatenate(
+        [_candidate_pairs(renderer, z, ids, pose, K_inv, horizontal) for horizontal in (True, False)]
+    )
     if not len(pairs.batch):
         empty = np.zeros(0, np.int64)
         return EdgePairs(empty, empty, empty, np.zeros(0, bool), np.zeros((0, 2), np.int64), np.zeros(0))
     occluder, occlusion, t_star = _bisect(renderer, pairs, z.reshape(batch, -1), ids.reshape(batch, -1))
     chosen, error, steep = _occluder_edge(renderer, pairs, occluder, t_star, K)
     keep = occlusion & (error < _MAX_CROSSING_ERROR) & (steep == pairs.horizontal)
-    return EdgePairs(pairs.batch[keep], pairs.a[keep], pairs.b[keep], pairs.horizontal[keep], chosen[keep],
-                     t_star[keep])
+    return EdgePairs(
+        pairs.batch[keep], pairs.a[keep], pairs.b[keep], pairs.horizontal[keep], chosen[keep], t_star[keep]
+    )
 
 
-def silhouette_term(renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torch.Tensor, K: torch.Tensor,
-                    values: torch.Tensor) -> torch.Tensor:
+def silhouette_term(
+    renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torch.Tensor, K: torch.Tensor, values: torch.Tensor
+) -> torch.Tensor:
     """Zero-valued (B, C, H, W) tensor whose gradient is the edge-motion derivative of ``values``.
 
     Args:
@@ -269,13 +315,14 @@ def silhouette_term(renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torc
     device = values.device
     term = torch.zeros(batch * height * width, channels, dtype=torch.float64, device=device)
     if len(pairs.batch) == 0:
-        return (term.view(batch, height, width, channels).permute(0, 3, 1, 2).to(values.dtype)
-                + (0 * world_T_cam.sum()).to(device))
+        return term.view(batch, height, width, channels).permute(0, 3, 1, 2).to(values.dtype) + (
+            0 * world_T_cam.sum()
+        ).to(device)
     K = batched_intrinsics(K, batch)
     bi = torch.from_numpy(pairs.batch)
     R, c = world_T_cam[bi, :3, :3].double(), world_T_cam[bi, :3, 3].double()
     vertices = torch.from_numpy(renderer.scene.vertices[pairs.edge])  # (N, 2, 3) world
-    vertices_cam = ((vertices - c[:, None]) @ R)  # R^T (v - c), row-vector form
+    vertices_cam = (vertices - c[:, None]) @ R  # R^T (v - c), row-vector form
     ya, xa = np.divmod(pairs.a, width)
     uv_a = torch.from_numpy(np.c_[xa + 0.5, ya + 0.5])
     uv_b = uv_a + torch.from_numpy(np.where(pairs.horizontal[:, None], [[1.0, 0.0]], [[0.0, 1.0]]))

@@ -1,4 +1,5 @@
 """The straight-through idiom: a value from one computation with the gradient of another."""
+
 from __future__ import annotations
 
 import torch

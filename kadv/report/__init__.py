@@ -1,4 +1,5 @@
 """Run artefacts: images, the run directory and its summary, sweep tables and the HTML report."""
+
 from __future__ import annotations
 
 from kadv.report.build import write_report

@@ -1,4 +1,5 @@
 """``kadv-report``'s work: every table, the anytime curves and ``report.html`` for a set of runs."""
+
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -14,9 +15,13 @@ from kadv.report.transfer import transfer_tables
 __all__ = ["write_report"]
 
 
-def write_report(paths: list[str | Path], out: str | Path | None = None,
-                 renderer_of: Callable[[RunRecord], ExactRenderer] | None = None,
-                 model_of: Callable[[RunRecord], DepthModel] | None = None, progress: bool = True) -> list[Path]:
+def write_report(
+    paths: list[str | Path],
+    out: str | Path | None = None,
+    renderer_of: Callable[[RunRecord], ExactRenderer] | None = None,
+    model_of: Callable[[RunRecord], DepthModel] | None = None,
+    progress: bool = True,
+) -> list[Path]:
     """Write Tables 2 and 3 per method, the method table, the transfer matrix, ``curves.png`` and
     ``report.html`` for the complete runs under ``paths``; returns the files written.
 

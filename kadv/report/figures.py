@@ -1,4 +1,5 @@
 """Figures of an attack run: four-panel views, L_depth curves, the scene map, the trajectory video."""
+
 from __future__ import annotations
 
 import math
@@ -34,8 +35,9 @@ def colourise(values: np.ndarray, mask: np.ndarray, low: float, high: float) -> 
     return (rgb * 255 + 0.5).astype(np.uint8)
 
 
-def save_four_panel(path: str | Path, rgb: np.ndarray, depth: np.ndarray, prediction: np.ndarray, mask: np.ndarray,
-                    title: str) -> Path:
+def save_four_panel(
+    path: str | Path, rgb: np.ndarray, depth: np.ndarray, prediction: np.ndarray, mask: np.ndarray, title: str
+) -> Path:
     """Image | ground-truth depth | aligned prediction | relative error, as one PNG.
 
     Args:
@@ -78,20 +80,44 @@ def save_curves(path: str | Path, results: list[InitViewResult]) -> Path:
         axis.scatter([order[id(r)] for r in valid], [r.l_depth for r in valid], s=6, alpha=0.4, label="evaluated views")
         invalid = [r for r in result.records if not r.valid]
         if invalid:
-            axis.scatter([order[id(r)] for r in invalid], [r.l_depth for r in invalid], marker="x", s=10, color="grey",
-                         label="invalid or uninformative")
+            axis.scatter(
+                [order[id(r)] for r in invalid],
+                [r.l_depth for r in invalid],
+                marker="x",
+                s=10,
+                color="grey",
+                label="invalid or uninformative",
+            )
         curve = best_so_far(result.records)
-        axis.step([c[0] for c in curve] + [len(result.records)], [c[2] for c in curve] + [curve[-1][2]], where="post",
-                  color="k", lw=1.5, label="best so far")
-        axis.plot([order[id(r)] for r in result.path], [r.l_depth for r in result.path], color="tab:orange", lw=1.0,
-                  label="path")
+        axis.step(
+            [c[0] for c in curve] + [len(result.records)],
+            [c[2] for c in curve] + [curve[-1][2]],
+            where="post",
+            color="k",
+            lw=1.5,
+            label="best so far",
+        )
+        axis.plot(
+            [order[id(r)] for r in result.path],
+            [r.l_depth for r in result.path],
+            color="tab:orange",
+            lw=1.0,
+            label="path",
+        )
         axis.axhline(result.init_record.l_depth, color="k", ls="--", lw=1, label="init view")
-        axis.scatter([order[id(r)] for r in result.top], [r.l_depth for r in result.top], marker="*", s=120,
-                     color="red", zorder=5, label="adversarial views")
+        axis.scatter(
+            [order[id(r)] for r in result.top],
+            [r.l_depth for r in result.top],
+            marker="*",
+            s=120,
+            color="red",
+            zorder=5,
+            label="adversarial views",
+        )
         axis.set_title(f"{result.init.name}")
         axis.set_xlabel("evaluated views")
         axis.set_ylabel("L_depth")
-    for axis in list(axes.flat)[len(results):]:
+    for axis in list(axes.flat)[len(results) :]:
         axis.set_axis_off()
     # one legend under the panels: inside them it hid the best views, which sit top right
     legend = {label: handle for axis in axes.flat for handle, label in zip(*axis.get_legend_handles_labels())}
@@ -112,8 +138,12 @@ def _plan_polygons(scene: Scene, cut_height: float) -> np.ndarray:
 
 def _arrow(axis: plt.Axes, pose: np.ndarray, length: float, **style) -> None:
     forward = pose[:3, 2]
-    axis.annotate("", xy=(pose[0, 3] + length * forward[0], pose[2, 3] + length * forward[2]),
-                  xytext=(pose[0, 3], pose[2, 3]), arrowprops={"arrowstyle": "->", **style})
+    axis.annotate(
+        "",
+        xy=(pose[0, 3] + length * forward[0], pose[2, 3] + length * forward[2]),
+        xytext=(pose[0, 3], pose[2, 3]),
+        arrowprops={"arrowstyle": "->", **style},
+    )
 
 
 def save_map(path: str | Path, scene: Scene, results: list[InitViewResult]) -> Path:
@@ -150,7 +180,7 @@ def save_map(path: str | Path, scene: Scene, results: list[InitViewResult]) -> P
         axis.set_title(result.init.name)
         axis.legend(fontsize=7, loc="upper right")
         figure.colorbar(points, ax=axis, fraction=0.046, pad=0.02, label="L_depth")
-    for axis in list(axes.flat)[len(results):]:
+    for axis in list(axes.flat)[len(results) :]:
         axis.set_axis_off()
     figure.tight_layout()
     return save_figure(Path(path), figure)

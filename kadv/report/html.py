@@ -1,4 +1,5 @@
 """The sweep report: tables, curves, gallery and maps in one self-contained HTML page (Jinja2)."""
+
 from __future__ import annotations
 
 import base64
@@ -65,20 +66,35 @@ def _gallery(runs: list[RunRecord], out_dir: Path) -> list[dict]:
                 key = (run.model, run.scene)
                 if key not in best or top.l_depth > best[key][0]:
                     best[key] = (top.l_depth, run, top)
-    return [{"model": model, "scene": scene, "method": run.method, "l_depth": l_depth, "delta1": top.delta1,
-             "image": _data_uri(run.path / top.png), "map": _data_uri(run.path / "map.png"),
-             "href": Path(os.path.relpath(run.path, out_dir)).as_posix() + "/"}
-            for (model, scene), (l_depth, run, top) in sorted(best.items())]
+    return [
+        {
+            "model": model,
+            "scene": scene,
+            "method": run.method,
+            "l_depth": l_depth,
+            "delta1": top.delta1,
+            "image": _data_uri(run.path / top.png),
+            "map": _data_uri(run.path / "map.png"),
+            "href": Path(os.path.relpath(run.path, out_dir)).as_posix() + "/",
+        }
+        for (model, scene), (l_depth, run, top) in sorted(best.items())
+    ]
 
 
 def write_html(path: Path, tables: list[Table], curves: Path, runs: list[RunRecord]) -> Path:
     """Render ``report.html``: every table (sortable by clicking a header), the curves, the gallery of
     the worst adversarial views linking to their run folders, and the scene maps; images embedded."""
-    environment = jinja2.Environment(loader=jinja2.PackageLoader("kadv.report", "templates"),
-                                     autoescape=jinja2.select_autoescape(["html", "j2"]))
+    environment = jinja2.Environment(
+        loader=jinja2.PackageLoader("kadv.report", "templates"), autoescape=jinja2.select_autoescape(["html", "j2"])
+    )
     html = environment.get_template("report.html.j2").render(
-        tables=tables, curves=_data_uri(curves), gallery=_gallery(runs, path.parent),
-        runs=len(runs), models=sorted({r.model for r in runs}), scenes=sorted({r.scene for r in runs}),
+        tables=tables,
+        curves=_data_uri(curves),
+        gallery=_gallery(runs, path.parent),
+        runs=len(runs),
+        models=sorted({r.model for r in runs}),
+        scenes=sorted({r.scene for r in runs}),
         methods=sorted({r.method for r in runs}),
-        number=lambda v: f"{v:.4f}" if isinstance(v, float) else v)
+        number=lambda v: f"{v:.4f}" if isinstance(v, float) else v,
+    )
     return atomic_write(path, lambda tmp: tmp.write_text(html))

@@ -1,4 +1,5 @@
 """PNG artefacts, written atomically so an interrupted run never leaves a truncated file."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -33,8 +34,9 @@ def save_rgb_png(path: str | Path, rgb: torch.Tensor) -> Path:
     return atomic_write(path, lambda tmp: Image.fromarray(array).save(tmp, format="PNG"))
 
 
-def save_depth_png(path: str | Path, depth: torch.Tensor, mask: torch.Tensor | None = None,
-                   label: str = "depth [m]") -> Path:
+def save_depth_png(
+    path: str | Path, depth: torch.Tensor, mask: torch.Tensor | None = None, label: str = "depth [m]"
+) -> Path:
     """Save a depth map (1, H, W) colour-mapped with a colour bar; invalid pixels are grey.
 
     The colour range spans the 1st to 99th percentile of valid depths; values beyond take the end colours.

@@ -4,6 +4,7 @@ Every file is written atomically; ``summary.json`` is written last, so a run dir
 is complete. Each init view's result is saved under ``partial/`` as soon as it is done, so an
 interrupted run resumes without recomputing (or rewriting) it.
 """
+
 from __future__ import annotations
 
 import csv
@@ -24,7 +25,15 @@ from kadv.io import atomic_write
 from kadv.losses import aligned_depth
 from kadv.penalties.validity import UNINFORMATIVE
 from kadv.report.figures import annotate, colourise, save_curves, save_four_panel, save_map, save_video
-from kadv.report.summary import AnytimePoint, InitViewSummary, RunInfo, RunSummary, ViewMetrics, read_partial, write_partial
+from kadv.report.summary import (
+    AnytimePoint,
+    InitViewSummary,
+    RunInfo,
+    RunSummary,
+    ViewMetrics,
+    read_partial,
+    write_partial,
+)
 
 __all__ = ["SUMMARY", "is_complete", "load_partial_results", "save_partial_result", "trajectory_rows", "write_run"]
 
@@ -58,8 +67,12 @@ def load_partial_results(run_dir: str | Path) -> dict[int, InitViewResult]:
         except ValueError as error:
             aside = path.with_name(path.name + ".unreadable")
             path.replace(aside)
-            log.warning("%s cannot be read (%s): moved aside to %s; its init view is computed again", path,
-                        str(error).removeprefix(f"{path}: "), aside.name)
+            log.warning(
+                "%s cannot be read (%s): moved aside to %s; its init view is computed again",
+                path,
+                str(error).removeprefix(f"{path}: "),
+                aside.name,
+            )
     return results
 
 
@@ -74,8 +87,13 @@ def trajectory_rows(result: AttackResult) -> list[dict]:
             row.update({f"c_{a}": v for a, v in zip("xyz", r.centre)})
             row.update({f"omega_{a}": v for a, v in zip("xyz", r.params[:3])})
             row.update({f"delta_{a}": v for a, v in zip("xyz", r.params[3:])})
-            row.update({f.name: getattr(r, f.name) for f in fields(r)
-                        if f.name not in ("step", "restart", "params", "theta", "centre", "seconds")})
+            row.update(
+                {
+                    f.name: getattr(r, f.name)
+                    for f in fields(r)
+                    if f.name not in ("step", "restart", "params", "theta", "centre", "seconds")
+                }
+            )
             rows.append(row)
     return rows
 
@@ -102,14 +120,22 @@ class _ViewRenderer:
             out = self.objective.renderer.render(poses, K, self.height, self.width, supersample=self.supersample)
             prediction = self.objective.model(out.rgb, K)
             aligned = aligned_depth(prediction.double(), out.depth.double(), out.mask, self.objective.model.output_kind)
-        return {"rgb": out.rgb.permute(0, 2, 3, 1).numpy(), "depth": out.depth[:, 0].numpy(),
-                "prediction": prediction[:, 0].numpy(), "aligned": aligned[:, 0].float().numpy(),
-                "mask": out.mask[:, 0].numpy(), "world_T_cam": poses.numpy(), "K": K.numpy()}
+        return {
+            "rgb": out.rgb.permute(0, 2, 3, 1).numpy(),
+            "depth": out.depth[:, 0].numpy(),
+            "prediction": prediction[:, 0].numpy(),
+            "aligned": aligned[:, 0].float().numpy(),
+            "mask": out.mask[:, 0].numpy(),
+            "world_T_cam": poses.numpy(),
+            "K": K.numpy(),
+        }
 
 
 def _title(label: str, record: ViewRecord) -> str:
-    return (f"{label}: L_depth {record.l_depth:.4f}, delta1 {record.delta1:.3f}, AbsRel {record.abs_rel:.3f} "
-            f"(step {record.step}, restart {record.restart})")
+    return (
+        f"{label}: L_depth {record.l_depth:.4f}, delta1 {record.delta1:.3f}, AbsRel {record.abs_rel:.3f} "
+        f"(step {record.step}, restart {record.restart})"
+    )
 
 
 def _save_views(views_dir: Path, index: int, view: InitViewResult, render: _ViewRenderer) -> list[str]:
@@ -118,8 +144,14 @@ def _save_views(views_dir: Path, index: int, view: InitViewResult, render: _View
     maps = render(view.init, records)
     for b, (name, record) in enumerate(zip(names, records)):
         label = "init view" if b == 0 else f"adversarial view {b}"
-        save_four_panel(views_dir / f"{name}.png", maps["rgb"][b], maps["depth"][b], maps["aligned"][b],
-                        maps["mask"][b], _title(label, record))
+        save_four_panel(
+            views_dir / f"{name}.png",
+            maps["rgb"][b],
+            maps["depth"][b],
+            maps["aligned"][b],
+            maps["mask"][b],
+            _title(label, record),
+        )
         arrays = {k: v[b] for k, v in maps.items() if k != "K"} | {"K": maps["K"]}
         atomic_write(views_dir / f"{name}.npz", lambda tmp, a=arrays: np.savez_compressed(str(tmp), **a))
     return [f"views/{name}.png" for name in names]
@@ -131,16 +163,23 @@ def _video_frames(view: InitViewResult, render: _ViewRenderer) -> list[np.ndarra
     path = path[:: max(1, len(path) // _MAX_VIDEO_FRAMES + (len(path) % _MAX_VIDEO_FRAMES > 0))]
     frames = []
     for start in range(0, len(path), 16):
-        chunk = path[start:start + 16]
+        chunk = path[start : start + 16]
         maps = render(view.init, chunk)
         for b, record in enumerate(chunk):
             mask = maps["mask"][b]
             low, high = np.percentile(maps["depth"][b][mask], [1, 99]) if mask.any() else (0.0, 1.0)
             rgb = (np.clip(maps["rgb"][b], 0, 1) * 255 + 0.5).astype(np.uint8)
-            frame = np.concatenate([rgb, colourise(maps["depth"][b], mask, low, high),
-                                    colourise(maps["aligned"][b], mask, low, high)], axis=1)
-            frames.append(annotate(frame, f"step {record.step}  L_depth {record.l_depth:.4f}  "
-                                          f"delta1 {record.delta1:.3f}   image | depth | prediction"))
+            frame = np.concatenate(
+                [rgb, colourise(maps["depth"][b], mask, low, high), colourise(maps["aligned"][b], mask, low, high)],
+                axis=1,
+            )
+            frames.append(
+                annotate(
+                    frame,
+                    f"step {record.step}  L_depth {record.l_depth:.4f}  "
+                    f"delta1 {record.delta1:.3f}   image | depth | prediction",
+                )
+            )
     return frames
 
 
@@ -154,8 +193,9 @@ def _versions() -> dict[str, str]:
     return versions
 
 
-def write_run(run_dir: str | Path, result: AttackResult, objective: Objective, info: RunInfo, supersample: int,
-              video: bool = True) -> RunSummary:
+def write_run(
+    run_dir: str | Path, result: AttackResult, objective: Objective, info: RunInfo, supersample: int, video: bool = True
+) -> RunSummary:
     """Write the run's artefacts and, last, ``summary.json``; returns the summary.
 
     Args:
@@ -169,8 +209,10 @@ def write_run(run_dir: str | Path, result: AttackResult, objective: Objective, i
     run_dir = Path(run_dir)
     render = _ViewRenderer(objective, info.height, info.width, supersample)
     _write_csv(run_dir / "trajectory.csv", trajectory_rows(result))
-    per_view = [_init_view_summary(index, view, _save_views(run_dir / "views", index, view, render))
-                for index, view in enumerate(result.views)]
+    per_view = [
+        _init_view_summary(index, view, _save_views(run_dir / "views", index, view, render))
+        for index, view in enumerate(result.views)
+    ]
     save_curves(run_dir / "loss.png", result.views)
     save_map(run_dir / "map.png", objective.renderer.scene, result.views)
     if video:
@@ -178,12 +220,16 @@ def write_run(run_dir: str | Path, result: AttackResult, objective: Objective, i
         save_video(run_dir / "trajectory.mp4", _video_frames(best, render))
     kept = [v for v in per_view if v.adversarial]
     summary = RunSummary(
-        **vars(info), method=result.method,
-        init_l_depth=_mean(v.init.l_depth for v in kept), init_delta1=_mean(v.init.delta1 for v in kept),
+        **vars(info),
+        method=result.method,
+        init_l_depth=_mean(v.init.l_depth for v in kept),
+        init_delta1=_mean(v.init.delta1 for v in kept),
         adversarial_l_depth=_mean(v.adversarial_mean["l_depth"] for v in kept),
         adversarial_delta1=_mean(v.adversarial_mean["delta1"] for v in kept),
         budget=Budget(*(sum(getattr(v.budget, k) for v in per_view) for k in ("forward", "backward", "seconds"))),
-        versions=_versions(), init_views=per_view)
+        versions=_versions(),
+        init_views=per_view,
+    )
     summary.write(run_dir / SUMMARY)
     return summary
 
@@ -195,15 +241,23 @@ def _mean(values) -> float:
 def _init_view_summary(index: int, view: InitViewResult, pictures: list[str]) -> InitViewSummary:
     adversarial = [ViewMetrics.of(r, png) for r, png in zip(view.top, pictures[1:])]
     return InitViewSummary(
-        index=index, name=view.init.name, source=view.init.source, note=view.init.note,
-        fov_x_deg=view.init.fov_x_deg, init_world_T_cam=view.init.world_T_cam.tolist(),
-        init=ViewMetrics.of(view.init_record, pictures[0]), adversarial=adversarial,
-        adversarial_mean={k: _mean(getattr(a, k) for a in adversarial) if adversarial else None
-                          for k in ("l_depth", "delta1", "abs_rel")},
+        index=index,
+        name=view.init.name,
+        source=view.init.source,
+        note=view.init.note,
+        fov_x_deg=view.init.fov_x_deg,
+        init_world_T_cam=view.init.world_T_cam.tolist(),
+        init=ViewMetrics.of(view.init_record, pictures[0]),
+        adversarial=adversarial,
+        adversarial_mean={
+            k: _mean(getattr(a, k) for a in adversarial) if adversarial else None
+            for k in ("l_depth", "delta1", "abs_rel")
+        },
         l_depth_gain=(view.top[0].l_depth - view.init_record.l_depth) if view.top else 0.0,
         anytime=[AnytimePoint(*point) for point in best_so_far(view.records)],
         evaluations=len(view.records),
         invalid_views=sum(not r.valid for r in view.records),
         uninformative_views=sum(r.verdict == UNINFORMATIVE for r in view.records),
         guarded_steps=sum(r.guard_fraction < 1.0 for r in view.records),
-        budget=view.budget)
+        budget=view.budget,
+    )

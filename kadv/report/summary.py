@@ -4,6 +4,7 @@ Both carry :data:`SCHEMA_VERSION`; a file of another version (or none) is refuse
 an error naming it, so a report never reads a field that changed meaning and a resumed run never
 reuses a result of another shape.
 """
+
 from __future__ import annotations
 
 import json
@@ -15,7 +16,13 @@ from kadv.attack.records import Budget
 from kadv.io import write_json
 
 __all__ = [
-    "SCHEMA_VERSION", "AnytimePoint", "InitViewSummary", "RunInfo", "RunSummary", "ViewMetrics", "read_partial",
+    "SCHEMA_VERSION",
+    "AnytimePoint",
+    "InitViewSummary",
+    "RunInfo",
+    "RunSummary",
+    "ViewMetrics",
+    "read_partial",
     "write_partial",
 ]
 
@@ -54,8 +61,18 @@ class ViewMetrics:
 
     @classmethod
     def of(cls, record: ViewRecord, png: str) -> ViewMetrics:
-        return cls(record.l_depth, record.l_dist, record.objective, record.delta1, record.abs_rel, record.theta,
-                   record.centre, record.step, record.restart, png)
+        return cls(
+            record.l_depth,
+            record.l_dist,
+            record.objective,
+            record.delta1,
+            record.abs_rel,
+            record.theta,
+            record.centre,
+            record.step,
+            record.restart,
+            png,
+        )
 
 
 @dataclass
@@ -91,10 +108,15 @@ class InitViewSummary:
 
     @classmethod
     def from_dict(cls, data: dict) -> InitViewSummary:
-        return cls(**data | {"init": ViewMetrics(**data["init"]),
-                             "adversarial": [ViewMetrics(**a) for a in data["adversarial"]],
-                             "anytime": [AnytimePoint(**p) for p in data["anytime"]],
-                             "budget": Budget(**data["budget"])})
+        return cls(
+            **data
+            | {
+                "init": ViewMetrics(**data["init"]),
+                "adversarial": [ViewMetrics(**a) for a in data["adversarial"]],
+                "anytime": [AnytimePoint(**p) for p in data["anytime"]],
+                "budget": Budget(**data["budget"]),
+            }
+        )
 
 
 @dataclass
@@ -134,8 +156,13 @@ class RunSummary(RunInfo):
 
     @classmethod
     def from_dict(cls, data: dict) -> RunSummary:
-        return cls(**data | {"budget": Budget(**data["budget"]),
-                             "init_views": [InitViewSummary.from_dict(v) for v in data["init_views"]]})
+        return cls(
+            **data
+            | {
+                "budget": Budget(**data["budget"]),
+                "init_views": [InitViewSummary.from_dict(v) for v in data["init_views"]],
+            }
+        )
 
     def write(self, path: str | Path) -> Path:
         return write_json(Path(path), self.to_dict())
@@ -156,14 +183,17 @@ class RunSummary(RunInfo):
 
 def write_partial(path: str | Path, result: InitViewResult) -> Path:
     """Save one init view's full search result (``partial/init<i>.json``), to resume from."""
-    return write_json(Path(path), {
-        "schema": SCHEMA_VERSION,
-        "init": result.init.to_dict(),
-        "records": [asdict(r) for r in result.records],
-        "top": [[r.step, r.restart] for r in result.top],
-        "path": [[r.step, r.restart] for r in result.path],
-        "budget": result.budget.to_dict(),
-    })
+    return write_json(
+        Path(path),
+        {
+            "schema": SCHEMA_VERSION,
+            "init": result.init.to_dict(),
+            "records": [asdict(r) for r in result.records],
+            "top": [[r.step, r.restart] for r in result.top],
+            "path": [[r.step, r.restart] for r in result.path],
+            "budget": result.budget.to_dict(),
+        },
+    )
 
 
 def read_partial(path: str | Path) -> InitViewResult:
@@ -177,7 +207,12 @@ def read_partial(path: str | Path) -> InitViewResult:
     try:
         records = [ViewRecord(**r) for r in data["records"]]
         by_key = {(r.step, r.restart): r for r in records}
-        return InitViewResult(InitView.from_dict(data["init"]), records, [by_key[tuple(key)] for key in data["top"]],
-                              Budget(**data["budget"]), [by_key[tuple(key)] for key in data["path"]])
+        return InitViewResult(
+            InitView.from_dict(data["init"]),
+            records,
+            [by_key[tuple(key)] for key in data["top"]],
+            Budget(**data["budget"]),
+            [by_key[tuple(key)] for key in data["path"]],
+        )
     except (KeyError, TypeError) as error:
         raise ValueError(f"{path}: not a kadv partial result ({error})") from error

@@ -4,6 +4,7 @@ Table 2: adversarial L_depth and delta1 per model x scene with averages; Table 3
 the init views (adversarial - init for L_depth, init - adversarial for delta1); the method table
 (each method's gain, evaluations and seconds per model x scene); the transfer matrix.
 """
+
 from __future__ import annotations
 
 import csv
@@ -68,8 +69,10 @@ class Table:
 
     def write(self, folder: Path, stem: str) -> list[Path]:
         markdown, text = f"## {self.title}\n\n{self.markdown()}", self.csv()
-        return [atomic_write(folder / f"{stem}.md", lambda tmp: tmp.write_text(markdown)),
-                atomic_write(folder / f"{stem}.csv", lambda tmp: tmp.write_text(text))]
+        return [
+            atomic_write(folder / f"{stem}.md", lambda tmp: tmp.write_text(markdown)),
+            atomic_write(folder / f"{stem}.csv", lambda tmp: tmp.write_text(text)),
+        ]
 
 
 def collect_runs(paths: list[str | Path]) -> list[RunRecord]:
@@ -120,8 +123,9 @@ def _grid(runs: list[RunRecord], method: str, value) -> tuple[list[str], list[st
     return models, scenes, {key: statistics.mean(values) for key, values in cells.items()}
 
 
-def _paired_table(title: str, runs: list[RunRecord], method: str, first: tuple[str, object],
-                  second: tuple[str, object]) -> Table:
+def _paired_table(
+    title: str, runs: list[RunRecord], method: str, first: tuple[str, object], second: tuple[str, object]
+) -> Table:
     """Models as rows; per scene a column pair (first, second); then their averages over scenes."""
     grids = [_grid(runs, method, getter) for _, getter in (first, second)]
     models, scenes = grids[0][0], grids[0][1]
@@ -150,17 +154,25 @@ def _paired_table(title: str, runs: list[RunRecord], method: str, first: tuple[s
 def table2(runs: list[RunRecord], method: str) -> Table:
     """The study's Table 2 for one method's runs: adversarial L_depth (higher: worse for the model)
     and delta1 (lower: worse)."""
-    return _paired_table(f"Table 2: adversarial views ({method} attack)", runs, method,
-                         ("L_depth", lambda r: r.summary.adversarial_l_depth),
-                         ("delta1", lambda r: r.summary.adversarial_delta1))
+    return _paired_table(
+        f"Table 2: adversarial views ({method} attack)",
+        runs,
+        method,
+        ("L_depth", lambda r: r.summary.adversarial_l_depth),
+        ("delta1", lambda r: r.summary.adversarial_delta1),
+    )
 
 
 def table3(runs: list[RunRecord], method: str) -> Table:
     """The study's Table 3 for one method's runs: adversarial - init for L_depth, init - adversarial
     for delta1."""
-    return _paired_table(f"Table 3: change from the init views ({method} attack)", runs, method,
-                         ("dL_depth", lambda r: r.summary.adversarial_l_depth - r.summary.init_l_depth),
-                         ("ddelta1", lambda r: r.summary.init_delta1 - r.summary.adversarial_delta1))
+    return _paired_table(
+        f"Table 3: change from the init views ({method} attack)",
+        runs,
+        method,
+        ("dL_depth", lambda r: r.summary.adversarial_l_depth - r.summary.init_l_depth),
+        ("ddelta1", lambda r: r.summary.init_delta1 - r.summary.adversarial_delta1),
+    )
 
 
 def method_table(runs: list[RunRecord]) -> Table | None:
@@ -170,15 +182,21 @@ def method_table(runs: list[RunRecord]) -> Table | None:
     cells: dict[tuple[str, str, str], list[RunRecord]] = defaultdict(list)
     for run in runs:
         cells[run.model, run.scene, run.method].append(run)
-    table = Table("Methods at equal budget", ["model", "scene", "method", "L_depth gain", "delta1 drop",
-                                              "evaluations / init view", "seconds / init view"])
+    table = Table(
+        "Methods at equal budget",
+        ["model", "scene", "method", "L_depth gain", "delta1 drop", "evaluations / init view", "seconds / init view"],
+    )
     for (model, scene, method), group in sorted(cells.items()):
         views = [v for run in group for v in run.summary.init_views]
-        table.rows.append([
-            model, scene, method,
-            statistics.mean(r.summary.adversarial_l_depth - r.summary.init_l_depth for r in group),
-            statistics.mean(r.summary.init_delta1 - r.summary.adversarial_delta1 for r in group),
-            statistics.mean(v.budget.forward for v in views),
-            statistics.mean(v.budget.seconds for v in views),
-        ])
+        table.rows.append(
+            [
+                model,
+                scene,
+                method,
+                statistics.mean(r.summary.adversarial_l_depth - r.summary.init_l_depth for r in group),
+                statistics.mean(r.summary.init_delta1 - r.summary.adversarial_delta1 for r in group),
+                statistics.mean(v.budget.forward for v in views),
+                statistics.mean(v.budget.seconds for v in views),
+            ]
+        )
     return table

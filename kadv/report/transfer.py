@@ -1,4 +1,5 @@
 """Transfer: each model's adversarial views, re-rendered from their saved poses, scored by every model."""
+
 from __future__ import annotations
 
 import statistics
@@ -30,10 +31,14 @@ def _adversarial_poses(run: RunRecord) -> tuple[torch.Tensor, torch.Tensor]:
     return torch.stack(poses), torch.stack(Ks)
 
 
-def transfer_tables(runs: list[RunRecord], renderer_of: Callable[[RunRecord], ExactRenderer],
-                    model_of: Callable[[RunRecord], DepthModel],
-                    loss: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], space: str = "disparity",
-                    progress: bool = True) -> tuple[Table, Table]:
+def transfer_tables(
+    runs: list[RunRecord],
+    renderer_of: Callable[[RunRecord], ExactRenderer],
+    model_of: Callable[[RunRecord], DepthModel],
+    loss: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+    space: str = "disparity",
+    progress: bool = True,
+) -> tuple[Table, Table]:
     """delta1 and L_depth of every model (columns) on every model's adversarial views (rows).
 
     Each run's adversarial poses are re-rendered exactly at the run's size and scored by each model
@@ -57,13 +62,17 @@ def transfer_tables(runs: list[RunRecord], renderer_of: Callable[[RunRecord], Ex
                     objective = Objective(model, loss, renderer, PenaltyConfig(), space)
                     prediction = model(out.rgb, Ks)
                     l_depth = objective.l_depth(out.depth.double(), prediction.double(), out.mask)
-                    delta1 = depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)["delta1"]
+                    delta1 = depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)[
+                        "delta1"
+                    ]
                     scores[run.model, name]["delta1"] += delta1.tolist()
                     scores[run.model, name]["l_depth"] += l_depth.tolist()
                     bar.update(1)
     tables = []
-    for key, title in (("delta1", "Transfer: delta1 of each model (columns) on each model's adversarial views (rows)"),
-                       ("l_depth", "Transfer: L_depth of each model (columns) on each model's adversarial views (rows)")):
+    for key, title in (
+        ("delta1", "Transfer: delta1 of each model (columns) on each model's adversarial views (rows)"),
+        ("l_depth", "Transfer: L_depth of each model (columns) on each model's adversarial views (rows)"),
+    ):
         table = Table(title, ["views of \\ scored by", *names])
         for source in names:
             table.rows.append([source] + [statistics.mean(scores[source, target][key]) for target in names])

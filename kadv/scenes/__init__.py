@@ -1,4 +1,5 @@
 """Scene data and loaders: Mitsuba XML, trimesh formats, generated box rooms and furnished rooms."""
+
 from __future__ import annotations
 
 from kadv.scenes.box_room import box_room
@@ -6,5 +7,13 @@ from kadv.scenes.load import SUPPORTED_SUFFIXES, load_scene
 from kadv.scenes.procedural import procedural_room
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 
-__all__ = ["SUPPORTED_SUFFIXES", "Material", "MeshPart", "Scene", "assemble_scene", "box_room", "load_scene",
-           "procedural_room"]
+__all__ = [
+    "SUPPORTED_SUFFIXES",
+    "Material",
+    "MeshPart",
+    "Scene",
+    "assemble_scene",
+    "box_room",
+    "load_scene",
+    "procedural_room",
+]

@@ -1,4 +1,5 @@
 """Procedural box rooms: closed rooms with textured furniture boxes, deterministic per seed."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -44,7 +45,7 @@ def box_room(
     floor, ceiling = textured_materials(rng, "floor", 1) + textured_materials(rng, "paint", 1)
     paint = textured_materials(rng, "paint", 2)  # most walls share one paint, an accent wall may differ
     walls_paint = [paint[int(rng.random() < 0.25)] for _ in range(4)]
-    materials = [floor, ceiling, *walls_paint] + textured_materials(rng, "furniture", num_boxes)
+    materials = [floor, ceiling, *walls_paint, *textured_materials(rng, "furniture", num_boxes)]
     W, H, D = width, height, depth
     walls = {
         "floor": [[0, 0, 0], [W, 0, 0], [W, 0, D], [0, 0, D]],

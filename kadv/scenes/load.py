@@ -1,4 +1,5 @@
 """``load_scene``: one entry point for every supported scene file."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,7 +10,7 @@ from kadv.scenes.trimesh_loader import TRIMESH_SUFFIXES, load_mesh_file
 
 __all__ = ["SUPPORTED_SUFFIXES", "load_scene"]
 
-SUPPORTED_SUFFIXES = (".xml",) + TRIMESH_SUFFIXES
+SUPPORTED_SUFFIXES = (".xml", *TRIMESH_SUFFIXES)
 
 
 def load_scene(
@@ -47,7 +48,7 @@ def load_scene(
         raise ValueError(f"unsupported scene format {suffix!r} for {path}; supported: {', '.join(SUPPORTED_SUFFIXES)}")
     if name is None:
         name = path.parent.name if path.stem == "scene" else path.stem
-    options = dict(scale=scale, up_axis=up_axis, drop_transparent=drop_transparent, drop_emitters=drop_emitters)
+    options = {"scale": scale, "up_axis": up_axis, "drop_transparent": drop_transparent, "drop_emitters": drop_emitters}
     if suffix == ".xml":
         parts, materials, cameras, lights = parse_mitsuba(path, missing=missing)
         return assemble_scene(parts, materials, cameras, lights, name=name, **options)

@@ -1,4 +1,5 @@
 """Generated materials: textures from scikit-image's bundled images and procedural patterns."""
+
 from __future__ import annotations
 
 from functools import cache
@@ -67,11 +68,12 @@ def _backdrop(rng: np.random.Generator) -> np.ndarray:
 def textured_materials(rng: np.random.Generator, role: str, count: int) -> list[Material]:
     """Random materials for a surface role, as interiors tend to have them.
 
-    Roles: "paint" (walls, ceiling: a tint with a low-contrast grain), "wall" (paint in the
-    near-neutral tints real rooms have), "floor" (planks, tiles, carpet-like grain), "furniture" (anything, including photographs and bold patterns), "wood"
-    (grain in brown tints), "fabric" (woven grain, checks, stripes), "picture" (a photograph, mapped
-    once), "plain" (one flat colour), "ground" (bright grass or gravel outdoors) and "backdrop" (a
-    bright outdoor view, mapped once).
+    Roles: "paint" (walls, ceiling: a tint with a low-contrast grain), "wall" (paint in the near-
+    neutral tints real rooms have), "floor" (planks, tiles, carpet-like grain), "furniture"
+    (anything, including photographs and bold patterns), "wood" (grain in brown tints), "fabric"
+    (woven grain, checks, stripes), "picture" (a photograph, mapped once), "plain" (one flat
+    colour), "ground" (bright grass or gravel outdoors) and "backdrop" (a bright outdoor view,
+    mapped once).
     """
     materials = []
     for index in range(count):
@@ -80,8 +82,13 @@ def textured_materials(rng: np.random.Generator, role: str, count: int) -> list[
             texture = _grey_photo(rng, tint, contrast=rng.uniform(0.05, 0.25))
         elif role == "floor":
             kind = rng.integers(3)
-            texture = (_stripes(rng, tint) if kind == 0 else _checker(rng, tint) if kind == 1
-                       else _grey_photo(rng, tint, contrast=rng.uniform(0.3, 0.8)))
+            texture = (
+                _stripes(rng, tint)
+                if kind == 0
+                else _checker(rng, tint)
+                if kind == 1
+                else _grey_photo(rng, tint, contrast=rng.uniform(0.3, 0.8))
+            )
         elif role == "furniture":
             kind = rng.integers(4)
             texture = (_grey_photo(rng, tint, 1.0), _photo(rng), _checker(rng, tint), _stripes(rng, tint))[kind]

@@ -5,6 +5,7 @@ transforms, BSDF chains reduced to a base colour or texture plus flags, and the 
 Mitsuba's camera looks down +z with +y up and +x to the left; kadv's (OpenCV) camera has x right
 and y down, so ``world_T_cam = to_world @ diag(-1, -1, 1, 1)``.
 """
+
 from __future__ import annotations
 
 import math
@@ -24,8 +25,26 @@ from kadv.scenes.trimesh_loader import mesh_parts
 
 __all__ = ["parse_mitsuba"]
 
-_IGNORED = {"integrator", "sampler", "film", "rfilter", "medium", "phase", "default", "boolean", "integer",
-            "float", "string", "rgb", "srgb", "spectrum", "vector", "point", "transform", "ref"}
+_IGNORED = {
+    "integrator",
+    "sampler",
+    "film",
+    "rfilter",
+    "medium",
+    "phase",
+    "default",
+    "boolean",
+    "integer",
+    "float",
+    "string",
+    "rgb",
+    "srgb",
+    "spectrum",
+    "vector",
+    "point",
+    "transform",
+    "ref",
+}
 _TRANSPARENT = {"dielectric", "thindielectric", "roughdielectric"}
 _WRAPPERS = {"twosided", "bumpmap", "normalmap", "blendbsdf", "mixturebsdf", "coating", "roughcoating"}
 _DIFFUSE_KEYS = {
@@ -127,10 +146,12 @@ def _texture(element: ET.Element, ctx: _Context) -> tuple[np.ndarray | None, np.
     """(texture, alpha, base colour, uv scale) of a texture element."""
     kind = ctx.attr(element, "type")
     props = _named(element, ctx)
-    uv_scale = np.array([
-        float(ctx.attr(props["uscale"], "value")) if "uscale" in props else 1.0,
-        float(ctx.attr(props["vscale"], "value")) if "vscale" in props else 1.0,
-    ])
+    uv_scale = np.array(
+        [
+            float(ctx.attr(props["uscale"], "value")) if "uscale" in props else 1.0,
+            float(ctx.attr(props["vscale"], "value")) if "vscale" in props else 1.0,
+        ]
+    )
     if kind == "bitmap" and "filename" in props:
         path = ctx.file(ctx.attr(props["filename"], "value"))
         if path is None:
@@ -197,7 +218,7 @@ def _transform(element: ET.Element | None, ctx: _Context) -> np.ndarray:
     if element is None:
         return matrix
     for op in element:
-        get = lambda key, default=None: ctx.attr(op, key, default)  # noqa: E731
+        get = lambda key, default=None, op=op: ctx.attr(op, key, default)
         step = np.eye(4)
         if op.tag == "matrix":
             step = np.array(_floats(get("value"))).reshape(4, 4)
@@ -316,7 +337,9 @@ def _sensor(element: ET.Element, ctx: _Context) -> Camera | None:
     axes = to_world[:3, :3] @ np.diag([-1.0, -1.0, 1.0])
     axes = axes / np.linalg.norm(axes, axis=0, keepdims=True)
     if np.linalg.det(axes) < 0:
-        ctx.warn_once("sensor:mirror", "Mitsuba XML: the sensor transform mirrors the image; kadv renders it unmirrored")
+        ctx.warn_once(
+            "sensor:mirror", "Mitsuba XML: the sensor transform mirrors the image; kadv renders it unmirrored"
+        )
         axes[:, 0] *= -1
     # Re-orthonormalise: exported matrices carry ~1e-6 rounding.
     u, _, vt = np.linalg.svd(axes)
@@ -326,7 +349,9 @@ def _sensor(element: ET.Element, ctx: _Context) -> Camera | None:
     return Camera(pose, math.degrees(2.0 * math.atan(half)), width, height, name="sensor")
 
 
-def parse_mitsuba(path: Path, missing: str = "error") -> tuple[list[MeshPart], list[Material], list[Camera], np.ndarray]:
+def parse_mitsuba(
+    path: Path, missing: str = "error"
+) -> tuple[list[MeshPart], list[Material], list[Camera], np.ndarray]:
     """Parse a Mitsuba scene file into parts, materials, cameras and light positions (file frame).
 
     Args:

@@ -6,6 +6,7 @@ becomes a constant sky plus a directional sun, and texture filters Mitsuba 3 dro
 bilinear. Plain XML: Mitsuba itself is needed only to load the result
 (:mod:`kadv.diagnostics.reference`).
 """
+
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
@@ -30,8 +31,9 @@ def _sensor(world_T_cam: np.ndarray, fov_x_deg: float, height: int, width: int, 
             <rfilter type="box"/></film></sensor>""")
 
 
-def sanitised_scene_root(path: Path, views: list[tuple[np.ndarray, float]], height: int, width: int, spp: int,
-                         max_depth: int = MAX_DEPTH) -> ET.Element:
+def sanitised_scene_root(
+    path: Path, views: list[tuple[np.ndarray, float]], height: int, width: int, spp: int, max_depth: int = MAX_DEPTH
+) -> ET.Element:
     """The scene file's element tree with our sensors (one per (world_T_cam, fov_x_deg) view) and a
     path tracer of ``max_depth`` bounces.
 
@@ -56,9 +58,13 @@ def sanitised_scene_root(path: Path, views: list[tuple[np.ndarray, float]], heig
             if sun is not None:
                 direction = [-float(sun.get(axis)) for axis in "xyz"]
                 scale = float(names["sunScale"].get("value")) if "sunScale" in names else 1.0
-                root.append(ET.fromstring(f'<emitter type="directional"><vector name="direction" x="{direction[0]}" '
-                                          f'y="{direction[1]}" z="{direction[2]}"/><rgb name="irradiance" '
-                                          f'value="{scale}"/></emitter>'))
+                root.append(
+                    ET.fromstring(
+                        f'<emitter type="directional"><vector name="direction" x="{direction[0]}" '
+                        f'y="{direction[1]}" z="{direction[2]}"/><rgb name="irradiance" '
+                        f'value="{scale}"/></emitter>'
+                    )
+                )
     for texture in root.iter("texture"):
         for child in texture:
             # Mitsuba 0.6's "trilinear" and "ewa" mip-map filters are gone; bilinear is the nearest left

@@ -1,4 +1,5 @@
 """Building blocks of generated scenes: textured quads and boxes as :class:`MeshPart` s."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -55,14 +56,17 @@ def box_parts(lo: np.ndarray, hi: np.ndarray, material: int, name: str, tile: fl
     repeat per ``tile`` metres from each face's corner."""
     x0, y0, z0 = lo
     x1, y1, z1 = hi
-    faces = np.array([
-        [[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0]],
-        [[x1, y0, z1], [x0, y0, z1], [x0, y1, z1], [x1, y1, z1]],
-        [[x0, y0, z1], [x0, y0, z0], [x0, y1, z0], [x0, y1, z1]],
-        [[x1, y0, z0], [x1, y0, z1], [x1, y1, z1], [x1, y1, z0]],
-        [[x0, y1, z0], [x1, y1, z0], [x1, y1, z1], [x0, y1, z1]],
-        [[x0, y0, z1], [x1, y0, z1], [x1, y0, z0], [x0, y0, z0]],
-    ], np.float64)
+    faces = np.array(
+        [
+            [[x0, y0, z0], [x1, y0, z0], [x1, y1, z0], [x0, y1, z0]],
+            [[x1, y0, z1], [x0, y0, z1], [x0, y1, z1], [x1, y1, z1]],
+            [[x0, y0, z1], [x0, y0, z0], [x0, y1, z0], [x0, y1, z1]],
+            [[x1, y0, z0], [x1, y0, z1], [x1, y1, z1], [x1, y1, z0]],
+            [[x0, y1, z0], [x1, y1, z0], [x1, y1, z1], [x0, y1, z1]],
+            [[x0, y0, z1], [x1, y0, z1], [x1, y0, z0], [x0, y0, z0]],
+        ],
+        np.float64,
+    )
     parts = []
     for index, corners in enumerate(faces):
         corners = overlapped(corners)

@@ -8,6 +8,7 @@ dropped at load like a file's glass) and shows a bright ground and backdrop outs
 rays escape to the sky. The lamps' bulbs are emitters (dropped, their centres become lights) and a
 light stands inside each window.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -132,23 +133,55 @@ def _wall_pieces(b: _Builder, wall: _Wall, height: float, material: int, name: s
             b.quad(corners, inward, material, f"{name}.piece{index}")
 
 
-def _reveal(b: _Builder, wall: _Wall, opening: tuple[float, float, float, float, str], thickness: float,
-            material: int, name: str) -> None:
+def _reveal(
+    b: _Builder,
+    wall: _Wall,
+    opening: tuple[float, float, float, float, str],
+    thickness: float,
+    material: int,
+    name: str,
+) -> None:
     """The four faces of the opening's depth through the wall, facing into the opening."""
     u0, u1, v0, v1, _ = opening
     along = np.array([wall.along[0], 0.0, wall.along[1]])
     corners = lambda ua, ub, va, vb: np.array(
-        [wall.point(ua, va, 0.0), wall.point(ub, vb, 0.0), wall.point(ub, vb, -thickness), wall.point(ua, va, -thickness)])
+        [
+            wall.point(ua, va, 0.0),
+            wall.point(ub, vb, 0.0),
+            wall.point(ub, vb, -thickness),
+            wall.point(ua, va, -thickness),
+        ]
+    )
     b.quad(corners(u0, u1, v0, v0), _UP, material, f"{name}.sill")
     b.quad(corners(u0, u1, v1, v1), -_UP, material, f"{name}.head")
-    b.quad(np.array([wall.point(u0, v0), wall.point(u0, v1), wall.point(u0, v1, -thickness),
-                     wall.point(u0, v0, -thickness)]), along, material, f"{name}.left")
-    b.quad(np.array([wall.point(u1, v0), wall.point(u1, v1), wall.point(u1, v1, -thickness),
-                     wall.point(u1, v0, -thickness)]), -along, material, f"{name}.right")
+    b.quad(
+        np.array(
+            [wall.point(u0, v0), wall.point(u0, v1), wall.point(u0, v1, -thickness), wall.point(u0, v0, -thickness)]
+        ),
+        along,
+        material,
+        f"{name}.left",
+    )
+    b.quad(
+        np.array(
+            [wall.point(u1, v0), wall.point(u1, v1), wall.point(u1, v1, -thickness), wall.point(u1, v0, -thickness)]
+        ),
+        -along,
+        material,
+        f"{name}.right",
+    )
 
 
-def _corridor(b: _Builder, wall: _Wall, opening: tuple[float, float, float, float, str], thickness: float,
-              extent: tuple[float, float, float, float], paint: int, floor: int, name: str) -> None:
+def _corridor(
+    b: _Builder,
+    wall: _Wall,
+    opening: tuple[float, float, float, float, str],
+    thickness: float,
+    extent: tuple[float, float, float, float],
+    paint: int,
+    floor: int,
+    name: str,
+) -> None:
     """A closed corridor behind a door: u from ``extent[0]`` to ``extent[1]``, ``extent[2]`` deep and
     ``extent[3]`` high, every face looking into it."""
     u0, u1, _, v1, _ = opening
@@ -157,21 +190,35 @@ def _corridor(b: _Builder, wall: _Wall, opening: tuple[float, float, float, floa
     outward = np.array([-wall.inward[0], 0.0, -wall.inward[1]])
     along = np.array([wall.along[0], 0.0, wall.along[1]])
     box = lambda ua, ub, va, vb, w: np.array(
-        [wall.point(ua, va, w), wall.point(ub, va, w), wall.point(ub, vb, w), wall.point(ua, vb, w)])
+        [wall.point(ua, va, w), wall.point(ub, va, w), wall.point(ub, vb, w), wall.point(ua, vb, w)]
+    )
     b.quad(box(a, c, 0.0, height, far), -outward, paint, f"{name}.far")
     for index, (ua, ub, va, vb) in enumerate([(a, u0, 0.0, height), (u1, c, 0.0, height), (u0, u1, v1, height)]):
         b.quad(box(ua, ub, va, vb, near), outward, paint, f"{name}.near{index}")
     flat = lambda y: np.array(
-        [wall.point(a, y, near), wall.point(c, y, near), wall.point(c, y, far), wall.point(a, y, far)])
+        [wall.point(a, y, near), wall.point(c, y, near), wall.point(c, y, far), wall.point(a, y, far)]
+    )
     b.quad(flat(0.0), _UP, floor, f"{name}.floor")
     b.quad(flat(height), -_UP, paint, f"{name}.ceiling")
     for u, toward in ((a, along), (c, -along)):
-        b.quad(np.array([wall.point(u, 0.0, near), wall.point(u, 0.0, far), wall.point(u, height, far),
-                         wall.point(u, height, near)]), toward, paint, f"{name}.end")
+        b.quad(
+            np.array(
+                [
+                    wall.point(u, 0.0, near),
+                    wall.point(u, 0.0, far),
+                    wall.point(u, height, far),
+                    wall.point(u, height, near),
+                ]
+            ),
+            toward,
+            paint,
+            f"{name}.end",
+        )
 
 
-def _outdoors(b: _Builder, wall: _Wall, thickness: float, extent: tuple[float, float, float, float, float],
-              name: str) -> None:
+def _outdoors(
+    b: _Builder, wall: _Wall, thickness: float, extent: tuple[float, float, float, float, float], name: str
+) -> None:
     """A bright courtyard beyond a window, open to the sky: u from ``extent[0]`` to ``extent[1]``,
     ``extent[2]`` metres out, its ground ``extent[3]`` below the floor, its walls ``extent[4]`` high."""
     a, c, distance, drop, top = extent
@@ -179,21 +226,57 @@ def _outdoors(b: _Builder, wall: _Wall, thickness: float, extent: tuple[float, f
     along = np.array([wall.along[0], 0.0, wall.along[1]])
     toward_room = np.array([wall.inward[0], 0.0, wall.inward[1]])
     ground, backdrop = b.material("ground"), b.material("backdrop")
-    b.quad(np.array([wall.point(a, -drop, near), wall.point(c, -drop, near), wall.point(c, -drop, far),
-                     wall.point(a, -drop, far)]), _UP, ground, f"{name}.ground")
-    b.framed_quad(np.array([wall.point(a, -drop, far), wall.point(c, -drop, far), wall.point(c, top, far),
-                            wall.point(a, top, far)]), toward_room, backdrop, f"{name}.backdrop")
+    b.quad(
+        np.array(
+            [
+                wall.point(a, -drop, near),
+                wall.point(c, -drop, near),
+                wall.point(c, -drop, far),
+                wall.point(a, -drop, far),
+            ]
+        ),
+        _UP,
+        ground,
+        f"{name}.ground",
+    )
+    b.framed_quad(
+        np.array(
+            [wall.point(a, -drop, far), wall.point(c, -drop, far), wall.point(c, top, far), wall.point(a, top, far)]
+        ),
+        toward_room,
+        backdrop,
+        f"{name}.backdrop",
+    )
     for u, toward in ((a, along), (c, -along)):
-        b.framed_quad(np.array([wall.point(u, -drop, near), wall.point(u, -drop, far), wall.point(u, top, far),
-                                wall.point(u, top, near)]), toward, b.material("backdrop"), f"{name}.side")
+        b.framed_quad(
+            np.array(
+                [
+                    wall.point(u, -drop, near),
+                    wall.point(u, -drop, far),
+                    wall.point(u, top, far),
+                    wall.point(u, top, near),
+                ]
+            ),
+            toward,
+            b.material("backdrop"),
+            f"{name}.side",
+        )
 
 
-def _add_openings(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height: float, thickness: float,
-                  paint: int, floor: int, glass: int) -> list[np.ndarray]:
+def _add_openings(
+    b: _Builder,
+    walls: list[_Wall],
+    rects: list[np.ndarray],
+    height: float,
+    thickness: float,
+    paint: int,
+    floor: int,
+    glass: int,
+) -> list[np.ndarray]:
     """Doors and windows cut into the walls, each with what lies behind it; returns the floor
     rectangles kept clear in front of the doors."""
     rng = b.rng
-    outside: list[np.ndarray] = [r for r in rects]  # floor rectangles nothing outside may enter
+    outside: list[np.ndarray] = list(rects)  # floor rectangles nothing outside may enter
     clear = []
     plans = ["door"] * int(rng.integers(0, 3)) + ["window"] * int(rng.integers(1, 4))
     for kind in plans:
@@ -229,8 +312,14 @@ def _add_openings(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], heig
                 _corridor(b, wall, opening, thickness, extent, paint, floor, name)
                 clear.append(wall.rect(u0 - 0.1, u1 + 0.1, 0.0, 1.0))
             else:
-                pane = np.array([wall.point(u0, v0, -thickness / 2), wall.point(u1, v0, -thickness / 2),
-                                 wall.point(u1, v1, -thickness / 2), wall.point(u0, v1, -thickness / 2)])
+                pane = np.array(
+                    [
+                        wall.point(u0, v0, -thickness / 2),
+                        wall.point(u1, v0, -thickness / 2),
+                        wall.point(u1, v1, -thickness / 2),
+                        wall.point(u0, v1, -thickness / 2),
+                    ]
+                )
                 b.quad(pane, np.array([wall.inward[0], 0.0, wall.inward[1]]), glass, f"{name}.glass")
                 _outdoors(b, wall, thickness, extent, name)
                 b.lights.append(wall.point((u0 + u1) / 2, (v0 + v1) / 2, 0.4))
@@ -266,9 +355,18 @@ def _chair(rng: np.random.Generator) -> tuple[list, tuple[float, float]]:
 
 def _sofa(rng: np.random.Generator) -> tuple[list, tuple[float, float]]:
     width, depth = rng.uniform(1.5, 2.4), rng.uniform(0.8, 1.0)
-    seat, back, arm, arm_w = rng.uniform(0.38, 0.45), rng.uniform(0.75, 0.9), rng.uniform(0.55, 0.65), rng.uniform(0.12, 0.25)
-    boxes = [((0, 0.06, 0), (width, seat, depth), "fabric"), ((0, seat, 0), (width, back, 0.2), "fabric"),
-             ((0, seat, 0.2), (arm_w, arm, depth), "fabric"), ((width - arm_w, seat, 0.2), (width, arm, depth), "fabric")]
+    seat, back, arm, arm_w = (
+        rng.uniform(0.38, 0.45),
+        rng.uniform(0.75, 0.9),
+        rng.uniform(0.55, 0.65),
+        rng.uniform(0.12, 0.25),
+    )
+    boxes = [
+        ((0, 0.06, 0), (width, seat, depth), "fabric"),
+        ((0, seat, 0), (width, back, 0.2), "fabric"),
+        ((0, seat, 0.2), (arm_w, arm, depth), "fabric"),
+        ((width - arm_w, seat, 0.2), (width, arm, depth), "fabric"),
+    ]
     cushions = int(rng.integers(2, 4))
     span = (width - 2 * arm_w) / cushions
     for index in range(cushions):  # a seam between cushions
@@ -282,8 +380,11 @@ def _sofa(rng: np.random.Generator) -> tuple[list, tuple[float, float]]:
 def _shelf(rng: np.random.Generator) -> tuple[list, tuple[float, float]]:
     width, depth, height = rng.uniform(0.6, 1.6), rng.uniform(0.28, 0.45), rng.uniform(1.0, 2.2)
     board = rng.uniform(0.02, 0.035)
-    boxes = [((0, 0, 0), (board, height, depth), "wood"), ((width - board, 0, 0), (width, height, depth), "wood"),
-             ((0, 0, 0), (width, height, 0.015), "wood")]
+    boxes = [
+        ((0, 0, 0), (board, height, depth), "wood"),
+        ((width - board, 0, 0), (width, height, depth), "wood"),
+        ((0, 0, 0), (width, height, 0.015), "wood"),
+    ]
     levels = np.linspace(0, height - board, int(rng.integers(3, 7)))
     for y in levels:
         boxes.append(((board, y, 0.015), (width - board, y + board, depth), "wood"))
@@ -305,14 +406,19 @@ def _cabinet(rng: np.random.Generator) -> tuple[list, tuple[float, float]]:
     width, depth = rng.uniform(0.5, 1.6), rng.uniform(0.4, 0.6)
     height = rng.uniform(0.7, 1.0) if rng.random() < 0.6 else rng.uniform(1.7, 2.1)
     role = ("wood", "plain")[int(rng.integers(2))]
-    boxes = [((0, 0.05, 0), (width, height, depth), role), ((0.03, 0, 0.03), (width - 0.03, 0.05, depth - 0.03), "plain")]
+    boxes = [
+        ((0, 0.05, 0), (width, height, depth), role),
+        ((0.03, 0, 0.03), (width - 0.03, 0.05, depth - 0.03), "plain"),
+    ]
     doors = max(1, round(width / 0.5))
     span = width / doors
     for index in range(doors):  # door fronts a little proud, with seams, and a handle each
         u = index * span
         boxes.append(((u + 0.005, 0.06, depth), (u + span - 0.005, height - 0.01, depth + 0.015), role))
         handle_u = u + (span - 0.05 if index % 2 == 0 else 0.03)
-        boxes.append(((handle_u, height * 0.5, depth + 0.015), (handle_u + 0.02, height * 0.5 + 0.12, depth + 0.035), "plain"))
+        boxes.append(
+            ((handle_u, height * 0.5, depth + 0.015), (handle_u + 0.02, height * 0.5 + 0.12, depth + 0.035), "plain")
+        )
     return boxes, (width, depth)
 
 
@@ -327,8 +433,9 @@ def _place(b: _Builder, boxes: list, wall: _Wall, u: float, w: float, materials:
         b.box(corners.min(axis=0), corners.max(axis=0), material, f"{name}.part{index}")
 
 
-def _add_furniture(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height: float,
-                   occupied: list[np.ndarray]) -> None:
+def _add_furniture(
+    b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height: float, occupied: list[np.ndarray]
+) -> None:
     rng = b.rng
     materials = {"wood": b.material("wood"), "fabric": b.material("fabric")}
     area = sum((r[2] - r[0]) * (r[3] - r[1]) for r in rects)
@@ -345,7 +452,9 @@ def _add_furniture(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], hei
             if kind in _AGAINST_WALL:
                 w = 0.02
                 top = max(hi[1] for _, hi, _ in boxes)
-                if any(u < o1 and o0 < u + width and (what == "door" or v0 < top) for o0, o1, v0, _, what in wall.openings):
+                if any(
+                    u < o1 and o0 < u + width and (what == "door" or v0 < top) for o0, o1, v0, _, what in wall.openings
+                ):
                     continue
             else:
                 w = rng.uniform(0.3, 3.0)
@@ -366,16 +475,23 @@ def _add_decor(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height:
         if wall.length < size[0] + 0.4:
             continue
         u, bottom = rng.uniform(0.2, wall.length - size[0] - 0.2), rng.uniform(1.1, 1.9) - size[1] / 2
-        if bottom + size[1] > height - 0.1 or any(u < o1 + 0.1 and o0 < u + size[0] + 0.1 for o0, o1, *_ in wall.openings):
+        if bottom + size[1] > height - 0.1 or any(
+            u < o1 + 0.1 and o0 < u + size[0] + 0.1 for o0, o1, *_ in wall.openings
+        ):
             continue
         frame = b.material(("wood", "plain")[int(rng.integers(2))])
         lo, hi = wall.point(u, bottom, 0.0), wall.point(u + size[0], bottom + size[1], 0.03)
         b.box(lo, hi, frame, f"picture{index}.frame")
         border = min(0.06, size.min() / 6)
         inward = np.array([wall.inward[0], 0.0, wall.inward[1]])
-        canvas = np.array([wall.point(u + border, bottom + border, 0.031), wall.point(u + size[0] - border, bottom + border, 0.031),
-                           wall.point(u + size[0] - border, bottom + size[1] - border, 0.031),
-                           wall.point(u + border, bottom + size[1] - border, 0.031)])
+        canvas = np.array(
+            [
+                wall.point(u + border, bottom + border, 0.031),
+                wall.point(u + size[0] - border, bottom + border, 0.031),
+                wall.point(u + size[0] - border, bottom + size[1] - border, 0.031),
+                wall.point(u + border, bottom + size[1] - border, 0.031),
+            ]
+        )
         b.framed_quad(canvas, inward, b.material("picture"), f"picture{index}.canvas")
     for index in range(int(rng.integers(0, 3))):
         rect = rects[int(rng.integers(len(rects)))]
@@ -383,7 +499,9 @@ def _add_decor(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height:
         if np.any(size > rect[2:] - rect[:2] - 0.4):
             continue
         x0, z0 = rng.uniform(rect[:2] + 0.2, rect[2:] - size - 0.2)
-        b.box(np.array([x0, 0.0, z0]), np.array([x0 + size[0], 0.012, z0 + size[1]]), b.material("fabric"), f"rug{index}")
+        b.box(
+            np.array([x0, 0.0, z0]), np.array([x0 + size[0], 0.012, z0 + size[1]]), b.material("fabric"), f"rug{index}"
+        )
     bulb = b.special(Material("bulb", base_color=np.ones(3), emissive=True))
     for index in range(int(rng.integers(1, 4))):
         rect = rects[int(rng.integers(len(rects)))]
@@ -392,13 +510,27 @@ def _add_decor(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height:
         if np.hypot(x - eye[0], z - eye[2]) < 1.5:
             continue
         shade, tall = rng.uniform(0.2, 0.5), rng.uniform(0.1, 0.3)
-        b.box(np.array([x - 0.006, height - drop, z - 0.006]), np.array([x + 0.006, height, z + 0.006]),
-              b.material("plain"), f"lamp{index}.cord")
-        b.box(np.array([x - shade / 2, height - drop - tall, z - shade / 2]),
-              np.array([x + shade / 2, height - drop, z + shade / 2]), b.material("wall"), f"lamp{index}.shade")
+        b.box(
+            np.array([x - 0.006, height - drop, z - 0.006]),
+            np.array([x + 0.006, height, z + 0.006]),
+            b.material("plain"),
+            f"lamp{index}.cord",
+        )
+        b.box(
+            np.array([x - shade / 2, height - drop - tall, z - shade / 2]),
+            np.array([x + shade / 2, height - drop, z + shade / 2]),
+            b.material("wall"),
+            f"lamp{index}.shade",
+        )
         y = height - drop - tall - 0.01
-        corners = np.array([[x - shade / 4, y, z - shade / 4], [x + shade / 4, y, z - shade / 4],
-                            [x + shade / 4, y, z + shade / 4], [x - shade / 4, y, z + shade / 4]])
+        corners = np.array(
+            [
+                [x - shade / 4, y, z - shade / 4],
+                [x + shade / 4, y, z - shade / 4],
+                [x + shade / 4, y, z + shade / 4],
+                [x - shade / 4, y, z + shade / 4],
+            ]
+        )
         b.quad(corners, -_UP, bulb, f"lamp{index}.bulb")
 
 
@@ -407,8 +539,8 @@ def procedural_room(seed: int = 0, tile: float = 1.0, fov_x_deg: float = 70.0, d
 
     The floor is at y = 0 and the room spans x >= 0, z >= 0: a rectangle of 3.5-8 m sides or an L
     cut from one, 2.4-3.4 m high; the room's box is the scene's ``interior``, where camera samplers
-    look (the courtyards outside the windows are not for cameras). The file camera stands near the corner (0, 0), 1.3-1.7 m high,
-    looking across the room, with at least 1 m of free space around it.
+    look (the courtyards outside the windows are not for cameras). The file camera stands near the
+    corner (0, 0), 1.3-1.7 m high, looking across the room, with at least 1 m of free space around it.
 
     Args:
         seed: the random seed.
@@ -429,18 +561,32 @@ def procedural_room(seed: int = 0, tile: float = 1.0, fov_x_deg: float = 70.0, d
     for index, rect in enumerate(rects):
         x0, z0, x1, z1 = rect
         b.quad(np.array([[x0, 0, z0], [x1, 0, z0], [x1, 0, z1], [x0, 0, z1]]), _UP, floor, f"floor{index}")
-        b.quad(np.array([[x0, height, z0], [x1, height, z0], [x1, height, z1], [x0, height, z1]]), -_UP, ceiling,
-               f"ceiling{index}")
+        b.quad(
+            np.array([[x0, height, z0], [x1, height, z0], [x1, height, z1], [x0, height, z1]]),
+            -_UP,
+            ceiling,
+            f"ceiling{index}",
+        )
     first = rects[0]
     eye = np.array([min(1.0, (first[2] - first[0]) / 4), rng.uniform(1.3, 1.7), min(1.0, (first[3] - first[1]) / 4)])
-    occupied = clear + [np.array([eye[0], eye[2], eye[0], eye[2]]) + _EYE_CLEARANCE * np.array([-1, -1, 1, 1])]
+    occupied = [*clear, np.array([eye[0], eye[2], eye[0], eye[2]]) + _EYE_CLEARANCE * np.array([-1, -1, 1, 1])]
     _add_furniture(b, walls, rects, height, occupied)
     _add_decor(b, walls, rects, height, eye)
     centre = np.mean([(r[:2] + r[2:]) / 2 for r in rects], axis=0)
     target = np.array([centre[0], 1.0, centre[1]])
-    camera = Camera(look_at(torch.tensor(eye), torch.tensor(target)).double(), fov_x_deg, 640, 480,
-                    name="procedural_room_camera")
+    camera = Camera(
+        look_at(torch.tensor(eye), torch.tensor(target)).double(), fov_x_deg, 640, 480, name="procedural_room_camera"
+    )
     corners = np.array(rects)
-    interior = np.array([[corners[:, 0].min(), 0.0, corners[:, 1].min()], [corners[:, 2].max(), height, corners[:, 3].max()]])
-    return assemble_scene(b.parts, b.materials, [camera], np.array(b.lights).reshape(-1, 3),
-                          name=f"procedural_room_{seed}", drop_transparent=drop_transparent, interior=interior)
+    interior = np.array(
+        [[corners[:, 0].min(), 0.0, corners[:, 1].min()], [corners[:, 2].max(), height, corners[:, 3].max()]]
+    )
+    return assemble_scene(
+        b.parts,
+        b.materials,
+        [camera],
+        np.array(b.lights).reshape(-1, 3),
+        name=f"procedural_room_{seed}",
+        drop_transparent=drop_transparent,
+        interior=interior,
+    )

@@ -1,4 +1,5 @@
 """The in-memory scene: triangles with per-corner UVs and normals, materials, cameras, lights."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field

@@ -1,4 +1,5 @@
 """Texture images: loading from files and converting colours to the renderer's display space."""
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,4 +1,5 @@
 """Meshes through trimesh (glTF/GLB, OBJ+MTL, PLY, OFF, STL), keeping every material and texture."""
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -16,8 +16,8 @@ from kadv.attack import (
     file_init_views,
     load_init_params,
     sample_init_views,
-    score_views,
     save_init_params,
+    score_views,
 )
 from kadv.penalties import distance_to_surface, view_validity
 from tests.conftest import cached_real_scene
@@ -79,9 +79,9 @@ def test_init_params_round_trip_and_bad_files_name_themselves(tiny_objective, tm
     assert all(torch.equal(a.world_T_cam, b.world_T_cam) for a, b in zip(loaded, views))
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"init_views": [{**views[0].to_dict(), "world_T_cam": [[1, 0], [0, 1]]}]}))
-    with pytest.raises(ValueError, match="bad.json"):
+    with pytest.raises(ValueError, match=r"bad.json"):
         load_init_params(bad)
-    with pytest.raises(FileNotFoundError, match="missing.json"):
+    with pytest.raises(FileNotFoundError, match=r"missing.json"):
         load_init_params(tmp_path / "missing.json")
 
 
@@ -90,6 +90,8 @@ def test_an_init_view_inside_a_box_is_refused(tiny_objective) -> None:
     box = renderer.scene.vertices[renderer.scene.faces[renderer.scene.material_ids == 6]]
     centre = torch.from_numpy(box.reshape(-1, 3).mean(axis=0))
     views = file_init_views(renderer, PENALTY.margin)
-    inside = type(views[0])("boxed", "given", look_at(centre, centre + torch.tensor([1.0, 0, 0], dtype=torch.float64)).double(), 70.0)
-    with pytest.raises(InitViewError, match="boxed.*inside an object"):
+    inside = type(views[0])(
+        "boxed", "given", look_at(centre, centre + torch.tensor([1.0, 0, 0], dtype=torch.float64)).double(), 70.0
+    )
+    with pytest.raises(InitViewError, match=r"boxed.*inside an object"):
         check_init_views(renderer, [inside], PENALTY, 24, 32)

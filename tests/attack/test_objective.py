@@ -29,9 +29,12 @@ def _depth() -> tuple[torch.Tensor, torch.Tensor]:
     return torch.where(mask, depth, torch.zeros_like(depth)), mask
 
 
-@pytest.mark.parametrize("kind, perfect", [("disparity", lambda d: 3.0 / d.clamp_min(1e-3) + 7.0),
-                                           ("depth", lambda d: 0.5 * d)])
-def test_l_depth_is_zero_for_a_prediction_equal_up_to_scale_and_positive_otherwise(tiny_objective, kind, perfect) -> None:
+@pytest.mark.parametrize(
+    "kind, perfect", [("disparity", lambda d: 3.0 / d.clamp_min(1e-3) + 7.0), ("depth", lambda d: 0.5 * d)]
+)
+def test_l_depth_is_zero_for_a_prediction_equal_up_to_scale_and_positive_otherwise(
+    tiny_objective, kind, perfect
+) -> None:
     objective = _objective(tiny_objective, kind)
     depth, mask = _depth()
     assert float(objective.l_depth(depth, perfect(depth), mask)) == pytest.approx(0.0, abs=1e-6)

@@ -35,7 +35,7 @@ def _run(objective, differentiable, views, size=(H, W), method="gradient", setti
 
 def test_the_registry_holds_the_built_in_methods_and_refuses_unknown_ones() -> None:
     assert all(get_method(m).name == m for m in BUILT_IN) and set(BUILT_IN) <= set(METHODS)
-    with pytest.raises(ValueError, match="attack.method must be one of .*gradient.*got 'adam'"):
+    with pytest.raises(ValueError, match=r"attack.method must be one of .*gradient.*got 'adam'"):
         AttackConfig("adam")
 
 
@@ -43,8 +43,14 @@ def test_ten_gradient_steps_raise_l_depth_from_most_restarts(tiny_objective, dif
     # L_depth is rough in the pose at a few thousand pixels (min-max normalisation, occlusions): a
     # restart can start on a local peak where every step, even a quarter of the default rate, loses
     # (restart 2 here, 0.181 -> 0.156 at the first step); the others climb
-    result = _run(tiny_objective, differentiable, [file_view], size=(96, 128),
-                  settings=GradientSettings(steps=10, restarts=3), budget_evaluations=None)
+    result = _run(
+        tiny_objective,
+        differentiable,
+        [file_view],
+        size=(96, 128),
+        settings=GradientSettings(steps=10, restarts=3),
+        budget_evaluations=None,
+    )
     view = result.views[0]
     rose = []
     for restart in range(3):
@@ -59,7 +65,7 @@ def test_ten_gradient_steps_raise_l_depth_from_most_restarts(tiny_objective, dif
     assert view.path == [r for r in view.records if r.restart == best]  # the path is the best restart
     assert [r.l_depth for r in view.top] == sorted((r.l_depth for r in view.top), reverse=True)
     for i, a in enumerate(view.top):
-        for b in view.top[i + 1:]:
+        for b in view.top[i + 1 :]:
             assert separated(a, b, 0.05, 3.0)
 
 
@@ -77,18 +83,39 @@ def test_the_gradient_method_starts_from_given_poses(tiny_objective, differentia
 
 
 def test_bounds_hold_on_every_visited_pose(tiny_objective, differentiable, file_view) -> None:
-    for method, settings in (("gradient", GradientSettings(steps=4, lr_rotation=0.2, lr_translation=0.2)),
-                             ("random", None)):
-        result = _run(tiny_objective, differentiable, [file_view], method=method, settings=settings,
-                      max_angle_deg=5.0, max_distance=0.1, budget_evaluations=12)
+    for method, settings in (
+        ("gradient", GradientSettings(steps=4, lr_rotation=0.2, lr_translation=0.2)),
+        ("random", None),
+    ):
+        result = _run(
+            tiny_objective,
+            differentiable,
+            [file_view],
+            method=method,
+            settings=settings,
+            max_angle_deg=5.0,
+            max_distance=0.1,
+            budget_evaluations=12,
+        )
         for record in result.views[0].records:
             assert torch.tensor(record.params[:3], dtype=torch.float64).norm() <= math.radians(5.0) + 1e-9
             assert torch.tensor(record.params[3:], dtype=torch.float64).norm() <= 0.1 + 1e-9
 
 
 def _record(l_depth: float, centre: list[float], verdict: str = "valid", theta=(0.0, 0.0, 0.0)) -> ViewRecord:
-    return ViewRecord(step=0, restart=0, params=[0.0] * 6, theta=list(theta), centre=centre, l_depth=l_depth,
-                      l_dist=0.0, objective=l_depth, delta1=1.0, abs_rel=0.0, verdict=verdict)
+    return ViewRecord(
+        step=0,
+        restart=0,
+        params=[0.0] * 6,
+        theta=list(theta),
+        centre=centre,
+        l_depth=l_depth,
+        l_dist=0.0,
+        objective=l_depth,
+        delta1=1.0,
+        abs_rel=0.0,
+        verdict=verdict,
+    )
 
 
 def test_top_views_skip_invalid_and_uninformative_views_and_keep_their_separation() -> None:
@@ -96,7 +123,7 @@ def test_top_views_skip_invalid_and_uninformative_views_and_keep_their_separatio
         _record(0.9, [0.0, 0.0, 0.0], verdict="inside an object"),
         _record(0.85, [2.0, 0.0, 0.0], verdict="uninformative"),
         _record(0.8, [0.0, 0.0, 0.0]),
-        _record(0.7, [0.01, 0.0, 0.0]),                        # too near the 0.8 view
+        _record(0.7, [0.01, 0.0, 0.0]),  # too near the 0.8 view
         _record(0.6, [0.01, 0.0, 0.0], theta=(0.0, 0.2, 0.0)),  # as near, but turned by 11.5 degrees
         _record(0.5, [1.0, 0.0, 0.0]),
     ]
@@ -122,8 +149,15 @@ def test_every_method_stays_within_its_evaluation_budget(method, tiny_objective,
 def test_every_method_stays_within_its_time_budget(method, tiny_objective, differentiable, file_view) -> None:
     started = time.perf_counter()
     settings = GradientSettings(steps=10_000) if method == "gradient" else None
-    result = _run(tiny_objective, differentiable, [file_view], method=method, settings=settings,
-                  budget_evaluations=None, budget_seconds=1.5)
+    result = _run(
+        tiny_objective,
+        differentiable,
+        [file_view],
+        method=method,
+        settings=settings,
+        budget_evaluations=None,
+        budget_seconds=1.5,
+    )
     elapsed = time.perf_counter() - started
     view = result.views[0]
     batches = len({r.step for r in view.records})
@@ -132,18 +166,22 @@ def test_every_method_stays_within_its_time_budget(method, tiny_objective, diffe
     assert view.budget.seconds <= 1.5 + 2 * elapsed / batches
 
 
-@pytest.mark.parametrize("method, settings", [("hybrid", None), ("nevergrad", NevergradSettings("TwoPointsDE")),
-                                              ("nevergrad", None)])
+@pytest.mark.parametrize(
+    "method, settings", [("hybrid", None), ("nevergrad", NevergradSettings("TwoPointsDE")), ("nevergrad", None)]
+)
 def test_same_seed_gives_identical_trajectories(method, settings, tiny_objective, differentiable, file_view) -> None:
-    runs = [_run(tiny_objective, differentiable, [file_view], method=method, settings=settings, budget_evaluations=20)
-            for _ in range(2)]
+    runs = [
+        _run(tiny_objective, differentiable, [file_view], method=method, settings=settings, budget_evaluations=20)
+        for _ in range(2)
+    ]
     assert trajectory_rows(runs[0]) == trajectory_rows(runs[1])
     assert len(trajectory_rows(runs[0])) == 20
 
 
 def test_same_seed_gives_bit_identical_gradient_records(tiny_objective, differentiable, file_view) -> None:
-    first, second = (_run(tiny_objective, differentiable, [file_view], settings=GradientSettings(steps=3))
-                     for _ in range(2))
+    first, second = (
+        _run(tiny_objective, differentiable, [file_view], settings=GradientSettings(steps=3)) for _ in range(2)
+    )
     assert trajectory_rows(first) == trajectory_rows(second)
 
 
@@ -159,20 +197,25 @@ def test_a_method_added_through_the_documented_route_runs(tiny_objective, differ
     METHODS.pop("still_test")
 
 
-@pytest.mark.parametrize("overrides, key", [
-    ({"settings": GradientSettings(steps=-1)}, "attack.gradient.steps"),
-    ({"settings": GradientSettings(restarts=0)}, "attack.gradient.restarts"),
-    ({"settings": GradientSettings(lr_rotation=0.0)}, "attack.gradient.lr_rotation"),
-    ({"max_distance": -1.0}, "attack.max_distance"),
-    ({"budget_evaluations": 0}, "attack.budget_evaluations"),
-])
+@pytest.mark.parametrize(
+    "overrides, key",
+    [
+        ({"settings": GradientSettings(steps=-1)}, "attack.gradient.steps"),
+        ({"settings": GradientSettings(restarts=0)}, "attack.gradient.restarts"),
+        ({"settings": GradientSettings(lr_rotation=0.0)}, "attack.gradient.lr_rotation"),
+        ({"max_distance": -1.0}, "attack.max_distance"),
+        ({"budget_evaluations": 0}, "attack.budget_evaluations"),
+    ],
+)
 def test_bad_settings_name_their_key(overrides, key) -> None:
     with pytest.raises(ValueError, match=key):
         AttackConfig("gradient", **overrides)
 
 
 def test_bad_method_settings_name_their_key() -> None:
-    with pytest.raises(ValueError, match="attack.nevergrad.optimizer.*NGOpt"):
+    with pytest.raises(ValueError, match=r"attack.nevergrad.optimizer.*NGOpt"):
         NevergradSettings("NoSuchOptimizer")
-    with pytest.raises(ValueError, match="attack.method=random needs attack.budget_evaluations or attack.budget_seconds"):
+    with pytest.raises(
+        ValueError, match=r"attack.method=random needs attack.budget_evaluations or attack.budget_seconds"
+    ):
         AttackConfig("random", budget_evaluations=None)

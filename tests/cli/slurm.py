@@ -1,5 +1,6 @@
 """A single-node Slurm cluster on this machine, for tests: munged, slurmctld and slurmd with a
 slurm.conf in a temporary folder, started as root and stopped afterwards."""
+
 from __future__ import annotations
 
 import os
@@ -55,8 +56,7 @@ def _stop(pid_file: Path, timeout: float = 15.0) -> None:
 
 
 def missing_binaries() -> list[str]:
-    return [name for name in _BINARIES if shutil.which(name) is None
-            and not Path("/usr/sbin", name).exists()]
+    return [name for name in _BINARIES if shutil.which(name) is None and not Path("/usr/sbin", name).exists()]
 
 
 @contextmanager
@@ -88,12 +88,12 @@ ReturnToService=2
 SchedulerType=sched/builtin
 SelectType=select/cons_tres
 SelectTypeParameters=CR_Core_Memory
-StateSaveLocation={folder / 'state'}
-SlurmdSpoolDir={folder / 'spool'}
-SlurmctldPidFile={folder / 'slurmctld.pid'}
-SlurmdPidFile={folder / 'slurmd.pid'}
-SlurmctldLogFile={folder / 'slurmctld.log'}
-SlurmdLogFile={folder / 'slurmd.log'}
+StateSaveLocation={folder / "state"}
+SlurmdSpoolDir={folder / "spool"}
+SlurmctldPidFile={folder / "slurmctld.pid"}
+SlurmdPidFile={folder / "slurmd.pid"}
+SlurmctldLogFile={folder / "slurmctld.log"}
+SlurmdLogFile={folder / "slurmd.log"}
 NodeName={host} NodeAddr=127.0.0.1 CPUs={os.cpu_count()} RealMemory={max(1024, _free_memory_mb() - 2048)} State=UNKNOWN
 PartitionName=debug Nodes={host} Default=YES MaxTime=INFINITE State=UP
 """)

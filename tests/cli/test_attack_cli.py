@@ -19,8 +19,16 @@ from transformers import CHMv2Config
 from kadv import box_room
 
 BIN = Path(sys.executable).parent
-SMALL = ["render.height=48", "render.width=64", "attack=gradient", "attack.gradient.steps=4", "attack.gradient.restarts=2", "init.count=2",
-         "init.candidates=8", "progress=false"]
+SMALL = [
+    "render.height=48",
+    "render.width=64",
+    "attack=gradient",
+    "attack.gradient.steps=4",
+    "attack.gradient.restarts=2",
+    "init.count=2",
+    "init.candidates=8",
+    "progress=false",
+]
 
 
 def _command(tool: str, run_dir: Path, *overrides: str) -> list[str]:
@@ -28,8 +36,14 @@ def _command(tool: str, run_dir: Path, *overrides: str) -> list[str]:
 
 
 def _run(tool: str, cwd: Path, run_dir: str, *overrides: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run(_command(tool, cwd / run_dir, *overrides), cwd=cwd, capture_output=True, text=True,
-                          timeout=600, env={**os.environ, **(env or {})})
+    return subprocess.run(
+        _command(tool, cwd / run_dir, *overrides),
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, **(env or {})},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -48,8 +62,23 @@ def test_two_runs_of_one_config_write_identical_trajectories(demo_runs: Path) ->
     rows = first.decode().splitlines()
     assert len(rows) == 1 + 2 * 2 * 5  # header + init views x restarts x (steps + 1)
     header = rows[0].split(",")
-    for column in ("step", "restart", "theta_x", "c_z", "l_depth", "l_dist", "objective", "delta1", "abs_rel",
-                   "verdict", "guard_fraction", "coverage", "rgb_error", "depth_error", "refreshed"):
+    for column in (
+        "step",
+        "restart",
+        "theta_x",
+        "c_z",
+        "l_depth",
+        "l_dist",
+        "objective",
+        "delta1",
+        "abs_rel",
+        "verdict",
+        "guard_fraction",
+        "coverage",
+        "rgb_error",
+        "depth_error",
+        "refreshed",
+    ):
         assert column in header
 
 
@@ -89,8 +118,12 @@ def test_a_complete_run_is_skipped(demo_runs: Path) -> None:
 
 def test_a_killed_run_resumes_without_redoing_finished_init_views(demo_runs: Path, tmp_path: Path) -> None:
     overrides = [*SMALL, "video=false"]
-    process = subprocess.Popen(_command("kadv-attack", tmp_path / "run", *overrides), cwd=tmp_path,
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    process = subprocess.Popen(
+        _command("kadv-attack", tmp_path / "run", *overrides),
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     part = tmp_path / "run" / "partial" / "init0.json"
     deadline = time.monotonic() + 300
     while not part.exists() and process.poll() is None and time.monotonic() < deadline:
@@ -122,7 +155,9 @@ def test_unreadable_partial_files_are_set_aside_and_recomputed(demo_runs: Path, 
     warnings = [line for line in (result.stdout + result.stderr).splitlines() if "cannot be read" in line]
     assert len(warnings) == 2 and "init0.json" in warnings[0] and "init1.json" in warnings[1], warnings
     assert "Expecting" in warnings[0] and "schema version" in warnings[1]
-    assert (run / "partial" / "init0.json.unreadable").is_file() and (run / "partial" / "init1.json.unreadable").is_file()
+    assert (run / "partial" / "init0.json.unreadable").is_file() and (
+        run / "partial" / "init1.json.unreadable"
+    ).is_file()
     assert json.loads((run / "summary.json").read_text())["resumed_init_views"] == []
     assert (run / "trajectory.csv").read_bytes() == (demo_runs / "first" / "trajectory.csv").read_bytes()
 
@@ -141,8 +176,22 @@ def _inside_box_params(tmp_path: Path) -> Path:
     pose = np.eye(4)
     pose[:3, 3] = box
     path = tmp_path / "inside.json"
-    path.write_text(json.dumps({"init_views": [{"name": "boxed", "source": "given", "world_T_cam": pose.tolist(),
-                                                "fov_x_deg": 70.0, "delta1": None, "note": ""}]}))
+    path.write_text(
+        json.dumps(
+            {
+                "init_views": [
+                    {
+                        "name": "boxed",
+                        "source": "given",
+                        "world_T_cam": pose.tolist(),
+                        "fov_x_deg": 70.0,
+                        "delta1": None,
+                        "note": "",
+                    }
+                ]
+            }
+        )
+    )
     return path
 
 

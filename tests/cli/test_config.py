@@ -1,4 +1,5 @@
 """Every option of every config group composes, and the YAML defaults equal the library's."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -36,14 +37,22 @@ def test_every_group_option_composes_into_valid_settings() -> None:
         for option in _options(group):
             cfg = _compose("kadv_attack", f"{group}={option}")
             attack = attack_settings(cfg.attack)
-            InitViewConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in OmegaConf.to_container(cfg.init).items()})
+            InitViewConfig(
+                **{k: tuple(v) if isinstance(v, list) else v for k, v in OmegaConf.to_container(cfg.init).items()}
+            )
             PenaltyConfig(**OmegaConf.to_container(cfg.penalty))
             DiffRenderConfig(supersample=cfg.render.supersample, **OmegaConf.to_container(cfg.render.differentiable))
             shading_from_config(cfg.render.shading)
             assert cfg.loss.kind in ("ssim", "perceptual") and cfg.loss.space in ("disparity", "depth")
-            assert OmegaConf.is_missing(cfg.model, "name") or cfg.model.name in {*PRESETS, *EMBEDDED} or (
-                cfg.model.name == "custom" and OmegaConf.is_missing(cfg.model, "target")
-                and cfg.model.output_kind in ("disparity", "depth"))
+            assert (
+                OmegaConf.is_missing(cfg.model, "name")
+                or cfg.model.name in {*PRESETS, *EMBEDDED}
+                or (
+                    cfg.model.name == "custom"
+                    and OmegaConf.is_missing(cfg.model, "target")
+                    and cfg.model.output_kind in ("disparity", "depth")
+                )
+            )
             assert cfg.scene.kind in ("box_room", "procedural", "file")
             if group == "attack":  # each method's YAML node is its settings dataclass, defaults included
                 assert attack.method == option and attack.settings == get_method(option).settings()
@@ -65,7 +74,11 @@ def test_yaml_defaults_equal_the_library_defaults() -> None:
     diff = OmegaConf.to_container(cfg.render.differentiable)
     assert DiffRenderConfig(supersample=cfg.render.supersample, **diff) == DiffRenderConfig()
     shading = shading_from_config(cfg.render.shading)
-    assert (shading.ambient, shading.diffuse, shading.lights) == (Shading().ambient, Shading().diffuse, Shading().lights)
+    assert (shading.ambient, shading.diffuse, shading.lights) == (
+        Shading().ambient,
+        Shading().diffuse,
+        Shading().lights,
+    )
     train = OmegaConf.to_container(_compose("kadv_train_tiny").train)
     assert TinyTrainConfig(**{**train, "channels": tuple(train["channels"])}) == TinyTrainConfig()
 
@@ -76,7 +89,12 @@ def test_experiment_presets() -> None:
     assert (attack.method, attack.evaluations, demo.init.count, demo.loss.kind) == (DEFAULT_METHOD, 123, 2, "ssim")
     paper = _compose("kadv_attack", "experiment=paper")
     attack = attack_settings(paper.attack)  # the study's protocol keeps the gradient attack
-    assert (attack.method, attack.settings.steps, attack.settings.restarts, attack.evaluations) == ("gradient", 400, 5, 2005)
+    assert (attack.method, attack.settings.steps, attack.settings.restarts, attack.evaluations) == (
+        "gradient",
+        400,
+        5,
+        2005,
+    )
     assert (paper.init.count, paper.loss.kind) == (10, "perceptual")
 
 
@@ -84,8 +102,17 @@ def test_paper_sweep_is_the_study_grid() -> None:
     with initialize_config_module(config_module="kadv.conf", version_base="1.3"):
         cfg = compose(config_name="kadv_attack", overrides=["experiment=paper_sweep"], return_hydra_config=True)
     params = cfg.hydra.sweeper.params
-    assert params.model.split(",") == ["midas_dpt_large", "zoedepth_nk", "depth_anything_v1_large",
-                                       "depth_anything_v2_large"]
+    assert params.model.split(",") == [
+        "midas_dpt_large",
+        "zoedepth_nk",
+        "depth_anything_v1_large",
+        "depth_anything_v2_large",
+    ]
     assert set(params.scene.split(",")) == {"grey_white_room", "modern_hall", "japanese_classroom"}
     attack = attack_settings(cfg.attack)
-    assert (attack.settings.steps, attack.settings.restarts, cfg.init.count, cfg.loss.kind) == (400, 5, 10, "perceptual")
+    assert (attack.settings.steps, attack.settings.restarts, cfg.init.count, cfg.loss.kind) == (
+        400,
+        5,
+        10,
+        "perceptual",
+    )

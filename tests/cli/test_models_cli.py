@@ -1,4 +1,5 @@
 """kadv-models lists every preset from the local cache alone."""
+
 from __future__ import annotations
 
 import os
@@ -35,10 +36,17 @@ def test_a_cached_checkpoint_is_marked_cached(tmp_path, monkeypatch: pytest.Monk
 
 
 def test_listing_presets_imports_neither_torch_nor_transformers(tmp_path) -> None:
-    script = ("import sys\nfrom kadv.cli.models import main\nmain([])\n"
-              "print('HEAVY', sorted(m for m in ('torch', 'transformers', 'kornia') if m in sys.modules))")
-    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
-                            env={**os.environ, "HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf")})
+    script = (
+        "import sys\nfrom kadv.cli.models import main\nmain([])\n"
+        "print('HEAVY', sorted(m for m in ('torch', 'transformers', 'kornia') if m in sys.modules))"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", script],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, "HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf")},
+    )
     assert result.returncode == 0, result.stderr
     assert result.stdout.splitlines()[-1] == "HEAVY []" and "| depth_pro |" in result.stdout
 

@@ -1,4 +1,5 @@
 """kadv-render as a subprocess: its files, the README's examples, and views it must refuse."""
+
 from __future__ import annotations
 
 import json
@@ -22,8 +23,9 @@ README = Path(__file__).resolve().parents[2] / "README.md"
 
 def _run(cwd: Path, *overrides: str) -> subprocess.CompletedProcess:
     env = {**os.environ, "KADV_SCENES": str(scenes_root()), "HYDRA_FULL_ERROR": "0"}
-    return subprocess.run([str(SCRIPT), "hydra.run.dir=run", *overrides], cwd=cwd, capture_output=True, text=True,
-                          timeout=300, env=env)
+    return subprocess.run(
+        [str(SCRIPT), "hydra.run.dir=run", *overrides], cwd=cwd, capture_output=True, text=True, timeout=300, env=env
+    )
 
 
 def test_installed_script_writes_aligned_images_raw_depth_and_a_summary(tmp_path: Path) -> None:
@@ -46,8 +48,14 @@ def test_installed_script_writes_aligned_images_raw_depth_and_a_summary(tmp_path
 
 
 def test_look_at_override_and_clear_error_for_bad_index(tmp_path: Path) -> None:
-    ok = _run(tmp_path, "render.height=30", "render.width=40", "camera.eye=[1,1.5,1]", "camera.target=[3,1,3]",
-              "camera.fov_x_deg=90")
+    ok = _run(
+        tmp_path,
+        "render.height=30",
+        "render.width=40",
+        "camera.eye=[1,1.5,1]",
+        "camera.target=[3,1,3]",
+        "camera.fov_x_deg=90",
+    )
     assert ok.returncode == 0, ok.stderr
     bad = _run(tmp_path, "camera.index=5")
     assert bad.returncode == 2 and "camera.index=5" in bad.stderr
@@ -61,8 +69,11 @@ def _readme_render_examples() -> list[list[str]]:
 @pytest.mark.parametrize("overrides", _readme_render_examples(), ids=lambda o: " ".join(o)[:60])
 def test_readme_examples_render_valid_views(overrides: list[str], tmp_path: Path) -> None:
     # the README names the scenes where a checkout finds them; tests honour KADV_TEST_SCENES
-    small = [o.replace("../shared/scenes", str(scenes_root())) for o in overrides
-             if not o.startswith(("render.width", "render.height"))]
+    small = [
+        o.replace("../shared/scenes", str(scenes_root()))
+        for o in overrides
+        if not o.startswith(("render.width", "render.height"))
+    ]
     result = _run(tmp_path, *small, "render.height=24", "render.width=32")
     assert result.returncode == 0, result.stderr
     summary = json.loads((tmp_path / "run" / "render.json").read_text())
@@ -77,8 +88,13 @@ def test_the_file_camera_beside_a_wall_is_moved_clear(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("eye, verdict", [("[3,1.5,-4]", "outside the scene"), ("[2.5,0.3,2.3]", "inside an object")])
 def test_an_impossible_eye_is_refused_unless_allowed(eye: str, verdict: str, tmp_path: Path) -> None:
-    camera = [f"camera.eye={eye}", "camera.target=[3,1,3.5]", "camera.fov_x_deg=70", "render.height=24",
-              "render.width=32"]
+    camera = [
+        f"camera.eye={eye}",
+        "camera.target=[3,1,3.5]",
+        "camera.fov_x_deg=70",
+        "render.height=24",
+        "render.width=32",
+    ]
     refused = _run(tmp_path, *camera)
     assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1, refused.stderr
     assert verdict in refused.stderr and "camera.allow_invalid=true" in refused.stderr
@@ -90,8 +106,15 @@ def test_an_impossible_eye_is_refused_unless_allowed(eye: str, verdict: str, tmp
 
 def test_an_eye_on_a_wall_has_no_hits_in_its_mask(tmp_path: Path) -> None:
     """The box room's wall x = 0: an eye on its plane sees no depth, and the mask says so."""
-    result = _run(tmp_path, "camera.eye=[0.0,1.5,2.0]", "camera.target=[-1,1.5,2.0]", "camera.fov_x_deg=70",
-                  "render.height=24", "render.width=32", "camera.allow_invalid=true")
+    result = _run(
+        tmp_path,
+        "camera.eye=[0.0,1.5,2.0]",
+        "camera.target=[-1,1.5,2.0]",
+        "camera.fov_x_deg=70",
+        "render.height=24",
+        "render.width=32",
+        "camera.allow_invalid=true",
+    )
     assert result.returncode == 0, result.stderr
     summary = json.loads((tmp_path / "run" / "render.json").read_text())
     depth = np.load(tmp_path / "run" / "depth.npy")

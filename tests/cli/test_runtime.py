@@ -1,4 +1,5 @@
 """The rendering commands set the process up before torch loads; the training command leaves it."""
+
 from __future__ import annotations
 
 import os
@@ -17,8 +18,9 @@ print(os.environ["OMP_WAIT_POLICY"], "torch" in sys.modules)
 
 def _probe(code: str) -> subprocess.CompletedProcess:
     env = {key: value for key, value in os.environ.items() if key != "OMP_WAIT_POLICY"}
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env,
-                          check=False)
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env, check=False
+    )
 
 
 def test_commands_configure_the_process_before_torch_loads() -> None:

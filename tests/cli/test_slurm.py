@@ -1,4 +1,5 @@
 """The cluster path on a real single-node Slurm: a sweep through Hydra's submitit_slurm launcher."""
+
 from __future__ import annotations
 
 import json
@@ -12,10 +13,23 @@ import pytest
 from tests.cli.slurm import INSTALL, missing_binaries, slurm_cluster
 
 BIN = Path(sys.executable).parent
-TINY = ["render.height=24", "render.width=32", "attack.budget_evaluations=6", "init.count=1",
-        "init.candidates=4", "progress=false", "video=false"]
-LAUNCHER = ["hydra/launcher=submitit_slurm", "hydra.launcher.partition=debug", "hydra.launcher.timeout_min=10",
-            "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=1", "hydra.launcher.gpus_per_node=0"]
+TINY = [
+    "render.height=24",
+    "render.width=32",
+    "attack.budget_evaluations=6",
+    "init.count=1",
+    "init.candidates=4",
+    "progress=false",
+    "video=false",
+]
+LAUNCHER = [
+    "hydra/launcher=submitit_slurm",
+    "hydra.launcher.partition=debug",
+    "hydra.launcher.timeout_min=10",
+    "hydra.launcher.cpus_per_task=1",
+    "hydra.launcher.mem_gb=1",
+    "hydra.launcher.gpus_per_node=0",
+]
 
 
 @pytest.fixture(scope="module")

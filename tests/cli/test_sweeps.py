@@ -1,5 +1,6 @@
 """Multiruns: job folders named by their overrides, reruns that skip finished jobs, failures that
 do not stop the others, the joblib and submitit launchers, and the report on a sweep."""
+
 from __future__ import annotations
 
 import json
@@ -13,14 +14,26 @@ from pathlib import Path
 import pytest
 
 BIN = Path(sys.executable).parent
-TINY = ["render.height=24", "render.width=32", "attack.budget_evaluations=6", "init.count=1",
-        "init.candidates=4", "progress=false", "video=false"]
+TINY = [
+    "render.height=24",
+    "render.width=32",
+    "attack.budget_evaluations=6",
+    "init.count=1",
+    "init.candidates=4",
+    "progress=false",
+    "video=false",
+]
 GRID = ["scene.seed=0,1", "attack=gradient,random"]
 
 
 def _sweep(cwd: Path, *overrides: str, timeout: int = 600) -> subprocess.CompletedProcess:
-    return subprocess.run([str(BIN / "kadv-attack"), "-m", "hydra.sweep.dir=sweep", *TINY, *overrides], cwd=cwd,
-                          capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        [str(BIN / "kadv-attack"), "-m", "hydra.sweep.dir=sweep", *TINY, *overrides],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
 
 
 def _jobs(cwd: Path) -> dict[str, Path]:
@@ -49,8 +62,9 @@ def test_a_2x2_sweep_through_a_launcher(launcher: str, tmp_path: Path) -> None:
 
 def test_a_killed_sweep_finishes_on_a_rerun_without_redoing_jobs(tmp_path: Path) -> None:
     command = [str(BIN / "kadv-attack"), "-m", "hydra.sweep.dir=sweep", *TINY, *GRID]
-    process = subprocess.Popen(command, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                               start_new_session=True)
+    process = subprocess.Popen(
+        command, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+    )
     deadline = time.monotonic() + 300
     while not _summaries(tmp_path) and process.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -70,7 +84,10 @@ def test_a_failing_job_does_not_stop_the_others(tmp_path: Path) -> None:
     assert result.returncode != 0
     failures = json.loads((tmp_path / "sweep" / "failures.json").read_text())
     assert len(failures) == 1
-    assert "attack.budget_evaluations=-1" in failures[0]["overrides"] and "attack.budget_evaluations" in failures[0]["error"]
+    assert (
+        "attack.budget_evaluations=-1" in failures[0]["overrides"]
+        and "attack.budget_evaluations" in failures[0]["error"]
+    )
     assert len(_summaries(tmp_path)) == 1 and "attack.budget_evaluations=6" in _summaries(tmp_path)[0].parent.name
     fixed = _sweep(tmp_path, "attack.budget_evaluations=6,7", "scene.seed=0")  # a clean rerun clears the record
     assert fixed.returncode == 0 and not (tmp_path / "sweep" / "failures.json").exists()
@@ -78,8 +95,9 @@ def test_a_failing_job_does_not_stop_the_others(tmp_path: Path) -> None:
 
 def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(tmp_path: Path) -> None:
     assert _sweep(tmp_path, *GRID).returncode == 0
-    result = subprocess.run([str(BIN / "kadv-report"), "sweep", "--no-progress"], cwd=tmp_path, capture_output=True,
-                            text=True, timeout=600)
+    result = subprocess.run(
+        [str(BIN / "kadv-report"), "sweep", "--no-progress"], cwd=tmp_path, capture_output=True, text=True, timeout=600
+    )
     assert result.returncode == 0, result.stderr[-2000:]
     out = tmp_path / "sweep" / "report"
     for method in ("gradient", "random"):  # the study's tables for each method in the sweep
@@ -92,10 +110,26 @@ def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(tmp_path: Pat
     assert transfer[0] == "views of \\ scored by,kadv_tiny" and len(transfer) == 2
     chromium = "/usr/bin/chromium"
     assert Path(chromium).exists(), "headless Chromium is missing: apt-get install -y chromium"
-    dom = subprocess.run([chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-                          "--disable-background-networking", "--disable-component-update", "--disable-sync",
-                          f"--user-data-dir={tmp_path / 'chromium'}", "--virtual-time-budget=5000", "--dump-dom",
-                          (out / "report.html").as_uri()], capture_output=True, text=True, timeout=120).stdout
+    dom = subprocess.run(
+        [
+            chromium,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            f"--user-data-dir={tmp_path / 'chromium'}",
+            "--virtual-time-budget=5000",
+            "--dump-dom",
+            (out / "report.html").as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    ).stdout
     assert dom.count("<table") == 7  # tables 2 and 3 of each method, methods, transfer delta1 and L_depth
     assert dom.count("<tr>") == 4 * 3 + 5 + 2 * 2  # tables 2 and 3: header, model, Avg; methods; transfer
     images = int(dom.split('data-images="')[1].split('"')[0])
@@ -104,6 +138,7 @@ def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(tmp_path: Pat
 
 
 def test_kadv_report_names_a_missing_directory(tmp_path: Path) -> None:
-    result = subprocess.run([str(BIN / "kadv-report"), str(tmp_path / "nothing")], capture_output=True, text=True,
-                            timeout=120)
+    result = subprocess.run(
+        [str(BIN / "kadv-report"), str(tmp_path / "nothing")], capture_output=True, text=True, timeout=120
+    )
     assert result.returncode == 2 and result.stderr.strip().count("\n") == 0 and "nothing" in result.stderr

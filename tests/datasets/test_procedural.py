@@ -1,4 +1,5 @@
 """kadv.datasets: procedural training views."""
+
 from __future__ import annotations
 
 import pytest
@@ -20,8 +21,9 @@ def test_views_are_deterministic_per_seed_and_consistent() -> None:
 
 def test_a_share_of_the_rooms_is_furnished() -> None:
     boxes = render_procedural_views(4, seed=3, height=12, width=16, views_per_room=2, progress=False)
-    mixed = render_procedural_views(4, seed=3, height=12, width=16, views_per_room=2, furnished_share=0.5,
-                                    progress=False)
+    mixed = render_procedural_views(
+        4, seed=3, height=12, width=16, views_per_room=2, furnished_share=0.5, progress=False
+    )
     # room 0 is a box room in both, room 1 is furnished in the mix
     assert torch.equal(boxes.rgb[:2], mixed.rgb[:2])
     assert not torch.equal(boxes.depth[2:], mixed.depth[2:])

@@ -1,4 +1,5 @@
 """kadv.diagnostics: the gradient check's pieces, and the check itself on a box room."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,5 @@
 """kadv.diagnostics.reference: Mitsuba 3 renders the same scene from the same camera as kadv does."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -6,10 +7,10 @@ import pytest
 import torch
 
 from kadv.attack import file_init_views
+from kadv.diagnostics.reference import compare_view, load_mitsuba_scene, mitsuba_depth, save_comparison
 from kadv.geometry import intrinsics_from_fov, look_at
 from kadv.models import load_model
 from kadv.render import ExactRenderer
-from kadv.diagnostics.reference import compare_view, load_mitsuba_scene, mitsuba_depth, save_comparison
 from kadv.scenes import load_scene
 from tests.conftest import cached_real_scene, scenes_root
 
@@ -69,8 +70,9 @@ def test_real_scene_depth_agrees_at_the_file_camera(tmp_path):
     name = "japanese_classroom"
     renderer = ExactRenderer(cached_real_scene(name))
     view = file_init_views(renderer, 0.1)[0]
-    scene = load_mitsuba_scene(scenes_root() / name / "scene.xml", [(view.world_T_cam.numpy(), view.fov_x_deg)],
-                               24, 32, 4)
+    scene = load_mitsuba_scene(
+        scenes_root() / name / "scene.xml", [(view.world_T_cam.numpy(), view.fov_x_deg)], 24, 32, 4
+    )
     comparison = compare_view(scene, 0, renderer, load_model("kadv_tiny"), view.world_T_cam, view.fov_x_deg, 24, 32, 4)
     assert comparison.depth_rel_err <= 1e-3
     assert comparison.mitsuba_rgb.mean() > 0.05 and np.isfinite(comparison.psnr)
@@ -79,4 +81,3 @@ def test_real_scene_depth_agrees_at_the_file_camera(tmp_path):
 
     written = save_comparison(tmp_path / "view.png", comparison, "test")
     assert Image.open(written).size[0] > 4 * 32
-

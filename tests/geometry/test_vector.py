@@ -1,4 +1,5 @@
 """kadv.geometry.vector: written-out 3-vector products agree with the library reductions, to the bit."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -87,9 +87,9 @@ def test_offline_without_vgg_weights_is_a_clear_error(tmp_path: Path, monkeypatc
         raise urllib.error.URLError("no network")
 
     monkeypatch.setattr(torch.hub, "load_state_dict_from_url", offline)
-    with pytest.raises(RuntimeError, match="VGG-16 weights .* not available.*loss=ssim"):
+    with pytest.raises(RuntimeError, match=r"VGG-16 weights .* not available.*loss=ssim"):
         PerceptualLoss.vgg16()
-    with pytest.raises(FileNotFoundError, match="missing.pth"):
+    with pytest.raises(FileNotFoundError, match=r"missing.pth"):
         PerceptualLoss.vgg16(weights=tmp_path / "missing.pth")
 
 

@@ -1,4 +1,5 @@
 """Bring your own model: any torch module wrapped as a DepthModel, checked on its first call."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -63,9 +64,16 @@ def test_a_declared_preprocess_resizes_in_and_back() -> None:
     assert seen[-1] == (1, 3, 32, 32)
 
 
-@pytest.mark.parametrize("fault, message", [("shape", "must map rgb (B, 3, H, W) to (B, 1, H, W)"),
-                                            ("nan", "NaN"), ("detached", "not differentiable"),
-                                            ("no_grad", "not differentiable"), ("numpy", "got ndarray")])
+@pytest.mark.parametrize(
+    "fault, message",
+    [
+        ("shape", "must map rgb (B, 3, H, W) to (B, 1, H, W)"),
+        ("nan", "NaN"),
+        ("detached", "not differentiable"),
+        ("no_grad", "not differentiable"),
+        ("numpy", "got ndarray"),
+    ],
+)
 def test_a_wrong_model_is_refused_on_its_first_call_naming_it(fault: str, message: str) -> None:
     with pytest.raises(ValueError, match="model 'mine'") as error:
         wrap_model(Broken(fault), "disparity", name="mine")
@@ -78,22 +86,29 @@ def test_an_unknown_output_kind_is_refused() -> None:
 
 
 def test_a_factory_from_a_file_outside_the_package(tmp_path: Path) -> None:
-    (tmp_path / "mine.py").write_text("import torch\n\nclass M(torch.nn.Module):\n"
-                                      "    def __init__(self, k):\n        super().__init__(); self.k = k\n"
-                                      "    def forward(self, rgb):\n        return self.k + rgb[:, :1]\n\n"
-                                      "def make(k=1.0):\n    return M(k)\n")
+    (tmp_path / "mine.py").write_text(
+        "import torch\n\nclass M(torch.nn.Module):\n"
+        "    def __init__(self, k):\n        super().__init__(); self.k = k\n"
+        "    def forward(self, rgb):\n        return self.k + rgb[:, :1]\n\n"
+        "def make(k=1.0):\n    return M(k)\n"
+    )
     model = load_custom(f"{tmp_path / 'mine.py'}:make", "depth", {"k": 2.0})
     rgb = torch.rand(1, 3, 8, 8)
     torch.testing.assert_close(model(rgb), 2.0 + rgb[:, :1])
 
 
-@pytest.mark.parametrize("target, message", [("no_such_package_kadv.make", "cannot import 'no_such_package_kadv'"),
-                                             ("torch.no_such_factory", "has no attribute 'no_such_factory'"),
-                                             ("make", "expected package.module.factory"),
-                                             ("/no/such/file.py:make", "no such file"),
-                                             ("math.pi", "is not callable"),
-                                             ("torch.nn.Conv2d", "failed when called with {}")])
+@pytest.mark.parametrize(
+    "target, message",
+    [
+        ("no_such_package_kadv.make", "cannot import 'no_such_package_kadv'"),
+        ("torch.no_such_factory", "has no attribute 'no_such_factory'"),
+        ("make", "expected package.module.factory"),
+        ("/no/such/file.py:make", "no such file"),
+        ("math.pi", "is not callable"),
+        ("torch.nn.Conv2d", "failed when called with {}"),
+    ],
+)
 def test_a_bad_target_is_named(target: str, message: str) -> None:
-    with pytest.raises(ValueError, match="model.target") as error:
+    with pytest.raises(ValueError, match=r"model.target") as error:
         load_custom(target, "disparity")
     assert message in str(error.value)

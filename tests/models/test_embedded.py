@@ -1,4 +1,5 @@
 """The embedded models: shipped weights that load offline and predict a room's structure."""
+
 from __future__ import annotations
 
 import pytest

@@ -2,6 +2,7 @@
 and loaded through load_model: it predicts what transformers' own processor + model +
 post-processing predict, a pose gradient moves the camera through it, and its output kind holds
 on the box room, where near and far are known."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -92,12 +93,15 @@ def _reference(name: str, directory: Path, rgb: torch.Tensor, K: torch.Tensor | 
         pad_h, pad_w = -H % 14, -W % 14
         top, left = round(pad_h // 2 * h_out / h_in), round(pad_w // 2 * w_out / w_in)
         bottom, right = round((pad_h - pad_h // 2) * h_out / h_in), round((pad_w - pad_w // 2) * w_out / w_in)
-        outputs.predicted_depth = outputs.predicted_depth[:, top:h_out - bottom, left:w_out - right]
+        outputs.predicted_depth = outputs.predicted_depth[:, top : h_out - bottom, left : w_out - right]
     return processor.post_process_depth_estimation(outputs, target_sizes=[(H, W)])[0]["predicted_depth"]
 
 
-_PIL_FAMILIES = {name for name, family in FAMILIES.items()
-                 if family.processor_runs and family.processor.get("do_resize", True) and name != "zoedepth"}
+_PIL_FAMILIES = {
+    name
+    for name, family in FAMILIES.items()
+    if family.processor_runs and family.processor.get("do_resize", True) and name != "zoedepth"
+}
 
 
 def test_the_prediction_is_the_family_processor_model_and_post_processing(family, view) -> None:
@@ -105,7 +109,7 @@ def test_the_prediction_is_the_family_processor_model_and_post_processing(family
     model = load_model(directory)
     assert model.output_kind == FAMILIES[name].kind
     with torch.no_grad():
-        for K in ((view.K, None) if name == "depth_pro" else (None,)):
+        for K in (view.K, None) if name == "depth_pro" else (None,):
             ours, theirs = model(view.rgb, K)[0, 0], _reference(name, directory, view.rgb, K)
             assert ours.shape == theirs.shape == (H, W)
             spread, error = float(theirs.max() - theirs.min()), (ours - theirs).abs()
@@ -121,7 +125,9 @@ def test_two_gradient_steps_move_the_camera(family, room) -> None:
     objective = Objective(load_model(directory), depth_loss("ssim"), ExactRenderer(room), PenaltyConfig())
     init = file_init_views(objective.renderer, PenaltyConfig().margin)[0]
     config = AttackConfig("gradient", GradientSettings(steps=2, restarts=1), budget_evaluations=None)
-    result = attack(objective, DifferentiableRenderer(objective.renderer), [init], 48, 64, config, seed=0, progress=False)
+    result = attack(
+        objective, DifferentiableRenderer(objective.renderer), [init], 48, 64, config, seed=0, progress=False
+    )
     path = result.views[0].records
     assert [r.step for r in path] == [0, 1, 2]
     assert path[0].params == [0.0] * 6 and all(any(abs(p) > 1e-6 for p in r.params) for r in path[1:]), name

@@ -1,4 +1,5 @@
 """Every adapter family, loaded from tiny random configs through the same path real checkpoints take."""
+
 from __future__ import annotations
 
 import os
@@ -47,13 +48,21 @@ def test_preprocessor_config_is_honoured(saved) -> None:
     assert model.preprocess.multiple == processor.get("ensure_multiple_of", 1)
 
 
-@pytest.mark.parametrize("config, processor, expected", [
-    ("GLPNConfig", {"size_divisor": 32}, dict(size=None, floor_multiple=32, mean=None)),
-    ("ZoeDepthConfig", {"do_pad": False}, dict(reflect_pad=False, size=(384, 512))),
-    ("DPTConfig", {"do_resize": False, "do_pad": True, "size_divisor": 14}, dict(size=None, pad_multiple=14)),
-    ("DPTConfig", {"do_normalize": False, "resample": 2}, dict(mean=None, std=None, interpolation="bilinear")),
-    ("DPTConfig", {"size": 256, "keep_aspect_ratio": True, "ensure_multiple_of": 14}, dict(size=(256, 256), multiple=14))],
-    ids=["glpn", "zoedepth_no_pad", "dinov2_pad", "no_normalize", "int_size"])
+@pytest.mark.parametrize(
+    "config, processor, expected",
+    [
+        ("GLPNConfig", {"size_divisor": 32}, {"size": None, "floor_multiple": 32, "mean": None}),
+        ("ZoeDepthConfig", {"do_pad": False}, {"reflect_pad": False, "size": (384, 512)}),
+        ("DPTConfig", {"do_resize": False, "do_pad": True, "size_divisor": 14}, {"size": None, "pad_multiple": 14}),
+        ("DPTConfig", {"do_normalize": False, "resample": 2}, {"mean": None, "std": None, "interpolation": "bilinear"}),
+        (
+            "DPTConfig",
+            {"size": 256, "keep_aspect_ratio": True, "ensure_multiple_of": 14},
+            {"size": (256, 256), "multiple": 14},
+        ),
+    ],
+    ids=["glpn", "zoedepth_no_pad", "dinov2_pad", "no_normalize", "int_size"],
+)
 def test_processor_settings_become_the_preprocess(config, processor, expected) -> None:
     import transformers
 
@@ -69,8 +78,9 @@ def test_a_resampling_filter_kadv_cannot_reproduce_is_refused() -> None:
 @pytest.mark.parametrize("shape", [(480, 640), (240, 320), (181, 333), (518, 518)])
 @pytest.mark.parametrize("keep, multiple", [(True, 14), (False, 1), (True, 32)])
 def test_resize_matches_the_transformers_processor(shape, keep, multiple) -> None:
-    theirs = get_resize_output_image_size(torch.zeros(3, *shape).numpy(), output_size=(518, 518),
-                                          keep_aspect_ratio=keep, multiple=multiple)
+    theirs = get_resize_output_image_size(
+        torch.zeros(3, *shape).numpy(), output_size=(518, 518), keep_aspect_ratio=keep, multiple=multiple
+    )
     assert resized_shape(*shape, (518, 518), keep, multiple) == (theirs.height, theirs.width)
 
 
@@ -113,10 +123,17 @@ def test_a_missing_path_is_reported_as_a_missing_directory_not_a_hub_id(path: st
         load_model(path)
 
 
-@pytest.mark.parametrize("family, config, kind", [
-    ("glpn", "GLPNConfig", "depth"), ("zoedepth", "ZoeDepthConfig", "depth"), ("tipsv2_dpt", "Tipsv2DptConfig", "depth"),
-    ("dpt", "DPTConfig", "disparity"), ("depth_pro", "DepthProConfig", "depth"),
-    ("depth_anything", "DepthAnythingConfig", "disparity")])
+@pytest.mark.parametrize(
+    "family, config, kind",
+    [
+        ("glpn", "GLPNConfig", "depth"),
+        ("zoedepth", "ZoeDepthConfig", "depth"),
+        ("tipsv2_dpt", "Tipsv2DptConfig", "depth"),
+        ("dpt", "DPTConfig", "disparity"),
+        ("depth_pro", "DepthProConfig", "depth"),
+        ("depth_anything", "DepthAnythingConfig", "disparity"),
+    ],
+)
 def test_each_family_declares_what_its_output_holds(family: str, config: str, kind: str) -> None:
     import transformers
 
@@ -132,11 +149,13 @@ def test_metric_depth_anything_and_dinov2_dpt_heads_are_depth() -> None:
 def test_a_family_kadv_does_not_know_is_refused_with_what_to_do() -> None:
     config = DPTConfig()
     config.model_type = "future_depth"
-    with pytest.raises(ValueError, match="'future_depth' is not one kadv knows.*wrap_model"):
+    with pytest.raises(ValueError, match=r"'future_depth' is not one kadv knows.*wrap_model"):
         output_kind(config)
 
 
-@pytest.mark.parametrize("config, why", [("CHMv2Config", "canopy-height"), ("PromptDepthAnythingConfig", "prompt depth")])
+@pytest.mark.parametrize(
+    "config, why", [("CHMv2Config", "canopy-height"), ("PromptDepthAnythingConfig", "prompt depth")]
+)
 def test_families_kadv_cannot_attack_are_refused_in_one_line(config: str, why: str, tmp_path: Path) -> None:
     import transformers
 

@@ -73,9 +73,20 @@ def test_the_dpt_trains_through_its_own_preprocessing_and_continues_from_a_direc
     assert not any(p.requires_grad for p in again.parameters())  # handed back frozen, as loaded models are
 
 
-@pytest.mark.parametrize("field, value", [("steps", 0), ("train_views", -4), ("batch_size", 1.5), ("lr", 0.0),
-                                          ("weight_decay", -1e-4), ("channels", ()), ("init_weights", "/no/such/file"),
-                                          ("architecture", "resnet"), ("furnished_share", 1.5)])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("steps", 0),
+        ("train_views", -4),
+        ("batch_size", 1.5),
+        ("lr", 0.0),
+        ("weight_decay", -1e-4),
+        ("channels", ()),
+        ("init_weights", "/no/such/file"),
+        ("architecture", "resnet"),
+        ("furnished_share", 1.5),
+    ],
+)
 def test_bad_settings_are_refused_before_any_rendering(field, value) -> None:
     with pytest.raises((ValueError, FileNotFoundError), match=rf"train\.{field}"):
         TinyTrainConfig(**{field: value})

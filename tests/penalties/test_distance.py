@@ -26,7 +26,9 @@ def test_distance_and_penalty_match_the_formula_near_a_wall(empty_room: ExactRen
     penalty.sum().backward()
     # dL/dc = -1/d^2 * dd/dc, and dd/dc is the unit normal of the wall x = 0
     # Open3D works in float32: components that should be 0 come out near 1e-3 beside 400
-    assert torch.allclose(centre.grad, torch.tensor([[-1 / 0.05**2, 0.0, 0.0]], dtype=torch.float64), rtol=1e-4, atol=1e-2)
+    assert torch.allclose(
+        centre.grad, torch.tensor([[-1 / 0.05**2, 0.0, 0.0]], dtype=torch.float64), rtol=1e-4, atol=1e-2
+    )
 
 
 def test_penalty_is_zero_with_zero_gradient_beyond_threshold(empty_room: ExactRenderer) -> None:
@@ -50,7 +52,9 @@ def test_distance_gradient_matches_finite_differences(empty_room: ExactRenderer)
     for axis in range(3):
         step = torch.zeros_like(centres)
         step[:, axis] = eps
-        fd = (distance_to_surface(empty_room, centres + step) - distance_to_surface(empty_room, centres - step)) / (2 * eps)
+        fd = (distance_to_surface(empty_room, centres + step) - distance_to_surface(empty_room, centres - step)) / (
+            2 * eps
+        )
         assert torch.allclose(grad[:, axis], fd.detach(), atol=1e-3)
 
 

@@ -29,7 +29,9 @@ RENDERER = _room_with_thin_wall()
 @settings(max_examples=60, deadline=None)
 @given(
     start=st.tuples(st.floats(0.5, 2.5), st.floats(0.5, 2.5), st.floats(0.5, 3.5)),
-    steps=st.lists(st.tuples(st.floats(1e-4, 8.0), st.floats(-0.5, 0.5), st.floats(-0.5, 0.5)), min_size=1, max_size=25),
+    steps=st.lists(
+        st.tuples(st.floats(1e-4, 8.0), st.floats(-0.5, 0.5), st.floats(-0.5, 0.5)), min_size=1, max_size=25
+    ),
 )
 def test_camera_pushed_at_a_thin_wall_never_crosses_it(start, steps) -> None:
     centre = torch.tensor([start], dtype=torch.float64)

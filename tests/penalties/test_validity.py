@@ -25,7 +25,7 @@ def room_renderer() -> ExactRenderer:
 
 
 def _box_bounds(renderer: ExactRenderer, index: int) -> tuple[np.ndarray, np.ndarray]:
-    corners = renderer.scene.vertices[renderer.scene.faces[12 + 12 * index: 24 + 12 * index]].reshape(-1, 3)
+    corners = renderer.scene.vertices[renderer.scene.faces[12 + 12 * index : 24 + 12 * index]].reshape(-1, 3)
     return corners.min(axis=0), corners.max(axis=0)
 
 
@@ -34,7 +34,7 @@ def test_box_room_inside_outside_free(room_renderer: ExactRenderer) -> None:
     assert _verdict(room_renderer, (lo + hi) / 2) == "inside an object"
     assert _verdict(room_renderer, lo + 0.05 * (hi - lo)) == "inside an object"
     room_hi = room_renderer.scene.bounds[1]
-    assert _verdict(room_renderer, room_hi + [1.0, 0.5, 1.0]) == "outside the scene"
+    assert _verdict(room_renderer, [*room_hi, 1.0, 0.5, 1.0]) == "outside the scene"
     assert _verdict(room_renderer, [-2.0, 1.5, 1.0]) == "outside the scene"
     assert _verdict(room_renderer, room_renderer.scene.cameras[0].world_T_cam[:3, 3].numpy()) == "valid"
     assert _verdict(room_renderer, [0.02, 1.5, 1.0]) == "too close"
@@ -42,11 +42,22 @@ def test_box_room_inside_outside_free(room_renderer: ExactRenderer) -> None:
 
 def test_a_given_render_gives_the_same_verdicts_as_casting_again(room_renderer: ExactRenderer) -> None:
     lo, hi = _box_bounds(room_renderer, 0)
-    centres = [(lo + hi) / 2, room_renderer.scene.bounds[1] + [1.0, 0.5, 1.0],
-               room_renderer.scene.cameras[0].world_T_cam[:3, 3].numpy(), [0.02, 1.5, 1.0], [0.3, 1.5, 0.06]]
-    poses = torch.stack([look_at(torch.tensor(c, dtype=torch.float64),
-                                 torch.tensor(c, dtype=torch.float64) + torch.tensor([1.0, -0.1, 0.7], dtype=torch.float64))
-                         for c in centres])
+    centres = [
+        (lo + hi) / 2,
+        room_renderer.scene.bounds[1] + [1.0, 0.5, 1.0],
+        room_renderer.scene.cameras[0].world_T_cam[:3, 3].numpy(),
+        [0.02, 1.5, 1.0],
+        [0.3, 1.5, 0.06],
+    ]
+    poses = torch.stack(
+        [
+            look_at(
+                torch.tensor(c, dtype=torch.float64),
+                torch.tensor(c, dtype=torch.float64) + torch.tensor([1.0, -0.1, 0.7], dtype=torch.float64),
+            )
+            for c in centres
+        ]
+    )
     cast = view_validity(room_renderer, poses, K, 12, 16)
     given = view_validity(room_renderer, poses, K, 12, 16, render=room_renderer.render(poses, K, 12, 16, supersample=2))
     assert given.verdicts == cast.verdicts and given.reasons == cast.reasons
@@ -71,8 +82,9 @@ def test_statistics_shapes_and_back_faces_seen_from_inside_a_box(room_renderer: 
 def _reference_classes(scene, centres: np.ndarray, directions: int = 4096) -> list[str]:
     """Brute force, independent of kadv's ray code: dense random probes through raw Open3D."""
     raycaster = o3d.t.geometry.RaycastingScene()
-    raycaster.add_triangles(o3d.core.Tensor(scene.vertices.astype(np.float32)),
-                            o3d.core.Tensor(scene.faces.astype(np.uint32)))
+    raycaster.add_triangles(
+        o3d.core.Tensor(scene.vertices.astype(np.float32)), o3d.core.Tensor(scene.faces.astype(np.uint32))
+    )
     corners = scene.vertices[scene.faces]
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     dirs = np.random.default_rng(123).normal(size=(directions, 3))
@@ -94,16 +106,24 @@ def test_grey_white_room_classification_agrees_with_brute_force(grey_white_room)
     renderer = ExactRenderer(grey_white_room)
     lo, hi = grey_white_room.bounds
     centres = np.random.default_rng(2024).uniform(lo, hi, size=(200, 3))
-    poses = torch.stack([look_at(torch.tensor(c), torch.tensor(c + [1.0, 0.0, 0.3])) for c in centres])
+    poses = torch.stack([look_at(torch.tensor(c), torch.tensor([*c, 1.0, 0.0, 0.3])) for c in centres])
     ours = view_validity(renderer, poses, K, 12, 16)
-    mapping = {"valid": "free", "too close": "free", "uninformative": "free", "inside an object": "inside",
-               "outside the scene": "outside"}
+    mapping = {
+        "valid": "free",
+        "too close": "free",
+        "uninformative": "free",
+        "inside an object": "inside",
+        "outside the scene": "outside",
+    }
     ours_classes = [mapping[v] for v in ours.verdicts]
     reference = _reference_classes(grey_white_room, centres)
-    disagreements = [(i, centres[i].round(3).tolist(), a, b, ours.reasons[i])
-                     for i, (a, b) in enumerate(zip(ours_classes, reference)) if a != b]
+    disagreements = [
+        (i, centres[i].round(3).tolist(), a, b, ours.reasons[i])
+        for i, (a, b) in enumerate(zip(ours_classes, reference))
+        if a != b
+    ]
     for row in disagreements:
-        print("disagreement: index %d centre %s ours=%s reference=%s (%s)" % row)
+        print("disagreement: index {} centre {} ours={} reference={} ({})".format(*row))
     counts = {c: ours_classes.count(c) for c in ("free", "inside", "outside")}
     print("grey_white_room classes:", counts, "agreement:", 1 - len(disagreements) / 200)
     assert len(disagreements) <= 6  # >= 97% agreement

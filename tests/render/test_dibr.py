@@ -1,4 +1,5 @@
 """kadv.render.dibr: the anchor warped into the current view, against analytic planes."""
+
 from __future__ import annotations
 
 import torch
@@ -15,7 +16,11 @@ def _wall_view() -> tuple[ExactRenderer, torch.Tensor, torch.Tensor]:
     """A camera 1.5 m in front of the box room's wall x = 0, looking straight at it; nothing else in view."""
     renderer = ExactRenderer(box_room(seed=0))
     eye = torch.tensor([1.5, 1.4, 1.8], dtype=torch.float64)
-    return renderer, look_at(eye, eye - torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64)).double()[None], intrinsics_from_fov(40.0, H, W)
+    return (
+        renderer,
+        look_at(eye, eye - torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64)).double()[None],
+        intrinsics_from_fov(40.0, H, W),
+    )
 
 
 def _warp(renderer: ExactRenderer, anchor_pose: torch.Tensor, pose: torch.Tensor, K: torch.Tensor):
@@ -35,8 +40,11 @@ def test_the_anchor_at_the_current_pose_is_reproduced() -> None:
 
 def test_after_a_move_the_warped_depth_is_the_new_exact_depth() -> None:
     renderer, anchor_pose, K = _wall_view()
-    moved = perturb_world_T_cam(anchor_pose, torch.tensor([[0.0, 0.03, 0.0]], dtype=torch.float64),
-                                torch.tensor([[-0.2, 0.05, 0.1]], dtype=torch.float64))
+    moved = perturb_world_T_cam(
+        anchor_pose,
+        torch.tensor([[0.0, 0.03, 0.0]], dtype=torch.float64),
+        torch.tensor([[-0.2, 0.05, 0.1]], dtype=torch.float64),
+    )
     exact, warp = _warp(renderer, anchor_pose, moved, K)
     assert float(warp.valid.float().mean()) > 0.9
     valid = warp.valid

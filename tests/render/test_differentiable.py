@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import torch
 
-from kadv.penalties import random_valid_poses
 from kadv.geometry import intrinsics_from_fov
-from kadv.render import DiffRenderConfig, DifferentiableRenderer, ExactRenderer
+from kadv.penalties import random_valid_poses
+from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
 
 K_SMALL = intrinsics_from_fov(70.0, 48, 64)
 
@@ -42,7 +42,7 @@ def test_gradient_finite_at_zero_and_where_rays_miss(room_renderer: ExactRendere
     from kadv.geometry import look_at
 
     lo, hi = room_renderer.scene.bounds
-    pose = look_at(torch.tensor(hi + [2.0, 1.0, 2.0]), torch.tensor((lo + hi) / 2)).double()[None]
+    pose = look_at(torch.tensor([*hi, 2.0, 1.0, 2.0]), torch.tensor((lo + hi) / 2)).double()[None]
     params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
     out = DifferentiableRenderer(room_renderer)(params, pose, K_SMALL, 48, 64)
     assert 0.05 < float(out.mask.float().mean()) < 0.95
@@ -53,10 +53,12 @@ def test_gradient_finite_at_zero_and_where_rays_miss(room_renderer: ExactRendere
 def test_bad_pose_params(room_renderer: ExactRenderer) -> None:
     camera = room_renderer.scene.cameras[0]
     with pytest.raises(ValueError, match="NaN"):
-        DifferentiableRenderer(room_renderer)(torch.full((1, 6), float("nan")), camera.world_T_cam[None], K_SMALL, 48, 64)
+        DifferentiableRenderer(room_renderer)(
+            torch.full((1, 6), float("nan")), camera.world_T_cam[None], K_SMALL, 48, 64
+        )
     with pytest.raises(ValueError, match=r"\(B, 6\)"):
         DifferentiableRenderer(room_renderer)(torch.zeros(6), camera.world_T_cam[None], K_SMALL, 48, 64)
-    with pytest.raises(ValueError, match="render.values"):
+    with pytest.raises(ValueError, match=r"render.values"):
         DiffRenderConfig(values="magic")
 
 
@@ -69,8 +71,19 @@ def test_warp_mode_tracks_exact_render_along_a_trajectory(grey_white_room) -> No
     refreshes = 0
     for step in range(20):
         phase = step / 19.0
-        params = torch.tensor([[0.05 * np.sin(2 * phase), 0.15 * phase, 0.02 * phase,
-                                0.2 * phase, 0.05 * np.sin(3 * phase), 0.15 * phase]], dtype=torch.float64)
+        params = torch.tensor(
+            [
+                [
+                    0.05 * np.sin(2 * phase),
+                    0.15 * phase,
+                    0.02 * phase,
+                    0.2 * phase,
+                    0.05 * np.sin(3 * phase),
+                    0.15 * phase,
+                ]
+            ],
+            dtype=torch.float64,
+        )
         out = differentiable(params, base, K, 60, 80)
         refreshes += out.refreshed
         assert float(out.rgb_error) <= 0.02, (step, float(out.rgb_error))

@@ -14,8 +14,10 @@ from kadv.scenes.parts import quad_part
 def _panel_before_wall() -> ExactRenderer:
     """A 1 m panel at z = 2 in front of a wall at z = 4 (camera at the origin looking down +z)."""
     materials = [Material("panel", base_color=[1.0, 0.0, 0.0]), Material("wall", base_color=[0.0, 0.0, 1.0])]
-    parts = [quad_part(np.array([[-0.5, -0.5, 2], [0.5, -0.5, 2], [0.5, 0.5, 2], [-0.5, 0.5, 2]], float), 0, "panel"),
-             quad_part(np.array([[-5, -5, 4], [5, -5, 4], [5, 5, 4], [-5, 5, 4]], float), 1, "wall")]
+    parts = [
+        quad_part(np.array([[-0.5, -0.5, 2], [0.5, -0.5, 2], [0.5, 0.5, 2], [-0.5, 0.5, 2]], float), 0, "panel"),
+        quad_part(np.array([[-5, -5, 4], [5, -5, 4], [5, 5, 4], [-5, 5, 4]], float), 1, "wall"),
+    ]
     return ExactRenderer(assemble_scene(parts, materials, name="panel"))
 
 
@@ -27,7 +29,9 @@ def test_depth_peeling_layers_are_sorted_and_complete() -> None:
     K = intrinsics_from_fov(60.0, 16, 16)
     anchor = render_anchor(renderer, POSE, K, 16, 16, layers=3)
     centre_depths = anchor.points[0, :, 2, 8, 8]
-    assert torch.allclose(centre_depths, torch.tensor([2.0, 4.0, 0.0], dtype=torch.float32), atol=1e-6)  # panel, wall, none
+    assert torch.allclose(
+        centre_depths, torch.tensor([2.0, 4.0, 0.0], dtype=torch.float32), atol=1e-6
+    )  # panel, wall, none
     assert anchor.mask[0, :, 0, 8, 8].tolist() == [True, True, False]
     corner = anchor.points[0, :, 2, 0, 0].tolist()  # outside the panel: the wall only
     assert abs(corner[0] - 4.0) < 1e-6 and not anchor.mask[0, 1, 0, 0, 0]
@@ -41,8 +45,11 @@ def test_guard_band_widens_the_view_around_the_same_centre() -> None:
     assert torch.allclose(anchor.K[0], guard_band_intrinsics(K, 4, 2))
     assert float(anchor.K[0, 0, 2]) == 2 * (8 + 4)
     # the hi-res pixels around the centre of the current view still see the panel's centre
-    assert torch.allclose(anchor.points[0, 0, :, 23:25, 23:25].mean(dim=(1, 2)), torch.tensor([0.0, 0.0, 2.0], dtype=torch.float32),
-                          atol=0.05)
+    assert torch.allclose(
+        anchor.points[0, 0, :, 23:25, 23:25].mean(dim=(1, 2)),
+        torch.tensor([0.0, 0.0, 2.0], dtype=torch.float32),
+        atol=0.05,
+    )
 
 
 def test_edge_pairs_sit_on_the_panel_outline_with_exact_crossings() -> None:

@@ -19,8 +19,10 @@ def _checker_texture(cells: int = 4, texels: int = 8) -> np.ndarray:
 
 
 def _quad_scene(opacity: np.ndarray | None = None, wall_behind: bool = False):
-    materials = [Material("checker", base_color=np.ones(3), texture=_checker_texture(), opacity=opacity),
-                 Material("wall", base_color=np.array([0.0, 1.0, 0.0]))]
+    materials = [
+        Material("checker", base_color=np.ones(3), texture=_checker_texture(), opacity=opacity),
+        Material("wall", base_color=np.array([0.0, 1.0, 0.0])),
+    ]
     parts = [quad_part(np.array([[-1, -1, 2], [1, -1, 2], [1, 1, 2], [-1, 1, 2]], float), 0, "quad")]
     if wall_behind:
         parts.append(quad_part(np.array([[-5, -5, 4], [5, -5, 4], [5, 5, 4], [-5, 5, 4]], float), 1, "wall"))
@@ -45,8 +47,11 @@ def test_wall_depth_equals_analytic_plane_distance(omega) -> None:
     size = (5.0, 3.0, 4.0)
     scene = box_room(seed=1, size=size, num_boxes=0)
     pose = look_at(torch.tensor([1.0, 1.4, 1.5]), torch.tensor([4.0, 1.0, 3.0])).double()
-    pose[:3, :3] = pose[:3, :3] @ torch.linalg.matrix_exp(torch.tensor(
-        [[0, -omega[2], omega[1]], [omega[2], 0, -omega[0]], [-omega[1], omega[0], 0]], dtype=torch.float64))
+    pose[:3, :3] = pose[:3, :3] @ torch.linalg.matrix_exp(
+        torch.tensor(
+            [[0, -omega[2], omega[1]], [omega[2], 0, -omega[0]], [-omega[1], omega[0], 0]], dtype=torch.float64
+        )
+    )
     K = intrinsics_from_fov(80.0, 48, 64)
     out = ExactRenderer(scene).render(pose, K, 48, 64)
     expected = _analytic_room_depth(size, pose, K, 48, 64)
@@ -60,7 +65,7 @@ def test_checker_quad_colours_at_chosen_pixels() -> None:
     height = width = 64
     K = intrinsics_from_fov(60.0, height, width)
     out = ExactRenderer(scene, FLAT).render(pose, K, height, width)
-    origins, dirs = pixel_rays(pose, K, height, width)
+    _, dirs = pixel_rays(pose, K, height, width)
     hit = dirs.reshape(height, width, 3) * 2.0  # ray parameter = z-depth = 2 on the quad
     u, v = (hit[..., 0] + 1) / 2, (hit[..., 1] + 1) / 2
     inside = (u > 0) & (u < 1) & (v > 0) & (v < 1)
@@ -99,15 +104,26 @@ def test_alpha_mask_lets_rays_through_to_the_surface_behind() -> None:
 def test_first_opaque_hit_behind_transparent_texels_is_the_nearest_of_all_intersections() -> None:
     # alpha-masked quads (checkered holes) in front of, between and behind opaque quads, and a wall
     holes = (np.indices((32, 32)).sum(0) // 8 % 2).astype(np.float32)
-    materials = [Material("leaf", base_color=np.ones(3), texture=_checker_texture(), opacity=holes),
-                 Material("wall", base_color=np.array([0.0, 1.0, 0.0]))]
+    materials = [
+        Material("leaf", base_color=np.ones(3), texture=_checker_texture(), opacity=holes),
+        Material("wall", base_color=np.array([0.0, 1.0, 0.0])),
+    ]
 
     def quad(z: float, half: float, shift: float, material: int):
         corners = np.array([[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]], float)
-        return quad_part(corners + [shift, 0.0, 0.0], material, f"quad{z}")
+        return quad_part([*corners, shift, 0.0, 0.0], material, f"quad{z}")
 
-    scene = assemble_scene([quad(2.0, 1.0, 0.0, 0), quad(2.5, 0.4, 0.3, 1), quad(3.0, 1.0, 0.1, 0),
-                            quad(3.5, 1.0, -0.2, 0), quad(4.0, 5.0, 0.0, 1)], materials, name="leaves")
+    scene = assemble_scene(
+        [
+            quad(2.0, 1.0, 0.0, 0),
+            quad(2.5, 0.4, 0.3, 1),
+            quad(3.0, 1.0, 0.1, 0),
+            quad(3.5, 1.0, -0.2, 0),
+            quad(4.0, 5.0, 0.0, 1),
+        ],
+        materials,
+        name="leaves",
+    )
     renderer = ExactRenderer(scene)
     directions = np.c_[np.random.default_rng(0).uniform(-0.6, 0.6, (4000, 2)), np.ones(4000)]
     origins = np.zeros_like(directions)
@@ -179,5 +195,5 @@ def test_bad_pose_raises(room, bad: str) -> None:
         pose[0, 3] = float("nan")
     else:
         pose[:3, :3] *= 2
-    with pytest.raises(ValueError, match="NaN|not a rotation"):
+    with pytest.raises(ValueError, match=r"NaN|not a rotation"):
         ExactRenderer(room).render(pose, intrinsics_from_fov(60.0, 4, 4), 4, 4)

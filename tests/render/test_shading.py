@@ -1,4 +1,5 @@
 """kadv.render.shading: texture lookups, mip levels and the view-independent shading model."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -35,8 +36,15 @@ def test_mip_levels_halve_down_to_the_mean_and_the_lookup_blends_two_levels() ->
 def test_ambient_only_returns_the_base_colour_and_a_facing_light_adds_the_diffuse_weight() -> None:
     base = torch.tensor([[0.2, 0.4, 0.6]], dtype=torch.float64)
     point, normal = torch.zeros(1, 3, dtype=torch.float64), torch.tensor([[0.0, 1.0, 0.0]], dtype=torch.float64)
-    above, below = torch.tensor([[0.0, 5.0, 0.0]], dtype=torch.float64), torch.tensor([[0.0, -5.0, 0.0]], dtype=torch.float64)
+    above, below = (
+        torch.tensor([[0.0, 5.0, 0.0]], dtype=torch.float64),
+        torch.tensor([[0.0, -5.0, 0.0]], dtype=torch.float64),
+    )
     close = {"rtol": 1e-7, "atol": 0.0}
     torch.testing.assert_close(shade(Shading(ambient=1.0, diffuse=0.0), above, point, normal, base), base, **close)
-    torch.testing.assert_close(shade(Shading(ambient=0.3, diffuse=0.5), above, point, normal, base), base * 0.8, **close)
-    torch.testing.assert_close(shade(Shading(ambient=0.3, diffuse=0.5), below, point, normal, base), base * 0.3, **close)
+    torch.testing.assert_close(
+        shade(Shading(ambient=0.3, diffuse=0.5), above, point, normal, base), base * 0.8, **close
+    )
+    torch.testing.assert_close(
+        shade(Shading(ambient=0.3, diffuse=0.5), below, point, normal, base), base * 0.3, **close
+    )

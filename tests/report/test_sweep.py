@@ -1,4 +1,5 @@
 """The sweep report on synthetic summary.json files of two methods, without a browser."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -21,14 +22,41 @@ def _run(folder: Path, method: str, init: float, adversarial: float, delta1: tup
     Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(folder / "views" / "init0_adv0.png")
     Image.fromarray(np.zeros((4, 4, 3), np.uint8)).save(folder / "map.png")
     view = InitViewSummary(
-        index=0, name="file0", source="file", note="", fov_x_deg=70.0, init_world_T_cam=np.eye(4).tolist(),
-        init=_metrics(init, delta1[0], "views/init0.png"), adversarial=[_metrics(adversarial, delta1[1],
-                                                                                 "views/init0_adv0.png")],
-        adversarial_mean={"l_depth": adversarial, "delta1": delta1[1], "abs_rel": 0.1}, l_depth_gain=adversarial - init,
+        index=0,
+        name="file0",
+        source="file",
+        note="",
+        fov_x_deg=70.0,
+        init_world_T_cam=np.eye(4).tolist(),
+        init=_metrics(init, delta1[0], "views/init0.png"),
+        adversarial=[_metrics(adversarial, delta1[1], "views/init0_adv0.png")],
+        adversarial_mean={"l_depth": adversarial, "delta1": delta1[1], "abs_rel": 0.1},
+        l_depth_gain=adversarial - init,
         anytime=[AnytimePoint(1, 0.1, init, delta1[0]), AnytimePoint(9, 2.0, adversarial, delta1[1])],
-        evaluations=10, invalid_views=0, uninformative_views=0, guarded_steps=0, budget=Budget(10, 0, 3.0))
-    summary = RunSummary("box_room_0", "kadv_tiny", "ssim", 0, "cpu", 96, 128, [], method, init, delta1[0], adversarial,
-                         delta1[1], Budget(10, 0, 3.0), {"kadv": "0"}, [view])
+        evaluations=10,
+        invalid_views=0,
+        uninformative_views=0,
+        guarded_steps=0,
+        budget=Budget(10, 0, 3.0),
+    )
+    summary = RunSummary(
+        "box_room_0",
+        "kadv_tiny",
+        "ssim",
+        0,
+        "cpu",
+        96,
+        128,
+        [],
+        method,
+        init,
+        delta1[0],
+        adversarial,
+        delta1[1],
+        Budget(10, 0, 3.0),
+        {"kadv": "0"},
+        [view],
+    )
     summary.write(folder / "summary.json")
     return summary
 
@@ -50,8 +78,15 @@ def test_tables_for_each_method_delta1_drop_and_anytime_curves(tmp_path: Path) -
     _run(tmp_path / "sweep" / "b", "random", 0.05, 0.35, (0.98, 0.40))
     written = write_report([tmp_path / "sweep"], tmp_path / "out", progress=False)
     names = {path.name for path in written}
-    assert {"table2_gradient.md", "table2_random.md", "table3_gradient.md", "table3_random.md", "methods.md",
-            "curves.png", "report.html"} <= names
+    assert {
+        "table2_gradient.md",
+        "table2_random.md",
+        "table3_gradient.md",
+        "table3_random.md",
+        "methods.md",
+        "curves.png",
+        "report.html",
+    } <= names
     assert "| kadv_tiny | 0.3500 | 0.4000 |" in (tmp_path / "out" / "table2_random.md").read_text()
     methods = (tmp_path / "out" / "methods.csv").read_text().splitlines()
     assert methods[0].split(",")[3:5] == ["L_depth gain", "delta1 drop"]

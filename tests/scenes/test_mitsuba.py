@@ -128,9 +128,15 @@ def test_options_keep_transparent_and_emitters(tmp_path: Path) -> None:
     assert (True, False) in flags and (False, True) in flags
 
 
-@pytest.mark.parametrize("axis, expected", [("x", 60.0), ("y", 2 * math.degrees(math.atan(math.tan(math.radians(30)) * 64 / 48))),
-                                            ("diagonal", 2 * math.degrees(math.atan(math.tan(math.radians(30)) * 64 / 80))),
-                                            ("smaller", 2 * math.degrees(math.atan(math.tan(math.radians(30)) * 64 / 48)))])
+@pytest.mark.parametrize(
+    "axis, expected",
+    [
+        ("x", 60.0),
+        ("y", 2 * math.degrees(math.atan(math.tan(math.radians(30)) * 64 / 48))),
+        ("diagonal", 2 * math.degrees(math.atan(math.tan(math.radians(30)) * 64 / 80))),
+        ("smaller", 2 * math.degrees(math.atan(math.tan(math.radians(30)) * 64 / 48))),
+    ],
+)
 def test_fov_axis_conversion(tmp_path: Path, axis: str, expected: float) -> None:
     scene = load_scene(_write(tmp_path, SCENE_05, fov=60.0, axis=axis))
     assert scene.cameras[0].fov_x_deg == pytest.approx(expected)
@@ -151,7 +157,9 @@ def test_primitives_and_nested_bsdfs(tmp_path: Path) -> None:
     by_count = {int((scene.material_ids == i).sum()): m for i, m in enumerate(scene.materials)}
     assert by_count[12].two_sided and by_count[12].base_color == pytest.approx([0.4845] * 3, abs=1e-3)
     assert by_count[64].opacity is not None
-    assert np.allclose(scene.vertices[scene.faces[scene.material_ids == scene.material_ids[-1]]].mean(axis=(0, 1))[0], 10.0)
+    assert np.allclose(
+        scene.vertices[scene.faces[scene.material_ids == scene.material_ids[-1]]].mean(axis=(0, 1))[0], 10.0
+    )
     sphere = scene.vertices[np.unique(scene.faces[scene.material_ids == scene.material_ids[12]])]
     assert np.allclose(np.linalg.norm(sphere - [5, 0, 0], axis=1), 0.5, atol=1e-6)
 
@@ -177,7 +185,7 @@ def test_missing_file_is_an_error_naming_it_unless_skipped(tmp_path: Path) -> No
       <shape type="rectangle"><bsdf type="diffuse"><texture name="reflectance" type="bitmap">
         <string name="filename" value="gone.png"/></texture></bsdf></shape>
     </scene>""")
-    with pytest.raises(FileNotFoundError, match="nothere.obj"):
+    with pytest.raises(FileNotFoundError, match=r"nothere.obj"):
         load_scene(tmp_path / "scene.xml")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -187,10 +195,14 @@ def test_missing_file_is_an_error_naming_it_unless_skipped(tmp_path: Path) -> No
     assert scene.num_triangles == 2
 
 
-@pytest.mark.parametrize("text, message", [
-    ('<scene version="0.5.0"><integrator type="path"/></scene>', "no shapes"),
-    ("<scene><shape", "not well-formed"),
-], ids=["no shapes", "malformed"])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('<scene version="0.5.0"><integrator type="path"/></scene>', "no shapes"),
+        ("<scene><shape", "not well-formed"),
+    ],
+    ids=["no shapes", "malformed"],
+)
 def test_a_bad_xml_raises_a_clear_error(tmp_path: Path, text: str, message: str) -> None:
     (tmp_path / "scene.xml").write_text(text)
     with pytest.raises(ValueError, match=message):

@@ -18,7 +18,8 @@ def test_same_seed_same_room_bit_for_bit() -> None:
     assert all(np.array_equal(x.texture, y.texture) for x, y in zip(a.materials, b.materials))
     assert np.array_equal(a.cameras[0].world_T_cam, b.cameras[0].world_T_cam)
     assert a.vertices.shape != procedural_room(seed=6).vertices.shape or not np.array_equal(
-        a.vertices, procedural_room(seed=6).vertices)
+        a.vertices, procedural_room(seed=6).vertices
+    )
 
 
 @pytest.mark.parametrize("seed", SEEDS)
@@ -53,6 +54,12 @@ def test_rooms_vary_and_are_lit_at_their_lamps_and_windows() -> None:
     assert len({room.num_triangles for room in rooms}) == len(rooms)
     # windows: from some rooms' cameras, rays leave through the (dropped) glass over the courtyard walls
     directions = fibonacci_sphere(4096)
-    escapes = [(~ExactRenderer(room).cast(np.broadcast_to(room.cameras[0].world_T_cam[:3, 3].numpy(), directions.shape),
-                                          directions).hit).mean() for room in rooms]
+    escapes = [
+        (
+            ~ExactRenderer(room)
+            .cast(np.broadcast_to(room.cameras[0].world_T_cam[:3, 3].numpy(), directions.shape), directions)
+            .hit
+        ).mean()
+        for room in rooms
+    ]
     assert max(escapes) > 0.0

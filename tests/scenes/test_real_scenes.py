@@ -1,4 +1,5 @@
 """The three real scenes in ../shared/scenes: loaders, counts, textures, file cameras."""
+
 from __future__ import annotations
 
 import re
@@ -39,7 +40,9 @@ def _bitmap_materials(xml: Path) -> set[str]:
 
 @pytest.mark.parametrize("name", REAL_SCENES)
 @pytest.mark.parametrize("file", ["scene.xml", "glb"])
-def test_real_scene_loads_with_attributed_triangle_count_and_textures(real_scene_root: Path, name: str, file: str) -> None:
+def test_real_scene_loads_with_attributed_triangle_count_and_textures(
+    real_scene_root: Path, name: str, file: str
+) -> None:
     path = real_scene_root / name / (f"{name}.glb" if file == "glb" else file)
     scene = load_scene(path, drop_transparent=False, drop_emitters=False)
     expected = _attribution_triangles(real_scene_root)[name]

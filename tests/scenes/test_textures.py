@@ -1,4 +1,5 @@
 """kadv.scenes.textures: the sRGB transfer function and its inverse."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -56,7 +56,9 @@ def test_glb_round_trip_with_texture(tmp_path: Path) -> None:
     mesh = trimesh.creation.box()
     uv = np.random.default_rng(0).random((len(mesh.vertices), 2))
     image = Image.fromarray(np.dstack([_checker()] * 3))
-    mesh.visual = trimesh.visual.TextureVisuals(uv=uv, material=trimesh.visual.material.PBRMaterial(baseColorTexture=image))
+    mesh.visual = trimesh.visual.TextureVisuals(
+        uv=uv, material=trimesh.visual.material.PBRMaterial(baseColorTexture=image)
+    )
     trimesh.Scene(mesh).export(tmp_path / "box.glb")
     scene = load_scene(tmp_path / "box.glb")
     assert scene.num_triangles == 12
@@ -81,7 +83,7 @@ def test_z_up_file_is_rotated_to_y_up(tmp_path: Path) -> None:
 
 
 def test_nonexistent_path() -> None:
-    with pytest.raises(FileNotFoundError, match="nowhere.glb"):
+    with pytest.raises(FileNotFoundError, match=r"nowhere.glb"):
         load_scene("/nonexistent/nowhere.glb")
 
 

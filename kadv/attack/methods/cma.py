@@ -1,4 +1,5 @@
 """CMA-ES (the ``cma`` package, ask/tell) on the pose parameters scaled to the unit search box."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -36,8 +37,13 @@ class CMAProposer(Proposer):
 
     def __init__(self, context, rng: np.random.Generator) -> None:
         super().__init__(context, rng)
-        options = {"seed": int(rng.integers(1, 2**31 - 1)), "popsize": self.settings.population,
-                   "bounds": [-1.0, 1.0], "verbose": -9, "CMA_stds": None}
+        options = {
+            "seed": int(rng.integers(1, 2**31 - 1)),
+            "popsize": self.settings.population,
+            "bounds": [-1.0, 1.0],
+            "verbose": -9,
+            "CMA_stds": None,
+        }
         self.strategy = cma.CMAEvolutionStrategy(np.zeros(6), self.settings.sigma, options)
         self.candidates: list[np.ndarray] = []
 

@@ -1,4 +1,5 @@
 """The study's attack: Adam on (omega, delta) through the differentiable renderer, guarded steps."""
+
 from __future__ import annotations
 
 import math
@@ -48,8 +49,15 @@ def restart_jitter(rng: np.random.Generator, restarts: int, settings: GradientSe
     return params
 
 
-def gradient_ascent(context: SearchContext, start: torch.Tensor, steps: int, lr_rotation: float,
-                    lr_translation: float, bar: tqdm, first_step: int = 0) -> list[ViewRecord]:
+def gradient_ascent(
+    context: SearchContext,
+    start: torch.Tensor,
+    steps: int,
+    lr_rotation: float,
+    lr_translation: float,
+    bar: tqdm,
+    first_step: int = 0,
+) -> list[ViewRecord]:
     """Batched Adam runs from ``start`` (R, 6) within the context's budget; their records.
 
     Each update is pulled back within the pose bounds, then passes the step guard (a move that
@@ -64,8 +72,9 @@ def gradient_ascent(context: SearchContext, start: torch.Tensor, steps: int, lr_
     reached, fraction = context.guard(torch.zeros(batch, 3, dtype=torch.float64), start[:, 3:])
     omega = start[:, :3].clone().requires_grad_(True)
     delta = reached.clone().requires_grad_(True)
-    optimiser = torch.optim.Adam([{"params": [omega], "lr": lr_rotation},
-                                  {"params": [delta], "lr": lr_translation}], maximize=True)
+    optimiser = torch.optim.Adam(
+        [{"params": [omega], "lr": lr_rotation}, {"params": [delta], "lr": lr_translation}], maximize=True
+    )
     base = context.base(batch)
     records: list[ViewRecord] = []
     for step in range(steps + 1):
@@ -75,8 +84,16 @@ def gradient_ascent(context: SearchContext, start: torch.Tensor, steps: int, lr_
         params = torch.cat([omega, delta], dim=1)
         out = context.differentiable(params, base, context.K, context.height, context.width)
         terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
-        records += context.records(first_step + step, params, out.world_T_cam, terms, fraction,
-                                   (out.coverage, out.rgb_error, out.depth_error), out.refreshed, render=out.exact)
+        records += context.records(
+            first_step + step,
+            params,
+            out.world_T_cam,
+            terms,
+            fraction,
+            (out.coverage, out.rgb_error, out.depth_error),
+            out.refreshed,
+            render=out.exact,
+        )
         bar.set_postfix(L_depth=f"{float(terms.l_depth.detach().max()):.4f}", refresh=False)
         bar.update(batch)
         if step == steps:
@@ -103,8 +120,9 @@ def best_lane(records: list[ViewRecord]) -> list[ViewRecord]:
 
 
 @register_method("gradient", GradientSettings, evaluations=lambda s: s.restarts * (s.steps + 1))
-def gradient_search(context: SearchContext, rng: np.random.Generator, bar: tqdm,
-                    start: torch.Tensor | None = None) -> InitViewResult:
+def gradient_search(
+    context: SearchContext, rng: np.random.Generator, bar: tqdm, start: torch.Tensor | None = None
+) -> InitViewResult:
     """Maximise the objective from one init view with batched Adam runs.
 
     Args:

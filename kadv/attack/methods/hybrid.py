@@ -1,5 +1,6 @@
 """Screen, then refine: a space-filling design over the bounds, then batched gradient ascent from
 the best screened views for the rest of the budget."""
+
 from __future__ import annotations
 
 import math
@@ -52,7 +53,11 @@ def hybrid_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) -
     while screen_views is None or clock.budget.forward < screen_views:
         if screen_seconds is not None and clock.elapsed() >= screen_seconds:
             break
-        wanted = settings.population if screen_views is None else min(settings.population, screen_views - clock.budget.forward)
+        wanted = (
+            settings.population
+            if screen_views is None
+            else min(settings.population, screen_views - clock.budget.forward)
+        )
         count = clock.allows(wanted)
         if count == 0:
             break
@@ -63,7 +68,8 @@ def hybrid_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) -
     starts = select_top_views(screened, settings.refine_views, config.min_separation, config.min_separation_deg)
     if starts:
         start = torch.tensor([r.params for r in starts], dtype=torch.float64)
-        records += gradient_ascent(context, start, 2**31, settings.lr_rotation, settings.lr_translation, bar,
-                                   first_step=step)
-    refined = records[len(screened):]
+        records += gradient_ascent(
+            context, start, 2**31, settings.lr_rotation, settings.lr_translation, bar, first_step=step
+        )
+    refined = records[len(screened) :]
     return context.result(records, incumbent_path(screened) + (best_lane(refined) if refined else []))

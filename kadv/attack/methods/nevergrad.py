@@ -1,4 +1,5 @@
 """Any optimizer of the ``nevergrad`` package (NGOpt by default), through its ask/tell interface."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -31,9 +32,13 @@ class NevergradSettings:
 
     def __post_init__(self) -> None:
         if self.optimizer not in ng.optimizers.registry:
-            some = ", ".join(n for n in ("NGOpt", "TwoPointsDE", "PSO", "OnePlusOne", "DE", "CMA") if n in ng.optimizers.registry)
-            raise ValueError(f"attack.nevergrad.optimizer={self.optimizer!r} is not a nevergrad optimizer; "
-                             f"valid names include {some} (nevergrad.optimizers.registry lists all)")
+            some = ", ".join(
+                n for n in ("NGOpt", "TwoPointsDE", "PSO", "OnePlusOne", "DE", "CMA") if n in ng.optimizers.registry
+            )
+            raise ValueError(
+                f"attack.nevergrad.optimizer={self.optimizer!r} is not a nevergrad optimizer; "
+                f"valid names include {some} (nevergrad.optimizers.registry lists all)"
+            )
 
 
 @register_proposer("nevergrad", NevergradSettings)
@@ -47,7 +52,8 @@ class NevergradProposer(Proposer):
         # the evaluation budget when there is one; else a count that a seconds budget rarely exceeds
         budget = context.clock.remaining() if context.clock.evaluations is not None else 1000
         self.optimizer = ng.optimizers.registry[self.settings.optimizer](
-            parametrization=parametrization, budget=max(budget, 1), num_workers=self.settings.population)
+            parametrization=parametrization, budget=max(budget, 1), num_workers=self.settings.population
+        )
         self.candidates: list = []
 
     def ask(self, count: int) -> torch.Tensor:

@@ -1,4 +1,5 @@
 """Random search: poses drawn uniformly over the bounds' two balls, a batch at a time."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
