@@ -160,6 +160,13 @@ def select_top_views(
     """Up to ``count`` valid views of highest L_depth, each separated from those chosen before it.
 
     Greedy in order of L_depth (ties keep evaluation order), so the result is deterministic.
+
+    Example:
+        >>> def view(l_depth, x, verdict="valid"):
+        ...     return ViewRecord(0, 0, [0.0] * 6, [0.0] * 3, [x, 1.5, 1.0], l_depth, 0.0, l_depth, 0.9, 0.1, verdict)
+        >>> views = [view(0.30, 1.00), view(0.50, 1.05), view(0.40, 2.00), view(0.90, 3.0, "inside an object")]
+        >>> [v.l_depth for v in select_top_views(views, 2, min_distance=0.2, min_angle_deg=10.0)]
+        [0.5, 0.4]
     """
     chosen: list[ViewRecord] = []
     for record in sorted((r for r in records if r.valid), key=lambda r: -r.l_depth):

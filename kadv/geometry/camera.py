@@ -29,6 +29,13 @@ def intrinsics_from_fov(fov_x_deg: float, height: int, width: int) -> torch.Tens
 
     Raises:
         ValueError: if the field of view is not in (0, 180) degrees or the size is not positive.
+
+    Example:
+        >>> K = intrinsics_from_fov(90.0, 240, 320)
+        >>> K.dtype, K.shape
+        (torch.float64, torch.Size([3, 3]))
+        >>> [round(K[0, 0].item(), 9), K[0, 2].item(), K[1, 2].item()]  # f = (W / 2) / tan(45 deg)
+        [160.0, 160.0, 120.0]
     """
     if not (0.0 < float(fov_x_deg) < 180.0) or not math.isfinite(float(fov_x_deg)):
         raise ValueError(f"fov_x_deg must be in (0, 180), got {fov_x_deg}")
@@ -72,6 +79,11 @@ def batched_intrinsics(K: torch.Tensor, batch: int) -> torch.Tensor:
 
     Raises:
         ValueError: on another shape, NaN/inf entries or a focal length that is not positive.
+
+    Example:
+        >>> K = intrinsics_from_fov(60.0, 48, 64)
+        >>> batched_intrinsics(K, 4).shape
+        torch.Size([4, 3, 3])
     """
     K = torch.as_tensor(K, dtype=torch.float64)
     if K.shape == (3, 3):
@@ -114,6 +126,15 @@ def pixel_rays(
     Returns:
         origins, directions: float64 arrays (B, H, s, W, s, 3); averaging over axes 2 and 4 gives
         per-pixel values.
+
+    Example:
+        >>> from kadv.geometry import look_at
+        >>> world_T_cam = look_at(torch.tensor([0.0, 1.0, 0.0]), torch.tensor([0.0, 1.0, 5.0]))
+        >>> origins, directions = pixel_rays(world_T_cam, intrinsics_from_fov(90.0, 2, 2), 2, 2)
+        >>> origins.shape, directions.shape  # (B, H, s, W, s, 3) with s = 1
+        ((1, 2, 1, 2, 1, 3), (1, 2, 1, 2, 1, 3))
+        >>> origins[0, 0, 0, 0, 0].tolist(), directions[0, 1, 0, 1, 0].round(9).tolist()  # lower right
+        ([0.0, 1.0, 0.0], [-0.5, -0.5, 1.0])
     """
     pose = check_world_T_cam(world_T_cam).detach().double()
     return world_rays(pose, camera_rays(batched_intrinsics(K, pose.shape[0]), height, width, supersample))
@@ -137,6 +158,13 @@ def to_open3d_pinhole(world_T_cam: torch.Tensor, K: torch.Tensor) -> tuple[o3d.c
     Args:
         world_T_cam: one pose (4, 4).
         K: intrinsics (3, 3) in kadv's convention.
+
+    Example:
+        >>> from kadv.geometry import look_at
+        >>> world_T_cam = look_at(torch.tensor([0.0, 1.0, 0.0]), torch.tensor([0.0, 1.0, 5.0]))
+        >>> intrinsic, extrinsic = to_open3d_pinhole(world_T_cam, intrinsics_from_fov(90.0, 2, 2))
+        >>> bool(np.allclose(extrinsic.numpy() @ [0.0, 1.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0]))  # eye -> origin
+        True
     """
     pose = check_world_T_cam(world_T_cam)[0].detach().double()
     intrinsic = torch.as_tensor(K, dtype=torch.float64)

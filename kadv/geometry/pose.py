@@ -25,19 +25,38 @@ def axis_angle_to_matrix(axis_angle: torch.Tensor) -> torch.Tensor:
 
     kornia's Rodrigues form has exact, finite derivatives at exactly zero rotation (pinned by
     ``tests/geometry/test_pose.py``), which the attack needs since it starts every run at zero.
+
+    Example:
+        >>> import math
+        >>> R = axis_angle_to_matrix(torch.tensor([0.0, math.pi / 2, 0.0], dtype=torch.float64))
+        >>> z, x = torch.eye(3, dtype=torch.float64)[2], torch.eye(3, dtype=torch.float64)[0]
+        >>> torch.allclose(R @ z, x)  # a quarter turn about y takes z to x
+        True
     """
     shape = axis_angle.shape[:-1]
     return axis_angle_to_rotation_matrix(axis_angle.reshape(-1, 3)).reshape(*shape, 3, 3)
 
 
 def matrix_to_axis_angle(rotation: torch.Tensor) -> torch.Tensor:
-    """Rotation matrices (..., 3, 3) to rotation vectors (..., 3) with angle in [0, pi]."""
+    """Rotation matrices (..., 3, 3) to rotation vectors (..., 3) with angle in [0, pi].
+
+    Example:
+        >>> omega = torch.tensor([0.1, -0.2, 0.3], dtype=torch.float64)
+        >>> torch.allclose(matrix_to_axis_angle(axis_angle_to_matrix(omega)), omega)
+        True
+    """
     shape = rotation.shape[:-2]
     return rotation_matrix_to_axis_angle(rotation.reshape(-1, 3, 3)).reshape(*shape, 3)
 
 
 def world_T_cam_from_rc(rotation: torch.Tensor, centre: torch.Tensor) -> torch.Tensor:
-    """Build ``world_T_cam`` (..., 4, 4) from camera orientation R (..., 3, 3) and centre c (..., 3)."""
+    """Build ``world_T_cam`` (..., 4, 4) from camera orientation R (..., 3, 3) and centre c (..., 3).
+
+    Example:
+        >>> world_T_cam = world_T_cam_from_rc(torch.eye(3), torch.tensor([1.0, 2.0, 3.0]))
+        >>> world_T_cam[:3, 3].tolist(), world_T_cam[3].tolist()
+        ([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0])
+    """
     top = torch.cat([rotation, centre.unsqueeze(-1)], dim=-1)
     bottom = torch.zeros_like(top[..., :1, :])
     bottom[..., 0, 3] = 1.0
@@ -45,7 +64,13 @@ def world_T_cam_from_rc(rotation: torch.Tensor, centre: torch.Tensor) -> torch.T
 
 
 def rc_from_world_T_cam(world_T_cam: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Split ``world_T_cam`` (..., 4, 4) into R (..., 3, 3) and centre c (..., 3)."""
+    """Split ``world_T_cam`` (..., 4, 4) into R (..., 3, 3) and centre c (..., 3).
+
+    Example:
+        >>> R, c = rc_from_world_T_cam(world_T_cam_from_rc(torch.eye(3), torch.tensor([1.0, 2.0, 3.0])))
+        >>> torch.equal(R, torch.eye(3)), c.tolist()
+        (True, [1.0, 2.0, 3.0])
+    """
     return world_T_cam[..., :3, :3], world_T_cam[..., :3, 3]
 
 
@@ -59,6 +84,13 @@ def perturb_world_T_cam(world_T_cam: torch.Tensor, omega: torch.Tensor, delta: t
 
     Returns:
         Perturbed poses (B, 4, 4), differentiable in ``omega`` and ``delta``.
+
+    Example:
+        >>> start = look_at(torch.tensor([1.0, 1.5, 1.0]), torch.tensor([3.0, 1.5, 1.0])).double()
+        >>> moved = perturb_world_T_cam(start[None], torch.zeros(1, 3, dtype=torch.float64),
+        ...                             torch.tensor([[0.0, 0.0, 0.5]], dtype=torch.float64))
+        >>> moved[0, :3, 3].tolist(), torch.equal(moved[0, :3, :3], start[:3, :3])  # delta moves the centre only
+        ([1.0, 1.5, 1.5], True)
     """
     rotation0, centre0 = rc_from_world_T_cam(world_T_cam)
     return world_T_cam_from_rc(rotation0 @ axis_angle_to_matrix(omega), centre0 + delta)
@@ -73,6 +105,13 @@ def look_at(
 
     Raises:
         ValueError: if eye and target coincide or the view direction is parallel to ``up``.
+
+    Example:
+        >>> world_T_cam = look_at(torch.tensor([1.0, 1.5, 1.0]), torch.tensor([3.0, 1.5, 1.0]))
+        >>> world_T_cam[:3, 2].tolist()  # the optical axis (camera z) points at the target
+        [1.0, 0.0, 0.0]
+        >>> world_T_cam[:3, 1].tolist()  # camera y points down (OpenCV), the world's y is up
+        [0.0, -1.0, 0.0]
     """
     eye = torch.as_tensor(eye, dtype=torch.float32)
     target = torch.as_tensor(target, dtype=eye.dtype)
@@ -97,6 +136,14 @@ def check_world_T_cam(world_T_cam: torch.Tensor, name: str = "world_T_cam", atol
     Raises:
         ValueError: on a wrong shape, NaN/inf entries, a last row other than [0, 0, 0, 1], or a
             rotation block that is not orthonormal with determinant +1.
+
+    Example:
+        >>> check_world_T_cam(torch.eye(4, dtype=torch.float64)).shape
+        torch.Size([1, 4, 4])
+        >>> check_world_T_cam(2 * torch.eye(4, dtype=torch.float64))
+        Traceback (most recent call last):
+        ...
+        ValueError: world_T_cam...
     """
     pose = torch.as_tensor(world_T_cam)
     if pose.ndim == 2:

@@ -20,6 +20,12 @@ def to_comparison_space(values: torch.Tensor, kind: str, space: str, mask: torch
         kind: what ``values`` holds: "depth" (metres) or "disparity" (relative inverse depth).
         space: the space to compare in.
         mask: (B, 1, H, W) valid pixels.
+
+    Example:
+        >>> depth = torch.tensor([[[[2.0, 4.0], [0.0, 8.0]]]])
+        >>> to_comparison_space(depth, "depth", "disparity", depth > 0)  # 0 where invalid
+        tensor([[[[0.5000, 0.2500],
+                  [0.0000, 0.1250]]]])
     """
     for name, value in (("kind", kind), ("space", space)):
         if value not in ("depth", "disparity"):
@@ -30,7 +36,14 @@ def to_comparison_space(values: torch.Tensor, kind: str, space: str, mask: torch
 
 
 def minmax_normalize(values: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-    """Rescale each map's valid pixels to [0, 1] (min -> 0, max -> 1); invalid pixels -> 0."""
+    """Rescale each map's valid pixels to [0, 1] (min -> 0, max -> 1); invalid pixels -> 0.
+
+    Example:
+        >>> values = torch.tensor([[[[2.0, 4.0], [6.0, 10.0]]]])
+        >>> minmax_normalize(values, torch.ones_like(values, dtype=torch.bool))
+        tensor([[[[0.0000, 0.2500],
+                  [0.5000, 1.0000]]]])
+    """
     big = torch.finfo(values.dtype).max
     low = torch.where(mask, values, torch.full_like(values, big)).amin(dim=(1, 2, 3), keepdim=True)
     high = torch.where(mask, values, torch.full_like(values, -big)).amax(dim=(1, 2, 3), keepdim=True)
@@ -42,6 +55,12 @@ def align_scale_shift(prediction: torch.Tensor, target: torch.Tensor, mask: torc
     """s * prediction + t with (s, t) per map minimising the squared error to ``target`` on ``mask``.
 
     Closed-form normal equations, differentiable in both maps.
+
+    Example:
+        >>> target = torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4)
+        >>> mask = torch.ones_like(target, dtype=torch.bool)
+        >>> torch.allclose(align_scale_shift(0.5 * target - 3.0, target, mask), target)
+        True
     """
     weight = mask.to(prediction.dtype)
     count = weight.sum(dim=(1, 2, 3), keepdim=True).clamp_min(1.0)

@@ -17,6 +17,13 @@ def aligned_depth(
 
     Aligned disparities below 1/max(gt) are clamped there, so a prediction that needs a negative
     depth comes out as the farthest ground-truth depth rather than being dropped.
+
+    Example:
+        >>> depth = 1.0 + torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4) / 4
+        >>> mask = torch.ones_like(depth, dtype=torch.bool)
+        >>> disparity = 2.0 / depth + 1.0  # right up to scale and shift
+        >>> torch.allclose(aligned_depth(disparity, depth, mask, "disparity"), depth)
+        True
     """
     gt_disparity = to_comparison_space(gt_depth, "depth", "disparity", mask)
     pred_disparity = to_comparison_space(prediction, prediction_kind, "disparity", mask)
@@ -43,6 +50,13 @@ def depth_metrics(
         mask: (B, 1, H, W) valid ground-truth pixels.
         prediction_kind: "disparity" (relative, affine-invariant) or "depth".
         min_depth: ground truth below this is treated as invalid.
+
+    Example:
+        >>> depth = 1.0 + torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4) / 4
+        >>> mask = torch.ones_like(depth, dtype=torch.bool)
+        >>> metrics = depth_metrics(2.0 / depth + 1.0, depth, mask, "disparity")
+        >>> metrics["delta1"].tolist(), metrics["abs_rel"].abs().max().item() < 1e-9
+        ([1.0], True)
     """
     mask = mask & (gt_depth > min_depth)
     pred_depth = aligned_depth(prediction, gt_depth, mask, prediction_kind)

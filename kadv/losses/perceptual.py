@@ -61,7 +61,15 @@ class PerceptualLoss(nn.Module):
 
 
 def ssim_loss(a: torch.Tensor, b: torch.Tensor, window_size: int = 11) -> torch.Tensor:
-    """Per-sample structural dissimilarity (1 - SSIM) / 2 (B,) of normalised maps (B, 1, H, W)."""
+    """Per-sample structural dissimilarity (1 - SSIM) / 2 (B,) of normalised maps (B, 1, H, W).
+
+    Example:
+        >>> ramp = torch.linspace(0.0, 1.0, 256).reshape(1, 1, 16, 16)
+        >>> ssim_loss(ramp, ramp).tolist()  # (1 - SSIM) / 2 per sample
+        [0.0]
+        >>> 0.0 < ssim_loss(ramp, ramp.flip(-1)).item() <= 1.0
+        True
+    """
     per_pixel = kornia_ssim_loss(a, b, window_size=window_size, max_val=1.0, reduction="none")
     return per_pixel.mean(dim=(1, 2, 3))
 
@@ -73,6 +81,12 @@ def depth_loss(
 
     Raises:
         ValueError: an unknown kind or a bad window size.
+
+    Example:
+        >>> loss = depth_loss("ssim")
+        >>> ramp = torch.linspace(0.0, 1.0, 64).reshape(1, 1, 8, 8)
+        >>> loss(ramp, ramp).item() < 1e-6, loss(ramp, 1.0 - ramp).item() > 0.1
+        (True, True)
     """
     if kind == "perceptual":
         return PerceptualLoss.vgg16(vgg_weights)

@@ -10,7 +10,13 @@ __all__ = ["gradient_matching", "ssi_loss"]
 
 
 def gradient_matching(residual: torch.Tensor, mask: torch.Tensor, scales: int) -> torch.Tensor:
-    """Mean |d/dx| + |d/dy| of the residual over pairs of valid pixels, summed over dyadic scales; (B,)."""
+    """Mean |d/dx| + |d/dy| of the residual over pairs of valid pixels, summed over dyadic scales; (B,).
+
+    Example:
+        >>> residual = torch.full((1, 1, 8, 8), 0.3, dtype=torch.float64)  # a constant offset has no gradient
+        >>> gradient_matching(residual, torch.ones_like(residual, dtype=torch.bool), scales=2).tolist()
+        [0.0]
+    """
     total = residual.new_zeros(residual.shape[0])
     for level in range(scales):
         step = 2**level
@@ -30,6 +36,15 @@ def ssi_loss(
     With d the ground-truth disparity and r = (align(pred) - d) / mean(d): mean |r| plus
     ``gradient_weight`` times the multi-scale gradient-matching term of MiDaS on r, which rewards
     sharp, well placed discontinuities that the mean error alone barely notices.
+
+    Example:
+        >>> depth = 1.0 + torch.arange(64.0, dtype=torch.float64).reshape(1, 1, 8, 8) / 16
+        >>> mask = torch.ones_like(depth, dtype=torch.bool)
+        >>> disparity = 3.0 / depth - 0.1  # right up to scale and shift
+        >>> ssi_loss(disparity, depth, mask, gradient_weight=0.5).abs().item() < 1e-9
+        True
+        >>> ssi_loss(depth, depth, mask).item() > 0.0  # depth read as disparity is wrong
+        True
     """
     target = to_comparison_space(gt_depth, "depth", "disparity", mask)
     weight = mask.to(prediction.dtype)

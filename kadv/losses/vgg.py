@@ -23,7 +23,13 @@ _CONFIG = (64, 64, "M", 128, 128, "M", 256, 256, 256, "M", 512, 512, 512)
 
 
 def vgg16_features() -> nn.Sequential:
-    """The VGG-16 convolutional layers up to relu4_3 (indices 0..22), randomly initialised."""
+    """The VGG-16 convolutional layers up to relu4_3 (indices 0..22), randomly initialised.
+
+    Example:
+        >>> features = vgg16_features()
+        >>> len(features), features(torch.zeros(1, 3, 32, 32)).shape  # up to relu4_3: 512 channels at 1/8
+        (23, torch.Size([1, 512, 4, 4]))
+    """
     layers: list[nn.Module] = []
     channels = 3
     for item in _CONFIG:
@@ -43,6 +49,15 @@ def load_vgg16_state_dict(path: str | Path | None = None) -> dict[str, torch.Ten
     Raises:
         FileNotFoundError: an explicit ``path`` that does not exist.
         WeightsUnavailable: no local copy and the download failed (offline), saying how to provide it.
+
+    Example:
+        >>> import tempfile
+        >>> state = {f"features.{k}": v for k, v in vgg16_features().state_dict().items()}
+        >>> with tempfile.TemporaryDirectory() as folder:
+        ...     torch.save(state | {"classifier.0.weight": torch.zeros(1)}, Path(folder) / "vgg16.pth")
+        ...     loaded = load_vgg16_state_dict(Path(folder) / "vgg16.pth")
+        >>> sorted(loaded)[:2], len(loaded)  # features only, without the prefix: 10 convolutions
+        (['0.bias', '0.weight'], 20)
     """
     if path is not None:
         path = Path(path)

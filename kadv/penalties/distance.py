@@ -41,6 +41,13 @@ def distance_to_surface(renderer: ExactRenderer, centres: torch.Tensor) -> torch
 
     Raises:
         ValueError: on a wrong shape or NaN/inf centres.
+
+    Example:
+        >>> import kadv
+        >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))  # x 0-4, y 0-3, z 0-5
+        >>> centres = torch.tensor([[1.0, 1.5, 2.5], [2.0, 2.5, 2.5]], dtype=torch.float64)
+        >>> distance_to_surface(room, centres).round(decimals=9).tolist()  # to the wall x = 0; the ceiling
+        [1.0, 0.5]
     """
     check_shape(centres, "B 3", "centres")
     if not bool(torch.isfinite(centres.detach()).all()):
@@ -52,6 +59,10 @@ def shortcut_penalty(distance: torch.Tensor, d_th: float) -> torch.Tensor:
     """L_dist = 1/d - 1/d_th where d < d_th, else 0 (zero gradient there).
 
     Continuous at d = d_th and growing without bound as the camera reaches a surface.
+
+    Example:
+        >>> shortcut_penalty(torch.tensor([0.1, 0.2, 0.5], dtype=torch.float64), d_th=0.2).tolist()  # 1/0.1 - 1/0.2
+        [5.0, 0.0, 0.0]
     """
     if d_th <= 0:
         raise ValueError(f"d_th must be positive, got {d_th}")

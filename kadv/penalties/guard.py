@@ -53,6 +53,17 @@ def step_guard(
 
     Raises:
         ValueError: on mismatched shapes or NaN/inf centres.
+
+    Example:
+        >>> import kadv
+        >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
+        >>> start = torch.tensor([[1.0, 1.5, 2.5], [1.0, 1.5, 2.5]], dtype=torch.float64)
+        >>> end = torch.tensor([[2.0, 1.5, 2.5], [-1.0, 1.5, 2.5]], dtype=torch.float64)
+        >>> check = step_guard(room, start, end, margin=0.1)
+        >>> check.allowed.tolist()  # the second move would leave through the wall x = 0
+        [True, False]
+        >>> round(check.max_fraction[1].item(), 3)  # it may go 0.9 m of its 2 m, to 0.1 m from the wall
+        0.45
     """
     check_shape(c_new, "B 3", "c_new", check_shape(c_old, "B 3", "c_old"))
     old = c_old.detach().double().cpu().numpy()

@@ -21,6 +21,13 @@ def random_valid_poses(
 
     Centres are uniform in the scene's camera region (its interior if declared, else its bounds)
     shrunk by ``min_clearance``; headings uniform, pitch in [-35, 15] degrees, roll within +-5 degrees.
+
+    Example:
+        >>> import kadv
+        >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
+        >>> poses = random_valid_poses(room, 3, np.random.default_rng(0), fov_x_deg=70.0)
+        >>> poses.shape, bool(view_validity(room, poses, intrinsics_from_fov(70.0, 24, 32), 24, 32).valid.all())
+        (torch.Size([3, 4, 4]), True)
     """
     lo, hi = renderer.scene.camera_region + np.array([[min_clearance] * 3, [-min_clearance] * 3])
     accepted: list[torch.Tensor] = []

@@ -79,7 +79,15 @@ class ViewValidity:
 
 
 def fibonacci_sphere(count: int) -> np.ndarray:
-    """(count, 3) nearly uniform unit directions (golden-angle spiral), deterministic."""
+    """(count, 3) nearly uniform unit directions (golden-angle spiral), deterministic.
+
+    Example:
+        >>> directions = fibonacci_sphere(100)
+        >>> directions.shape, bool(np.allclose(np.linalg.norm(directions, axis=1), 1.0))
+        ((100, 3), True)
+        >>> bool(abs(directions.mean(axis=0)).max() < 0.02)  # spread evenly: their mean is near 0
+        True
+    """
     index = np.arange(count) + 0.5
     z = 1.0 - 2.0 * index / count
     radius = np.sqrt(1.0 - z * z)
@@ -89,7 +97,14 @@ def fibonacci_sphere(count: int) -> np.ndarray:
 
 def plane_labels(renderer: ExactRenderer) -> np.ndarray:
     """(F,) int64 label per triangle of the renderer's scene; coplanar triangles share a label
-    (computed once per scene)."""
+    (computed once per scene).
+
+    Example:
+        >>> import kadv
+        >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
+        >>> len(np.unique(plane_labels(room)))  # floor, ceiling and four walls
+        6
+    """
     if renderer not in _PLANE_LABELS:
         scene = renderer.scene
         corners = scene.vertices[scene.faces]
@@ -108,7 +123,19 @@ def plane_labels(renderer: ExactRenderer) -> np.ndarray:
 
 def plane_shares(renderer: ExactRenderer, triangle_ids: np.ndarray) -> np.ndarray:
     """(B,) share of each view's hit pixels that lie on its most common plane (0 for a view that
-    hits nothing), from per-pixel triangle ids (B, N) with -1 for a miss."""
+    hits nothing), from per-pixel triangle ids (B, N) with -1 for a miss.
+
+    Example:
+        >>> import kadv
+        >>> from kadv.geometry import intrinsics_from_fov, look_at
+        >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
+        >>> facing_wall = look_at(torch.tensor([2.0, 1.5, 4.0]), torch.tensor([2.0, 1.5, 5.0]))  # 1 m from it
+        >>> corner = look_at(torch.tensor([1.0, 2.0, 1.0]), torch.tensor([4.0, 0.0, 5.0]))
+        >>> out = room.render(torch.stack([facing_wall, corner]), intrinsics_from_fov(60.0, 24, 32), 24, 32)
+        >>> shares = plane_shares(room, out.triangle_ids[:, 0].numpy())
+        >>> shares[0].item(), shares[1].item() < 0.9
+        (1.0, True)
+    """
     labels = plane_labels(renderer)
     shares = np.zeros(len(triangle_ids))
     for b, ids in enumerate(triangle_ids):
@@ -121,7 +148,16 @@ def plane_shares(renderer: ExactRenderer, triangle_ids: np.ndarray) -> np.ndarra
 def probe_directions_hits(
     renderer: ExactRenderer, centres: np.ndarray, directions: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(miss, back) booleans (B, N) for rays from each centre (B, 3) along each direction (N, 3)."""
+    """(miss, back) booleans (B, N) for rays from each centre (B, 3) along each direction (N, 3).
+
+    Example:
+        >>> import kadv
+        >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
+        >>> centres = np.array([[2.0, 1.5, 2.5], [2.0, 1.5, -1.0]])  # inside; outside, behind the wall z = 0
+        >>> miss, back = probe_directions_hits(room, centres, fibonacci_sphere(64))
+        >>> miss.any(axis=1).tolist(), back.any(axis=1).tolist()  # from outside: escaping rays, back faces
+        ([False, True], [False, True])
+    """
     origins = np.broadcast_to(centres[:, None, :], (len(centres), len(directions), 3))
     rays = np.broadcast_to(directions[None], origins.shape)
     hits = renderer.cast(origins, rays)
@@ -160,6 +196,16 @@ def view_validity(
             "uninformative" (None: never).
         render: the views' exact render at these poses, K and size, when the caller has one: its
             pixel-centre hits are used instead of casting them again.
+
+    Example:
+        >>> import kadv
+        >>> from kadv.geometry import intrinsics_from_fov, look_at
+        >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
+        >>> eyes = torch.tensor([[1.0, 1.5, 1.0], [1.0, 1.5, -1.0]])  # inside the room; behind its wall z = 0
+        >>> poses = look_at(eyes, torch.tensor([[3.0, 1.0, 4.0], [3.0, 1.0, 4.0]]))
+        >>> verdicts = view_validity(room, poses, intrinsics_from_fov(70.0, 24, 32), 24, 32)
+        >>> verdicts.valid.tolist(), verdicts.verdicts
+        ([True, False], ['valid', 'outside the scene'])
     """
     pose = check_world_T_cam(world_T_cam)
     centres = pose[:, :3, 3].detach().double().numpy()
