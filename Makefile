@@ -7,7 +7,9 @@ STAMP := $(VENV)/.kadv-installed
 DEMO_PACKAGES := $(shell sed -n 's/^demo://p' system-packages.txt)
 TEST_PACKAGES := $(DEMO_PACKAGES) $(shell sed -n 's/^test://p' system-packages.txt)
 
-.PHONY: demo test bench clean demo-packages test-packages
+DOCS_STAMP := $(VENV)/.kadv-docs-installed
+
+.PHONY: demo test docs lint bench clean demo-packages test-packages
 
 # Installs the missing ones of $(1) with apt-get as root; otherwise prints the one line to run and stops.
 # dpkg-query's status, not `dpkg -s`: a removed package whose configuration remains still passes `dpkg -s`.
@@ -38,8 +40,21 @@ demo: demo-packages $(STAMP)
 test: test-packages $(STAMP)
 	$(BIN)/python -m pytest -q
 
+$(DOCS_STAMP): pyproject.toml | $(STAMP)
+	$(BIN)/pip install --quiet -e ".[docs]"
+	touch $@
+
+# the site (site/index.html) from docs/ and the docstrings; any warning fails the build
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+	$(BIN)/python tools/check_api_reference.py site
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
 bench: demo-packages $(STAMP)
 	cd benchmarks && for b in render penalty gradcheck tiny_accuracy attack_step search_anytime reference_render; do ../$(BIN)/python $$b.py || exit 1; done
 
 clean:
-	rm -rf $(VENV) outputs multirun .pytest_cache
+	rm -rf $(VENV) outputs multirun .pytest_cache site

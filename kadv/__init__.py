@@ -6,6 +6,7 @@ The names below load on first use, so that ``import kadv.runtime`` runs before t
 from __future__ import annotations
 
 import importlib
+from typing import TYPE_CHECKING
 
 _EXPORTS = {
     "Camera": "kadv.geometry",
@@ -25,7 +26,29 @@ _EXPORTS = {
     "procedural_room": "kadv.scenes",
 }
 
-__all__ = sorted(_EXPORTS)
+if TYPE_CHECKING:  # the same names, for type checkers and the API reference
+    from kadv.geometry import Camera, intrinsics_from_fov, look_at
+    from kadv.models import DepthModel, load_model
+    from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer, RenderOutput, Shading
+    from kadv.scenes import Material, Scene, box_room, load_scene, procedural_room
+
+__all__ = [
+    "Camera",
+    "DepthModel",
+    "DiffRenderConfig",
+    "DifferentiableRenderer",
+    "ExactRenderer",
+    "Material",
+    "RenderOutput",
+    "Scene",
+    "Shading",
+    "box_room",
+    "intrinsics_from_fov",
+    "load_model",
+    "load_scene",
+    "look_at",
+    "procedural_room",
+]
 __version__ = "0.1.0"
 
 

@@ -161,7 +161,7 @@ def select_top_views(
 
     Greedy in order of L_depth (ties keep evaluation order), so the result is deterministic.
 
-    Example:
+    Examples:
         >>> def view(l_depth, x, verdict="valid"):
         ...     return ViewRecord(0, 0, [0.0] * 6, [0.0] * 3, [x, 1.5, 1.0], l_depth, 0.0, l_depth, 0.9, 0.1, verdict)
         >>> views = [view(0.30, 1.00), view(0.50, 1.05), view(0.40, 2.00), view(0.90, 3.0, "inside an object")]

@@ -39,7 +39,8 @@ def attack(
         differentiable: the differentiable renderer (gradient steps use it; views evaluated
             without a gradient use its exact renderer and supersampling).
         init_views: starting views.
-        height, width: image size.
+        height: image height.
+        width: image width.
         config: search settings.
         seed: the run's seed.
         completed: results already computed, by init-view index; they are not recomputed.

@@ -186,7 +186,8 @@ class SearchContext:
         objective: the objective (it holds the model, the loss and the exact renderer).
         differentiable: the differentiable renderer (its exact renderer must be the objective's).
         init: the init view.
-        height, width: image size.
+        height: image height.
+        width: image width.
         config: the attack's settings (bounds, budgets).
     """
 

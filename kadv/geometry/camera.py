@@ -30,7 +30,7 @@ def intrinsics_from_fov(fov_x_deg: float, height: int, width: int) -> torch.Tens
     Raises:
         ValueError: if the field of view is not in (0, 180) degrees or the size is not positive.
 
-    Example:
+    Examples:
         >>> K = intrinsics_from_fov(90.0, 240, 320)
         >>> K.dtype, K.shape
         (torch.float64, torch.Size([3, 3]))
@@ -80,7 +80,7 @@ def batched_intrinsics(K: torch.Tensor, batch: int) -> torch.Tensor:
     Raises:
         ValueError: on another shape, NaN/inf entries or a focal length that is not positive.
 
-    Example:
+    Examples:
         >>> K = intrinsics_from_fov(60.0, 48, 64)
         >>> batched_intrinsics(K, 4).shape
         torch.Size([4, 3, 3])
@@ -120,14 +120,15 @@ def pixel_rays(
     Args:
         world_T_cam: poses (B, 4, 4).
         K: intrinsics (3, 3) or (B, 3, 3).
-        height, width: image size in pixels.
+        height: image height in pixels.
+        width: image width in pixels.
         supersample: s; each pixel gets s x s rays on a regular sub-grid.
 
     Returns:
         origins, directions: float64 arrays (B, H, s, W, s, 3); averaging over axes 2 and 4 gives
         per-pixel values.
 
-    Example:
+    Examples:
         >>> from kadv.geometry import look_at
         >>> world_T_cam = look_at(torch.tensor([0.0, 1.0, 0.0]), torch.tensor([0.0, 1.0, 5.0]))
         >>> origins, directions = pixel_rays(world_T_cam, intrinsics_from_fov(90.0, 2, 2), 2, 2)
@@ -159,7 +160,7 @@ def to_open3d_pinhole(world_T_cam: torch.Tensor, K: torch.Tensor) -> tuple[o3d.c
         world_T_cam: one pose (4, 4).
         K: intrinsics (3, 3) in kadv's convention.
 
-    Example:
+    Examples:
         >>> from kadv.geometry import look_at
         >>> world_T_cam = look_at(torch.tensor([0.0, 1.0, 0.0]), torch.tensor([0.0, 1.0, 5.0]))
         >>> intrinsic, extrinsic = to_open3d_pinhole(world_T_cam, intrinsics_from_fov(90.0, 2, 2))

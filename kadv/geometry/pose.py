@@ -26,7 +26,7 @@ def axis_angle_to_matrix(axis_angle: torch.Tensor) -> torch.Tensor:
     kornia's Rodrigues form has exact, finite derivatives at exactly zero rotation (pinned by
     ``tests/geometry/test_pose.py``), which the attack needs since it starts every run at zero.
 
-    Example:
+    Examples:
         >>> import math
         >>> R = axis_angle_to_matrix(torch.tensor([0.0, math.pi / 2, 0.0], dtype=torch.float64))
         >>> z, x = torch.eye(3, dtype=torch.float64)[2], torch.eye(3, dtype=torch.float64)[0]
@@ -40,7 +40,7 @@ def axis_angle_to_matrix(axis_angle: torch.Tensor) -> torch.Tensor:
 def matrix_to_axis_angle(rotation: torch.Tensor) -> torch.Tensor:
     """Rotation matrices (..., 3, 3) to rotation vectors (..., 3) with angle in [0, pi].
 
-    Example:
+    Examples:
         >>> omega = torch.tensor([0.1, -0.2, 0.3], dtype=torch.float64)
         >>> torch.allclose(matrix_to_axis_angle(axis_angle_to_matrix(omega)), omega)
         True
@@ -52,7 +52,7 @@ def matrix_to_axis_angle(rotation: torch.Tensor) -> torch.Tensor:
 def world_T_cam_from_rc(rotation: torch.Tensor, centre: torch.Tensor) -> torch.Tensor:
     """Build ``world_T_cam`` (..., 4, 4) from camera orientation R (..., 3, 3) and centre c (..., 3).
 
-    Example:
+    Examples:
         >>> world_T_cam = world_T_cam_from_rc(torch.eye(3), torch.tensor([1.0, 2.0, 3.0]))
         >>> world_T_cam[:3, 3].tolist(), world_T_cam[3].tolist()
         ([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 1.0])
@@ -66,7 +66,7 @@ def world_T_cam_from_rc(rotation: torch.Tensor, centre: torch.Tensor) -> torch.T
 def rc_from_world_T_cam(world_T_cam: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Split ``world_T_cam`` (..., 4, 4) into R (..., 3, 3) and centre c (..., 3).
 
-    Example:
+    Examples:
         >>> R, c = rc_from_world_T_cam(world_T_cam_from_rc(torch.eye(3), torch.tensor([1.0, 2.0, 3.0])))
         >>> torch.equal(R, torch.eye(3)), c.tolist()
         (True, [1.0, 2.0, 3.0])
@@ -85,7 +85,7 @@ def perturb_world_T_cam(world_T_cam: torch.Tensor, omega: torch.Tensor, delta: t
     Returns:
         Perturbed poses (B, 4, 4), differentiable in ``omega`` and ``delta``.
 
-    Example:
+    Examples:
         >>> start = look_at(torch.tensor([1.0, 1.5, 1.0]), torch.tensor([3.0, 1.5, 1.0])).double()
         >>> moved = perturb_world_T_cam(start[None], torch.zeros(1, 3, dtype=torch.float64),
         ...                             torch.tensor([[0.0, 0.0, 0.5]], dtype=torch.float64))
@@ -106,7 +106,7 @@ def look_at(
     Raises:
         ValueError: if eye and target coincide or the view direction is parallel to ``up``.
 
-    Example:
+    Examples:
         >>> world_T_cam = look_at(torch.tensor([1.0, 1.5, 1.0]), torch.tensor([3.0, 1.5, 1.0]))
         >>> world_T_cam[:3, 2].tolist()  # the optical axis (camera z) points at the target
         [1.0, 0.0, 0.0]
@@ -137,7 +137,7 @@ def check_world_T_cam(world_T_cam: torch.Tensor, name: str = "world_T_cam", atol
         ValueError: on a wrong shape, NaN/inf entries, a last row other than [0, 0, 0, 1], or a
             rotation block that is not orthonormal with determinant +1.
 
-    Example:
+    Examples:
         >>> check_world_T_cam(torch.eye(4, dtype=torch.float64)).shape
         torch.Size([1, 4, 4])
         >>> check_world_T_cam(2 * torch.eye(4, dtype=torch.float64))

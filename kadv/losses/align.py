@@ -21,7 +21,7 @@ def to_comparison_space(values: torch.Tensor, kind: str, space: str, mask: torch
         space: the space to compare in.
         mask: (B, 1, H, W) valid pixels.
 
-    Example:
+    Examples:
         >>> depth = torch.tensor([[[[2.0, 4.0], [0.0, 8.0]]]])
         >>> to_comparison_space(depth, "depth", "disparity", depth > 0)  # 0 where invalid
         tensor([[[[0.5000, 0.2500],
@@ -38,7 +38,7 @@ def to_comparison_space(values: torch.Tensor, kind: str, space: str, mask: torch
 def minmax_normalize(values: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
     """Rescale each map's valid pixels to [0, 1] (min -> 0, max -> 1); invalid pixels -> 0.
 
-    Example:
+    Examples:
         >>> values = torch.tensor([[[[2.0, 4.0], [6.0, 10.0]]]])
         >>> minmax_normalize(values, torch.ones_like(values, dtype=torch.bool))
         tensor([[[[0.0000, 0.2500],
@@ -56,7 +56,7 @@ def align_scale_shift(prediction: torch.Tensor, target: torch.Tensor, mask: torc
 
     Closed-form normal equations, differentiable in both maps.
 
-    Example:
+    Examples:
         >>> target = torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4)
         >>> mask = torch.ones_like(target, dtype=torch.bool)
         >>> torch.allclose(align_scale_shift(0.5 * target - 3.0, target, mask), target)

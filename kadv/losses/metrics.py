@@ -18,7 +18,7 @@ def aligned_depth(
     Aligned disparities below 1/max(gt) are clamped there, so a prediction that needs a negative
     depth comes out as the farthest ground-truth depth rather than being dropped.
 
-    Example:
+    Examples:
         >>> depth = 1.0 + torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4) / 4
         >>> mask = torch.ones_like(depth, dtype=torch.bool)
         >>> disparity = 2.0 / depth + 1.0  # right up to scale and shift
@@ -51,7 +51,7 @@ def depth_metrics(
         prediction_kind: "disparity" (relative, affine-invariant) or "depth".
         min_depth: ground truth below this is treated as invalid.
 
-    Example:
+    Examples:
         >>> depth = 1.0 + torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4) / 4
         >>> mask = torch.ones_like(depth, dtype=torch.bool)
         >>> metrics = depth_metrics(2.0 / depth + 1.0, depth, mask, "disparity")

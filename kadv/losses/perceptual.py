@@ -63,7 +63,7 @@ class PerceptualLoss(nn.Module):
 def ssim_loss(a: torch.Tensor, b: torch.Tensor, window_size: int = 11) -> torch.Tensor:
     """Per-sample structural dissimilarity (1 - SSIM) / 2 (B,) of normalised maps (B, 1, H, W).
 
-    Example:
+    Examples:
         >>> ramp = torch.linspace(0.0, 1.0, 256).reshape(1, 1, 16, 16)
         >>> ssim_loss(ramp, ramp).tolist()  # (1 - SSIM) / 2 per sample
         [0.0]
@@ -82,7 +82,7 @@ def depth_loss(
     Raises:
         ValueError: an unknown kind or a bad window size.
 
-    Example:
+    Examples:
         >>> loss = depth_loss("ssim")
         >>> ramp = torch.linspace(0.0, 1.0, 64).reshape(1, 1, 8, 8)
         >>> loss(ramp, ramp).item() < 1e-6, loss(ramp, 1.0 - ramp).item() > 0.1

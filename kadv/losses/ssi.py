@@ -12,7 +12,7 @@ __all__ = ["gradient_matching", "ssi_loss"]
 def gradient_matching(residual: torch.Tensor, mask: torch.Tensor, scales: int) -> torch.Tensor:
     """Mean |d/dx| + |d/dy| of the residual over pairs of valid pixels, summed over dyadic scales; (B,).
 
-    Example:
+    Examples:
         >>> residual = torch.full((1, 1, 8, 8), 0.3, dtype=torch.float64)  # a constant offset has no gradient
         >>> gradient_matching(residual, torch.ones_like(residual, dtype=torch.bool), scales=2).tolist()
         [0.0]
@@ -37,7 +37,7 @@ def ssi_loss(
     ``gradient_weight`` times the multi-scale gradient-matching term of MiDaS on r, which rewards
     sharp, well placed discontinuities that the mean error alone barely notices.
 
-    Example:
+    Examples:
         >>> depth = 1.0 + torch.arange(64.0, dtype=torch.float64).reshape(1, 1, 8, 8) / 16
         >>> mask = torch.ones_like(depth, dtype=torch.bool)
         >>> disparity = 3.0 / depth - 0.1  # right up to scale and shift

@@ -25,7 +25,7 @@ _CONFIG = (64, 64, "M", 128, 128, "M", 256, 256, 256, "M", 512, 512, 512)
 def vgg16_features() -> nn.Sequential:
     """The VGG-16 convolutional layers up to relu4_3 (indices 0..22), randomly initialised.
 
-    Example:
+    Examples:
         >>> features = vgg16_features()
         >>> len(features), features(torch.zeros(1, 3, 32, 32)).shape  # up to relu4_3: 512 channels at 1/8
         (23, torch.Size([1, 512, 4, 4]))
@@ -50,7 +50,7 @@ def load_vgg16_state_dict(path: str | Path | None = None) -> dict[str, torch.Ten
         FileNotFoundError: an explicit ``path`` that does not exist.
         WeightsUnavailable: no local copy and the download failed (offline), saying how to provide it.
 
-    Example:
+    Examples:
         >>> import tempfile
         >>> state = {f"features.{k}": v for k, v in vgg16_features().state_dict().items()}
         >>> with tempfile.TemporaryDirectory() as folder:

@@ -7,6 +7,7 @@ without importing torch or transformers.
 from __future__ import annotations
 
 import importlib
+from typing import TYPE_CHECKING
 
 _EXPORTS = {
     "DepthModel": "kadv.models.base",
@@ -33,7 +34,40 @@ _EXPORTS = {
     "wrap_model": "kadv.models.custom",
 }
 
-__all__ = sorted(_EXPORTS)
+if TYPE_CHECKING:  # the same names, for type checkers and the API reference
+    from kadv.models.base import DepthModel
+    from kadv.models.custom import ModuleDepthModel, check_depth_model, load_custom, wrap_model
+    from kadv.models.huggingface import HuggingFaceDepthModel, ModelWeightsUnavailable, load_huggingface
+    from kadv.models.preprocess import NetworkLayout, Preprocess, resized_shape
+    from kadv.models.presets import EMBEDDED, PRESETS, Preset, preset_table
+    from kadv.models.registry import load_model
+    from kadv.models.tiny import KadvTiny, TinyDepthNet, load_kadv_tiny, save_kadv_tiny
+    from kadv.models.tiny_dpt import load_kadv_tiny_dpt, save_kadv_tiny_dpt
+
+__all__ = [
+    "EMBEDDED",
+    "PRESETS",
+    "DepthModel",
+    "HuggingFaceDepthModel",
+    "KadvTiny",
+    "ModelWeightsUnavailable",
+    "ModuleDepthModel",
+    "NetworkLayout",
+    "Preprocess",
+    "Preset",
+    "TinyDepthNet",
+    "check_depth_model",
+    "load_custom",
+    "load_huggingface",
+    "load_kadv_tiny",
+    "load_kadv_tiny_dpt",
+    "load_model",
+    "preset_table",
+    "resized_shape",
+    "save_kadv_tiny",
+    "save_kadv_tiny_dpt",
+    "wrap_model",
+]
 
 
 def __getattr__(name: str) -> object:

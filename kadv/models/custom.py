@@ -91,7 +91,7 @@ def wrap_model(
     Raises:
         ValueError: a bad output kind, or a module that fails :func:`check_depth_model`.
 
-    Example:
+    Examples:
         >>> import torch
         >>> from kadv.models import wrap_model
         >>> class Ramp(torch.nn.Module):

@@ -42,7 +42,7 @@ def distance_to_surface(renderer: ExactRenderer, centres: torch.Tensor) -> torch
     Raises:
         ValueError: on a wrong shape or NaN/inf centres.
 
-    Example:
+    Examples:
         >>> import kadv
         >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))  # x 0-4, y 0-3, z 0-5
         >>> centres = torch.tensor([[1.0, 1.5, 2.5], [2.0, 2.5, 2.5]], dtype=torch.float64)
@@ -60,7 +60,7 @@ def shortcut_penalty(distance: torch.Tensor, d_th: float) -> torch.Tensor:
 
     Continuous at d = d_th and growing without bound as the camera reaches a surface.
 
-    Example:
+    Examples:
         >>> shortcut_penalty(torch.tensor([0.1, 0.2, 0.5], dtype=torch.float64), d_th=0.2).tolist()  # 1/0.1 - 1/0.2
         [5.0, 0.0, 0.0]
     """

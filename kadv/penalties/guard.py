@@ -54,7 +54,7 @@ def step_guard(
     Raises:
         ValueError: on mismatched shapes or NaN/inf centres.
 
-    Example:
+    Examples:
         >>> import kadv
         >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
         >>> start = torch.tensor([[1.0, 1.5, 2.5], [1.0, 1.5, 2.5]], dtype=torch.float64)

@@ -22,7 +22,7 @@ def random_valid_poses(
     Centres are uniform in the scene's camera region (its interior if declared, else its bounds)
     shrunk by ``min_clearance``; headings uniform, pitch in [-35, 15] degrees, roll within +-5 degrees.
 
-    Example:
+    Examples:
         >>> import kadv
         >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
         >>> poses = random_valid_poses(room, 3, np.random.default_rng(0), fov_x_deg=70.0)

@@ -81,7 +81,7 @@ class ViewValidity:
 def fibonacci_sphere(count: int) -> np.ndarray:
     """(count, 3) nearly uniform unit directions (golden-angle spiral), deterministic.
 
-    Example:
+    Examples:
         >>> directions = fibonacci_sphere(100)
         >>> directions.shape, bool(np.allclose(np.linalg.norm(directions, axis=1), 1.0))
         ((100, 3), True)
@@ -99,7 +99,7 @@ def plane_labels(renderer: ExactRenderer) -> np.ndarray:
     """(F,) int64 label per triangle of the renderer's scene; coplanar triangles share a label
     (computed once per scene).
 
-    Example:
+    Examples:
         >>> import kadv
         >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
         >>> len(np.unique(plane_labels(room)))  # floor, ceiling and four walls
@@ -125,7 +125,7 @@ def plane_shares(renderer: ExactRenderer, triangle_ids: np.ndarray) -> np.ndarra
     """(B,) share of each view's hit pixels that lie on its most common plane (0 for a view that
     hits nothing), from per-pixel triangle ids (B, N) with -1 for a miss.
 
-    Example:
+    Examples:
         >>> import kadv
         >>> from kadv.geometry import intrinsics_from_fov, look_at
         >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
@@ -150,7 +150,7 @@ def probe_directions_hits(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(miss, back) booleans (B, N) for rays from each centre (B, 3) along each direction (N, 3).
 
-    Example:
+    Examples:
         >>> import kadv
         >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
         >>> centres = np.array([[2.0, 1.5, 2.5], [2.0, 1.5, -1.0]])  # inside; outside, behind the wall z = 0
@@ -186,7 +186,8 @@ def view_validity(
         renderer: the scene's exact renderer (its ray caster is reused).
         world_T_cam: (B, 4, 4) or (4, 4) poses.
         K: (3, 3) or (B, 3, 3) intrinsics.
-        height, width: the view's image size.
+        height: the view's image height.
+        width: the view's image width.
         near: near plane in metres (z-depth); pixels closer than it make the view "too close".
         min_distance: the centre may not be nearer than this to any surface.
         probe_rays: directions of the spherical probe.
@@ -197,7 +198,7 @@ def view_validity(
         render: the views' exact render at these poses, K and size, when the caller has one: its
             pixel-centre hits are used instead of casting them again.
 
-    Example:
+    Examples:
         >>> import kadv
         >>> from kadv.geometry import intrinsics_from_fov, look_at
         >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))

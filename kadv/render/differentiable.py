@@ -175,7 +175,8 @@ class DifferentiableRenderer:
                 offset in world metres; usually ``requires_grad``.
             base_world_T_cam: (B, 4, 4) poses at pose_params = 0.
             K: (3, 3) or (B, 3, 3) intrinsics.
-            height, width: image size.
+            height: image height.
+            width: image width.
         """
         check_shape(pose_params, "B 6", "pose_params")
         if not bool(torch.isfinite(pose_params.detach()).all()):

@@ -297,7 +297,8 @@ class ExactRenderer:
         Args:
             world_T_cam: (B, 4, 4) or (4, 4) poses (OpenCV camera, metres).
             K: (3, 3) or (B, 3, 3) intrinsics.
-            height, width: image size.
+            height: image height.
+            width: image width.
             supersample: s; RGB averages s x s rays per pixel, depth and the other maps come from the
                 pixel-centre ray.
             sub_rgb: (B, 3, s * height, s * width) colours of those s x s rays, when the caller has

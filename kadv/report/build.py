@@ -28,8 +28,9 @@ def write_report(
     Args:
         paths: sweep or run directories.
         out: output folder (default: ``<first path>/report``).
-        renderer_of, model_of: the renderer of a run's scene and its model, to re-render and score
-            the adversarial views for the transfer matrix; without both, no transfer matrix.
+        renderer_of: the renderer of a run's scene, to re-render its adversarial views for the
+            transfer matrix; without it (or ``model_of``), no transfer matrix.
+        model_of: a run's model, to score every run's adversarial views.
         progress: show a progress bar while re-rendering.
     """
     runs = collect_runs(paths)

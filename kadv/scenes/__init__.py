@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from kadv.scenes.box_room import box_room
+from kadv.scenes.box_rooms import box_room
 from kadv.scenes.load import SUPPORTED_SUFFIXES, load_scene
 from kadv.scenes.procedural import procedural_room
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
