@@ -1,4 +1,4 @@
-"""Every Python block of README.md runs as written, on its own (so the README cannot drift)."""
+"""Every Python block of README.md and of the guide in docs/ runs as written, on its own (so they cannot drift)."""
 
 from __future__ import annotations
 
@@ -10,17 +10,24 @@ import pytest
 from tests.conftest import scenes_root
 
 ROOT = Path(__file__).resolve().parents[1]
-BLOCKS = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+BLOCKS = [
+    (page.relative_to(ROOT), block)
+    for page in PAGES
+    for block in re.findall(r"```python\n(.*?)```", page.read_text(), re.S)
+]
 
 
-def test_the_readme_has_python_blocks() -> None:
-    assert len(BLOCKS) >= 4
+def test_the_readme_and_the_guide_have_python_blocks() -> None:
+    pages = [str(page) for page, _ in BLOCKS]
+    assert pages.count("README.md") >= 3 and len(BLOCKS) >= 6
 
 
 @pytest.mark.real_scenes
-@pytest.mark.parametrize("index", range(len(BLOCKS)))
-def test_readme_python_block_runs(index: int, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("index", range(len(BLOCKS)), ids=[f"{page}-{i}" for i, (page, _) in enumerate(BLOCKS)])
+def test_python_block_runs(index: int, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.chdir(ROOT)
-    # the README names the scenes where a checkout finds them; tests honour KADV_TEST_SCENES
-    code = BLOCKS[index].replace("../shared/scenes", str(scenes_root()))
-    exec(compile(code, f"README.md python block {index + 1}", "exec"), {"__name__": f"readme_block_{index}"})
+    page, block = BLOCKS[index]
+    # the pages name the scenes where a checkout finds them; tests honour KADV_TEST_SCENES
+    code = block.replace("../shared/scenes", str(scenes_root()))
+    exec(compile(code, f"{page} python block {index + 1}", "exec"), {"__name__": f"readme_block_{index}"})
