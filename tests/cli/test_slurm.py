@@ -11,17 +11,9 @@ from pathlib import Path
 import pytest
 
 from tests.cli.slurm import INSTALL, missing_binaries, slurm_cluster
+from tests.cli.test_sweeps import TINY
 
 BIN = Path(sys.executable).parent
-TINY = [
-    "render.height=24",
-    "render.width=32",
-    "attack.budget_evaluations=6",
-    "init.count=1",
-    "init.candidates=4",
-    "progress=false",
-    "video=false",
-]
 LAUNCHER = [
     "hydra/launcher=submitit_slurm",
     "hydra.launcher.partition=debug",

@@ -34,7 +34,7 @@ def test_box_room_inside_outside_free(room_renderer: ExactRenderer) -> None:
     assert _verdict(room_renderer, (lo + hi) / 2) == "inside an object"
     assert _verdict(room_renderer, lo + 0.05 * (hi - lo)) == "inside an object"
     room_hi = room_renderer.scene.bounds[1]
-    assert _verdict(room_renderer, [*room_hi, 1.0, 0.5, 1.0]) == "outside the scene"
+    assert _verdict(room_renderer, room_hi + [1.0, 0.5, 1.0]) == "outside the scene"
     assert _verdict(room_renderer, [-2.0, 1.5, 1.0]) == "outside the scene"
     assert _verdict(room_renderer, room_renderer.scene.cameras[0].world_T_cam[:3, 3].numpy()) == "valid"
     assert _verdict(room_renderer, [0.02, 1.5, 1.0]) == "too close"
@@ -106,7 +106,7 @@ def test_grey_white_room_classification_agrees_with_brute_force(grey_white_room)
     renderer = ExactRenderer(grey_white_room)
     lo, hi = grey_white_room.bounds
     centres = np.random.default_rng(2024).uniform(lo, hi, size=(200, 3))
-    poses = torch.stack([look_at(torch.tensor(c), torch.tensor([*c, 1.0, 0.0, 0.3])) for c in centres])
+    poses = torch.stack([look_at(torch.tensor(c), torch.tensor(c + [1.0, 0.0, 0.3])) for c in centres])
     ours = view_validity(renderer, poses, K, 12, 16)
     mapping = {
         "valid": "free",

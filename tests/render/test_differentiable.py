@@ -42,7 +42,7 @@ def test_gradient_finite_at_zero_and_where_rays_miss(room_renderer: ExactRendere
     from kadv.geometry import look_at
 
     lo, hi = room_renderer.scene.bounds
-    pose = look_at(torch.tensor([*hi, 2.0, 1.0, 2.0]), torch.tensor((lo + hi) / 2)).double()[None]
+    pose = look_at(torch.tensor(hi + [2.0, 1.0, 2.0]), torch.tensor((lo + hi) / 2)).double()[None]
     params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
     out = DifferentiableRenderer(room_renderer)(params, pose, K_SMALL, 48, 64)
     assert 0.05 < float(out.mask.float().mean()) < 0.95

@@ -111,7 +111,7 @@ def test_first_opaque_hit_behind_transparent_texels_is_the_nearest_of_all_inters
 
     def quad(z: float, half: float, shift: float, material: int):
         corners = np.array([[-half, -half, z], [half, -half, z], [half, half, z], [-half, half, z]], float)
-        return quad_part([*corners, shift, 0.0, 0.0], material, f"quad{z}")
+        return quad_part(corners + [shift, 0.0, 0.0], material, f"quad{z}")
 
     scene = assemble_scene(
         [
