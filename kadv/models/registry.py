@@ -5,10 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from kadv.models.base import DepthModel
-from kadv.models.huggingface import load_huggingface
 from kadv.models.presets import PRESETS
 from kadv.models.tiny import load_kadv_tiny
-from kadv.models.tiny_dpt import load_kadv_tiny_dpt
 
 __all__ = ["load_model"]
 
@@ -33,6 +31,10 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
         raise ValueError("model name is empty")
     if name == "kadv_tiny":
         return load_kadv_tiny(weights)
+    # transformers takes seconds to import; commands that load no Hugging Face model skip it
+    from kadv.models.huggingface import load_huggingface
+    from kadv.models.tiny_dpt import load_kadv_tiny_dpt
+
     if name == "kadv_tiny_dpt":
         return load_kadv_tiny_dpt(weights)
     if weights is not None:

@@ -1,10 +1,38 @@
-"""Run artefacts: images, the run directory and its summary, sweep tables and the HTML report."""
+"""Run artefacts: images, the run directory and its summary, sweep tables and the HTML report.
+
+The names below load on first use, so that a command writing only images (``kadv-render``) does
+not import the attack, the models and the report's plotting.
+"""
 
 from __future__ import annotations
 
-from kadv.report.build import write_report
-from kadv.report.images import save_depth_png, save_rgb_png
-from kadv.report.run import write_run
-from kadv.report.summary import SCHEMA_VERSION, RunInfo, RunSummary
+import importlib
+from typing import TYPE_CHECKING
+
+_EXPORTS = {
+    "SCHEMA_VERSION": "kadv.report.summary",
+    "RunInfo": "kadv.report.summary",
+    "RunSummary": "kadv.report.summary",
+    "save_depth_png": "kadv.report.images",
+    "save_rgb_png": "kadv.report.images",
+    "write_report": "kadv.report.build",
+    "write_run": "kadv.report.run",
+}
+
+if TYPE_CHECKING:  # the same names, for type checkers and the API reference
+    from kadv.report.build import write_report
+    from kadv.report.images import save_depth_png, save_rgb_png
+    from kadv.report.run import write_run
+    from kadv.report.summary import SCHEMA_VERSION, RunInfo, RunSummary
 
 __all__ = ["SCHEMA_VERSION", "RunInfo", "RunSummary", "save_depth_png", "save_rgb_png", "write_report", "write_run"]
+
+
+def __getattr__(name: str) -> object:
+    if name not in _EXPORTS:
+        raise AttributeError(f"module 'kadv.report' has no attribute {name!r}")
+    return getattr(importlib.import_module(_EXPORTS[name]), name)
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cma
 import numpy as np
 import torch
 
@@ -36,6 +35,8 @@ class CMAProposer(Proposer):
     """Minimises -objective; a generation cut short by the budget is not told (CMA-ES needs whole ones)."""
 
     def __init__(self, context, rng: np.random.Generator) -> None:
+        import cma  # here, not at the top: only a CMA-ES search needs it
+
         super().__init__(context, rng)
         options = {
             "seed": int(rng.integers(1, 2**31 - 1)),

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import nevergrad as ng
 import numpy as np
 import torch
 
@@ -31,6 +30,8 @@ class NevergradSettings:
     population: int = 8
 
     def __post_init__(self) -> None:
+        import nevergrad as ng  # here, not at the top: it takes most of a second to import
+
         if self.optimizer not in ng.optimizers.registry:
             some = ", ".join(
                 n for n in ("NGOpt", "TwoPointsDE", "PSO", "OnePlusOne", "DE", "CMA") if n in ng.optimizers.registry
@@ -46,6 +47,8 @@ class NevergradProposer(Proposer):
     """Minimises -objective over the unit search box [-1, 1]^6, seeded from the search's generator."""
 
     def __init__(self, context, rng: np.random.Generator) -> None:
+        import nevergrad as ng
+
         super().__init__(context, rng)
         parametrization = ng.p.Array(shape=(6,), lower=-1.0, upper=1.0)
         parametrization.random_state = np.random.RandomState(int(rng.integers(1, 2**31 - 1)))
