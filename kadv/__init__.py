@@ -5,8 +5,9 @@ The names below load on first use, so that ``import kadv.runtime`` runs before t
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from kadv._lazy import lazy_exports
 
 _EXPORTS = {
     "Camera": "kadv.geometry",
@@ -51,12 +52,4 @@ __all__ = [
 ]
 __version__ = "0.1.0"
 
-
-def __getattr__(name: str) -> object:
-    if name not in _EXPORTS:
-        raise AttributeError(f"module 'kadv' has no attribute {name!r}")
-    return getattr(importlib.import_module(_EXPORTS[name]), name)
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

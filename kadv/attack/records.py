@@ -87,6 +87,15 @@ class Budget:
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
 
+    def __add__(self, other: Budget) -> Budget:
+        """The cost of both searches, so that ``sum(budgets, Budget())`` totals a run.
+
+        Examples:
+            >>> sum([Budget(10, 2, 1.5), Budget(5, 0, 0.5)], Budget())
+            Budget(forward=15, backward=2, seconds=2.0)
+        """
+        return Budget(self.forward + other.forward, self.backward + other.backward, self.seconds + other.seconds)
+
 
 @dataclass
 class InitViewResult:

@@ -6,8 +6,9 @@ without importing torch or transformers.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from kadv._lazy import lazy_exports
 
 _EXPORTS = {
     "DepthModel": "kadv.models.base",
@@ -69,12 +70,4 @@ __all__ = [
     "wrap_model",
 ]
 
-
-def __getattr__(name: str) -> object:
-    if name not in _EXPORTS:
-        raise AttributeError(f"module 'kadv.models' has no attribute {name!r}")
-    return getattr(importlib.import_module(_EXPORTS[name]), name)
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -6,8 +6,9 @@ not import the attack, the models and the report's plotting.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from kadv._lazy import lazy_exports
 
 _EXPORTS = {
     "SCHEMA_VERSION": "kadv.report.summary",
@@ -27,12 +28,4 @@ if TYPE_CHECKING:  # the same names, for type checkers and the API reference
 
 __all__ = ["SCHEMA_VERSION", "RunInfo", "RunSummary", "save_depth_png", "save_rgb_png", "write_report", "write_run"]
 
-
-def __getattr__(name: str) -> object:
-    if name not in _EXPORTS:
-        raise AttributeError(f"module 'kadv.report' has no attribute {name!r}")
-    return getattr(importlib.import_module(_EXPORTS[name]), name)
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

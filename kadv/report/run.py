@@ -226,7 +226,7 @@ def write_run(
         init_delta1=_mean(v.init.delta1 for v in kept),
         adversarial_l_depth=_mean(v.adversarial_mean["l_depth"] for v in kept),
         adversarial_delta1=_mean(v.adversarial_mean["delta1"] for v in kept),
-        budget=Budget(*(sum(getattr(v.budget, k) for v in per_view) for k in ("forward", "backward", "seconds"))),
+        budget=sum((v.budget for v in per_view), Budget()),
         versions=_versions(),
         init_views=per_view,
     )
