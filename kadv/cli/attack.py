@@ -31,7 +31,8 @@ from kadv.attack import (
 )
 from kadv.cli.common import (
     check_render_config,
-    checks_group_options,
+    checks_overrides,
+    config_int,
     model_from_config,
     reports_user_errors,
     scene_from_config,
@@ -68,7 +69,7 @@ def attack_settings(cfg: DictConfig) -> AttackConfig:
 
 
 def _init_views(
-    cfg: DictConfig,
+    seed: int,
     run_dir: Path,
     renderer: ExactRenderer,
     model,
@@ -86,7 +87,7 @@ def _init_views(
     else:
         views = file_init_views(renderer, penalty.margin)[: init_config.count] if init_config.file_cameras else []
         views += sample_init_views(
-            renderer, model, init_config.count - len(views), int(cfg.seed), init_config, penalty, height, width
+            renderer, model, init_config.count - len(views), seed, init_config, penalty, height, width
         )
     check_init_views(renderer, views, penalty, height, width)
     save_init_params(saved, views)
@@ -104,7 +105,7 @@ def _table(summary: RunSummary) -> str:
     return "\n".join(lines)
 
 
-@checks_group_options("kadv-attack")
+@checks_overrides("kadv-attack")
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_attack")
 @reports_user_errors("kadv-attack")
 def main(cfg: DictConfig) -> float:
@@ -115,6 +116,7 @@ def main(cfg: DictConfig) -> float:
         print(f"already complete, skipped: {run_dir}\n{_table(summary)}")
         return summary.adversarial_l_depth
     device = resolve_device(cfg.device)
+    seed = config_int(cfg.seed, "seed")
     height, width, supersample = check_render_config(cfg.render)
     attack_config = attack_settings(cfg.attack)
     init_config = settings_from_node(InitViewConfig, OmegaConf.to_container(cfg.init, resolve=True), "init")
@@ -125,11 +127,13 @@ def main(cfg: DictConfig) -> float:
     scene = scene_from_config(cfg.scene)
     renderer = ExactRenderer(scene, shading_from_config(cfg.render.shading))
     model = model_from_config(cfg.model)
-    loss = depth_loss(cfg.loss.kind, cfg.loss.get("vgg_weights"), int(cfg.loss.get("window_size", 11)))
+    loss = depth_loss(
+        cfg.loss.kind, cfg.loss.get("vgg_weights"), config_int(cfg.loss.get("window_size", 11), "loss.window_size", 1)
+    )
     objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space, device=device)
     config_text = OmegaConf.to_yaml(cfg, resolve=True)
     atomic_write(run_dir / "config.yaml", lambda tmp: tmp.write_text(config_text))
-    views = _init_views(cfg, run_dir, renderer, model, penalty, init_config, height, width)
+    views = _init_views(seed, run_dir, renderer, model, penalty, init_config, height, width)
     completed = load_partial_results(run_dir)
     if completed:
         log.info("resuming: %d of %d init views already done", len(completed), len(views))
@@ -140,12 +144,12 @@ def main(cfg: DictConfig) -> float:
         height,
         width,
         attack_config,
-        int(cfg.seed),
+        seed,
         completed=completed,
         on_result=lambda index, view: save_partial_result(run_dir, index, view),
         progress=cfg.progress,
     )
-    info = RunInfo(scene.name, model.name, cfg.loss.kind, int(cfg.seed), str(device), height, width, sorted(completed))
+    info = RunInfo(scene.name, model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed))
     summary = write_run(run_dir, result, objective, info, supersample, video=cfg.video)
     print(f"run directory: {run_dir}\n{_table(summary)}")
     return summary.adversarial_l_depth

@@ -19,10 +19,13 @@ from pathlib import Path
 from typing import Any
 
 import torch
+from hydra import compose, initialize_config_module
 from hydra.core.hydra_config import HydraConfig
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException, OverrideParseException
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
-from omegaconf.errors import OmegaConfBaseException
+from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
 
 from kadv.errors import WeightsUnavailable
 from kadv.geometry import look_at
@@ -35,7 +38,9 @@ __all__ = [
     "FAILURE",
     "camera_from_config",
     "check_render_config",
-    "checks_group_options",
+    "checks_overrides",
+    "config_float",
+    "config_int",
     "dirname",
     "model_from_config",
     "reports_user_errors",
@@ -92,31 +97,85 @@ def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]],
     return decorate
 
 
-def checks_group_options(command: str) -> Callable[[Callable[[], Any]], Callable[[], Any]]:
-    """Decorate a ``hydra.main`` entry point so that ``group=option`` naming no ``conf/group/option.yaml``
-    (``model=no_such_preset``) prints ``<command>: error: ...`` in one line and exits 2, before
-    Hydra's composition would fail with a multi-line message."""
+def _unknown_group_option(command: str, arguments: list[str]) -> str | None:
+    """The message for the first ``group=option`` naming no ``conf/group/option.yaml``, else None."""
+    conf = importlib.resources.files("kadv.conf")
+    for argument in arguments:
+        group, equals, options = argument.partition("=")
+        if not equals or not re.fullmatch(r"[a-z_]+", group) or not conf.joinpath(group).is_dir():
+            continue
+        known = sorted(p.name.removesuffix(".yaml") for p in conf.joinpath(group).iterdir() if p.name.endswith(".yaml"))
+        for option in options.split(","):
+            if re.fullmatch(r"[A-Za-z0-9_]+", option) and option not in known:
+                listing = " (kadv-models lists the model presets)" if group == "model" else ""
+                return f"{group}={option}: no such option in {group}/; one of: {', '.join(known)}{listing}"
+    return None
+
+
+def _composition_error(config_name: str, arguments: list[str]) -> str | None:
+    """Why Hydra cannot compose ``config_name`` with the override ``arguments`` (a sweep's first
+    value standing for the sweep), in one line; None when it can, or when only the sweeper could
+    tell (``glob(...)``)."""
+    try:
+        overrides = OverridesParser.create().parse_overrides(arguments)
+    except OverrideParseException as error:
+        return f"cannot parse the overrides: {str(error).splitlines()[0]}"
+    firsts = []
+    for override in overrides:
+        if not override.is_sweep_override():
+            firsts.append(override.input_line)
+            continue
+        try:
+            first = next(iter(override.sweep_string_iterator()))
+        except HydraException:
+            return None
+        firsts.append(f"{override.input_line.partition('=')[0]}={first}")
+    try:
+        with initialize_config_module("kadv.conf", version_base="1.3"):
+            compose(config_name, firsts)
+    except (HydraException, OmegaConfBaseException) as error:
+        cause = error.__cause__
+        message = str(error).splitlines()[0].rstrip(".")
+        if isinstance(cause, (ConfigKeyError, ConfigAttributeError)) and cause.full_key:
+            parent, _, key = cause.full_key.rpartition(".")
+            return f"{message}: {parent or 'the config'} has no key {key!r}" + _keys_of(config_name, firsts, parent)
+        return _one_line(f"{message} {cause or ''}")
+    return None
+
+
+def _keys_of(config_name: str, overrides: list[str], node: str) -> str:
+    """A suffix listing ``node``'s keys, composed without the overrides under ``node``; empty if there is none."""
+    kept = [o for o in overrides if not o.lstrip("+~").startswith(f"{node}.")] if node else []
+    try:
+        with initialize_config_module("kadv.conf", version_base="1.3"):
+            found = OmegaConf.select(compose(config_name, kept), node) if node else None
+    except (HydraException, OmegaConfBaseException):
+        return ""
+    return f"; it has: {', '.join(map(str, found.keys()))}" if isinstance(found, DictConfig) else ""
+
+
+# Hydra's own flags; with any other (--cfg, --config-name, --help, ...) Hydra composes as it likes.
+_RUN_FLAGS = {"-m", "--multirun", "-r", "--run"}
+
+
+def checks_overrides(command: str) -> Callable[[Callable[[], Any]], Callable[[], Any]]:
+    """Decorate a ``hydra.main`` entry point so that an override Hydra cannot apply (``model=no_such_preset``,
+    a key the composed config lacks, a malformed value) prints ``<command>: error: ...`` in one line
+    and exits 2, before Hydra's composition would fail with a multi-line message and exit 1.
+
+    The config composed is the one named after the command (``kadv-attack``: ``kadv_attack.yaml``).
+    """
 
     def decorate(entry: Callable[[], Any]) -> Callable[[], Any]:
         @functools.wraps(entry)
         def wrapped() -> Any:
-            conf = importlib.resources.files("kadv.conf")
-            for argument in sys.argv[1:]:
-                group, equals, options = argument.partition("=")
-                if not equals or not re.fullmatch(r"[a-z_]+", group) or not conf.joinpath(group).is_dir():
-                    continue
-                known = sorted(
-                    p.name.removesuffix(".yaml") for p in conf.joinpath(group).iterdir() if p.name.endswith(".yaml")
-                )
-                for option in options.split(","):
-                    if re.fullmatch(r"[A-Za-z0-9_]+", option) and option not in known:
-                        listing = " (kadv-models lists the model presets)" if group == "model" else ""
-                        print(
-                            f"{command}: error: {group}={option}: no such option in {group}/; one of: "
-                            f"{', '.join(known)}{listing}",
-                            file=sys.stderr,
-                        )
-                        sys.exit(2)
+            arguments = sys.argv[1:]
+            message = _unknown_group_option(command, arguments)
+            if message is None and all(a in _RUN_FLAGS or not a.startswith("-") for a in arguments):
+                message = _composition_error(command.replace("-", "_"), [a for a in arguments if a not in _RUN_FLAGS])
+            if message is not None:
+                print(f"{command}: error: {message}", file=sys.stderr)
+                sys.exit(2)
             return entry()
 
         return wrapped
@@ -134,12 +193,36 @@ def dirname(overrides: str) -> str:
 OmegaConf.register_new_resolver("kadv_dirname", dirname, replace=True)
 
 
+def config_int(value: Any, key: str, minimum: int | None = None) -> int:
+    """``value`` of the config key ``key`` as an int; anything else (text, a float, a bool, below
+    ``minimum``) is an error naming the key.
+
+    >>> config_int("abc", "scene.seed")
+    Traceback (most recent call last):
+    ...
+    ValueError: scene.seed must be an integer, got 'abc'
+    """
+    if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None and value < minimum):
+        bound = "" if minimum is None else f" >= {minimum}"
+        raise ValueError(f"{key} must be an integer{bound}, got {value!r}")
+    return value
+
+
+def config_float(value: Any, key: str) -> float:
+    """``value`` of the config key ``key`` as a finite float; anything else is an error naming the key."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ValueError(f"{key} must be a finite number, got {value!r}")
+    return float(value)
+
+
 def scene_from_config(cfg: DictConfig) -> Scene:
     """Build the scene a ``scene/`` config node describes (``kind``: box_room, procedural or file)."""
     if cfg.kind == "box_room":
-        return box_room(seed=int(cfg.seed), num_boxes=int(cfg.num_boxes))
+        return box_room(
+            seed=config_int(cfg.seed, "scene.seed"), num_boxes=config_int(cfg.num_boxes, "scene.num_boxes", 0)
+        )
     if cfg.kind == "procedural":
-        return procedural_room(seed=int(cfg.seed))
+        return procedural_room(seed=config_int(cfg.seed, "scene.seed"))
     if cfg.kind == "file":
         options = OmegaConf.to_container(cfg.get("options") or {}, resolve=True)
         return load_scene(Path(cfg.path).expanduser(), **options)
@@ -149,8 +232,8 @@ def scene_from_config(cfg: DictConfig) -> Scene:
 def shading_from_config(cfg: DictConfig) -> Shading:
     lights = cfg.get("lights")
     return Shading(
-        ambient=float(cfg.ambient),
-        diffuse=float(cfg.diffuse),
+        ambient=config_float(cfg.ambient, "render.shading.ambient"),
+        diffuse=config_float(cfg.diffuse, "render.shading.diffuse"),
         lights=None if lights is None else tuple(tuple(float(v) for v in light) for light in lights),
         background=tuple(float(v) for v in cfg.background),
     )
@@ -158,13 +241,7 @@ def shading_from_config(cfg: DictConfig) -> Shading:
 
 def check_render_config(cfg: DictConfig) -> tuple[int, int, int]:
     """(height, width, supersample) of a ``render/`` node, each checked to be a positive integer."""
-    values = []
-    for key in ("height", "width", "supersample"):
-        value = cfg[key]
-        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-            raise ValueError(f"render.{key} must be a positive integer, got {value!r}")
-        values.append(value)
-    return tuple(values)
+    return tuple(config_int(cfg[key], f"render.{key}", 1) for key in ("height", "width", "supersample"))
 
 
 def _vector(cfg: DictConfig, key: str) -> torch.Tensor:
@@ -190,7 +267,7 @@ def camera_from_config(cfg: DictConfig, scene: Scene) -> tuple[torch.Tensor, flo
     else:
         if not scene.cameras:
             raise ValueError(f"scene {scene.name!r} defines no camera: give camera.world_T_cam or camera.eye/target")
-        index = int(cfg.index)
+        index = config_int(cfg.index, "camera.index")
         if not 0 <= index < len(scene.cameras):
             raise ValueError(f"camera.index={index} but scene {scene.name!r} has {len(scene.cameras)} camera(s)")
         camera = scene.cameras[index]

@@ -28,7 +28,7 @@ from kadv.attack import PenaltyConfig, clear_file_camera
 from kadv.cli.common import (
     camera_from_config,
     check_render_config,
-    checks_group_options,
+    checks_overrides,
     reports_user_errors,
     scene_from_config,
     shading_from_config,
@@ -42,7 +42,7 @@ from kadv.report import save_depth_png, save_rgb_png
 log = logging.getLogger(__name__)
 
 
-@checks_group_options("kadv-render")
+@checks_overrides("kadv-render")
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_render")
 @reports_user_errors("kadv-render")
 def main(cfg: DictConfig) -> None:

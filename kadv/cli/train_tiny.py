@@ -11,7 +11,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf
 
-from kadv.cli.common import checks_group_options, reports_user_errors
+from kadv.cli.common import checks_overrides, reports_user_errors
 from kadv.io import atomic_write
 from kadv.models.tiny import TINY_WEIGHTS, save_kadv_tiny
 from kadv.models.tiny_dpt import TINY_DPT_DIR, save_kadv_tiny_dpt
@@ -20,7 +20,7 @@ from kadv.models.train_tiny import TinyTrainConfig, train_tiny
 log = logging.getLogger(__name__)
 
 
-@checks_group_options("kadv-train-tiny")
+@checks_overrides("kadv-train-tiny")
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_train_tiny")
 @reports_user_errors("kadv-train-tiny")
 def main(cfg: DictConfig) -> None:

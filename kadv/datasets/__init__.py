@@ -2,6 +2,6 @@
 
 from __future__ import annotations
 
-from kadv.datasets.procedural import ViewBatch, render_procedural_views
+from kadv.datasets.procedural import HELD_OUT_SEED, ViewBatch, render_procedural_views
 
-__all__ = ["ViewBatch", "render_procedural_views"]
+__all__ = ["HELD_OUT_SEED", "ViewBatch", "render_procedural_views"]

@@ -14,7 +14,11 @@ from kadv.penalties import random_valid_poses
 from kadv.render import ExactRenderer, Shading
 from kadv.scenes import box_room, procedural_room
 
-__all__ = ["ViewBatch", "render_procedural_views"]
+__all__ = ["HELD_OUT_SEED", "ViewBatch", "render_procedural_views"]
+
+HELD_OUT_SEED = 7
+"""The seed of the generated rooms the embedded models are measured on (``benchmarks/tiny_accuracy.py``);
+no training run may draw it."""
 
 
 @dataclass

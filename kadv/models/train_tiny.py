@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from kadv.datasets import ViewBatch, render_procedural_views
+from kadv.datasets import HELD_OUT_SEED, ViewBatch, render_procedural_views
 from kadv.losses import ssi_loss
 from kadv.models.base import DepthModel
 from kadv.models.evaluation import evaluate
@@ -35,7 +35,9 @@ class TinyTrainConfig:
     """Everything that determines a training run of an embedded model (same config, same weights).
 
     ``architecture`` is "unet" (kadv-tiny, ``channels`` wide) or "dpt" (kadv-tiny-dpt, a small
-    hybrid DPT). ``furnished_share`` of the rooms are furnished rooms, the rest box rooms.
+    hybrid DPT). ``seed`` draws the training rooms (``render_procedural_views``), the batches and
+    the augmentation; ``val_seed`` the validation rooms. ``furnished_share`` of the rooms are
+    furnished rooms, the rest box rooms.
     ``init_weights`` continues from an earlier run's weights (a kadv-tiny file, whose channels win
     over ``channels``, or a kadv-tiny-dpt directory), so a long training can be done, and
     reproduced, in stages.
@@ -70,6 +72,11 @@ class TinyTrainConfig:
             raise ValueError(f"train.channels must be positive integers, got {list(self.channels)}")
         if self.architecture not in ARCHITECTURES:
             raise ValueError(f"train.architecture must be one of {', '.join(ARCHITECTURES)}, got {self.architecture!r}")
+        if HELD_OUT_SEED in (self.seed, self.val_seed) or self.seed == self.val_seed:
+            raise ValueError(
+                f"train.seed ({self.seed}) and train.val_seed ({self.val_seed}) must differ from each other and "
+                f"from {HELD_OUT_SEED}, the seed of the held-out rooms the benchmark measures on"
+            )
         if not 0.0 <= self.furnished_share <= 1.0:
             raise ValueError(f"train.furnished_share must be in [0, 1], got {self.furnished_share}")
         if self.init_weights is not None and not Path(self.init_weights).expanduser().exists():

@@ -200,6 +200,10 @@ BAD_INPUTS = [
     ("kadv-attack", ["scene=file", "scene.path={corrupt}"], "corrupt.xml"),
     ("kadv-attack", ["attack=gradient", "attack.gradient.steps=-3"], "attack.gradient.steps"),
     ("kadv-attack", ["attack.method=adam"], "attack.method must be one of"),
+    # a key the composed config lacks: Hydra's own message is five lines and exit 1
+    ("kadv-attack", ["attack.gradient.steps=-3"], "attack has no key 'gradient'; it has: "),
+    ("kadv-attack", ["camera.eye=[1,2"], "cannot parse the overrides"),
+    ("kadv-attack", ["seed=1.5"], "seed must be an integer"),
     ("kadv-attack", ["attack=nevergrad", "attack.nevergrad.optimizer=NoSuchOpt"], "NGOpt"),
     ("kadv-attack", ["model.name=no_such_model"], "no_such_model"),
     ("kadv-attack", ["render.supersample=0"], "render.supersample"),
@@ -217,8 +221,11 @@ BAD_INPUTS = [
     ("kadv-render", ["camera.eye=[nan,1.5,1]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),
     ("kadv-render", ["camera.eye=[1,1.5,1]", "camera.fov_x_deg=70"], "camera.target"),
     ("kadv-render", ["render.supersample=0"], "render.supersample"),
+    ("kadv-render", ["render.heigth=100"], "render has no key 'heigth'; it has: height"),
+    ("kadv-render", ["scene=procedural", "scene.seed=abc"], "scene.seed must be an integer, got 'abc'"),
     ("kadv-render", ["scene=file", "scene.path=/no/such/room.glb"], "/no/such/room.glb"),
     ("kadv-train-tiny", ["train.steps=-1"], "train.steps"),
+    ("kadv-train-tiny", ["train.seed=7"], "the held-out rooms"),
     ("kadv-train-tiny", ["train.init_weights=/no/such/tiny.safetensors"], "/no/such/tiny.safetensors"),
 ]
 # small images keep the attack and render cases fast; kadv-train-tiny has no render keys

@@ -85,6 +85,9 @@ def test_the_dpt_trains_through_its_own_preprocessing_and_continues_from_a_direc
         ("init_weights", "/no/such/file"),
         ("architecture", "resnet"),
         ("furnished_share", 1.5),
+        ("seed", 7),  # the held-out rooms
+        ("val_seed", 7),
+        ("seed", 1),  # the validation rooms
     ],
 )
 def test_bad_settings_are_refused_before_any_rendering(field, value) -> None:
