@@ -131,8 +131,7 @@ def _composition_error(config_name: str, arguments: list[str]) -> str | None:
             return None
         firsts.append(f"{override.input_line.partition('=')[0]}={first}")
     try:
-        with initialize_config_module("kadv.conf", version_base="1.3"):
-            compose(config_name, firsts)
+        _compose(config_name, firsts)
     except (HydraException, OmegaConfBaseException) as error:
         cause = error.__cause__
         message = str(error).splitlines()[0].rstrip(".")
@@ -145,13 +144,20 @@ def _composition_error(config_name: str, arguments: list[str]) -> str | None:
 
 def _keys_of(config_name: str, overrides: list[str], node: str) -> str:
     """A suffix listing ``node``'s keys, composed without the overrides under ``node``; empty if there is none."""
-    kept = [o for o in overrides if not o.lstrip("+~").startswith(f"{node}.")] if node else []
+    if not node:
+        return ""
     try:
-        with initialize_config_module("kadv.conf", version_base="1.3"):
-            found = OmegaConf.select(compose(config_name, kept), node) if node else None
+        found = OmegaConf.select(
+            _compose(config_name, [o for o in overrides if not o.lstrip("+~").startswith(f"{node}.")]), node
+        )
     except (HydraException, OmegaConfBaseException):
         return ""
     return f"; it has: {', '.join(map(str, found.keys()))}" if isinstance(found, DictConfig) else ""
+
+
+def _compose(config_name: str, overrides: list[str]) -> DictConfig:
+    with initialize_config_module("kadv.conf", version_base="1.3"):
+        return compose(config_name, overrides)
 
 
 # Hydra's own flags; with any other (--cfg, --config-name, --help, ...) Hydra composes as it likes.
