@@ -47,7 +47,8 @@ def test_fit_is_deterministic_and_learns() -> None:
         losses = fit(KadvTiny(network), views, config, progress=False)
         weights.append(torch.cat([p.detach().flatten() for p in network.parameters()]))
     assert torch.equal(weights[0], weights[1])
-    assert sum(losses[-10:]) < 0.7 * sum(losses[:10]), losses
+    # a network that learns nothing stays near 1; the ratio is 0.67 here and 0.75 on another CPU and torch
+    assert sum(losses[-10:]) < 0.8 * sum(losses[:10]), losses
 
 
 def test_train_tiny_continues_from_init_weights(tmp_path) -> None:

@@ -319,7 +319,13 @@ def save_family(name: str, directory: Path) -> Path:
     """Build family ``name`` with seed 0 and save it (and its processor settings) to ``directory``."""
     family = FAMILIES[name]
     torch.manual_seed(0)
-    _spread_weights(family.build()).save_pretrained(directory)
+    network = _spread_weights(family.build())
+    if name == "depth_pro":
+        # A random field-of-view head can predict a negative angle, and DepthPro then clamps every
+        # depth to its bound (a flat map, as with transformers 5.17): centre the angle on 60 degrees.
+        with torch.no_grad():
+            network.fov_model.head.layers[-1].bias.fill_(60.0)
+    network.save_pretrained(directory)
     if family.processor is not None:
         (directory / "preprocessor_config.json").write_text(json.dumps(family.processor))
     return directory
