@@ -189,6 +189,13 @@ def _depth_pro() -> torch.nn.Module:
     )
 
 
+def _centre_field_of_view(network: torch.nn.Module) -> None:
+    """A random field-of-view head can predict a negative angle, and DepthPro then clamps every
+    depth to its bound (a flat map, as with transformers 5.17): centre the angle on 60 degrees."""
+    with torch.no_grad():
+        network.fov_model.head.layers[-1].bias.fill_(60.0)
+
+
 def _tipsv2_dpt() -> torch.nn.Module:
     backbone = {
         "model_type": "tipsv2_vision_model",
@@ -211,13 +218,15 @@ def _tipsv2_dpt() -> torch.nn.Module:
 @dataclass(frozen=True)
 class Family:
     """A tiny checkpoint: how to build it, its preprocessor_config.json (None: none, so kadv uses the
-    family's defaults), the output kind kadv must give it, and whether transformers' own image
-    processor runs here (DepthPro's and TIPSv2's need torchvision, which has no CPU build)."""
+    family's defaults), the output kind kadv must give it, whether transformers' own image
+    processor runs here (DepthPro's and TIPSv2's need torchvision, which has no CPU build), and what
+    the family needs set after the random weights are spread (None: nothing)."""
 
     build: Callable[[], torch.nn.Module]
     processor: dict[str, Any] | None
     kind: str
     processor_runs: bool = True
+    settle: Callable[[torch.nn.Module], None] | None = None
 
 
 _DPT_PROCESSOR = {"image_processor_type": "DPTImageProcessor", "resample": 3}
@@ -285,7 +294,7 @@ FAMILIES = {
         "depth",
     ),
     "glpn": Family(_glpn, {"image_processor_type": "GLPNImageProcessor", "size_divisor": 32, "resample": 2}, "depth"),
-    "depth_pro": Family(_depth_pro, None, "depth", processor_runs=False),
+    "depth_pro": Family(_depth_pro, None, "depth", processor_runs=False, settle=_centre_field_of_view),
     "tipsv2_dpt": Family(
         _tipsv2_dpt,
         {"image_processor_type": "Tipsv2DptImageProcessor", "size": {"height": 56, "width": 56}},
@@ -320,11 +329,8 @@ def save_family(name: str, directory: Path) -> Path:
     family = FAMILIES[name]
     torch.manual_seed(0)
     network = _spread_weights(family.build())
-    if name == "depth_pro":
-        # A random field-of-view head can predict a negative angle, and DepthPro then clamps every
-        # depth to its bound (a flat map, as with transformers 5.17): centre the angle on 60 degrees.
-        with torch.no_grad():
-            network.fov_model.head.layers[-1].bias.fill_(60.0)
+    if family.settle is not None:
+        family.settle(network)
     network.save_pretrained(directory)
     if family.processor is not None:
         (directory / "preprocessor_config.json").write_text(json.dumps(family.processor))
