@@ -4,7 +4,9 @@ on the three shared scenes, which no training run ever sees.
 - Generated: 200 views of furnished rooms and 200 of box rooms from seed 7 (``HELD_OUT_SEED``, which
   ``kadv-train-tiny`` refuses to train or validate on), at 240 x 320.
 - Shared scenes: each scene's file camera plus 20 valid views drawn as the attack draws init-view
-  candidates (``sample_valid_views``, seed 0, unranked), at 180 x 320; the mean is over all 63 views.
+  candidates (``sample_valid_views``, unranked: seed 0, then seeds 1, 2, ... while fewer than 20
+  are found, as in the Japanese classroom, whose 220 m ground puts most candidates outside), at
+  180 x 320; the mean is over all 63 views.
 
 Run: .venv/bin/python benchmarks/tiny_accuracy.py [--kadv-tiny FILE] [--kadv-tiny-dpt DIR]
 (other weights than the shipped ones, e.g. a training run's).
@@ -31,6 +33,7 @@ from kadv.render import ExactRenderer
 from kadv.scenes import load_scene
 
 SAMPLED_VIEWS = 20
+SAMPLING_SEEDS = 10
 HEIGHT, WIDTH = 180, 320
 
 
@@ -40,7 +43,14 @@ def shared_scene_views(name: str) -> ViewBatch:
     renderer = ExactRenderer(scene)
     config = InitViewConfig()
     camera = scene.cameras[0]
-    sampled = sample_valid_views(renderer, SAMPLED_VIEWS, 0, config, PenaltyConfig(), HEIGHT, WIDTH)
+    sampled = torch.zeros(0, 4, 4, dtype=torch.float64)
+    for seed in range(SAMPLING_SEEDS):
+        if len(sampled) == SAMPLED_VIEWS:
+            break
+        more = sample_valid_views(renderer, SAMPLED_VIEWS - len(sampled), seed, config, PenaltyConfig(), HEIGHT, WIDTH)
+        sampled = torch.cat([sampled, more])
+    if len(sampled) < SAMPLED_VIEWS:
+        raise SystemExit(f"{name}: {len(sampled)} valid views from {SAMPLING_SEEDS} seeds, not {SAMPLED_VIEWS}")
     outputs = [
         renderer.render(camera.world_T_cam, camera.intrinsics(HEIGHT, WIDTH), HEIGHT, WIDTH, supersample=2),
         renderer.render(sampled, intrinsics_from_fov(config.fov_x_deg, HEIGHT, WIDTH), HEIGHT, WIDTH, supersample=2),

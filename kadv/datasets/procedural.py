@@ -13,6 +13,7 @@ from kadv.geometry import intrinsics_from_fov
 from kadv.penalties import random_valid_poses
 from kadv.render import ExactRenderer, Shading
 from kadv.scenes import box_room, procedural_room
+from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE
 
 __all__ = ["HELD_OUT_SEED", "ViewBatch", "render_procedural_views"]
 
@@ -38,13 +39,15 @@ def render_procedural_views(
     views_per_room: int = 8,
     furnished_share: float = 0.0,
     progress: bool = True,
+    corridor_share: float = CORRIDOR_SHARE,
+    hall_share: float = HALL_SHARE,
 ) -> ViewBatch:
     """Render ``count`` views, ``views_per_room`` per generated room, under random shading.
 
-    Room ``i`` is ``procedural_room(seed * 100003 + i)`` (furnished, lit at its lamps and windows)
-    for a ``furnished_share`` of the rooms, spread evenly, else ``box_room(seed * 100003 + i)``
-    lit from a random point. Deterministic for a seed; distinct seeds give disjoint rooms
-    (held-out evaluation uses another seed).
+    Room ``i`` is ``procedural_room(seed * 100003 + i)`` (furnished, lit at its lamps and windows;
+    ``corridor_share`` and ``hall_share`` pass to it) for a ``furnished_share`` of the rooms, spread
+    evenly, else ``box_room(seed * 100003 + i)`` lit from a random point. Deterministic for a seed;
+    distinct seeds give disjoint rooms (held-out evaluation uses another seed).
     """
     if not 0.0 <= furnished_share <= 1.0:
         raise ValueError(f"furnished_share must be in [0, 1], got {furnished_share}")
@@ -55,7 +58,7 @@ def render_procedural_views(
         room_seed = seed * 100003 + index
         # room i is furnished when the running share first reaches the next whole room
         if math.floor((index + 1) * furnished_share) > math.floor(index * furnished_share):
-            scene = procedural_room(seed=room_seed)
+            scene = procedural_room(seed=room_seed, corridor_share=corridor_share, hall_share=hall_share)
             lights = None  # the room's own: its lamps and windows
         else:
             scene = box_room(seed=room_seed, num_boxes=int(rng.integers(2, 8)))

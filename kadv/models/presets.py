@@ -69,7 +69,7 @@ PRESETS = {
 # the embedded models, shipped in the package
 # (kadv.models.tiny: TINY_PREPROCESS; kadv.models.tiny_dpt: TINY_DPT_PROCESSOR)
 EMBEDDED = {
-    "kadv_tiny": Preset("", "kadv_tiny", "disparity", "128x160 keep-aspect /32"),
+    "kadv_tiny": Preset("", "kadv_tiny", "disparity", "128x160"),
     "kadv_tiny_dpt": Preset("", "dpt", "disparity", "160x160"),
 }
 

@@ -22,8 +22,10 @@ __all__ = ["TINY_WEIGHTS", "KadvTiny", "TinyDepthNet", "load_kadv_tiny", "save_k
 
 TINY_WEIGHTS = Path(__file__).parent / "weights" / "kadv_tiny.safetensors"
 DEFAULT_CHANNELS = (16, 32, 64, 128, 256)
-# Working resolution (the training resolution): images are resized, keeping aspect, near 128 x 160.
-TINY_PREPROCESS = Preprocess(size=(128, 160), keep_aspect_ratio=True, multiple=32, interpolation="bilinear")
+# The training resolution, to which every image is resized whatever its aspect (as DPT-Large's
+# processor squeezes images into its square): the network has seen no other size, and on held-out
+# generated 16:9 views squeezing scores higher than keeping the aspect (delta1 0.771 vs 0.756).
+TINY_PREPROCESS = Preprocess(size=(128, 160), keep_aspect_ratio=False, multiple=32, interpolation="bilinear")
 
 
 def _block(c_in: int, c_out: int, stride: int = 1) -> nn.Sequential:

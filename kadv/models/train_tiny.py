@@ -24,6 +24,7 @@ from kadv.models.tiny import (
     load_kadv_tiny,
 )
 from kadv.models.tiny_dpt import load_kadv_tiny_dpt, tiny_dpt_model, tiny_dpt_network
+from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, check_shares
 
 __all__ = ["ARCHITECTURES", "TinyTrainConfig", "fit", "render_training_views", "train_tiny"]
 
@@ -37,7 +38,8 @@ class TinyTrainConfig:
     ``architecture`` is "unet" (kadv-tiny, ``channels`` wide) or "dpt" (kadv-tiny-dpt, a small
     hybrid DPT). ``seed`` draws the training rooms (``render_procedural_views``), the batches and
     the augmentation; ``val_seed`` the validation rooms. ``furnished_share`` of the rooms are
-    furnished rooms, the rest box rooms.
+    furnished rooms, the rest box rooms; ``corridor_share`` and ``hall_share`` of the furnished
+    rooms are corridors and halls (both 0: the rooms of the generator before it drew them).
     ``init_weights`` continues from an earlier run's weights (a kadv-tiny file, whose channels win
     over ``channels``, or a kadv-tiny-dpt directory), so a long training can be done, and
     reproduced, in stages.
@@ -56,6 +58,8 @@ class TinyTrainConfig:
     init_weights: str | None = None
     architecture: str = "unet"
     furnished_share: float = 0.75
+    corridor_share: float = CORRIDOR_SHARE
+    hall_share: float = HALL_SHARE
 
     def __post_init__(self) -> None:
         # checked here, before the minutes of rendering that come first in train_tiny
@@ -79,6 +83,7 @@ class TinyTrainConfig:
             )
         if not 0.0 <= self.furnished_share <= 1.0:
             raise ValueError(f"train.furnished_share must be in [0, 1], got {self.furnished_share}")
+        check_shares(self.corridor_share, self.hall_share, "train.")
         if self.init_weights is not None and not Path(self.init_weights).expanduser().exists():
             raise FileNotFoundError(f"train.init_weights: no such weights file or directory: {self.init_weights}")
 
@@ -128,12 +133,14 @@ def _predict(model: DepthModel, rgb: torch.Tensor) -> torch.Tensor:
 def render_training_views(config: TinyTrainConfig, progress: bool = True) -> tuple[ViewBatch, ViewBatch]:
     """The training and validation views ``config`` names, at kadv-tiny's working size."""
     height, width = TINY_PREPROCESS.size
-    train = render_procedural_views(
-        config.train_views, config.seed, height, width, furnished_share=config.furnished_share, progress=progress
-    )
-    val = render_procedural_views(
-        config.val_views, config.val_seed, height, width, furnished_share=config.furnished_share, progress=progress
-    )
+    rooms = {
+        "furnished_share": config.furnished_share,
+        "corridor_share": config.corridor_share,
+        "hall_share": config.hall_share,
+        "progress": progress,
+    }
+    train = render_procedural_views(config.train_views, config.seed, height, width, **rooms)
+    val = render_procedural_views(config.val_views, config.val_seed, height, width, **rooms)
     return train, val
 
 

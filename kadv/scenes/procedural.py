@@ -1,5 +1,5 @@
-"""Procedural furnished rooms: rectangular or L-shaped, with furniture, windows, doors, pictures,
-rugs and ceiling lamps; deterministic per seed.
+"""Procedural furnished rooms: rectangular or L-shaped rooms, halls and corridors, with furniture,
+windows, doors, pictures, rugs and ceiling lamps; deterministic per seed.
 
 The room's walls, floor and ceiling face into it and every piece of furniture is a set of closed,
 outward-facing boxes, so a camera inside furniture or outside the room sees back faces, as in a
@@ -23,11 +23,17 @@ from kadv.scenes.materials import textured_materials
 from kadv.scenes.parts import box_parts, facing, overlapped, planar_quad, quad_part
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 
-__all__ = ["procedural_room"]
+__all__ = ["CORRIDOR_SHARE", "HALL_SHARE", "check_shares", "procedural_room"]
 
 _UP = np.array([0.0, 1.0, 0.0])
 _EYE_CLEARANCE = 1.0  # metres kept free of furniture around the file camera
 _GAP = 0.08  # metres between pieces of furniture
+# Real buildings are not all rooms of a few metres: views down a corridor or across a hall span
+# depths that a 3.5-8 m room never shows.
+CORRIDOR_SHARE = 0.15
+"""The default share of generated footprints that are corridors."""
+HALL_SHARE = 0.15
+"""The default share of generated footprints that are halls."""
 
 
 def _rects_overlap(a: np.ndarray, b: np.ndarray, gap: float = 0.0) -> bool:
@@ -104,10 +110,21 @@ class _Builder:
         self.parts.append(quad_part(corners, material, name))
 
 
-def _footprint(rng: np.random.Generator) -> tuple[list[np.ndarray], list[_Wall]]:
-    """Floor rectangles (x0, z0, x1, z1) and the walls around their union: a rectangle or an L."""
-    width, depth = rng.uniform(3.5, 8.0, size=2)
-    if rng.random() < 0.4:
+def _footprint(
+    rng: np.random.Generator, corridor_share: float, hall_share: float
+) -> tuple[list[np.ndarray], list[_Wall]]:
+    """Floor rectangles (x0, z0, x1, z1) and the walls around their union: a corridor, a hall or a
+    room, as a rectangle, or for a room an L."""
+    # no shape is drawn when only rooms may come, so that those rooms are the rooms of the
+    # generator before halls and corridors, which the shipped weights' first stages trained on
+    shape = rng.random() if corridor_share + hall_share > 0 else 1.0
+    if shape < corridor_share:
+        width, depth = rng.permutation([rng.uniform(2.0, 3.2), rng.uniform(10.0, 30.0)])
+    elif shape < corridor_share + hall_share:
+        width, depth = rng.uniform(8.0, 16.0, size=2)
+    else:
+        width, depth = rng.uniform(3.5, 8.0, size=2)
+    if shape >= corridor_share + hall_share and rng.random() < 0.4:
         w1, d1 = width * rng.uniform(0.45, 0.7), depth * rng.uniform(0.45, 0.7)
         rects = [np.array([0, 0, width, d1]), np.array([0, d1, w1, depth])]
         outline = [(0, 0), (0, depth), (w1, depth), (w1, d1), (width, d1), (width, 0)]
@@ -534,23 +551,47 @@ def _add_decor(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height:
         b.quad(corners, -_UP, bulb, f"lamp{index}.bulb")
 
 
-def procedural_room(seed: int = 0, tile: float = 1.0, fov_x_deg: float = 70.0, drop_transparent: bool = True) -> Scene:
+def check_shares(corridor_share: float, hall_share: float, prefix: str = "") -> None:
+    """Raise ValueError, naming ``prefix`` + the key, unless both shares lie in [0, 1] and sum to at most 1."""
+    if not (0.0 <= corridor_share <= 1.0 and 0.0 <= hall_share <= 1.0 and corridor_share + hall_share <= 1.0):
+        raise ValueError(
+            f"{prefix}corridor_share ({corridor_share}) and {prefix}hall_share ({hall_share}) "
+            "must lie in [0, 1] and sum to at most 1"
+        )
+
+
+def procedural_room(
+    seed: int = 0,
+    tile: float = 1.0,
+    fov_x_deg: float = 70.0,
+    drop_transparent: bool = True,
+    corridor_share: float = CORRIDOR_SHARE,
+    hall_share: float = HALL_SHARE,
+) -> Scene:
     """A furnished room, the same for the same seed, bit for bit.
 
-    The floor is at y = 0 and the room spans x >= 0, z >= 0: a rectangle of 3.5-8 m sides or an L
-    cut from one, 2.4-3.4 m high; the room's box is the scene's ``interior``, where camera samplers
-    look (the courtyards outside the windows are not for cameras). The file camera stands near the
-    corner (0, 0), 1.3-1.7 m high, looking across the room, with at least 1 m of free space around it.
+    The floor is at y = 0 and the room spans x >= 0, z >= 0: a corridor 2-3.2 m wide and 10-30 m
+    long (``corridor_share`` of the seeds), a hall of 8-16 m sides (``hall_share``), else a
+    rectangle of 3.5-8 m sides or an L cut from one; 2.4-3.4 m high; the room's box is the scene's
+    ``interior``, where camera samplers look (the courtyards outside the windows are not for
+    cameras). The file camera stands near the corner (0, 0), 1.3-1.7 m high, looking across the
+    room, with at least 1 m of free space around it.
 
     Args:
         seed: the random seed.
         tile: metres per texture repeat on walls, floors and furniture.
         fov_x_deg: the file camera's horizontal field of view.
         drop_transparent: leave out the windows' glass (as loaded scenes do by default).
+        corridor_share, hall_share: the chances of a corridor and of a hall; with both 0 the rooms
+            are those of kadv's generator before it drew halls and corridors.
+
+    Raises:
+        ValueError: a share outside [0, 1], or shares summing over 1.
     """
+    check_shares(corridor_share, hall_share)
     rng = np.random.default_rng(seed)
     b = _Builder(rng, tile)
-    rects, walls = _footprint(rng)
+    rects, walls = _footprint(rng, corridor_share, hall_share)
     height, thickness = rng.uniform(2.4, 3.4), rng.uniform(0.1, 0.3)
     floor = b.material(("wood", "floor", "fabric")[int(rng.choice(3, p=[0.5, 0.3, 0.2]))])
     ceiling, paints = b.material("wall"), [b.material("wall"), b.material("wall")]

@@ -226,6 +226,7 @@ BAD_INPUTS = [
     ("kadv-render", ["scene=file", "scene.path=/no/such/room.glb"], "/no/such/room.glb"),
     ("kadv-train-tiny", ["train.steps=-1"], "train.steps"),
     ("kadv-train-tiny", ["train.seed=7"], "the held-out rooms"),
+    ("kadv-train-tiny", ["train.hall_share=1.2"], "train.hall_share (1.2)"),
     ("kadv-train-tiny", ["train.init_weights=/no/such/tiny.safetensors"], "/no/such/tiny.safetensors"),
 ]
 # small images keep the attack and render cases fast; kadv-train-tiny has no render keys

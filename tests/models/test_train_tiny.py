@@ -86,6 +86,8 @@ def test_the_dpt_trains_through_its_own_preprocessing_and_continues_from_a_direc
         ("init_weights", "/no/such/file"),
         ("architecture", "resnet"),
         ("furnished_share", 1.5),
+        ("corridor_share", -0.1),
+        ("hall_share", 0.9),  # with the corridors' 0.15, over 1
         ("seed", 7),  # the held-out rooms
         ("val_seed", 7),
         ("seed", 1),  # the validation rooms

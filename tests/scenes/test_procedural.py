@@ -8,7 +8,7 @@ from kadv.penalties.validity import fibonacci_sphere
 from kadv.render import ExactRenderer
 from kadv.scenes import procedural_room
 
-SEEDS = range(8)
+SEEDS = range(12)  # rooms, an L, a hall (2) and corridors along x (3) and z (11)
 
 
 def test_same_seed_same_room_bit_for_bit() -> None:
@@ -51,6 +51,10 @@ def test_rooms_vary_and_are_lit_at_their_lamps_and_windows() -> None:
     assert all(len(room.lights) >= 1 for room in rooms)
     heights = [float(room.interior[1, 1]) for room in rooms]
     assert min(heights) >= 2.4 and max(heights) <= 3.4 and max(heights) - min(heights) > 0.4
+    sides = [sorted(room.interior[1, [0, 2]] - room.interior[0, [0, 2]]) for room in rooms]
+    corridors = [short <= 3.2 and long >= 10.0 for short, long in sides]
+    assert sum(corridors) >= 2 and any(short >= 8.0 for short, _ in sides)  # corridors and a hall
+    assert any(not corridor and long <= 8.0 for corridor, (_, long) in zip(corridors, sides, strict=True))
     assert len({room.num_triangles for room in rooms}) == len(rooms)
     # windows: from some rooms' cameras, rays leave through the (dropped) glass over the courtyard walls
     directions = fibonacci_sphere(4096)
@@ -63,3 +67,13 @@ def test_rooms_vary_and_are_lit_at_their_lamps_and_windows() -> None:
         for room in rooms
     ]
     assert max(escapes) > 0.0
+
+
+def test_the_shares_choose_the_footprints() -> None:
+    def long_side(room):
+        return float(max(room.interior[1, [0, 2]] - room.interior[0, [0, 2]]))
+
+    assert all(long_side(procedural_room(seed, corridor_share=0, hall_share=0)) <= 8.0 for seed in SEEDS)
+    assert all(long_side(procedural_room(seed, corridor_share=1, hall_share=0)) >= 10.0 for seed in SEEDS)
+    with pytest.raises(ValueError, match="sum to at most 1"):
+        procedural_room(0, corridor_share=0.6, hall_share=0.6)
