@@ -118,13 +118,14 @@ def _footprint(
     # no shape is drawn when only rooms may come, so that those rooms are the rooms of the
     # generator before halls and corridors, which the shipped weights' first stages trained on
     shape = rng.random() if corridor_share + hall_share > 0 else 1.0
-    if shape < corridor_share:
-        width, depth = rng.permutation([rng.uniform(2.0, 3.2), rng.uniform(10.0, 30.0)])
-    elif shape < corridor_share + hall_share:
-        width, depth = rng.uniform(8.0, 16.0, size=2)
-    else:
+    room = shape >= corridor_share + hall_share
+    if room:
         width, depth = rng.uniform(3.5, 8.0, size=2)
-    if shape >= corridor_share + hall_share and rng.random() < 0.4:
+    elif shape < corridor_share:
+        width, depth = rng.permutation([rng.uniform(2.0, 3.2), rng.uniform(10.0, 30.0)])
+    else:
+        width, depth = rng.uniform(8.0, 16.0, size=2)
+    if room and rng.random() < 0.4:
         w1, d1 = width * rng.uniform(0.45, 0.7), depth * rng.uniform(0.45, 0.7)
         rects = [np.array([0, 0, width, d1]), np.array([0, d1, w1, depth])]
         outline = [(0, 0), (0, depth), (w1, depth), (w1, d1), (width, d1), (width, 0)]

@@ -11,6 +11,11 @@ from kadv.scenes import procedural_room
 SEEDS = range(12)  # rooms, an L, a hall (2) and corridors along x (3) and z (11)
 
 
+def _floor_sides(room) -> list[float]:
+    """The room's floor extent along x and z, shorter first."""
+    return sorted((room.interior[1, [0, 2]] - room.interior[0, [0, 2]]).tolist())
+
+
 def test_same_seed_same_room_bit_for_bit() -> None:
     a, b = procedural_room(seed=5), procedural_room(seed=5)
     for name in ("vertices", "faces", "uvs", "normals", "material_ids", "lights"):
@@ -51,7 +56,7 @@ def test_rooms_vary_and_are_lit_at_their_lamps_and_windows() -> None:
     assert all(len(room.lights) >= 1 for room in rooms)
     heights = [float(room.interior[1, 1]) for room in rooms]
     assert min(heights) >= 2.4 and max(heights) <= 3.4 and max(heights) - min(heights) > 0.4
-    sides = [sorted(room.interior[1, [0, 2]] - room.interior[0, [0, 2]]) for room in rooms]
+    sides = [_floor_sides(room) for room in rooms]
     corridors = [short <= 3.2 and long >= 10.0 for short, long in sides]
     assert sum(corridors) >= 2 and any(short >= 8.0 for short, _ in sides)  # corridors and a hall
     assert any(not corridor and long <= 8.0 for corridor, (_, long) in zip(corridors, sides, strict=True))
@@ -70,10 +75,7 @@ def test_rooms_vary_and_are_lit_at_their_lamps_and_windows() -> None:
 
 
 def test_the_shares_choose_the_footprints() -> None:
-    def long_side(room):
-        return float(max(room.interior[1, [0, 2]] - room.interior[0, [0, 2]]))
-
-    assert all(long_side(procedural_room(seed, corridor_share=0, hall_share=0)) <= 8.0 for seed in SEEDS)
-    assert all(long_side(procedural_room(seed, corridor_share=1, hall_share=0)) >= 10.0 for seed in SEEDS)
+    assert all(_floor_sides(procedural_room(seed, corridor_share=0, hall_share=0))[1] <= 8.0 for seed in SEEDS)
+    assert all(_floor_sides(procedural_room(seed, corridor_share=1, hall_share=0))[1] >= 10.0 for seed in SEEDS)
     with pytest.raises(ValueError, match="sum to at most 1"):
         procedural_room(0, corridor_share=0.6, hall_share=0.6)
