@@ -10,9 +10,12 @@ import torch
 
 from kadv import DifferentiableRenderer, ExactRenderer, box_room, load_model, look_at
 from kadv.attack import Objective, PenaltyConfig
+from kadv.datasets import render_procedural_views
 from kadv.device import resolve_device
 from kadv.geometry import intrinsics_from_fov
 from kadv.losses import depth_loss
+from kadv.models import KadvTiny, TinyDepthNet
+from kadv.models.train_tiny import TinyTrainConfig, fit
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 H, W = 48, 64
@@ -66,3 +69,19 @@ def test_render_and_objective_run_on_the_device_and_agree_with_the_cpu(renderer:
     assert torch.isfinite(grad).all() and grad.abs().sum() > 0
     # the CPU run is deterministic; CUDA reorders float sums, so its gradient agrees closely
     torch.testing.assert_close(grad, reference_grad, atol=1e-6, rtol=1e-2 if device == "cuda" else 0)
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_training_runs_on_the_device_and_hands_back_a_cpu_model_that_agrees_with_the_cpu(device: str) -> None:
+    views = render_procedural_views(4, seed=3, height=32, width=40, progress=False)
+    config = TinyTrainConfig(steps=3, batch_size=2, channels=(8, 8, 8, 8, 8))
+    runs = []
+    for where in ("cpu", device):
+        torch.manual_seed(0)
+        model = KadvTiny(TinyDepthNet(config.channels))
+        losses = fit(model, views, TinyTrainConfig(**{**config.__dict__, "device": where}), progress=False)
+        runs.append((losses, torch.cat([p.flatten() for p in model.network.parameters()])))
+    (cpu_losses, cpu_weights), (losses, weights) = runs
+    assert weights.device.type == "cpu" and not weights.requires_grad
+    # the same batches everywhere; on CUDA the sums run in another order
+    assert losses == pytest.approx(cpu_losses, rel=1e-3) and torch.allclose(weights, cpu_weights, atol=1e-4)

@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
-from kadv.datasets.procedural import HELD_OUT_SEED, ViewBatch, render_procedural_views
+from kadv.datasets.procedural import (
+    HELD_OUT_SEED,
+    MAX_SQUEEZED_ASPECT,
+    ViewBatch,
+    render_procedural_views,
+    training_poses,
+)
 
-__all__ = ["HELD_OUT_SEED", "ViewBatch", "render_procedural_views"]
+__all__ = ["HELD_OUT_SEED", "MAX_SQUEEZED_ASPECT", "ViewBatch", "render_procedural_views", "training_poses"]

@@ -9,14 +9,17 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from kadv.attack.init_views import InitViewConfig, sample_valid_views
 from kadv.geometry import intrinsics_from_fov
-from kadv.penalties import random_valid_poses
+from kadv.penalties import PenaltyConfig, random_valid_poses
 from kadv.render import ExactRenderer, Shading
 from kadv.scenes import box_room, procedural_room
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE
 
-__all__ = ["HELD_OUT_SEED", "ViewBatch", "render_procedural_views"]
+__all__ = ["HELD_OUT_SEED", "MAX_SQUEEZED_ASPECT", "ViewBatch", "render_procedural_views", "training_poses"]
 
+MAX_SQUEEZED_ASPECT = 2.0
+"""The widest frame (width / height) a squeezed training view shows."""
 HELD_OUT_SEED = 7
 """The seed of the generated rooms the embedded models are measured on (``benchmarks/tiny_accuracy.py``);
 no training run may draw it."""
@@ -24,11 +27,38 @@ no training run may draw it."""
 
 @dataclass
 class ViewBatch:
-    """N rendered views: rgb (N, 3, H, W), depth (N, 1, H, W), mask (N, 1, H, W)."""
+    """N rendered views: rgb (N, 3, H, W), depth (N, 1, H, W), mask (N, 1, H, W), and where known
+    the cameras: world_T_cam (N, 4, 4) and intrinsics (N, 3, 3), float64."""
 
     rgb: torch.Tensor
     depth: torch.Tensor
     mask: torch.Tensor
+    world_T_cam: torch.Tensor | None = None
+    intrinsics: torch.Tensor | None = None
+
+
+def training_poses(
+    renderer: ExactRenderer,
+    count: int,
+    rng: np.random.Generator,
+    fov_x_deg: float,
+    attack_view_share: float,
+    height: int,
+    width: int,
+) -> torch.Tensor:
+    """``count`` valid poses (count, 4, 4) for training views: about ``attack_view_share`` of them
+    drawn as the attack draws init views at ``height`` x ``width``, first, the rest anywhere in the
+    scene's camera region."""
+    # nothing extra is drawn when the share is 0, so those views are the views drawn before it existed
+    wanted = int(rng.binomial(count, attack_view_share)) if attack_view_share > 0 else 0
+    seed = int(rng.integers(2**31)) if wanted else 0
+    eye_level = (
+        sample_valid_views(renderer, wanted, seed, InitViewConfig(fov_x_deg=fov_x_deg), PenaltyConfig(), height, width)
+        if wanted
+        else torch.zeros(0, 4, 4, dtype=torch.float64)
+    )
+    rest = count - len(eye_level)  # a room with no free space at eye height gets views from anywhere
+    return torch.cat([eye_level, random_valid_poses(renderer, rest, rng, fov_x_deg)]) if rest else eye_level
 
 
 def render_procedural_views(
@@ -41,18 +71,32 @@ def render_procedural_views(
     progress: bool = True,
     corridor_share: float = CORRIDOR_SHARE,
     hall_share: float = HALL_SHARE,
+    attack_view_share: float = 0.0,
+    squeeze_share: float = 0.0,
 ) -> ViewBatch:
     """Render ``count`` views, ``views_per_room`` per generated room, under random shading.
 
     Room ``i`` is ``procedural_room(seed * 100003 + i)`` (furnished, lit at its lamps and windows;
     ``corridor_share`` and ``hall_share`` pass to it) for a ``furnished_share`` of the rooms, spread
-    evenly, else ``box_room(seed * 100003 + i)`` lit from a random point. Deterministic for a seed;
-    distinct seeds give disjoint rooms (held-out evaluation uses another seed).
+    evenly, else ``box_room(seed * 100003 + i)`` lit from a random point. An
+    ``attack_view_share`` of the views are drawn as the attack draws its init views (eye height
+    above the floor, a level gaze: :func:`~kadv.attack.sample_valid_views`), the rest anywhere in
+    the room (:func:`~kadv.penalties.random_valid_poses`). A ``squeeze_share`` of the rooms are
+    seen through a wider frame (aspect drawn up to ``MAX_SQUEEZED_ASPECT``) squeezed into ``height``
+    x ``width``, as a model that resizes every image to its input size sees wide photographs.
+    Deterministic for a seed; distinct seeds give disjoint rooms (held-out evaluation uses another
+    seed).
     """
-    if not 0.0 <= furnished_share <= 1.0:
-        raise ValueError(f"furnished_share must be in [0, 1], got {furnished_share}")
+    shares = {
+        "furnished_share": furnished_share,
+        "attack_view_share": attack_view_share,
+        "squeeze_share": squeeze_share,
+    }
+    for name, share in shares.items():
+        if not 0.0 <= share <= 1.0:
+            raise ValueError(f"{name} must be in [0, 1], got {share}")
     rng = np.random.default_rng(seed)
-    rgb, depth, mask = [], [], []
+    rgb, depth, mask, world_T_cam, intrinsics = [], [], [], [], []
     rooms = math.ceil(count / views_per_room)
     for index in tqdm(range(rooms), desc="rendering rooms", disable=not progress):
         room_seed = seed * 100003 + index
@@ -68,9 +112,17 @@ def render_procedural_views(
         renderer = ExactRenderer(scene, shading)
         fov = float(rng.uniform(55, 85))
         n = min(views_per_room, count - index * views_per_room)
-        poses = random_valid_poses(renderer, n, rng, fov)
-        out = renderer.render(poses, intrinsics_from_fov(fov, height, width), height, width, supersample=2)
+        poses = training_poses(renderer, n, rng, fov, attack_view_share, height, width)
+        K = intrinsics_from_fov(fov, height, width)
+        # nothing is drawn when the share is 0, so those views are the views drawn before it existed
+        if squeeze_share > 0 and rng.random() < squeeze_share:
+            wide = round(height * rng.uniform(width / height, MAX_SQUEEZED_ASPECT))
+            K = intrinsics_from_fov(fov, height, wide)
+            K[0] *= width / wide  # the wide frame's columns squeezed into width
+        out = renderer.render(poses, K, height, width, supersample=2)
         rgb.append(out.rgb)
         depth.append(out.depth)
         mask.append(out.mask)
-    return ViewBatch(torch.cat(rgb), torch.cat(depth), torch.cat(mask))
+        world_T_cam.append(poses)
+        intrinsics.append(K.expand(len(poses), 3, 3))
+    return ViewBatch(*(torch.cat(parts) for parts in (rgb, depth, mask, world_T_cam, intrinsics)))

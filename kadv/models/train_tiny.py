@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +13,7 @@ import torch
 from tqdm import tqdm
 
 from kadv.datasets import HELD_OUT_SEED, ViewBatch, render_procedural_views
+from kadv.device import resolve_device
 from kadv.losses import ssi_loss
 from kadv.models.base import DepthModel
 from kadv.models.evaluation import evaluate
@@ -26,7 +27,7 @@ from kadv.models.tiny import (
 from kadv.models.tiny_dpt import load_kadv_tiny_dpt, tiny_dpt_model, tiny_dpt_network
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, check_shares
 
-__all__ = ["ARCHITECTURES", "TinyTrainConfig", "fit", "render_training_views", "train_tiny"]
+__all__ = ["ARCHITECTURES", "TinyTrainConfig", "fit", "render_training_views", "soup", "train_tiny"]
 
 ARCHITECTURES = ("unet", "dpt")
 
@@ -40,9 +41,15 @@ class TinyTrainConfig:
     the augmentation; ``val_seed`` the validation rooms. ``furnished_share`` of the rooms are
     furnished rooms, the rest box rooms; ``corridor_share`` and ``hall_share`` of the furnished
     rooms are corridors and halls (both 0: the rooms of the generator before it drew them).
-    ``init_weights`` continues from an earlier run's weights (a kadv-tiny file, whose channels win
-    over ``channels``, or a kadv-tiny-dpt directory), so a long training can be done, and
-    reproduced, in stages.
+    ``attack_view_share`` of the views are drawn as the attack draws init views (eye height, level
+    gaze), and a ``squeeze_share`` of the rooms are seen through wider frames squeezed to the
+    model's input size (as the model squeezes wide images). ``device`` trains on the CPU
+    (bit-identical weights for one config) or a CUDA device (faster; its weights differ in the last
+    bits). ``init_weights`` continues from an earlier run's weights (a kadv-tiny file, whose
+    channels win over ``channels``, or a kadv-tiny-dpt directory), so a long training can be done,
+    and reproduced, in stages. ``soup_with`` names earlier weights of the same architecture that the
+    trained weights are averaged with at the end (a uniform model soup; Wortsman et al., 2022):
+    weights along one fine-tuning path average into a model better than each.
     """
 
     seed: int = 0
@@ -60,6 +67,10 @@ class TinyTrainConfig:
     furnished_share: float = 0.75
     corridor_share: float = CORRIDOR_SHARE
     hall_share: float = HALL_SHARE
+    attack_view_share: float = 0.0
+    squeeze_share: float = 0.0
+    device: str = "cpu"
+    soup_with: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         # checked here, before the minutes of rendering that come first in train_tiny
@@ -81,11 +92,17 @@ class TinyTrainConfig:
                 f"train.seed ({self.seed}) and train.val_seed ({self.val_seed}) must differ from each other and "
                 f"from {HELD_OUT_SEED}, the seed of the held-out rooms the benchmark measures on"
             )
-        if not 0.0 <= self.furnished_share <= 1.0:
-            raise ValueError(f"train.furnished_share must be in [0, 1], got {self.furnished_share}")
         check_shares(self.corridor_share, self.hall_share, "train.")
-        if self.init_weights is not None and not Path(self.init_weights).expanduser().exists():
-            raise FileNotFoundError(f"train.init_weights: no such weights file or directory: {self.init_weights}")
+        for name in ("furnished_share", "attack_view_share", "squeeze_share"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"train.{name} must be in [0, 1], got {getattr(self, name)}")
+        try:
+            resolve_device(self.device)
+        except ValueError as error:
+            raise ValueError(f"train.{error}") from None
+        for key, path in [("init_weights", self.init_weights)] + [("soup_with", p) for p in self.soup_with]:
+            if path is not None and not Path(path).expanduser().exists():
+                raise FileNotFoundError(f"train.{key}: no such weights file or directory: {path}")
 
 
 def _augment(rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor, generator: torch.Generator):
@@ -102,8 +119,9 @@ def fit(model: DepthModel, train: ViewBatch, config: TinyTrainConfig, progress: 
     kadv-tiny takes the views (at its input size) normalised; other models through their own preprocessing.
     """
     network = model.network
+    device = resolve_device(config.device)
     # channels-last convolutions train about 30% faster on CPU (oneDNN).
-    network.train().requires_grad_(True).to(memory_format=torch.channels_last)
+    network.train().requires_grad_(True).to(device, memory_format=torch.channels_last)
     optimiser = torch.optim.AdamW(network.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     schedule = torch.optim.lr_scheduler.OneCycleLR(optimiser, max_lr=config.lr, total_steps=config.steps)
     generator = torch.Generator().manual_seed(config.seed)
@@ -111,7 +129,9 @@ def fit(model: DepthModel, train: ViewBatch, config: TinyTrainConfig, progress: 
     bar = tqdm(range(config.steps), desc=f"training {model.name}", disable=not progress)
     for _ in bar:
         index = torch.randint(len(train.rgb), (config.batch_size,), generator=generator)
+        # drawn on the CPU whatever the device, so a seed draws the same batches everywhere
         rgb, depth, mask = _augment(train.rgb[index], train.depth[index], train.mask[index], generator)
+        rgb, depth, mask = rgb.to(device), depth.to(device), mask.to(device)
         loss = ssi_loss(_predict(model, rgb), depth, mask, config.gradient_weight)
         optimiser.zero_grad()
         loss.backward()
@@ -119,6 +139,7 @@ def fit(model: DepthModel, train: ViewBatch, config: TinyTrainConfig, progress: 
         schedule.step()
         losses.append(loss.item())
         bar.set_postfix(loss=f"{np.mean(losses[-50:]):.4f}")
+    network.cpu()
     model.freeze()
     return losses
 
@@ -137,6 +158,8 @@ def render_training_views(config: TinyTrainConfig, progress: bool = True) -> tup
         "furnished_share": config.furnished_share,
         "corridor_share": config.corridor_share,
         "hall_share": config.hall_share,
+        "attack_view_share": config.attack_view_share,
+        "squeeze_share": config.squeeze_share,
         "progress": progress,
     }
     train = render_procedural_views(config.train_views, config.seed, height, width, **rooms)
@@ -144,15 +167,32 @@ def render_training_views(config: TinyTrainConfig, progress: bool = True) -> tup
     return train, val
 
 
+def _load(path: str, architecture: str) -> DepthModel:
+    if architecture == "dpt":
+        return load_kadv_tiny_dpt(Path(path).expanduser())
+    return load_kadv_tiny(path)
+
+
 def _initial_model(config: TinyTrainConfig) -> DepthModel:
     torch.manual_seed(config.seed)  # here, so the initial weights do not depend on what rendering drew
+    if config.init_weights is not None:
+        return _load(config.init_weights, config.architecture)
     if config.architecture == "dpt":
-        if config.init_weights is None:
-            return tiny_dpt_model(tiny_dpt_network())
-        return load_kadv_tiny_dpt(Path(config.init_weights).expanduser())
-    if config.init_weights is None:
-        return KadvTiny(TinyDepthNet(tuple(config.channels)))
-    return load_kadv_tiny(config.init_weights)
+        return tiny_dpt_model(tiny_dpt_network())
+    return KadvTiny(TinyDepthNet(tuple(config.channels)))
+
+
+def soup(model: DepthModel, paths: list[str], architecture: str) -> None:
+    """Replace ``model``'s floating-point weights by their mean with those of the weights at ``paths``."""
+    states = [model.network.state_dict()] + [_load(path, architecture).network.state_dict() for path in paths]
+    for path, state in zip(paths, states[1:]):
+        shapes = {name: tuple(value.shape) for name, value in state.items()}
+        if shapes != {name: tuple(value.shape) for name, value in states[0].items()}:
+            raise ValueError(f"train.soup_with: {path} is not shaped like the trained {model.name} (other channels?)")
+    with torch.no_grad():
+        for name, value in states[0].items():
+            if value.is_floating_point():
+                value.copy_(torch.stack([state[name] for state in states]).mean(0))
 
 
 def train_tiny(
@@ -167,6 +207,8 @@ def train_tiny(
     start = time.perf_counter()
     losses = fit(model, train, config, progress)
     train_seconds = time.perf_counter() - start
+    if config.soup_with:
+        soup(model, config.soup_with, config.architecture)
     log = {
         "config": asdict(config),
         "render_seconds": render_seconds,

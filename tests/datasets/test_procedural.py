@@ -2,10 +2,15 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
 
-from kadv.datasets import render_procedural_views
+from kadv.datasets import MAX_SQUEEZED_ASPECT, render_procedural_views, training_poses
+from kadv.geometry import intrinsics_from_fov
+from kadv.penalties import view_validity
+from kadv.render import ExactRenderer
+from kadv.scenes import box_room
 
 
 def test_views_are_deterministic_per_seed_and_consistent() -> None:
@@ -29,3 +34,39 @@ def test_a_share_of_the_rooms_is_furnished() -> None:
     assert not torch.equal(boxes.depth[2:], mixed.depth[2:])
     with pytest.raises(ValueError, match="furnished_share"):
         render_procedural_views(4, seed=3, height=12, width=16, furnished_share=1.5, progress=False)
+
+
+def test_an_attack_view_share_draws_views_at_eye_height_with_a_level_gaze() -> None:
+    renderer = ExactRenderer(box_room(seed=3, num_boxes=0))  # floor at y = 0, nothing on it
+    anywhere = training_poses(renderer, 16, np.random.default_rng(0), 70.0, 0.0, 12, 16)
+    eye_level = training_poses(renderer, 16, np.random.default_rng(0), 70.0, 1.0, 12, 16)
+    # the init views' defaults: 1.0-1.8 m above the floor, pitch -25 to 10 degrees
+    height = eye_level[:, 1, 3]
+    assert bool(((height > 1.0 - 1e-9) & (height < 1.8 + 1e-9)).all()), height
+    pitch = torch.rad2deg(torch.asin(eye_level[:, 1, 2]))  # the optical axis' (y up) upward part
+    assert bool(((pitch > -25.0 - 1e-6) & (pitch < 10.0 + 1e-6)).all()), pitch
+    assert not bool(((anywhere[:, 1, 3] > 1.0) & (anywhere[:, 1, 3] < 1.8)).all()), anywhere[:, 1, 3]
+    half = training_poses(renderer, 16, np.random.default_rng(0), 70.0, 0.5, 12, 16)
+    K = intrinsics_from_fov(70.0, 12, 16)
+    assert half.shape == (16, 4, 4) and bool(view_validity(renderer, half, K, 12, 16).valid.all())
+    with pytest.raises(ValueError, match="attack_view_share"):
+        render_procedural_views(4, seed=3, height=12, width=16, attack_view_share=-0.1, progress=False)
+
+
+def test_a_squeeze_share_renders_wider_frames_into_the_same_pixels() -> None:
+    plain = render_procedural_views(8, seed=3, height=12, width=16, views_per_room=4, progress=False)
+    squeezed = render_procedural_views(
+        8, seed=3, height=12, width=16, views_per_room=4, squeeze_share=1.0, progress=False
+    )
+    K = squeezed.intrinsics
+    assert squeezed.rgb.shape == plain.rgb.shape
+    assert torch.equal(plain.intrinsics[:, 0, 0], plain.intrinsics[:, 1, 1])  # square pixels
+    aspect = (16 / 12) * K[:, 1, 1] / K[:, 0, 0]  # the frame's width / height before it was squeezed
+    # drawn up to 2:1, then rounded to whole columns (a draw near 4:3 may round to the frame itself)
+    assert bool(((aspect > 16 / 12 - 1e-9) & (aspect <= MAX_SQUEEZED_ASPECT + 1 / 12)).all()), aspect
+    assert bool((aspect > 1.4).any()), aspect
+    # the drawn horizontal field of view (55-85 degrees) over the 16 columns, a vertical one no wider
+    fov_x = torch.rad2deg(2 * torch.atan(8 / K[:, 0, 0]))
+    assert bool(((fov_x > 55 - 1e-9) & (fov_x < 85 + 1e-9)).all()) and bool((K[:, 1, 1] >= K[:, 0, 0]).all())
+    with pytest.raises(ValueError, match="squeeze_share"):
+        render_procedural_views(4, seed=3, height=12, width=16, squeeze_share=1.5, progress=False)

@@ -6,7 +6,7 @@ import torch
 from kadv.datasets import render_procedural_views
 from kadv.losses import gradient_matching, ssi_loss
 from kadv.models import KadvTiny, TinyDepthNet, load_kadv_tiny, load_kadv_tiny_dpt, save_kadv_tiny, save_kadv_tiny_dpt
-from kadv.models.train_tiny import TinyTrainConfig, fit, train_tiny
+from kadv.models.train_tiny import TinyTrainConfig, fit, soup, train_tiny
 
 
 def _views():
@@ -74,6 +74,32 @@ def test_the_dpt_trains_through_its_own_preprocessing_and_continues_from_a_direc
     assert not any(p.requires_grad for p in again.parameters())  # handed back frozen, as loaded models are
 
 
+def test_a_soup_averages_the_trained_weights_with_the_named_ones(tmp_path) -> None:
+    torch.manual_seed(1)
+    first, second = (TinyDepthNet((8, 8, 8, 8, 16)) for _ in range(2))
+    paths = [str(save_kadv_tiny(net, tmp_path / f"{i}.safetensors")) for i, net in enumerate((first, second))]
+    trained = load_kadv_tiny(paths[0])
+    soup(trained, paths[1:], "unet")
+    other = load_kadv_tiny(paths[1]).network.state_dict()
+    for name, value in load_kadv_tiny(paths[0]).network.state_dict().items():
+        assert torch.allclose(trained.network.state_dict()[name], (value + other[name]) / 2)
+    narrow = str(save_kadv_tiny(TinyDepthNet((8, 8, 8, 8, 8)), tmp_path / "narrow.safetensors"))
+    with pytest.raises(ValueError, match=r"train\.soup_with: .*narrow.safetensors is not shaped like"):
+        soup(trained, [narrow], "unet")
+
+
+def test_train_tiny_soups_with_the_weights_it_names(tmp_path) -> None:
+    torch.manual_seed(1)
+    start = str(save_kadv_tiny(TinyDepthNet((8, 8, 8, 8, 16)), tmp_path / "start.safetensors"))
+    config = TinyTrainConfig(train_views=8, val_views=8, steps=3, batch_size=2, init_weights=start)
+    plain, _ = train_tiny(config, progress=False)
+    souped, log = train_tiny(TinyTrainConfig(**{**config.__dict__, "soup_with": [start]}), progress=False)
+    initial = load_kadv_tiny(start).network.state_dict()
+    for name, value in plain.network.state_dict().items():
+        assert torch.allclose(souped.network.state_dict()[name], (value + initial[name]) / 2)
+    assert log["config"]["soup_with"] == [start]
+
+
 @pytest.mark.parametrize(
     "field, value",
     [
@@ -91,6 +117,10 @@ def test_the_dpt_trains_through_its_own_preprocessing_and_continues_from_a_direc
         ("seed", 7),  # the held-out rooms
         ("val_seed", 7),
         ("seed", 1),  # the validation rooms
+        ("attack_view_share", -0.5),
+        ("squeeze_share", 2.0),
+        ("device", "tpu"),
+        ("soup_with", ["/no/such/file"]),
     ],
 )
 def test_bad_settings_are_refused_before_any_rendering(field, value) -> None:
