@@ -5,6 +5,8 @@ The placement tests run on every device this machine has: the CPU, and CUDA wher
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 import torch
 
@@ -79,7 +81,7 @@ def test_training_runs_on_the_device_and_hands_back_a_cpu_model_that_agrees_with
     for where in ("cpu", device):
         torch.manual_seed(0)
         model = KadvTiny(TinyDepthNet(config.channels))
-        losses = fit(model, views, TinyTrainConfig(**{**config.__dict__, "device": where}), progress=False)
+        losses = fit(model, views, replace(config, device=where), progress=False)
         runs.append((losses, torch.cat([p.flatten() for p in model.network.parameters()])))
     (cpu_losses, cpu_weights), (losses, weights) = runs
     assert weights.device.type == "cpu" and not weights.requires_grad

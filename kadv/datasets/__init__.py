@@ -6,8 +6,16 @@ from kadv.datasets.procedural import (
     HELD_OUT_SEED,
     MAX_SQUEEZED_ASPECT,
     ViewBatch,
+    check_view_shares,
     render_procedural_views,
     training_poses,
 )
 
-__all__ = ["HELD_OUT_SEED", "MAX_SQUEEZED_ASPECT", "ViewBatch", "render_procedural_views", "training_poses"]
+__all__ = [
+    "HELD_OUT_SEED",
+    "MAX_SQUEEZED_ASPECT",
+    "ViewBatch",
+    "check_view_shares",
+    "render_procedural_views",
+    "training_poses",
+]

@@ -16,7 +16,14 @@ from kadv.render import ExactRenderer, Shading
 from kadv.scenes import box_room, procedural_room
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE
 
-__all__ = ["HELD_OUT_SEED", "MAX_SQUEEZED_ASPECT", "ViewBatch", "render_procedural_views", "training_poses"]
+__all__ = [
+    "HELD_OUT_SEED",
+    "MAX_SQUEEZED_ASPECT",
+    "ViewBatch",
+    "check_view_shares",
+    "render_procedural_views",
+    "training_poses",
+]
 
 MAX_SQUEEZED_ASPECT = 2.0
 """The widest frame (width / height) a squeezed training view shows."""
@@ -37,6 +44,18 @@ class ViewBatch:
     intrinsics: torch.Tensor | None = None
 
 
+def check_view_shares(furnished_share: float, attack_view_share: float, squeeze_share: float, prefix: str = "") -> None:
+    """Raise ValueError, naming ``prefix`` + the key, unless each share lies in [0, 1]."""
+    shares = {
+        "furnished_share": furnished_share,
+        "attack_view_share": attack_view_share,
+        "squeeze_share": squeeze_share,
+    }
+    for name, share in shares.items():
+        if not 0.0 <= share <= 1.0:
+            raise ValueError(f"{prefix}{name} must be in [0, 1], got {share}")
+
+
 def training_poses(
     renderer: ExactRenderer,
     count: int,
@@ -51,12 +70,12 @@ def training_poses(
     scene's camera region."""
     # nothing extra is drawn when the share is 0, so those views are the views drawn before it existed
     wanted = int(rng.binomial(count, attack_view_share)) if attack_view_share > 0 else 0
-    seed = int(rng.integers(2**31)) if wanted else 0
-    eye_level = (
-        sample_valid_views(renderer, wanted, seed, InitViewConfig(fov_x_deg=fov_x_deg), PenaltyConfig(), height, width)
-        if wanted
-        else torch.zeros(0, 4, 4, dtype=torch.float64)
-    )
+    eye_level = torch.zeros(0, 4, 4, dtype=torch.float64)
+    if wanted:
+        config = InitViewConfig(fov_x_deg=fov_x_deg)
+        eye_level = sample_valid_views(
+            renderer, wanted, int(rng.integers(2**31)), config, PenaltyConfig(), height, width
+        )
     rest = count - len(eye_level)  # a room with no free space at eye height gets views from anywhere
     return torch.cat([eye_level, random_valid_poses(renderer, rest, rng, fov_x_deg)]) if rest else eye_level
 
@@ -87,14 +106,7 @@ def render_procedural_views(
     Deterministic for a seed; distinct seeds give disjoint rooms (held-out evaluation uses another
     seed).
     """
-    shares = {
-        "furnished_share": furnished_share,
-        "attack_view_share": attack_view_share,
-        "squeeze_share": squeeze_share,
-    }
-    for name, share in shares.items():
-        if not 0.0 <= share <= 1.0:
-            raise ValueError(f"{name} must be in [0, 1], got {share}")
+    check_view_shares(furnished_share, attack_view_share, squeeze_share)
     rng = np.random.default_rng(seed)
     rgb, depth, mask, world_T_cam, intrinsics = [], [], [], [], []
     rooms = math.ceil(count / views_per_room)

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from kadv.datasets import HELD_OUT_SEED, ViewBatch, render_procedural_views
+from kadv.datasets import HELD_OUT_SEED, ViewBatch, check_view_shares, render_procedural_views
 from kadv.device import resolve_device
 from kadv.losses import ssi_loss
 from kadv.models.base import DepthModel
@@ -93,9 +93,7 @@ class TinyTrainConfig:
                 f"from {HELD_OUT_SEED}, the seed of the held-out rooms the benchmark measures on"
             )
         check_shares(self.corridor_share, self.hall_share, "train.")
-        for name in ("furnished_share", "attack_view_share", "squeeze_share"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"train.{name} must be in [0, 1], got {getattr(self, name)}")
+        check_view_shares(self.furnished_share, self.attack_view_share, self.squeeze_share, "train.")
         try:
             resolve_device(self.device)
         except ValueError as error:
@@ -185,9 +183,9 @@ def _initial_model(config: TinyTrainConfig) -> DepthModel:
 def soup(model: DepthModel, paths: list[str], architecture: str) -> None:
     """Replace ``model``'s floating-point weights by their mean with those of the weights at ``paths``."""
     states = [model.network.state_dict()] + [_load(path, architecture).network.state_dict() for path in paths]
+    shapes = {name: value.shape for name, value in states[0].items()}
     for path, state in zip(paths, states[1:]):
-        shapes = {name: tuple(value.shape) for name, value in state.items()}
-        if shapes != {name: tuple(value.shape) for name, value in states[0].items()}:
+        if {name: value.shape for name, value in state.items()} != shapes:
             raise ValueError(f"train.soup_with: {path} is not shaped like the trained {model.name} (other channels?)")
     with torch.no_grad():
         for name, value in states[0].items():

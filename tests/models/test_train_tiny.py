@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 import torch
 
@@ -67,7 +69,7 @@ def test_the_dpt_trains_through_its_own_preprocessing_and_continues_from_a_direc
     config = TinyTrainConfig(train_views=8, val_views=8, steps=3, batch_size=2, architecture="dpt", furnished_share=1.0)
     model, log = train_tiny(config, progress=False)
     start = save_kadv_tiny_dpt(model.network, tmp_path / "start")
-    again, _ = train_tiny(TinyTrainConfig(**{**config.__dict__, "init_weights": str(start)}), progress=False)
+    again, _ = train_tiny(replace(config, init_weights=str(start)), progress=False)
     initial = load_kadv_tiny_dpt(start).network.state_dict()
     assert any(not torch.equal(initial[k], v) for k, v in again.network.state_dict().items())
     assert model.name == "kadv_tiny_dpt" and len(log["losses"]) == 3 and 0.0 <= log["val_delta1"] <= 1.0
@@ -93,7 +95,7 @@ def test_train_tiny_soups_with_the_weights_it_names(tmp_path) -> None:
     start = str(save_kadv_tiny(TinyDepthNet((8, 8, 8, 8, 16)), tmp_path / "start.safetensors"))
     config = TinyTrainConfig(train_views=8, val_views=8, steps=3, batch_size=2, init_weights=start)
     plain, _ = train_tiny(config, progress=False)
-    souped, log = train_tiny(TinyTrainConfig(**{**config.__dict__, "soup_with": [start]}), progress=False)
+    souped, log = train_tiny(replace(config, soup_with=[start]), progress=False)
     initial = load_kadv_tiny(start).network.state_dict()
     for name, value in plain.network.state_dict().items():
         assert torch.allclose(souped.network.state_dict()[name], (value + initial[name]) / 2)
