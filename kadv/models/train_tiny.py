@@ -27,7 +27,7 @@ from kadv.models.tiny import (
 from kadv.models.tiny_dpt import load_kadv_tiny_dpt, tiny_dpt_model, tiny_dpt_network
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, check_shares
 
-__all__ = ["ARCHITECTURES", "TinyTrainConfig", "fit", "render_training_views", "soup", "train_tiny"]
+__all__ = ["ARCHITECTURES", "TinyTrainConfig", "fit", "load_soup", "render_training_views", "soup", "train_tiny"]
 
 ARCHITECTURES = ("unet", "dpt")
 
@@ -172,7 +172,7 @@ def _load(path: str, architecture: str) -> DepthModel:
 
 
 def _initial_model(config: TinyTrainConfig) -> DepthModel:
-    torch.manual_seed(config.seed)  # here, so the initial weights do not depend on what rendering drew
+    torch.manual_seed(config.seed)  # here, so the initial weights depend on the seed alone
     if config.init_weights is not None:
         return _load(config.init_weights, config.architecture)
     if config.architecture == "dpt":
@@ -180,17 +180,24 @@ def _initial_model(config: TinyTrainConfig) -> DepthModel:
     return KadvTiny(TinyDepthNet(tuple(config.channels)))
 
 
-def soup(model: DepthModel, paths: list[str], architecture: str) -> None:
-    """Replace ``model``'s floating-point weights by their mean with those of the weights at ``paths``."""
-    states = [model.network.state_dict()] + [_load(path, architecture).network.state_dict() for path in paths]
-    shapes = {name: value.shape for name, value in states[0].items()}
-    for path, state in zip(paths, states[1:]):
+def load_soup(model: DepthModel, paths: list[str], architecture: str) -> list[dict[str, torch.Tensor]]:
+    """The weights at ``paths``, for :func:`soup`; a ValueError naming the path unless shaped like ``model``'s."""
+    # loading builds networks, which draws initial weights; the caller's seeded generator must not see that
+    with torch.random.fork_rng(devices=[]):
+        states = [_load(path, architecture).network.state_dict() for path in paths]
+    shapes = {name: value.shape for name, value in model.network.state_dict().items()}
+    for path, state in zip(paths, states):
         if {name: value.shape for name, value in state.items()} != shapes:
             raise ValueError(f"train.soup_with: {path} is not shaped like the trained {model.name} (other channels?)")
+    return states
+
+
+def soup(model: DepthModel, states: list[dict[str, torch.Tensor]]) -> None:
+    """Replace ``model``'s floating-point weights by their mean with ``states`` (from :func:`load_soup`)."""
     with torch.no_grad():
-        for name, value in states[0].items():
+        for name, value in model.network.state_dict().items():
             if value.is_floating_point():
-                value.copy_(torch.stack([state[name] for state in states]).mean(0))
+                value.copy_(torch.stack([value] + [state[name] for state in states]).mean(0))
 
 
 def train_tiny(
@@ -198,15 +205,17 @@ def train_tiny(
 ) -> tuple[DepthModel, dict[str, object]]:
     """Render the data (unless ``views`` gives what :func:`render_training_views` would), train,
     and return the model with a log (losses, delta1, timings)."""
+    model = _initial_model(config)
+    # a soup of other channels is refused here, not after the minutes of rendering and training
+    soup_states = load_soup(model, config.soup_with, config.architecture)
     start = time.perf_counter()
     train, val = render_training_views(config, progress) if views is None else views
     render_seconds = time.perf_counter() - start
-    model = _initial_model(config)
     start = time.perf_counter()
     losses = fit(model, train, config, progress)
     train_seconds = time.perf_counter() - start
-    if config.soup_with:
-        soup(model, config.soup_with, config.architecture)
+    if soup_states:
+        soup(model, soup_states)
     log = {
         "config": asdict(config),
         "render_seconds": render_seconds,

@@ -8,7 +8,8 @@ import torch
 from kadv.datasets import render_procedural_views
 from kadv.losses import gradient_matching, ssi_loss
 from kadv.models import KadvTiny, TinyDepthNet, load_kadv_tiny, load_kadv_tiny_dpt, save_kadv_tiny, save_kadv_tiny_dpt
-from kadv.models.train_tiny import TinyTrainConfig, fit, soup, train_tiny
+from kadv.models import train_tiny as training
+from kadv.models.train_tiny import TinyTrainConfig, fit, load_soup, soup, train_tiny
 
 
 def _views():
@@ -81,13 +82,23 @@ def test_a_soup_averages_the_trained_weights_with_the_named_ones(tmp_path) -> No
     first, second = (TinyDepthNet((8, 8, 8, 8, 16)) for _ in range(2))
     paths = [str(save_kadv_tiny(net, tmp_path / f"{i}.safetensors")) for i, net in enumerate((first, second))]
     trained = load_kadv_tiny(paths[0])
-    soup(trained, paths[1:], "unet")
+    generator_state = torch.get_rng_state()
+    ingredients = load_soup(trained, paths[1:], "unet")
+    assert torch.equal(torch.get_rng_state(), generator_state)  # loading leaves a seeded generator as it was
+    soup(trained, ingredients)
     other = load_kadv_tiny(paths[1]).network.state_dict()
     for name, value in load_kadv_tiny(paths[0]).network.state_dict().items():
         assert torch.allclose(trained.network.state_dict()[name], (value + other[name]) / 2)
     narrow = str(save_kadv_tiny(TinyDepthNet((8, 8, 8, 8, 8)), tmp_path / "narrow.safetensors"))
     with pytest.raises(ValueError, match=r"train\.soup_with: .*narrow.safetensors is not shaped like"):
-        soup(trained, [narrow], "unet")
+        load_soup(trained, [narrow], "unet")
+
+
+def test_a_soup_of_other_channels_is_refused_before_any_rendering(tmp_path, monkeypatch) -> None:
+    narrow = str(save_kadv_tiny(TinyDepthNet((8, 8, 8, 8, 8)), tmp_path / "narrow.safetensors"))
+    monkeypatch.setattr(training, "render_training_views", lambda *args: pytest.fail("rendered before the check"))
+    with pytest.raises(ValueError, match=r"narrow\.safetensors is not shaped like"):
+        train_tiny(TinyTrainConfig(channels=(8, 8, 8, 8, 16), soup_with=[narrow]), progress=False)
 
 
 def test_train_tiny_soups_with_the_weights_it_names(tmp_path) -> None:
