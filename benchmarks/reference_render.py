@@ -1,83 +1,178 @@
-"""Render reliability against Mitsuba 3 (the study's Table 1): depth, images and predictions.
+"""Render reliability against Mitsuba 3 (the study's Table 1): depth, images and predictions, per lighting.
 
-For each ../shared scene, the file camera (moved clear of walls as the attack does) plus 4 init views
-sampled with kadv-tiny are rendered by Mitsuba 3 (path tracing, the file's emitters) and by kadv's
-exact renderer. Per view: the median relative z-depth error (Mitsuba's ray intersection at our pixel
-centres), PSNR and SSIM of the images after exposure matching, and delta1 between kadv-tiny's
-predictions on the two images. Writes a Markdown and CSV table per scene and a side-by-side PNG per
-view under ``--out``.
+For each scene (the three ../shared scenes by default; ``--scenes`` takes names or paths to Mitsuba
+XML files), the file camera (moved clear of walls as the attack does) plus ``--sampled`` init views
+sampled with kadv-tiny are rendered by Mitsuba 3 (path tracing, the file's emitters, denoised with
+Open Image Denoise) and by kadv's exact renderer under each lighting (``direct``, ``baked``). Per
+view: the median relative z-depth error (Mitsuba's ray intersection at our pixel centres), PSNR
+and SSIM of the images after exposure matching, and delta1 between kadv-tiny's predictions on the
+two images. The reference's noise floor is two independent Mitsuba renders of the file camera
+against each other. Writes Markdown/CSV tables and a side-by-side PNG per view under ``--out``.
 
-Needs the ``reference`` extra (Mitsuba 3). Run: .venv/bin/python benchmarks/reference_render.py
+Needs the ``reference`` extra (Mitsuba 3, Open Image Denoise). Run:
+.venv/bin/python benchmarks/reference_render.py
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
+import subprocess
+import sys
+import time
 from pathlib import Path
 
-from common import REAL_SCENES, load_bench_scene, scenes_root
+from common import REAL_SCENES, scenes_root
 from tqdm import tqdm
 
 from kadv.attack import InitViewConfig, PenaltyConfig, file_init_views, sample_init_views
-from kadv.diagnostics.reference import compare_view, load_mitsuba_scene, save_comparison
+from kadv.diagnostics.reference import (
+    compare_view,
+    load_mitsuba_scene,
+    noise_floor,
+    render_reference,
+    save_comparison,
+    survival,
+    survival_table,
+)
 from kadv.models import load_model
-from kadv.render import ExactRenderer
+from kadv.render import ExactRenderer, Shading
+from kadv.report.summary import RunSummary
 from kadv.report.sweep import Table
+from kadv.scenes import load_scene
+
+
+def _scene_file(name: str) -> Path:
+    """A shared scene's XML by name, else the path as given."""
+    path = scenes_root() / name / "scene.xml"
+    return path if name in REAL_SCENES or path.is_file() else Path(name)
+
+
+_METRICS = ["psnr", "ssim", "pred_delta1"]
+# the demo's attack (experiment=demo) on another scene: kadv-tiny, SSIM loss, 2 init views of 123 views
+_ATTACK = ["model=kadv_tiny", "loss=ssim", "render.height=120", "render.width=160", "init.count=2"]
+_ATTACK += ["attack.budget_evaluations=123", "video=false"]
+
+
+def _attack(path: Path, lighting: str, out: Path) -> RunSummary:
+    """Run the demo's attack on a scene file under a lighting; its summary."""
+    command = [str(Path(sys.executable).parent / "kadv-attack"), "scene=file", f"scene.path={path}", *_ATTACK]
+    command += [f"render.lighting={lighting}", f"hydra.run.dir={out}"]
+    subprocess.run(command, check=True, capture_output=True)
+    return RunSummary.read(out / "summary.json")
+
+
+def _compare(args, scene, path: Path, renderers: dict, model, header: list[str]) -> tuple[Table, float, float]:
+    """The file camera and sampled init views rendered by Mitsuba and by kadv under each lighting:
+    their table (one row per view), a side-by-side PNG per view, and the reference's noise floor."""
+    penalty = PenaltyConfig()
+    direct = renderers.get("direct") or ExactRenderer(scene)
+    views = file_init_views(direct, penalty.margin)[:1]
+    views += sample_init_views(direct, model, args.sampled, 0, InitViewConfig(), penalty, args.height, args.width)
+    mitsuba = load_mitsuba_scene(
+        path, [(v.world_T_cam.numpy(), v.fov_x_deg) for v in views], args.height, args.width, args.spp
+    )
+    floor_psnr, floor_ssim = noise_floor(mitsuba, 0, args.spp)
+    title = f"{scene.name}: Mitsuba 3 ({args.spp} spp, denoised) against kadv, {args.height}x{args.width}, kadv-tiny"
+    table = Table(title, header)
+    for index, view in enumerate(tqdm(views, desc=scene.name)):
+        reference = render_reference(mitsuba, index, args.spp)
+        comparisons = {
+            lighting: compare_view(
+                mitsuba, index, renderer, model, view.world_T_cam, view.fov_x_deg,
+                args.height, args.width, args.spp, reference=reference,
+            )
+            for lighting, renderer in renderers.items()
+        }  # fmt: skip
+        depth_error = max(c.depth_rel_err for c in comparisons.values())
+        table.rows.append(
+            [view.name, f"{depth_error:.1e}", *(getattr(c, m) for c in comparisons.values() for m in _METRICS)]
+        )
+        scores = ", ".join(
+            f"{lighting} {c.psnr:.1f} dB / {c.ssim:.2f} / delta1 {c.pred_delta1:.3f}"
+            for lighting, c in comparisons.items()
+        )
+        save_comparison(args.out / scene.name / f"{view.name}.png", comparisons, f"{scene.name} {view.name}: {scores}")
+    table.write(args.out / scene.name, "reference")
+    print(f"\n{table.markdown()}")
+    return table, floor_psnr, floor_ssim
+
+
+def _survive(args, name: str, path: Path, lighting: str, renderer: ExactRenderer, model) -> tuple[float, float]:
+    """Mean delta1 drop of a demo-sized attack's kept views, on kadv's renders and on Mitsuba's."""
+    run = _attack(path, lighting, args.out / name / f"attack_{lighting}")
+    rows = survival(path, run.init_views, renderer, model, run.height, run.width, args.survival_spp)
+    title = f"{name}, {lighting}: delta1 init -> adversarial on kadv's renders and on Mitsuba's"
+    survival_table(title, rows).write(args.out / name, f"survival_{lighting}")
+    return statistics.mean(r.kadv_drop for r in rows), statistics.mean(r.mitsuba_drop for r in rows)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", default=",".join(REAL_SCENES), help="comma-separated names or Mitsuba XML paths")
+    parser.add_argument("--lightings", default="direct,baked")
     parser.add_argument("--height", type=int, default=120)
     parser.add_argument("--width", type=int, default=160)
-    parser.add_argument("--spp", type=int, default=256, help="Mitsuba samples per pixel")
+    parser.add_argument("--spp", type=int, default=256, help="Mitsuba samples per pixel (denoised)")
     parser.add_argument("--sampled", type=int, default=4, help="sampled init views per scene")
     parser.add_argument("--out", type=Path, default=Path("reference_out"))
+    parser.add_argument("--survival-spp", type=int, default=64, help="spp of the adversarial views' renders")
     args = parser.parse_args()
-    model, penalty = load_model("kadv_tiny"), PenaltyConfig()
-    header = ["view", "depth_rel_err", "psnr", "ssim", "pred_delta1"]
-    overall = Table("Reference comparison, per scene (median over views; depth error: max)", ["scene", *header[1:]])
-    depth_errors, file_errors, delta1s = [], [], []
-    for name in REAL_SCENES:
-        renderer = ExactRenderer(load_bench_scene(name))
-        views = file_init_views(renderer, penalty.margin)[:1]
-        views += sample_init_views(renderer, model, args.sampled, 0, InitViewConfig(), penalty, args.height, args.width)
-        scene = load_mitsuba_scene(
-            scenes_root() / name / "scene.xml",
-            [(v.world_T_cam.numpy(), v.fov_x_deg) for v in views],
-            args.height,
-            args.width,
-            args.spp,
-        )
-        table = Table(f"{name}: Mitsuba 3 ({args.spp} spp) against kadv, {args.height}x{args.width}, kadv-tiny", header)
-        for index, view in enumerate(tqdm(views, desc=name)):
-            c = compare_view(
-                scene, index, renderer, model, view.world_T_cam, view.fov_x_deg, args.height, args.width, args.spp
-            )
-            table.rows.append([view.name, f"{c.depth_rel_err:.1e}", c.psnr, c.ssim, c.pred_delta1])
-            save_comparison(
-                args.out / name / f"{view.name}.png",
-                c,
-                f"{name} {view.name}: depth rel. err {c.depth_rel_err:.1e}, PSNR {c.psnr:.1f} dB, "
-                f"SSIM {c.ssim:.3f}, delta1(pred Mitsuba, pred kadv) {c.pred_delta1:.3f}",
-            )
-            depth_errors.append(c.depth_rel_err)
-            delta1s.append(c.pred_delta1)
-            if view.source == "file":
-                file_errors.append(c.depth_rel_err)
-        table.write(args.out / name, "reference")
-        print(f"\n{table.markdown()}")
-        overall.rows.append(
-            [
-                name,
-                f"{max(depth_errors[-len(views) :]):.1e}",
-                *(statistics.median(r[k] for r in table.rows) for k in (2, 3, 4)),
-            ]
-        )
+    lightings = args.lightings.split(",")
+    default = Shading().lighting
+    model = load_model("kadv_tiny")
+    metrics = _METRICS
+    header = ["view", "depth_rel_err", *(f"{m} {lighting}" for lighting in lightings for m in metrics)]
+    overall = Table(
+        "Reference comparison per scene: median PSNR, SSIM over views, mean prediction delta1; depth error: max",
+        ["scene", "noise floor psnr", "noise floor ssim", "bake s", *header[2:]]
+        + [f"delta1 drop {lighting} on {renderer}" for lighting in lightings for renderer in ("kadv", "Mitsuba")],
+    )
+    survive: dict[str, list[tuple[float, float]]] = {lighting: [] for lighting in lightings}
+    depth_errors: list[float] = []
+    scene_summary: dict[str, dict[str, list[float]]] = {lighting: {m: [] for m in metrics} for lighting in lightings}
+    for name in args.scenes.split(","):
+        path = _scene_file(name)
+        scene = load_scene(path)
+        renderers, bake_seconds = {}, 0.0
+        for lighting in lightings:
+            start = time.perf_counter()
+            renderers[lighting] = ExactRenderer(scene, Shading(lighting=lighting))
+            if lighting == "baked":
+                bake_seconds = renderers[lighting].baked.seconds or time.perf_counter() - start
+        table, floor_psnr, floor_ssim = _compare(args, scene, path, renderers, model, header)
+        depth_errors += [float(r[1]) for r in table.rows]
+        row = [scene.name, floor_psnr, floor_ssim, f"{bake_seconds:.0f}"]
+        for offset, lighting in enumerate(lightings):
+            columns = [[r[2 + offset * len(metrics) + k] for r in table.rows] for k in range(len(metrics))]
+            summary = [statistics.median(columns[0]), statistics.median(columns[1]), statistics.mean(columns[2])]
+            for metric, value in zip(metrics, summary):
+                scene_summary[lighting][metric].append(value)
+            row += summary
+        for lighting in lightings:
+            kadv_drop, mitsuba_drop = _survive(args, scene.name, path, lighting, renderers[lighting], model)
+            survive[lighting].append((kadv_drop, mitsuba_drop))
+            row += [kadv_drop, mitsuba_drop]
+        overall.rows.append(row)
     overall.write(args.out, "reference")
     print(overall.markdown())
-    print(f"file cameras: depth_rel_err_max={max(file_errors):.2e}")
-    print(f"reference depth_rel_err_max={max(depth_errors):.2e} pred_delta1_mean={statistics.mean(delta1s):.3f}")
+    ratio = {
+        lighting: statistics.mean(m for _, m in drops) / statistics.mean(k for k, _ in drops)
+        for lighting, drops in survive.items()
+    }
+    for lighting in lightings:
+        s = scene_summary[lighting]
+        print(
+            f"{lighting}: psnr_min={min(s['psnr']):.2f} ssim_min={min(s['ssim']):.3f} "
+            f"pred_delta1_min={min(s['pred_delta1']):.3f} survive_ratio={ratio[lighting]:.3f}"
+        )
+    chosen = default if default in scene_summary else lightings[0]
+    s = scene_summary[chosen]
+    print(
+        f"reference lighting={chosen} depth_rel_err_max={max(depth_errors):.2e} psnr_min={min(s['psnr']):.2f} "
+        f"ssim_min={min(s['ssim']):.3f} pred_delta1_min={min(s['pred_delta1']):.3f} "
+        f"survive_ratio={ratio[chosen]:.3f}"
+    )
 
 
 if __name__ == "__main__":

@@ -125,7 +125,7 @@ def main(cfg: DictConfig) -> float:
         supersample=supersample, **OmegaConf.to_container(cfg.render.differentiable, resolve=True)
     )
     scene = scene_from_config(cfg.scene)
-    renderer = ExactRenderer(scene, shading_from_config(cfg.render.shading))
+    renderer = ExactRenderer(scene, shading_from_config(cfg.render))
     model = model_from_config(cfg.model)
     loss = depth_loss(
         cfg.loss.kind, cfg.loss.get("vgg_weights"), config_int(cfg.loss.get("window_size", 11), "loss.window_size", 1)

@@ -31,7 +31,7 @@ from kadv.errors import WeightsUnavailable
 from kadv.geometry import look_at
 from kadv.io import write_json
 from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
-from kadv.render import Shading
+from kadv.render import BakeConfig, Shading
 from kadv.scenes import Scene, box_room, load_scene, procedural_room
 
 __all__ = [
@@ -236,12 +236,18 @@ def scene_from_config(cfg: DictConfig) -> Scene:
 
 
 def shading_from_config(cfg: DictConfig) -> Shading:
-    lights = cfg.get("lights")
+    """The :class:`Shading` of a ``render/`` node: ``render.shading.*``, ``render.lighting`` and
+    ``render.bake.*`` (a run saved before lighting existed renders with ``direct``)."""
+    shading = cfg.shading
+    lights = shading.get("lights")
+    bake = OmegaConf.to_container(cfg.get("bake") or {}, resolve=True)
     return Shading(
-        ambient=config_float(cfg.ambient, "render.shading.ambient"),
-        diffuse=config_float(cfg.diffuse, "render.shading.diffuse"),
+        ambient=config_float(shading.ambient, "render.shading.ambient"),
+        diffuse=config_float(shading.diffuse, "render.shading.diffuse"),
         lights=None if lights is None else tuple(tuple(float(v) for v in light) for light in lights),
-        background=tuple(float(v) for v in cfg.background),
+        background=tuple(float(v) for v in shading.background),
+        lighting=cfg.get("lighting", "direct"),
+        bake=settings_from_node(BakeConfig, bake, "render.bake"),
     )
 
 

@@ -52,7 +52,7 @@ def main(cfg: DictConfig) -> None:
     world_T_cam, fov = camera_from_config(cfg.camera, scene)
     height, width, supersample = check_render_config(cfg.render)
     penalty = PenaltyConfig(**OmegaConf.to_container(cfg.penalty, resolve=True))
-    renderer = ExactRenderer(scene, shading_from_config(cfg.render.shading))
+    renderer = ExactRenderer(scene, shading_from_config(cfg.render))
     note = "as given"
     if cfg.camera.world_T_cam is None and cfg.camera.eye is None:
         world_T_cam, moved = clear_file_camera(renderer, world_T_cam, penalty.margin)

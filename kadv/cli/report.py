@@ -17,7 +17,7 @@ from kadv.cli.common import USER_ERRORS, model_from_config, scene_from_config, s
 from kadv.models import DepthModel
 from kadv.render import ExactRenderer
 from kadv.report.build import write_report
-from kadv.report.sweep import RunRecord
+from kadv.report.sweep import RunRecord, collect_runs
 
 DESCRIPTION = """kadv-report: turns kadv-attack run directories into the study's tables and more.
 Writes to OUT (default: <first path>/report), for each search method M in the runs:
@@ -26,7 +26,8 @@ from the init views); then methods.{md,csv} (each attack method's
 gain, evaluations and seconds, when the runs hold more than one), transfer_delta1.{md,csv} and
 transfer_l_depth.{md,csv} (every model scored on every model's adversarial views, re-rendered from
 their saved poses), curves.png (anytime curves per model and method), and report.html
-(self-contained: tables, curves, gallery, maps)."""
+(self-contained: tables, curves, gallery, maps); with --reference, reference_<run>.{md,csv} (each
+kept adversarial view and its init view re-rendered by Mitsuba 3 and scored on both renderers)."""
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -37,6 +38,13 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("-o", "--out", type=Path, help="output folder (default: <first path>/report)")
     parser.add_argument("--no-transfer", action="store_true", help="skip the transfer matrix (no re-rendering)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument(
+        "--reference",
+        action="store_true",
+        help="re-render every kept adversarial view and its init view with Mitsuba 3 (the reference extra) "
+        "and write reference_<run>.{md,csv}: delta1 init -> adversarial on kadv's renders and on Mitsuba's",
+    )
+    parser.add_argument("--reference-spp", type=int, default=64, help="Mitsuba samples per pixel (denoised)")
     return parser
 
 
@@ -51,7 +59,7 @@ class _FromConfig:
         if run.scene not in self.renderers:
             config = OmegaConf.create(run.config)
             self.renderers[run.scene] = ExactRenderer(
-                scene_from_config(config.scene), shading_from_config(config.render.shading)
+                scene_from_config(config.scene), shading_from_config(config.render)
             )
         return self.renderers[run.scene]
 
@@ -73,10 +81,43 @@ def main(argv: list[str] | None = None) -> None:
             sources and sources.model_of,
             progress=not args.no_progress,
         )
+        if args.reference:
+            written += _reference_tables(args, sources or _FromConfig())
     except USER_ERRORS as error:
         print(f"kadv-report: error: {' '.join(str(error).split())}", file=sys.stderr)
         sys.exit(2)
     print("\n".join(str(path) for path in written))
+
+
+def _reference_tables(args: argparse.Namespace, sources: _FromConfig) -> list[Path]:
+    """Mitsuba's verdict on each run whose scene is a Mitsuba XML file: one table per run."""
+    try:
+        import mitsuba  # noqa: F401
+    except ImportError as error:
+        raise ValueError("--reference needs Mitsuba 3: pip install 'kadv[reference]'") from error
+    from kadv.diagnostics.reference import survival, survival_table
+
+    out = args.out if args.out is not None else Path(args.paths[0]) / "report"
+    written = []
+    for run in collect_runs(args.paths):
+        scene = run.config.get("scene", {})
+        path = Path(str(scene.get("path", ""))).expanduser()
+        if scene.get("kind") != "file" or path.suffix.lower() != ".xml":
+            print(
+                f"kadv-report: {run.path}: its scene is not a Mitsuba XML file; no reference renders", file=sys.stderr
+            )
+            continue
+        if not path.is_file():
+            raise FileNotFoundError(f"{run.path}: its scene file {path} is gone; the reference needs it")
+        rows = survival(
+            path, run.summary.init_views, sources.renderer_of(run), sources.model_of(run),
+            run.summary.height, run.summary.width, args.reference_spp, progress=not args.no_progress,
+        )  # fmt: skip
+        title = f"{run.model} on {run.scene} ({run.method}): delta1 on kadv's renders and on Mitsuba's"
+        written += survival_table(title, rows).write(out, f"reference_{run.path.name}")
+    if not written:
+        raise ValueError("--reference: no run's scene is a Mitsuba XML file (generated rooms have none)")
+    return written
 
 
 if __name__ == "__main__":

@@ -25,15 +25,28 @@ import numpy as np
 import torch
 from kornia.metrics import psnr, ssim
 
-from kadv.geometry import intrinsics_from_fov
+from kadv.geometry import axis_angle_to_matrix, intrinsics_from_fov
 from kadv.losses import aligned_depth, depth_metrics
 from kadv.models import DepthModel
 from kadv.render import ExactRenderer
+from kadv.render.lighting import exposed, tone_map
 from kadv.report.figures import depth_colour_map, depth_range, save_figure
+from kadv.report.sweep import Table
 from kadv.scenes.mitsuba_sanitiser import sanitised_scene_root
-from kadv.scenes.textures import linear_to_srgb, srgb_to_linear
+from kadv.scenes.textures import srgb_to_linear
 
-__all__ = ["ReferenceComparison", "compare_view", "load_mitsuba_scene", "mitsuba_depth", "save_comparison"]
+__all__ = [
+    "ReferenceComparison",
+    "Survival",
+    "compare_view",
+    "load_mitsuba_scene",
+    "mitsuba_depth",
+    "noise_floor",
+    "render_reference",
+    "save_comparison",
+    "survival",
+    "survival_table",
+]
 
 log = logging.getLogger(__name__)
 
@@ -62,7 +75,8 @@ def _snake(name: str) -> str:
 
 
 def load_mitsuba_scene(path: str | Path, views: list[tuple[np.ndarray, float]], height: int, width: int, spp: int):
-    """Load the sanitised scene in Mitsuba (textures and meshes resolve relative to the file).
+    """Load the sanitised scene in Mitsuba (textures and meshes resolve relative to the file), its
+    path tracer also writing the albedo and normals that :func:`render_reference`'s denoiser reads.
 
     Older files carry properties Mitsuba 3 no longer knows (a rough conductor's ``extEta``); each one
     Mitsuba names as unreferenced is dropped from every plugin of that type, with a log line.
@@ -72,7 +86,7 @@ def load_mitsuba_scene(path: str | Path, views: list[tuple[np.ndarray, float]], 
     folder = str(Path(path).resolve().parent)
     if folder not in [str(p) for p in resolver]:
         resolver.prepend(folder)
-    root = sanitised_scene_root(Path(path), views, height, width, spp)
+    root = sanitised_scene_root(Path(path), views, height, width, spp, aovs=True)
     while True:
         try:
             return mi.load_string(ET.tostring(root, encoding="unicode"))
@@ -115,14 +129,20 @@ def mitsuba_depth(scene, sensor: int, height: int, width: int) -> np.ndarray:
 
 
 def _exposure(linear: np.ndarray, target_srgb: np.ndarray) -> float:
-    """One scale on linear radiance so that the median brightness matches the target's.
+    """One scale on linear radiance so that, tone-mapped as kadv tone-maps its baked renders
+    (:func:`kadv.render.lighting.tone_map`), its median brightness matches the target's.
 
     The median, not the mean: a window onto the sky is orders of magnitude brighter than the room and
     would otherwise set the exposure for the whole image.
     """
     brightness = np.median(linear.mean(axis=-1))
-    target = srgb_to_linear(np.median(target_srgb.mean(axis=-1)))
+    target = exposed(float(srgb_to_linear(np.median(target_srgb.mean(axis=-1)))))
     return float(target / max(brightness, 1e-12))
+
+
+def _display(linear: np.ndarray) -> np.ndarray:
+    """Display values (H, W, 3) in [0, 1] of exposed linear radiance, as kadv shows its own."""
+    return tone_map(torch.from_numpy(np.ascontiguousarray(linear))).numpy().astype(np.float32)
 
 
 @dataclass
@@ -148,6 +168,43 @@ class ReferenceComparison:
     mask: np.ndarray
 
 
+def render_reference(mitsuba_scene, sensor: int, spp: int, seed: int = 0, denoise: bool = True) -> np.ndarray:
+    """(H, W, 3) linear radiance that Mitsuba path-traces for one of the scene's sensors, denoised by
+    Intel Open Image Denoise with Mitsuba's own albedo and normals (at 256 spp two independent
+    renders of a gallery view agree to about 22 dB raw, 32 dB denoised)."""
+    mi = _mitsuba()
+    image = np.array(mi.render(mitsuba_scene, sensor=sensor, spp=spp, seed=seed), np.float32)
+    colour = np.ascontiguousarray(image[..., :3])
+    if denoise and image.shape[-1] >= 9:
+        try:
+            import pyoidn
+        except ImportError as error:
+            raise ImportError(
+                "the reference's denoiser needs Open Image Denoise: pip install 'kadv[reference]'"
+            ) from error
+        albedo, normals = np.ascontiguousarray(image[..., 3:6]), np.ascontiguousarray(image[..., 6:9])
+        colour = pyoidn.denoise(colour, albedo, normals, hdr=True)
+    return np.maximum(colour, 0.0).astype(np.float64)
+
+
+def _as_tensor(image: np.ndarray) -> torch.Tensor:
+    return torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
+
+
+def _image_scores(ours: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
+    """PSNR and SSIM (11 x 11 window) of display images (H, W, 3) in [0, 1]."""
+    a, b = _as_tensor(ours), _as_tensor(reference)
+    return float(psnr(a, b, 1.0)), float(ssim(a, b, 11).mean())
+
+
+def noise_floor(mitsuba_scene, sensor: int, spp: int, denoise: bool = True) -> tuple[float, float]:
+    """PSNR and SSIM of two independent Mitsuba renders of one view against each other, exposed
+    alike (the median to a mid grey): the best score any renderer can reach against one of them."""
+    first, second = (render_reference(mitsuba_scene, sensor, spp, seed, denoise) for seed in (0, 1))
+    scale = _exposure(first, np.full((1, 3), 0.5))
+    return _image_scores(_display(first * scale), _display(second * scale))
+
+
 def compare_view(
     mitsuba_scene,
     sensor: int,
@@ -159,9 +216,13 @@ def compare_view(
     width: int,
     spp: int,
     seed: int = 0,
+    reference: np.ndarray | None = None,
 ) -> ReferenceComparison:
-    """Render one view with Mitsuba (``sensor`` of the loaded scene) and kadv, and compare them."""
-    mi = _mitsuba()
+    """Render one view with Mitsuba (``sensor`` of the loaded scene) and kadv, and compare them.
+
+    ``reference``: Mitsuba's linear image of that sensor when already rendered (several kadv
+    renderers compared against one reference).
+    """
     K = intrinsics_from_fov(fov_x_deg, height, width)
     ours = renderer.render(world_T_cam, K, height, width, supersample=2)
     depth_ref = mitsuba_depth(mitsuba_scene, sensor, height, width)
@@ -169,14 +230,12 @@ def compare_view(
     both = (depth_ref > 0) & (depth_ours > 0)
     relative = np.abs(depth_ref[both] - depth_ours[both]) / depth_ours[both]
     depth_rel_err = float(np.median(relative)) if both.any() else math.nan
-    linear = np.array(mi.render(mitsuba_scene, sensor=sensor, spp=spp, seed=seed))[..., :3]
+    linear = render_reference(mitsuba_scene, sensor, spp, seed) if reference is None else reference
     kadv_rgb = ours.rgb[0].permute(1, 2, 0).numpy()
-    mitsuba_rgb = linear_to_srgb(linear * _exposure(linear, kadv_rgb)).astype(np.float32)
-    as_tensor = lambda image: torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
-    image_psnr = float(psnr(as_tensor(kadv_rgb), as_tensor(mitsuba_rgb), 1.0))
-    image_ssim = float(ssim(as_tensor(kadv_rgb), as_tensor(mitsuba_rgb), 11).mean())
+    mitsuba_rgb = _display(linear * _exposure(linear, kadv_rgb))
+    image_psnr, image_ssim = _image_scores(kadv_rgb, mitsuba_rgb)
     with torch.no_grad():
-        predictions = model(torch.cat([as_tensor(mitsuba_rgb), as_tensor(kadv_rgb)]))
+        predictions = model(torch.cat([_as_tensor(mitsuba_rgb), _as_tensor(kadv_rgb)]))
     mask = ours.mask.expand(2, -1, -1, -1)
     aligned = aligned_depth(predictions.double(), ours.depth.double().expand(2, -1, -1, -1), mask, model.output_kind)
     delta1 = depth_metrics(aligned[:1], aligned[1:], ours.mask, "depth")["delta1"]
@@ -193,30 +252,134 @@ def compare_view(
     )
 
 
-def save_comparison(path: str | Path, comparison: ReferenceComparison, title: str) -> Path:
-    """Mitsuba | kadv | prediction on Mitsuba's image | prediction on kadv's, as one PNG.
+def save_comparison(path: str | Path, comparisons: dict[str, ReferenceComparison], title: str) -> Path:
+    """One PNG: Mitsuba's image then kadv's under each label (top row), and the model's prediction
+    on each image (bottom row), aligned to kadv's ground truth and on one colour map.
 
-    The two predictions are aligned to kadv's ground truth and share one colour map.
+    Args:
+        comparisons: label (a lighting) -> comparison of one view; Mitsuba's image is the first's.
     """
-    mask = comparison.mask
-    low, high = depth_range(np.stack([comparison.mitsuba_pred, comparison.kadv_pred]), np.stack([mask, mask]))
-    height, width = comparison.kadv_rgb.shape[:2]
-    figure, axes = plt.subplots(1, 4, figsize=(4 * 3.2, 3.2 * height / width + 0.9), layout="constrained")
-    panels = [
-        (comparison.mitsuba_rgb, "Mitsuba 3 (path traced)"),
-        (comparison.kadv_rgb, "kadv (exact renderer)"),
-        (comparison.mitsuba_pred, "prediction on Mitsuba"),
-        (comparison.kadv_pred, "prediction on kadv"),
+    first = next(iter(comparisons.values()))
+    mask = first.mask
+    predictions = [first.mitsuba_pred] + [c.kadv_pred for c in comparisons.values()]
+    low, high = depth_range(np.stack(predictions), np.stack([mask] * len(predictions)))
+    height, width = first.kadv_rgb.shape[:2]
+    columns = 1 + len(comparisons)
+    figure, axes = plt.subplots(
+        2, columns, figsize=(columns * 3.2, 2 * 3.2 * height / width + 1.1), layout="constrained", squeeze=False
+    )
+    images = [(first.mitsuba_rgb, "Mitsuba 3 (path traced)")] + [
+        (c.kadv_rgb, f"kadv {label}: PSNR {c.psnr:.1f} dB, SSIM {c.ssim:.2f}") for label, c in comparisons.items()
     ]
-    for axis, (image, name) in zip(axes, panels):
-        if image.ndim == 3:
-            axis.imshow(image)
-        else:
-            shown = axis.imshow(
-                np.ma.masked_where(~mask, image), cmap=depth_colour_map(), vmin=low, vmax=high, interpolation="nearest"
-            )
-        axis.set_title(name, fontsize=9)
+    labels = ["prediction on Mitsuba"] + [
+        f"on kadv {label}: delta1 {c.pred_delta1:.3f}" for label, c in comparisons.items()
+    ]
+    for axis, (image, name) in zip(axes[0], images):
+        axis.imshow(image)
+        axis.set_title(name, fontsize=8)
+    for axis, prediction, name in zip(axes[1], predictions, labels):
+        shown = axis.imshow(
+            np.ma.masked_where(~mask, prediction), cmap=depth_colour_map(), vmin=low, vmax=high, interpolation="nearest"
+        )
+        axis.set_title(name, fontsize=8)
+    for axis in axes.ravel():
         axis.set_axis_off()
-    figure.colorbar(shown, ax=axes[2:].tolist(), fraction=0.03, pad=0.02, label="aligned depth [m]")
+    figure.colorbar(shown, ax=axes[1].tolist(), fraction=0.03, pad=0.02, label="aligned depth [m]")
     figure.suptitle(title, fontsize=9)
     return save_figure(Path(path), figure)
+
+
+@dataclass
+class Survival:
+    """An adversarial view and its init view, scored on kadv's renders and on Mitsuba's.
+
+    Attributes:
+        init_view: the init view's name; view: ``adv<k>``, the k-th kept adversarial view.
+        kadv_init, kadv_adversarial: the model's delta1 on kadv's renders of the two views.
+        mitsuba_init, mitsuba_adversarial: the same on Mitsuba's renders (denoised, exposure-matched to
+            kadv's), against the same ground truth (kadv's exact depth).
+    """
+
+    init_view: str
+    view: str
+    kadv_init: float
+    kadv_adversarial: float
+    mitsuba_init: float
+    mitsuba_adversarial: float
+
+    @property
+    def kadv_drop(self) -> float:
+        return self.kadv_init - self.kadv_adversarial
+
+    @property
+    def mitsuba_drop(self) -> float:
+        return self.mitsuba_init - self.mitsuba_adversarial
+
+
+def _pose(theta: list[float], centre: list[float]) -> torch.Tensor:
+    """world_T_cam (4, 4) of a recorded view: absolute axis-angle and optical centre."""
+    pose = torch.eye(4, dtype=torch.float64)
+    pose[:3, :3] = axis_angle_to_matrix(torch.tensor([theta], dtype=torch.float64))[0]
+    pose[:3, 3] = torch.tensor(centre, dtype=torch.float64)
+    return pose
+
+
+def _delta1_both(
+    mitsuba_scene, sensor: int, renderer: ExactRenderer, model: DepthModel, world_T_cam, K, height, width, spp
+) -> tuple[float, float]:
+    """The model's delta1 against kadv's exact depth, on kadv's image and on Mitsuba's."""
+    ours = renderer.render(world_T_cam, K, height, width, supersample=2)
+    linear = render_reference(mitsuba_scene, sensor, spp)
+    kadv_rgb = ours.rgb[0].permute(1, 2, 0).numpy()
+    mitsuba_rgb = _display(linear * _exposure(linear, kadv_rgb))
+    with torch.no_grad():
+        predictions = model(torch.cat([_as_tensor(kadv_rgb), _as_tensor(mitsuba_rgb)]))
+    depth, mask = ours.depth.double().expand(2, -1, -1, -1), ours.mask.expand(2, -1, -1, -1)
+    delta1 = depth_metrics(predictions.double(), depth, mask, model.output_kind)["delta1"]
+    return float(delta1[0]), float(delta1[1])
+
+
+def survival(
+    scene_file: str | Path,
+    init_views: list,
+    renderer: ExactRenderer,
+    model: DepthModel,
+    height: int,
+    width: int,
+    spp: int,
+    progress: bool = True,
+) -> list[Survival]:
+    """Re-render every kept adversarial view and its init view with Mitsuba 3 and score the model on
+    both renderers' images: does the failure survive the path tracer?
+
+    Args:
+        scene_file: the Mitsuba XML file the run's scene was loaded from (default load options).
+        init_views: a run summary's ``init_views`` (:class:`kadv.report.summary.InitViewSummary`).
+        renderer: the run's exact renderer (its lighting is the one compared).
+        model: the run's model.
+    """
+    from tqdm import tqdm
+
+    rows = []
+    for view in tqdm(init_views, desc="reference renders", unit="init view", disable=not progress):
+        poses = [torch.tensor(view.init_world_T_cam, dtype=torch.float64)]
+        poses += [_pose(a.theta, a.centre) for a in view.adversarial]
+        scene = load_mitsuba_scene(scene_file, [(p.numpy(), view.fov_x_deg) for p in poses], height, width, spp)
+        K = intrinsics_from_fov(view.fov_x_deg, height, width)
+        scores = [_delta1_both(scene, i, renderer, model, p, K, height, width, spp) for i, p in enumerate(poses)]
+        for k, (kadv, mitsuba) in enumerate(scores[1:]):
+            rows.append(Survival(view.name, f"adv{k}", scores[0][0], kadv, scores[0][1], mitsuba))
+    return rows
+
+
+def survival_table(title: str, rows: list[Survival]) -> Table:
+    """The delta1 of each adversarial view and its init view on both renderers, with the mean drops last."""
+    table = Table(title, ["init view", "view", "kadv init", "kadv adv", "Mitsuba init", "Mitsuba adv"])
+    table.rows = [
+        [r.init_view, r.view, r.kadv_init, r.kadv_adversarial, r.mitsuba_init, r.mitsuba_adversarial] for r in rows
+    ]
+    if rows:
+        kadv_drop = float(np.mean([r.kadv_drop for r in rows]))
+        mitsuba_drop = float(np.mean([r.mitsuba_drop for r in rows]))
+        table.rows.append(["mean drop", "", kadv_drop, "", mitsuba_drop, ""])
+    return table

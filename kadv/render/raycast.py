@@ -6,6 +6,7 @@ Values are exact and bit-identical across runs; nothing here carries a gradient.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -16,6 +17,7 @@ from torch.nn import functional as F
 from kadv.checks import check_shape
 from kadv.geometry.camera import pixel_rays
 from kadv.geometry.vector import dot
+from kadv.render.lighting import BakedLighting, load_or_bake, sky_emitters, sky_radiance, srgb_decode, tone_map
 from kadv.render.shading import Shading, albedo, mip_pyramid, sample_texture, scene_lights, shade, uv_density
 from kadv.scenes.scene import Scene
 
@@ -110,10 +112,12 @@ class ExactRenderer:
 
     Args:
         scene: the scene; its triangles go into one Open3D ``RaycastingScene`` reused by every call.
-        shading: shading parameters.
+        shading: shading parameters; with ``lighting="baked"`` the scene's lighting is read from the
+            bake cache, or baked there first.
+        progress: show the bake's progress bar.
     """
 
-    def __init__(self, scene: Scene, shading: Shading | None = None) -> None:
+    def __init__(self, scene: Scene, shading: Shading | None = None, progress: bool = True) -> None:
         self.scene = scene
         self.shading = shading or Shading()
         self.lights = scene_lights(scene, self.shading)
@@ -139,6 +143,21 @@ class ExactRenderer:
         self._normals = torch.from_numpy(scene.normals.astype(np.float32))
         self._face_normals = torch.from_numpy(scene.face_normals.astype(np.float64))
         self._lights = torch.from_numpy(self.lights.astype(np.float32))
+        self.baked: BakedLighting | None = None
+        self._emitter_scene = None
+        if self.shading.lighting == "baked":
+            self.baked = load_or_bake(self, self.shading.bake, progress)
+            self._sky = sky_emitters(scene)
+            emitters = scene.emitters.area_triangles
+            if len(emitters):  # the file's lamps and glowing panels, seen as a camera sees them
+                self._emitter_scene = _raycasting_scene(
+                    emitters.reshape(-1, 3), np.arange(3 * len(emitters)).reshape(-1, 3)
+                )
+                cross = np.cross(emitters[:, 1] - emitters[:, 0], emitters[:, 2] - emitters[:, 0])
+                self._emitter_normals = torch.from_numpy(cross)
+                self._emitter_colour = tone_map(
+                    torch.from_numpy(scene.emitters.area_radiance * self.baked.exposure)
+                ).float()
 
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
         """Cast rays (..., 3) each; alpha-masked texels let rays through.
@@ -273,7 +292,17 @@ class ExactRenderer:
             # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
             footprint = t * length * pixel_angle / incidence.clamp_min(0.05).sqrt()
             base = albedo(self.scene, ids, uv, footprint.float(), self._pyramids, self._uv_density)
-            rgb = torch.where(hit[:, None], shade(self.shading, self._lights, points, normals, base), background)
+            if self.baked is None:
+                shaded = shade(self.shading, self._lights, points, normals, base)
+            else:
+                irradiance = self.baked.irradiance_at(ids, bary, back)
+                shaded = tone_map(srgb_decode(base) * irradiance * (self.baked.exposure / math.pi))
+                # a ray that leaves the scene sees the sky the bake was lit by
+                sky = sky_radiance(self._sky, F.normalize(dirs, dim=1).numpy())
+                background = tone_map(torch.from_numpy(sky * self.baked.exposure).float())
+            rgb = torch.where(hit[:, None], shaded, background)
+            if self._emitter_scene is not None:
+                rgb = self._emitters_seen(rgb, hits, origins, directions)
         maps = {"rgb": np.ascontiguousarray(rgb.numpy())}
         if geometry:
             maps.update(
@@ -282,6 +311,19 @@ class ExactRenderer:
                 back_face=back.numpy(),
             )
         return maps
+
+    def _emitters_seen(
+        self, rgb: torch.Tensor, hits: RayHits, origins: np.ndarray, directions: np.ndarray
+    ) -> torch.Tensor:
+        """``rgb`` (N, 3) with the colour of an area emitter wherever a ray meets one before any
+        surface: its radiance on its emitting side, black behind. Emitters are no geometry (they
+        carry no depth): only the colour shows them."""
+        t, ids, _ = _cast(self._emitter_scene, origins.reshape(-1, 3), directions.reshape(-1, 3))
+        seen = torch.from_numpy((ids >= 0) & (t < np.where(hits.hit, hits.t, np.inf)))
+        ids = torch.from_numpy(np.maximum(ids, 0))
+        facing = dot(self._emitter_normals.index_select(0, ids), torch.from_numpy(directions.reshape(-1, 3))) < 0
+        glow = self._emitter_colour.index_select(0, ids) * facing[:, None]
+        return torch.where(seen[:, None], glow, rgb)
 
     def render(
         self,

@@ -1,4 +1,5 @@
-"""View-independent shading: base colour (texture or constant) x (ambient + Lambertian world lights).
+"""View-independent shading: base colour (texture or constant) x (ambient + Lambertian world lights),
+or x baked global illumination (:mod:`kadv.render.lighting`).
 
 A surface point keeps its colour when the camera moves (no head-light, no specular term): the
 differentiable reprojection relies on it.
@@ -9,13 +10,14 @@ need no more) and float64 for texture coordinates, whose tiling can reach hundre
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
 from torch.nn import functional as F
 
 from kadv.geometry.vector import dot
+from kadv.render.lighting import BakeConfig
 from kadv.scenes.scene import Scene
 
 __all__ = [
@@ -40,12 +42,21 @@ class Shading:
         lights: (L, 3) world positions; None uses the scene's emitters, else a light placed from
             the scene bounds.
         background: RGB of rays that hit nothing.
+        lighting: ``"direct"`` (ambient + Lambertian lights, no shadows) or ``"baked"`` (the
+            scene's emitters with shadows and diffuse inter-reflection, baked once per scene).
+        bake: the bake's settings, for ``lighting="baked"``.
     """
 
     ambient: float = 0.45
     diffuse: float = 0.55
     lights: tuple[tuple[float, float, float], ...] | None = None
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    lighting: str = "direct"
+    bake: BakeConfig = field(default_factory=BakeConfig)
+
+    def __post_init__(self) -> None:
+        if self.lighting not in ("direct", "baked"):
+            raise ValueError(f"render.lighting must be 'direct' or 'baked', got {self.lighting!r}")
 
 
 def scene_lights(scene: Scene, shading: Shading) -> np.ndarray:

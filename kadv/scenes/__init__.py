@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 from kadv.scenes.box_rooms import box_room
+from kadv.scenes.emitters import Emitters
 from kadv.scenes.load import SUPPORTED_SUFFIXES, load_scene
 from kadv.scenes.procedural import procedural_room
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 
 __all__ = [
     "SUPPORTED_SUFFIXES",
+    "Emitters",
     "Material",
     "MeshPart",
     "Scene",

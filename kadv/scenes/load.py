@@ -50,8 +50,8 @@ def load_scene(
         name = path.parent.name if path.stem == "scene" else path.stem
     options = {"scale": scale, "up_axis": up_axis, "drop_transparent": drop_transparent, "drop_emitters": drop_emitters}
     if suffix == ".xml":
-        parts, materials, cameras, lights = parse_mitsuba(path, missing=missing)
-        return assemble_scene(parts, materials, cameras, lights, name=name, **options)
+        parts, materials, cameras, lights, emitters = parse_mitsuba(path, missing=missing)
+        return assemble_scene(parts, materials, cameras, lights, name=name, emitters=emitters, **options)
     materials: list[Material] = []
     parts = load_mesh_file(path, materials)
     return assemble_scene(parts, materials, name=name, **options)

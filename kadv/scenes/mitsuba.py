@@ -12,15 +12,16 @@ import math
 import re
 import warnings
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
 from kadv.geometry.camera import Camera
+from kadv.scenes.emitters import MISSING_ENVMAP_RADIANCE, SUNSKY_SKY_PER_SCALE, Emitters
 from kadv.scenes.scene import Material, MeshPart
-from kadv.scenes.textures import linear_to_srgb, load_image
+from kadv.scenes.textures import linear_to_srgb, load_hdr_image, load_image, srgb_to_linear
 from kadv.scenes.trimesh_loader import mesh_parts
 
 __all__ = ["parse_mitsuba"]
@@ -140,6 +141,83 @@ def _color(element: ET.Element, ctx: _Context) -> np.ndarray | None:
             values = _floats(value)
         return linear_to_srgb(np.full(3, float(np.mean(values))))
     return None
+
+
+def _linear(element: ET.Element | None, ctx: _Context, default: float) -> np.ndarray:
+    """Linear RGB of a radiance-like property (rgb/srgb/spectrum/float), unclipped; ``default`` grey if absent."""
+    if element is None:
+        return np.full(3, default)
+    if element.tag == "srgb":
+        return srgb_to_linear(_color(element, ctx))
+    pairs = [v for v in re.split(r"[,\s]+", ctx.attr(element, "value", "").strip()) if v]
+    if element.tag == "spectrum":  # a grey of the mean value (of wavelength:value pairs, or plain values)
+        values = [float(v.split(":")[-1]) for v in pairs]
+        return np.full(3, float(np.mean(values))) if values else np.full(3, default)
+    values = [float(v) for v in pairs] if element.tag in ("rgb", "float") else []
+    if not values:
+        return np.full(3, default)
+    return np.array(values * 3 if len(values) == 1 else values[:3], np.float64)
+
+
+def _scalar(props: dict[str, ET.Element], key: str, ctx: _Context, default: float) -> float:
+    return float(ctx.attr(props[key], "value")) if key in props else default
+
+
+def _envmap(props: dict[str, ET.Element], ctx: _Context, to_world: np.ndarray, emitters: Emitters) -> Emitters:
+    """``emitters`` with an environment map: its image, else (absent or unreadable, as the reference
+    renders an absent one: :mod:`kadv.scenes.mitsuba_sanitiser`) a uniform sky."""
+    scale = _scalar(props, "scale", ctx, 1.0)
+    path = (ctx.root_dir / ctx.attr(props["filename"], "value")).resolve() if "filename" in props else None
+    image = None
+    if path is not None and path.is_file():
+        try:
+            image = load_hdr_image(path)
+        except ValueError as error:
+            ctx.warn_once(f"envmap:{path}", f"Mitsuba XML: {error}; the environment map lights as a uniform sky")
+    if image is None:
+        return replace(emitters, sky_radiance=emitters.sky_radiance + MISSING_ENVMAP_RADIANCE * scale)
+    return replace(emitters, envmap=image * scale, envmap_world_T_map=to_world[:3, :3])
+
+
+def _emitter(element: ET.Element, ctx: _Context, emitters: Emitters) -> Emitters:
+    """``emitters`` with a top-level <emitter> added (file frame); a type the bake cannot use is
+    named in one warning and left out."""
+    kind = ctx.attr(element, "type")
+    props = _named(element, ctx)
+    to_world = _transform(props.get("to_world"), ctx)
+    if kind == "point":
+        position = (
+            [float(ctx.attr(props["position"], k, "0")) for k in "xyz"] if "position" in props else to_world[:3, 3]
+        )
+        return emitters.point(position, _linear(props.get("intensity"), ctx, 1.0))
+    if kind == "spot":
+        cutoff = _scalar(props, "cutoff_angle", ctx, 20.0)
+        beam = _scalar(props, "beam_width", ctx, cutoff * 0.75)
+        intensity = _linear(props.get("intensity"), ctx, 1.0)
+        return emitters.spot(to_world[:3, 3], intensity, to_world[:3, 2], cutoff, beam)
+    if kind == "constant":
+        return replace(emitters, sky_radiance=emitters.sky_radiance + _linear(props.get("radiance"), ctx, 1.0))
+    if kind == "envmap":
+        return _envmap(props, ctx, to_world, emitters)
+    if kind in ("sunsky", "sky", "sun"):
+        if kind != "sun":
+            sky = SUNSKY_SKY_PER_SCALE * _scalar(props, "sky_scale", ctx, 1.0)
+            emitters = replace(emitters, sky_radiance=emitters.sky_radiance + sky)
+        if kind != "sky" and "sun_direction" in props:
+            direction = [float(ctx.attr(props["sun_direction"], axis)) for axis in "xyz"]
+            emitters = emitters.sun(direction, _scalar(props, "sun_scale", ctx, 1.0))
+        return emitters
+    if kind == "directional":
+        direction = (
+            [float(ctx.attr(props["direction"], axis, "0")) for axis in "xyz"]
+            if "direction" in props
+            else to_world[:3, 2]
+        )
+        return emitters.sun(-np.asarray(direction, np.float64), _linear(props.get("irradiance"), ctx, 1.0))
+    ctx.warn_once(
+        f"emitter:{kind}", f"Mitsuba XML: emitter type {kind!r} cannot be baked; it is left out, the rest is baked"
+    )
+    return emitters
 
 
 def _texture(element: ET.Element, ctx: _Context) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray, np.ndarray]:
@@ -299,8 +377,13 @@ def _shape(element: ET.Element, ctx: _Context, index: int) -> MeshPart | None:
     to_world = _transform(props.get("to_world"), ctx)
     bsdfs = [ctx.resolve(child) for child in element if child.tag in ("bsdf", "ref")]
     bsdf = next((b for b in bsdfs if b.tag == "bsdf"), None)
-    if any(child.tag == "emitter" for child in element):
-        ctx.materials.append(Material(f"emitter{index}", emissive=True))
+    emitter = next((child for child in element if child.tag == "emitter"), None)
+    if emitter is not None:
+        kind = ctx.attr(emitter, "type")
+        if kind != "area":
+            ctx.warn_once(f"emitter:{kind}", f"Mitsuba XML: emitter type {kind!r} on a shape is baked as an area light")
+        radiance = _linear(_named(emitter, ctx).get("radiance"), ctx, 1.0)
+        ctx.materials.append(Material(f"emitter{index}", emissive=True, emission=radiance))
         key = len(ctx.materials) - 1
     else:  # shapes sharing a BSDF element share one material
         key = id(bsdf)
@@ -351,8 +434,9 @@ def _sensor(element: ET.Element, ctx: _Context) -> Camera | None:
 
 def parse_mitsuba(
     path: Path, missing: str = "error"
-) -> tuple[list[MeshPart], list[Material], list[Camera], np.ndarray]:
-    """Parse a Mitsuba scene file into parts, materials, cameras and light positions (file frame).
+) -> tuple[list[MeshPart], list[Material], list[Camera], np.ndarray, Emitters]:
+    """Parse a Mitsuba scene file into parts, materials, cameras, light positions and the top-level
+    emitters (file frame; area emitters come with their shapes' materials).
 
     Args:
         path: the ``.xml`` file; relative file names resolve against its folder.
@@ -377,7 +461,7 @@ def parse_mitsuba(
             ctx.defaults[element.get("name")] = element.get("value")
         if element.get("id") is not None and element.tag != "ref":
             ctx.ids[element.get("id")] = element
-    parts, cameras, lights = [], [], []
+    parts, cameras, lights, emitters = [], [], [], Emitters()
     shapes = [element for element in root if element.tag == "shape"]
     if not shapes:
         raise ValueError(f"{path}: the Mitsuba scene defines no shapes")
@@ -391,6 +475,7 @@ def parse_mitsuba(
             if camera is not None:
                 cameras.append(camera)
         elif element.tag == "emitter":
+            emitters = _emitter(element, ctx, emitters)
             kind = ctx.attr(element, "type")
             props = _named(element, ctx)
             if kind in ("point", "spot") and ("position" in props or "to_world" in props):
@@ -406,4 +491,4 @@ def parse_mitsuba(
         warnings.warn(f"{path}: skipped missing files: {', '.join(sorted(set(ctx.missing_files)))}", stacklevel=2)
     if not parts:
         raise ValueError(f"{path}: no shape could be loaded")
-    return parts, ctx.materials, cameras, np.asarray(lights, np.float64).reshape(-1, 3)
+    return parts, ctx.materials, cameras, np.asarray(lights, np.float64).reshape(-1, 3), emitters

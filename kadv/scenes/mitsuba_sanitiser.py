@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from kadv.scenes.emitters import MISSING_ENVMAP_RADIANCE, SUNSKY_SKY_PER_SCALE
+
 __all__ = ["MAX_DEPTH", "sanitised_scene_root"]
 
 # Mitsuba's camera looks along +z with +y up and +x to the left: OpenCV's camera turned half a turn about z.
@@ -32,10 +34,17 @@ def _sensor(world_T_cam: np.ndarray, fov_x_deg: float, height: int, width: int, 
 
 
 def sanitised_scene_root(
-    path: Path, views: list[tuple[np.ndarray, float]], height: int, width: int, spp: int, max_depth: int = MAX_DEPTH
+    path: Path,
+    views: list[tuple[np.ndarray, float]],
+    height: int,
+    width: int,
+    spp: int,
+    max_depth: int = MAX_DEPTH,
+    aovs: bool = False,
 ) -> ET.Element:
     """The scene file's element tree with our sensors (one per (world_T_cam, fov_x_deg) view) and a
-    path tracer of ``max_depth`` bounces.
+    path tracer of ``max_depth`` bounces; with ``aovs`` the image has six more channels, the
+    albedo and the shading normal a denoiser reads.
 
     The scene must have been loaded by kadv with the default options (metres = file units, y up),
     so that kadv's world frame is the file's.
@@ -49,11 +58,19 @@ def sanitised_scene_root(
         names = {child.get("name"): child for child in emitter}
         if kind == "envmap" and not (path.parent / names["filename"].get("value")).is_file():
             root.remove(emitter)
-            root.append(ET.fromstring('<emitter type="constant"><rgb name="radiance" value="1"/></emitter>'))
+            root.append(
+                ET.fromstring(
+                    f'<emitter type="constant"><rgb name="radiance" value="{MISSING_ENVMAP_RADIANCE}"/></emitter>'
+                )
+            )
         elif kind == "sunsky":
             root.remove(emitter)
             sky = float(names["skyScale"].get("value")) if "skyScale" in names else 1.0
-            root.append(ET.fromstring(f'<emitter type="constant"><rgb name="radiance" value="{0.1 * sky}"/></emitter>'))
+            root.append(
+                ET.fromstring(
+                    f'<emitter type="constant"><rgb name="radiance" value="{SUNSKY_SKY_PER_SCALE * sky}"/></emitter>'
+                )
+            )
             sun = names.get("sunDirection")
             if sun is not None:
                 direction = [-float(sun.get(axis)) for axis in "xyz"]
@@ -71,6 +88,10 @@ def sanitised_scene_root(
             if child.get("name") in ("filterType", "filter_type") and child.get("value") not in ("nearest", "bilinear"):
                 child.set("value", "bilinear")
     integrator = f'<integrator type="path"><integer name="maxDepth" value="{max_depth}"/></integrator>'
+    if aovs:
+        integrator = (
+            f'<integrator type="aov"><string name="aovs" value="albedo:albedo,nn:sh_normal"/>{integrator}</integrator>'
+        )
     root.insert(0, ET.fromstring(integrator))
     for index, (world_T_cam, fov) in enumerate(views):
         root.insert(1 + index, _sensor(world_T_cam, fov, height, width, spp))

@@ -19,6 +19,7 @@ import torch
 
 from kadv.geometry.camera import Camera
 from kadv.geometry.pose import look_at
+from kadv.scenes.emitters import MISSING_ENVMAP_RADIANCE, Emitters
 from kadv.scenes.materials import textured_materials
 from kadv.scenes.parts import box_parts, facing, overlapped, planar_quad, quad_part
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
@@ -631,4 +632,6 @@ def procedural_room(
         name=f"procedural_room_{seed}",
         drop_transparent=drop_transparent,
         interior=interior,
+        # daylight through the windows (the lamps' bulbs are area emitters of the default radiance)
+        emitters=Emitters(sky_radiance=np.full(3, MISSING_ENVMAP_RADIANCE)),
     )

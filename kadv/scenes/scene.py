@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kadv.geometry.camera import Camera
+from kadv.scenes.emitters import DEFAULT_LAMP_RADIANCE, Emitters
 
 __all__ = ["Material", "MeshPart", "Scene", "assemble_scene"]
 
@@ -23,6 +24,7 @@ class Material:
         uv_scale: (2,) multiplier applied to UVs before the texture lookup.
         transparent: glass-like; dropped at load by default.
         emissive: a light source's own surface; dropped at load by default.
+        emission: optional (3,) linear radiance of an emissive surface; None: the default lamp's.
         two_sided: back faces are legitimate surfaces (Mitsuba ``twosided``, glTF ``doubleSided``).
     """
 
@@ -34,6 +36,7 @@ class Material:
     transparent: bool = False
     emissive: bool = False
     two_sided: bool = True
+    emission: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.base_color = np.clip(np.asarray(self.base_color, np.float32).reshape(3), 0.0, 1.0)
@@ -45,6 +48,8 @@ class Material:
             self.texture = texture
         if self.opacity is not None:
             self.opacity = np.asarray(self.opacity, np.float32)
+        if self.emission is not None:
+            self.emission = np.asarray(self.emission, np.float64).reshape(3)
 
 
 @dataclass
@@ -76,6 +81,16 @@ def _face_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     return normals, 0.5 * doubled_area
 
 
+def _emitting_side(triangles: np.ndarray, normals: np.ndarray | None) -> np.ndarray:
+    """Emitter triangles (T, 3, 3) wound so that they emit where their normals (T, 3, 3) point, as
+    Mitsuba's emitters do (a mirroring transform flips the winding, not the transformed normals)."""
+    if normals is None:
+        return triangles
+    winding = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    flip = np.einsum("td,td->t", winding, np.nan_to_num(np.asarray(normals, np.float64)).reshape(-1, 3, 3).sum(1)) < 0
+    return np.where(flip[:, None, None], triangles[:, [0, 2, 1]], triangles)
+
+
 @dataclass
 class Scene:
     """A triangle scene in kadv's world frame (metres, y up after load-time normalisation).
@@ -88,7 +103,10 @@ class Scene:
         material_ids: (F,) int64 index into ``materials`` per triangle.
         materials: the materials.
         cameras: cameras the file defines (may be empty).
-        lights: (L, 3) float64 positions of the file's light sources (may be empty).
+        lights: (L, 3) float64 positions of the file's light sources (may be empty): the direct
+            shading's lights.
+        emitters: the light sources as the lighting bake integrates them (empty: the bake's
+            documented defaults).
         name: a label for reports.
         interior: optional (2, 3) box (minimum corner, maximum corner) where cameras belong, for
             scenes that know it (generated rooms, whose windows look onto courtyards); None: the
@@ -105,6 +123,7 @@ class Scene:
     lights: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     name: str = "scene"
     interior: np.ndarray | None = None
+    emitters: Emitters = field(default_factory=Emitters)
 
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, np.float64).reshape(-1, 3)
@@ -167,6 +186,7 @@ def assemble_scene(
     drop_transparent: bool = True,
     drop_emitters: bool = True,
     interior: np.ndarray | None = None,
+    emitters: Emitters | None = None,
 ) -> Scene:
     """Concatenate mesh parts into a :class:`Scene`, applying the load options.
 
@@ -178,8 +198,10 @@ def assemble_scene(
         scale: metres per file unit.
         up_axis: the file's up axis, ``"y"`` or ``"z"``; the scene is rotated to y-up.
         drop_transparent: leave out triangles of transparent (glass) materials.
-        drop_emitters: leave out light-source surfaces (their centroids become lights).
+        drop_emitters: leave out light-source surfaces (their centroids become lights and their
+            triangles area emitters).
         interior: (2, 3) box where cameras belong, in file coordinates (see :class:`Scene`).
+        emitters: the file's other light sources (point, spot, sky, sun), in file coordinates.
 
     Raises:
         ValueError: on NaN/inf coordinates, a non-positive scale, or nothing left to render.
@@ -188,6 +210,7 @@ def assemble_scene(
         raise ValueError(f"scale must be a positive number, got {scale}")
     rotation = _rotation_to_y_up(up_axis)
     light_list = [np.asarray(lights, np.float64).reshape(-1, 3)] if lights is not None else []
+    emitters = emitters or Emitters()
     vertices, faces, uvs, normals, material_ids = [], [], [], [], []
     offset = 0
     for part in parts:
@@ -200,6 +223,8 @@ def assemble_scene(
             continue
         if material.emissive and drop_emitters:
             light_list.append(part_vertices[np.unique(part_faces)].mean(axis=0, keepdims=True))
+            radiance = DEFAULT_LAMP_RADIANCE if material.emission is None else material.emission
+            emitters = emitters.area(_emitting_side(part_vertices[part_faces], part.normals), radiance)
             continue
         if material.transparent and drop_transparent:
             continue
@@ -245,4 +270,5 @@ def assemble_scene(
         lights=all_lights @ rotation.T * scale,
         name=name,
         interior=interior,
+        emitters=emitters.transformed(rotation, scale),
     )

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-__all__ = ["image_to_rgba", "linear_to_srgb", "load_image", "srgb_to_linear"]
+__all__ = ["image_to_rgba", "linear_to_srgb", "load_hdr_image", "load_image", "srgb_to_linear"]
 
 
 def linear_to_srgb(linear: np.ndarray) -> np.ndarray:
@@ -57,3 +57,24 @@ def load_image(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
             return image_to_rgba(image)
     except OSError as error:
         raise ValueError(f"texture file {path} could not be decoded: {error}") from error
+
+
+def load_hdr_image(path: Path) -> np.ndarray:
+    """(H, W, 3) float32 linear radiance of an environment map: floating-point files (.exr, .hdr,
+    .pfm) as stored, 8-bit images decoded from sRGB.
+
+    Raises:
+        ValueError: if no installed reader decodes the file.
+    """
+    import imageio.v3 as iio
+
+    try:
+        image = np.asarray(iio.imread(path))
+    except Exception as error:  # each imageio plugin raises its own kinds
+        raise ValueError(f"environment map {path} could not be read ({type(error).__name__}: {error})") from error
+    if image.dtype.kind == "f":
+        image = image.astype(np.float32)
+        image = np.repeat(image[:, :, None], 3, axis=2) if image.ndim == 2 else image[:, :, :3]
+        return np.ascontiguousarray(np.maximum(np.nan_to_num(image), 0.0))
+    rgb, _ = image_to_rgba(image)
+    return srgb_to_linear(rgb).astype(np.float32)

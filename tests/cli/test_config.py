@@ -42,7 +42,7 @@ def test_every_group_option_composes_into_valid_settings() -> None:
             )
             PenaltyConfig(**OmegaConf.to_container(cfg.penalty))
             DiffRenderConfig(supersample=cfg.render.supersample, **OmegaConf.to_container(cfg.render.differentiable))
-            shading_from_config(cfg.render.shading)
+            shading_from_config(cfg.render)
             assert cfg.loss.kind in ("ssim", "perceptual") and cfg.loss.space in ("disparity", "depth")
             assert (
                 OmegaConf.is_missing(cfg.model, "name")
@@ -73,7 +73,7 @@ def test_yaml_defaults_equal_the_library_defaults() -> None:
     assert OmegaConf.to_container(cfg.penalty) == _defaults(PenaltyConfig)
     diff = OmegaConf.to_container(cfg.render.differentiable)
     assert DiffRenderConfig(supersample=cfg.render.supersample, **diff) == DiffRenderConfig()
-    shading = shading_from_config(cfg.render.shading)
+    shading = shading_from_config(cfg.render)
     assert (shading.ambient, shading.diffuse, shading.lights) == (
         Shading().ambient,
         Shading().diffuse,

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -79,5 +83,33 @@ def test_real_scene_depth_agrees_at_the_file_camera(tmp_path):
     assert 0.0 <= comparison.pred_delta1 <= 1.0
     from PIL import Image
 
-    written = save_comparison(tmp_path / "view.png", comparison, "test")
-    assert Image.open(written).size[0] > 4 * 32
+    written = save_comparison(tmp_path / "view.png", {"direct": comparison, "again": comparison}, "test")
+    assert Image.open(written).size[0] > 3 * 32
+
+
+@pytest.mark.real_scenes
+def test_kadv_report_reference_scores_each_adversarial_view_on_both_renderers(tmp_path):
+    """kadv-report --reference on a run in a Mitsuba scene: one row per kept view and a mean drop;
+    on a run in a generated room (no XML to give Mitsuba) one line and exit status 2."""
+    from kadv.report.summary import RunSummary
+
+    binaries = Path(sys.executable).parent
+    path = scenes_root() / "modern_hall" / "scene.xml"
+    small = ["render.height=24", "render.width=32", "init.count=1", "init.candidates=8", "attack=random"]
+    small += ["attack.budget_evaluations=12", "video=false", "progress=false"]
+    for name, scene in (("xml", ["scene=file", f"scene.path={path}"]), ("box", ["scene=box_room"])):
+        command = [str(binaries / "kadv-attack"), f"hydra.run.dir={tmp_path / name}", *scene, *small]
+        subprocess.run(command, check=True, capture_output=True, cwd=tmp_path)
+    report = [str(binaries / "kadv-report"), "--reference", "--reference-spp", "4", "--no-transfer", "--no-progress"]
+    result = subprocess.run([*report, str(tmp_path / "xml")], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    summary = RunSummary.read(tmp_path / "xml" / "summary.json")
+    lines = (tmp_path / "xml" / "report" / "reference_xml.csv").read_text().strip().splitlines()
+    kept = sum(len(view.adversarial) for view in summary.init_views)
+    assert len(lines) == 1 + kept + 1  # header, the kept views, the mean drops
+    first = lines[1].split(",")
+    assert abs(float(first[2]) - summary.init_views[0].init.delta1) < 1e-3  # kadv's init delta1, as the run scored it
+    assert all(0.0 <= float(v) <= 1.0 for line in lines[1:-1] for v in line.split(",")[2:])
+    refused = subprocess.run([*report, str(tmp_path / "box")], capture_output=True, text=True)
+    assert refused.returncode == 2 and "no run's scene is a Mitsuba XML file" in refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 2  # the skipped run's line, then the error

@@ -1,0 +1,226 @@
+"""kadv.render.lighting: the bake against closed forms, shadows, openings, determinism and its cache."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from kadv.diagnostics import FUNCTIONALS, gradient_check_poses
+from kadv.geometry import intrinsics_from_fov
+from kadv.render import BakeConfig, DiffRenderConfig, ExactRenderer, Shading, bake_lighting, lighting, load_or_bake
+from kadv.render.lighting import lattice_taps
+from kadv.scenes import Emitters, Material, assemble_scene, box_room, procedural_room
+from kadv.scenes.emitters import DEFAULT_CEILING_LIGHT_SIZE, DEFAULT_LAMP_RADIANCE
+from kadv.scenes.parts import facing, quad_part
+
+from ..conftest import cached_real_scene
+
+SIZE = np.array([4.0, 3.0, 4.0])
+QUICK = BakeConfig(texel=0.1, rays=32, light_samples=16)
+
+
+def _rect(axis: int, value: float, lo: tuple[float, float], hi: tuple[float, float]) -> np.ndarray:
+    """Corners (4, 3) of an axis-aligned rectangle in the plane ``x[axis] = value``."""
+    other = [a for a in range(3) if a != axis]
+    corners = np.zeros((4, 3))
+    corners[:, axis] = value
+    corners[:, other[0]] = [lo[0], hi[0], hi[0], lo[0]]
+    corners[:, other[1]] = [lo[1], lo[1], hi[1], hi[1]]
+    return corners
+
+
+def _room(albedo: float, window: bool = False, plate: bool = False, emitters: Emitters | None = None):
+    """A 4 x 3 x 4 m room of one grey, faces inwards; optionally a 1 x 1 m hole in the z = 0 wall
+    and a 0.6 m plate 1 m above the floor's centre."""
+    W, H, D = SIZE
+    centre = SIZE / 2
+    rects = [
+        _rect(1, 0.0, (0, 0), (W, D)),
+        _rect(1, H, (0, 0), (W, D)),
+        _rect(0, 0.0, (0, 0), (H, D)),
+        _rect(0, W, (0, 0), (H, D)),
+        _rect(2, D, (0, 0), (W, H)),
+    ]
+    if window:  # the z = 0 wall around a hole x 1.5-2.5, y 1-2
+        rects += [
+            _rect(2, 0.0, lo, hi)
+            for lo, hi in [((0, 0), (W, 1)), ((0, 2), (W, H)), ((0, 1), (1.5, 2)), ((2.5, 1), (W, 2))]
+        ]
+    else:
+        rects.append(_rect(2, 0.0, (0, 0), (W, H)))
+    parts = [quad_part(facing(r, centre - r.mean(axis=0)), 0, f"wall{i}") for i, r in enumerate(rects)]
+    if plate:
+        parts.append(quad_part(_rect(1, 1.0, (1.7, 1.7), (2.3, 2.3)), 0, "plate"))
+    material = Material("grey", base_color=np.full(3, albedo))
+    return assemble_scene(parts, [material], name=f"room_{albedo}_{window}_{plate}", emitters=emitters)
+
+
+def _irradiance_at(renderer: ExactRenderer, point: np.ndarray) -> np.ndarray:
+    """(3,) baked irradiance where a ray from ``point`` going down meets a surface."""
+    direction = np.array([[0.0, -1.0, 0.0]])
+    hits = renderer.cast(point[None], direction)
+    back = torch.from_numpy(renderer.back_facing(hits, direction))
+    ids, bary = torch.from_numpy(hits.triangle_ids), torch.from_numpy(hits.barycentrics)
+    return renderer.baked.irradiance_at(ids, bary, back)[0].double().numpy()
+
+
+def _baked(scene, config: BakeConfig, tmp_path) -> ExactRenderer:
+    from dataclasses import replace
+
+    return ExactRenderer(scene, Shading(lighting="baked", bake=replace(config, cache=str(tmp_path))), progress=False)
+
+
+def _corner(a: float, b: float, height: float) -> float:
+    """Irradiance under a corner of a parallel a x b rectangle of unit radiance ``height`` above
+    (the configuration factor of a differential area to a rectangle, times pi)."""
+    x, y = a / height, b / height
+    return 0.5 * (
+        x / math.sqrt(1 + x * x) * math.atan(y / math.sqrt(1 + x * x))
+        + y / math.sqrt(1 + y * y) * math.atan(x / math.sqrt(1 + y * y))
+    )
+
+
+def _square_irradiance(dx: float, dz: float, half: float, height: float, radiance: float) -> float:
+    """Irradiance at horizontal offset (dx, dz) from the axis of a parallel square of side 2 half:
+    the signed sum of the four rectangles from the foot point to its corners."""
+    total = 0.0
+    for sx, x in ((1, half - dx), (-1, -half - dx)):
+        for sz, z in ((1, half - dz), (-1, -half - dz)):
+            total += sx * sz * np.sign(x) * np.sign(z) * _corner(abs(x), abs(z), height)
+    return radiance * total
+
+
+def test_a_closed_black_room_gets_the_closed_form_irradiance_of_its_default_ceiling_light(tmp_path) -> None:
+    """Tolerance 3%: the Monte-Carlo noise left after 16 light samples and the filter."""
+    # no emitters: a closed room gets a downward square light at the direct shading's light (0.9 of
+    # the height, above the centre); black walls reflect nothing, so the floor sees that light alone
+    renderer = _baked(_room(albedo=0.0), QUICK, tmp_path)
+    height, half = 0.9 * SIZE[1], DEFAULT_CEILING_LIGHT_SIZE / 2
+    for dx, dz in ((0.0, 0.0), (0.3, -0.2), (1.2, 0.9)):
+        expected = _square_irradiance(dx, dz, half, height, DEFAULT_LAMP_RADIANCE)
+        baked = _irradiance_at(renderer, np.array([2.0 + dx, 1.0, 2.0 + dz]))
+        np.testing.assert_allclose(baked, expected, rtol=0.03)
+
+
+def test_a_point_in_full_shadow_gets_only_indirect_light(tmp_path) -> None:
+    under_plate = np.array([2.0, 0.5, 2.0])
+    direct_only = _baked(_room(albedo=0.6, plate=True), BakeConfig(texel=0.1, rays=32, bounces=0), tmp_path)
+    assert np.abs(_irradiance_at(direct_only, under_plate)).max() < 1e-6
+    lit = _irradiance_at(direct_only, np.array([0.8, 0.5, 0.8]))  # beside the plate's shadow
+    bounced = _baked(_room(albedo=0.6, plate=True), BakeConfig(texel=0.1, rays=32, bounces=3), tmp_path)
+    indirect = _irradiance_at(bounced, under_plate)
+    assert (indirect > 0.05 * lit).all() and (indirect < lit).all()
+    # grey light stays grey: the walls' albedo is the same in every channel
+    np.testing.assert_allclose(indirect, indirect.mean(), rtol=1e-5)
+
+
+def test_an_open_window_lets_the_sky_in(tmp_path) -> None:
+    sky = Emitters(sky_radiance=np.ones(3))
+    closed = _baked(_room(albedo=0.5, emitters=sky), QUICK, tmp_path)
+    opened = _baked(_room(albedo=0.5, window=True, emitters=sky), QUICK, tmp_path)
+    floor_near_window = np.array([2.0, 1.0, 1.0])
+    assert np.abs(_irradiance_at(closed, floor_near_window)).max() < 1e-6
+    assert (_irradiance_at(opened, floor_near_window) > 0.05).all()
+    # the floor before the window sees the sky; the far corner's only by reflection
+    far_corner = _irradiance_at(opened, np.array([0.5, 1.0, 3.5]))
+    assert (_irradiance_at(opened, floor_near_window) > 2 * far_corner).all() and (far_corner > 0).all()
+
+
+def test_rooms_without_emitters_get_the_documented_defaults(tmp_path) -> None:
+    closed = lighting.default_emitters(_room(albedo=0.5), escape_share=0.0)
+    opened = lighting.default_emitters(_room(albedo=0.5, window=True), escape_share=0.05)
+    assert (
+        closed.defaulted and len(closed.area_triangles) == 2 and (closed.area_radiance == DEFAULT_LAMP_RADIANCE).all()
+    )
+    normals = np.cross(
+        closed.area_triangles[:, 1] - closed.area_triangles[:, 0],
+        closed.area_triangles[:, 2] - closed.area_triangles[:, 0],
+    )
+    assert (normals[:, 1] < 0).all()  # facing down
+    assert len(opened.area_triangles) == 0 and (opened.sky_radiance > 0).all()
+
+
+def test_the_bake_is_deterministic_for_a_seed_and_cached(tmp_path, monkeypatch) -> None:
+    scene = box_room(seed=0)
+    renderer = ExactRenderer(scene)
+    config = BakeConfig(texel=0.2, rays=16, cache=str(tmp_path))
+    first, second = bake_lighting(renderer, config, False), bake_lighting(renderer, config, False)
+    assert np.array_equal(first.irradiance, second.irradiance) and first.exposure == second.exposure
+    other = bake_lighting(renderer, BakeConfig(texel=0.2, rays=16, seed=1), False)
+    assert not np.array_equal(first.irradiance, other.irradiance)
+    baked = load_or_bake(renderer, config, False)
+    assert len(list(tmp_path.glob("*.npz"))) == 1
+
+    def no_bake(*args, **kwargs):
+        raise AssertionError("the second load baked again")
+
+    monkeypatch.setattr(lighting, "bake_lighting", no_bake)
+    again = load_or_bake(renderer, config, False)
+    assert np.array_equal(again.irradiance, baked.irradiance) and again.exposure == baked.exposure
+    assert np.array_equal(baked.irradiance, first.irradiance)
+
+
+def test_a_corrupt_cache_file_is_moved_aside_and_baked_again(tmp_path) -> None:
+    renderer = ExactRenderer(box_room(seed=0))
+    config = BakeConfig(texel=0.2, rays=16, cache=str(tmp_path))
+    fresh = load_or_bake(renderer, config, False)
+    (path,) = tmp_path.glob("*.npz")
+    path.write_bytes(b"not a bake")
+    with pytest.warns(UserWarning, match="unreadable.*moved to"):
+        again = load_or_bake(renderer, config, False)
+    assert (tmp_path / (path.name + ".corrupt")).read_bytes() == b"not a bake"
+    assert np.array_equal(again.irradiance, fresh.irradiance)
+    assert np.array_equal(np.load(path)["irradiance"], fresh.irradiance)  # the cache holds the new bake
+
+
+def test_lattice_taps_reproduce_a_linear_function_inside_each_triangle() -> None:
+    resolution = torch.tensor([0, 1, 3, 8])
+    counts = (resolution + 1) * (resolution + 2) // 2
+    starts = torch.cat([torch.zeros(1, dtype=torch.long), counts.cumsum(0)[:-1]])
+    offsets = torch.stack([starts, starts + counts.sum()])
+    values = torch.zeros(2 * int(counts.sum()), dtype=torch.float64)
+    for face, r in enumerate(resolution.tolist()):  # f(u, v) = 1 + 2u + 3v at the lattice points
+        if r == 0:
+            values[starts[face]] = values[starts[face] + counts.sum()] = 1 + 5 / 3
+            continue
+        i, j = lighting._lattice_ij(r)
+        f = torch.from_numpy(1 + 2 * i / r + 3 * j / r)
+        values[starts[face] : starts[face] + counts[face]] = f
+        values[starts[face] + counts.sum() : starts[face] + counts.sum() + counts[face]] = f
+    generator = torch.Generator().manual_seed(0)
+    uv = torch.rand(400, 2, dtype=torch.float64, generator=generator)
+    uv = torch.where(uv.sum(1, keepdim=True) > 1, 1 - uv, uv)
+    faces = torch.arange(400) % 4
+    taps, weights = lattice_taps(resolution, offsets, faces, uv, torch.arange(400) % 2 == 0)
+    interpolated = (values[taps] * weights).sum(1)
+    linear = 1 + 2 * uv[:, 0] + 3 * uv[:, 1]
+    exact = faces > 0
+    torch.testing.assert_close(interpolated[exact], linear[exact])
+    torch.testing.assert_close(weights.sum(1), torch.ones(400, dtype=weights.dtype))
+
+
+@pytest.mark.real_scenes
+def test_direct_lighting_renders_as_before_bit_for_bit() -> None:
+    """sha256 of renders made by kadv 0.1 (main at 3787428), before lighting could be baked."""
+    expected = {
+        "box_room_0": "35212111b2538ce55ab0e84cfea2d309ab4377376026e6895ecbb95a1a17ab54",
+        "procedural_room_3": "96b3e2391c57b8ddd660ae1df9e11d156e643a7bbe8bba12e0b757fb980c03ec",
+        "modern_hall": "26cc86ca151d7b46e41b30ad4ad9309c9da52cff26632ba2243168f21f6ed77f",
+    }
+    for scene in (box_room(0), procedural_room(3), cached_real_scene("modern_hall")):
+        renderer = ExactRenderer(scene, Shading(lighting="direct"))
+        camera = scene.cameras[0]
+        out = renderer.render(camera.world_T_cam, intrinsics_from_fov(camera.fov_x_deg, 48, 64), 48, 64, supersample=2)
+        assert hashlib.sha256(out.rgb.numpy().tobytes()).hexdigest() == expected[scene.name]
+
+
+def test_gradient_check_keeps_its_thresholds_under_baked_lighting(tmp_path) -> None:
+    renderer = _baked(box_room(seed=0), BakeConfig(), tmp_path)
+    checks = gradient_check_poses(renderer, 3, 0, 70.0, 48, 64, {"default": DiffRenderConfig()})
+    scores = np.array([[c.score(f) for f in FUNCTIONALS] for c in checks["default"]])
+    assert np.median(scores[:, 0]) >= 0.99 and np.median(scores[:, 1]) >= 0.99  # interior rgb, depth
+    assert np.median(scores[:, 2]) >= 0.95 and np.median(scores[:, 3]) >= 0.95  # full rgb, depth
