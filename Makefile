@@ -54,7 +54,7 @@ lint: $(STAMP)
 	$(BIN)/ruff format --check .
 
 bench: demo-packages $(STAMP)
-	cd benchmarks && for b in render penalty gradcheck tiny_accuracy attack_step search_anytime reference_render; do ../$(BIN)/python $$b.py || exit 1; done
+	cd benchmarks && for b in render bake penalty gradcheck tiny_accuracy attack_step search_anytime reference_render; do ../$(BIN)/python $$b.py || exit 1; done
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache site

@@ -44,8 +44,12 @@ __all__ = [
     "BakeConfig",
     "BakedLighting",
     "bake_lighting",
+    "coat_table",
+    "coated_albedo",
     "default_emitters",
+    "delta_irradiance",
     "exposed",
+    "fresnel_diffuse_reflectance",
     "lattice_taps",
     "load_or_bake",
     "sky_emitters",
@@ -54,7 +58,7 @@ __all__ = [
     "tone_map",
 ]
 
-_BAKE_VERSION = 3  # part of the cache key: raise it when the bake's arithmetic changes
+_BAKE_VERSION = 5  # part of the cache key: raise it when the bake's arithmetic changes
 _OFFSET = 1e-3  # metres: ray origins leave the surface by this much, and keep as far from its edges
 _LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 _SLIVER = 8.0
@@ -156,6 +160,46 @@ def tone_map(linear: torch.Tensor) -> torch.Tensor:
     does), then sRGB-encoded. The reference comparison tone-maps the path tracer's image the same way."""
     film = -torch.expm1(-linear.clamp_min(0.0))
     return torch.where(film <= 0.0031308, 12.92 * film, 1.055 * film.clamp_min(0.0031308) ** (1.0 / 2.4) - 0.055)
+
+
+def fresnel_diffuse_reflectance(eta: float, samples: int = 4096) -> float:
+    """The cosine-weighted hemispherical average of the unpolarised Fresnel reflectance at an
+    interface of relative index ``eta`` (below 1: light inside the denser medium, where total
+    internal reflection sets in); 0.092 for eta 1.5 and 0.596 for 1 / 1.5."""
+    mu = (np.arange(samples) + 0.5) / samples  # cosine of incidence, midpoint rule
+    sin_t2 = (1.0 - mu**2) / eta**2
+    cos_t = np.sqrt(np.clip(1.0 - sin_t2, 0.0, None))
+    rs = (mu - eta * cos_t) / (mu + eta * cos_t)
+    rp = (eta * mu - cos_t) / (eta * mu + cos_t)
+    reflectance = np.where(sin_t2 >= 1.0, 1.0, 0.5 * (rs**2 + rp**2))
+    return float(np.mean(2.0 * mu * reflectance))
+
+
+def coat_table(scene: Scene) -> np.ndarray:
+    """(M, 4) per material: the share of the base's light that its dielectric coat lets out, the
+    coat's internal diffuse reflectance, its own reflectance, and 1 where internal scattering
+    deepens the base's colour (Mitsuba's ``nonlinear``). A bare material is (1, 0, 0, 0)."""
+    table = np.tile([1.0, 0.0, 0.0, 0.0], (len(scene.materials), 1))
+    for index, material in enumerate(scene.materials):
+        if material.coat_ior is not None:
+            outside = fresnel_diffuse_reflectance(material.coat_ior)
+            inside = fresnel_diffuse_reflectance(1.0 / material.coat_ior)
+            let_out = (1.0 - outside) ** 2 / material.coat_ior**2
+            table[index] = (let_out, inside, outside, float(material.coat_nonlinear))
+    return table
+
+
+def coated_albedo(albedo: torch.Tensor, coats: torch.Tensor) -> torch.Tensor:
+    """(N, 3) linear albedo, as diffuse light sees it, of bases with linear albedo (N, 3) under
+    coats (N, 4) (rows of :func:`coat_table`).
+
+    Mitsuba's plastic with its two Fresnel transmissions averaged over the hemisphere: the base's
+    light trapped and re-scattered under the coat, plus the coat's own reflection counted as if it
+    were diffuse (its energy bounces on; its view-dependent highlights are not rendered).
+    """
+    let_out, inside, outside, nonlinear = coats.unbind(dim=1)
+    trapped = inside[:, None] * torch.where(nonlinear[:, None] > 0, albedo, torch.ones_like(albedo))
+    return let_out[:, None] * albedo / (1.0 - trapped) + outside[:, None]
 
 
 def exposed(display: float) -> float:
@@ -323,41 +367,49 @@ def _visible(renderer: ExactRenderer, origins: np.ndarray, directions: np.ndarra
     return hits.t >= distance * (1.0 - 1e-6) - _OFFSET
 
 
-def _direct(
+def _area_direct(
     renderer: ExactRenderer, emitters: Emitters, points: np.ndarray, normals: np.ndarray, rng: np.random.Generator,
     light_samples: int,
 ) -> np.ndarray:  # fmt: skip
-    """(N, 3) irradiance from area, point, spot and directional lights, with shadows."""
+    """(N, 3) irradiance from the area emitters, with shadows (``light_samples`` shadow rays each)."""
     irradiance = np.zeros((len(points), 3))
     origins = points + _OFFSET * normals
     triangles = emitters.area_triangles
-    if len(triangles):
-        cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
-        area = 0.5 * np.linalg.norm(cross, axis=1)
-        light_normals = cross / np.maximum(2.0 * area, 1e-30)[:, None]
-        power = area * (emitters.area_radiance @ _LUMINANCE)
-        if power.sum() > 0:
-            probability = power / power.sum()
-            for _ in range(light_samples):
-                chosen = rng.choice(len(triangles), size=len(points), p=probability)
-                s, t = rng.random((2, len(points)))
-                root = np.sqrt(s)
-                tri = triangles[chosen]
-                target = (
-                    (1 - root)[:, None] * tri[:, 0]
-                    + (root * (1 - t))[:, None] * tri[:, 1]
-                    + (root * t)[:, None] * tri[:, 2]
-                )
-                offset = target - origins
-                distance = np.linalg.norm(offset, axis=1)
-                direction = offset / np.maximum(distance, 1e-12)[:, None]
-                cos_receiver = np.einsum("nd,nd->n", direction, normals).clip(0.0)
-                cos_light = -np.einsum("nd,nd->n", direction, light_normals[chosen]).clip(max=0.0)
-                geometry = (
-                    cos_receiver * cos_light / np.maximum(distance, 1e-3) ** 2 * area[chosen] / probability[chosen]
-                )
-                lit = (geometry > 0) & _visible(renderer, origins, direction, distance)
-                irradiance += (emitters.area_radiance[chosen] * (geometry * lit)[:, None]) / light_samples
+    if not len(triangles):
+        return irradiance
+    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    light_normals = cross / np.maximum(2.0 * area, 1e-30)[:, None]
+    power = area * (emitters.area_radiance @ _LUMINANCE)
+    if power.sum() <= 0:
+        return irradiance
+    probability = power / power.sum()
+    for _ in range(light_samples):
+        chosen = rng.choice(len(triangles), size=len(points), p=probability)
+        s, t = rng.random((2, len(points)))
+        root = np.sqrt(s)
+        tri = triangles[chosen]
+        target = (1 - root)[:, None] * tri[:, 0] + (root * (1 - t))[:, None] * tri[:, 1]
+        target = target + (root * t)[:, None] * tri[:, 2]
+        offset = target - origins
+        distance = np.linalg.norm(offset, axis=1)
+        direction = offset / np.maximum(distance, 1e-12)[:, None]
+        cos_receiver = np.einsum("nd,nd->n", direction, normals).clip(0.0)
+        cos_light = -np.einsum("nd,nd->n", direction, light_normals[chosen]).clip(max=0.0)
+        geometry = cos_receiver * cos_light / np.maximum(distance, 1e-3) ** 2 * area[chosen] / probability[chosen]
+        lit = (geometry > 0) & _visible(renderer, origins, direction, distance)
+        irradiance += (emitters.area_radiance[chosen] * (geometry * lit)[:, None]) / light_samples
+    return irradiance
+
+
+def delta_irradiance(
+    renderer: ExactRenderer, emitters: Emitters, points: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
+    """(N, 3) irradiance at surface points (N, 3) with unit normals (N, 3) from the lights of no
+    extent (point and spot lights, directional suns), one shadow ray each: exact, so the renderer
+    shades it per hit and the bake carries only its bounces."""
+    irradiance = np.zeros((len(points), 3))
+    origins = points + _OFFSET * normals
     for index, position in enumerate(emitters.point_positions):
         offset = position - origins
         distance = np.linalg.norm(offset, axis=1)
@@ -448,7 +500,7 @@ def _albedo(renderer: ExactRenderer, lattice: _Lattice) -> np.ndarray:
     uv = renderer._interpolate(renderer._uvs, ids, torch.from_numpy(lattice.bary))
     footprint = torch.full((len(ids),), float(lattice.texel), dtype=torch.float32)
     base = albedo(renderer.scene, ids, uv, footprint, renderer._pyramids, renderer._uv_density)
-    return srgb_decode(base).double().numpy()
+    return renderer.reflectance(ids, base).double().numpy()
 
 
 def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, progress: bool = True) -> BakedLighting:
@@ -468,6 +520,7 @@ def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, pro
     count = len(lattice.points)
     albedo = _albedo(renderer, lattice)
     direct = np.zeros((count, 3))
+    delta = np.zeros((count, 3))
     sky = np.zeros((count, 3))
     hit_point = np.empty((count, config.rays), np.int32)
     buried = np.empty(count, bool)
@@ -476,7 +529,8 @@ def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, pro
     for begin in tqdm(steps, desc=f"baking {scene.name}", unit="chunk", disable=not progress, leave=False):
         end = min(begin + chunk, count)
         points, normals = lattice.points[begin:end], lattice.normals[begin:end]
-        direct[begin:end] = _direct(renderer, emitters, points, normals, rng, config.light_samples)
+        direct[begin:end] = _area_direct(renderer, emitters, points, normals, rng, config.light_samples)
+        delta[begin:end] = delta_irradiance(renderer, emitters, points, normals)
         directions = _cosine_directions(normals, rng, config.rays).reshape(-1, 3)
         origins = np.repeat(points + _OFFSET * normals, config.rays, axis=0)
         hits = renderer.cast(origins, directions)
@@ -488,14 +542,17 @@ def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, pro
         buried[begin:end] = back.reshape(end - begin, config.rays).mean(axis=1) > _BURIED_SHARE
     index, weights = _filter_weights(lattice, config.neighbours, ~buried)
     smooth = lambda values: np.einsum("nk,nkc->nc", weights, values[index])
-    emitted = direct + sky
-    irradiance = smooth(emitted)
+    # the delta lights' own term is shaded per hit, with sharp shadows (a lattice point may stand
+    # metres apart on a large floor); the light they bounce is baked
+    delta = smooth(delta)
+    baked = smooth(direct + sky)
     missed = hit_point < 0
     safe = np.where(missed, 0, hit_point)
     for _ in range(config.bounces):
-        leaving = np.concatenate([albedo * irradiance, np.zeros((1, 3))])  # pi x outgoing radiance
+        leaving = np.concatenate([albedo * (baked + delta), np.zeros((1, 3))])  # pi x outgoing radiance
         gathered = leaving[np.where(missed, count, safe)].mean(axis=1)
-        irradiance = smooth(emitted + gathered)
+        baked = smooth(direct + sky + gathered)
+    irradiance = baked + delta
     # exposure: the median radiance the scene's cameras see, mapped to the key grey
     meter = renderer.cast(eyes, meter_directions)
     seen, _ = _nearest(lattice, renderer, meter, meter_directions)
@@ -506,7 +563,7 @@ def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, pro
     return BakedLighting(
         resolution=lattice.resolution,
         offsets=lattice.offsets,
-        irradiance=irradiance.astype(np.float32),
+        irradiance=baked.astype(np.float32),
         exposure=exposure,
         seconds=time.perf_counter() - start,
     )
@@ -519,7 +576,8 @@ def _scene_digest(scene: Scene, config: BakeConfig) -> str:
     for array in (scene.vertices, scene.faces, scene.uvs, scene.normals, scene.material_ids, scene.lights):
         digest.update(np.ascontiguousarray(array).tobytes())
     for material in scene.materials:
-        digest.update(repr((material.name, material.uv_scale.tolist(), material.base_color.tolist())).encode())
+        fields = (material.name, material.uv_scale.tolist(), material.base_color.tolist())
+        digest.update(repr((*fields, material.coat_ior, material.coat_nonlinear)).encode())
         for image in (material.texture, material.opacity):
             digest.update(b"-" if image is None else np.ascontiguousarray(image).tobytes())
     for name, value in asdict(scene.emitters).items():

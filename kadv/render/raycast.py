@@ -17,7 +17,17 @@ from torch.nn import functional as F
 from kadv.checks import check_shape
 from kadv.geometry.camera import pixel_rays
 from kadv.geometry.vector import dot
-from kadv.render.lighting import BakedLighting, load_or_bake, sky_emitters, sky_radiance, srgb_decode, tone_map
+from kadv.render.lighting import (
+    BakedLighting,
+    coat_table,
+    coated_albedo,
+    delta_irradiance,
+    load_or_bake,
+    sky_emitters,
+    sky_radiance,
+    srgb_decode,
+    tone_map,
+)
 from kadv.render.shading import Shading, albedo, mip_pyramid, sample_texture, scene_lights, shade, uv_density
 from kadv.scenes.scene import Scene
 
@@ -145,8 +155,10 @@ class ExactRenderer:
         self._lights = torch.from_numpy(self.lights.astype(np.float32))
         self.baked: BakedLighting | None = None
         self._emitter_scene = None
+        self._coats = torch.from_numpy(coat_table(scene)).float()[torch.from_numpy(scene.material_ids)]
         if self.shading.lighting == "baked":
             self.baked = load_or_bake(self, self.shading.bake, progress)
+            self._delta_lights = bool(len(scene.emitters.point_positions) or len(scene.emitters.sun_directions))
             self._sky = sky_emitters(scene)
             emitters = scene.emitters.area_triangles
             if len(emitters):  # the file's lamps and glowing panels, seen as a camera sees them
@@ -256,6 +268,11 @@ class ExactRenderer:
             + corners[:, 2] * bary[:, 1:2]
         )
 
+    def reflectance(self, triangle_ids: torch.Tensor, base: torch.Tensor) -> torch.Tensor:
+        """(N, 3) linear albedo that baked lighting multiplies: of the display colours ``base``
+        (N, 3) on triangles (N,), with their materials' coats (:func:`coated_albedo`)."""
+        return coated_albedo(srgb_decode(base), self._coats.index_select(0, triangle_ids))
+
     def shade_hits(
         self,
         hits: RayHits,
@@ -296,7 +313,9 @@ class ExactRenderer:
                 shaded = shade(self.shading, self._lights, points, normals, base)
             else:
                 irradiance = self.baked.irradiance_at(ids, bary, back)
-                shaded = tone_map(srgb_decode(base) * irradiance * (self.baked.exposure / math.pi))
+                if self._delta_lights:
+                    irradiance = irradiance + self._delta_irradiance(hits, origins, directions, normals)
+                shaded = tone_map(self.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi))
                 # a ray that leaves the scene sees the sky the bake was lit by
                 sky = sky_radiance(self._sky, F.normalize(dirs, dim=1).numpy())
                 background = tone_map(torch.from_numpy(sky * self.baked.exposure).float())
@@ -311,6 +330,23 @@ class ExactRenderer:
                 back_face=back.numpy(),
             )
         return maps
+
+    def _delta_irradiance(
+        self, hits: RayHits, origins: np.ndarray, directions: np.ndarray, normals: torch.Tensor
+    ) -> torch.Tensor:
+        """(N, 3) irradiance at the hits from the scene's point, spot and sun lights, with one
+        shadow ray each (zero on misses)."""
+        hit = hits.hit
+        dirs = directions.reshape(-1, 3)[hit]
+        points = origins.reshape(-1, 3)[hit] + dirs * hits.t[hit, None]
+        facing = normals.numpy()[hit].astype(np.float64)
+        # the side the ray arrived from, whatever the file's normals say
+        facing *= np.where(np.einsum("nd,nd->n", facing, dirs) > 0, -1.0, 1.0)[:, None]
+        irradiance = torch.zeros(len(hit), 3)
+        irradiance[torch.from_numpy(hit)] = torch.from_numpy(
+            delta_irradiance(self, self.scene.emitters, points, facing)
+        ).float()
+        return irradiance
 
     def _emitters_seen(
         self, rgb: torch.Tensor, hits: RayHits, origins: np.ndarray, directions: np.ndarray

@@ -62,6 +62,10 @@ _DIFFUSE_KEYS = {
 # A mirror has no colour of its own; a light grey reads as "shiny surface" in a diffuse render.
 _CONDUCTOR_GREY = 0.75
 _DEFAULT_REFLECTANCE = 0.5
+# Mitsuba's named indices of refraction that coats use, and its defaults for plastic
+_IOR = {"vacuum": 1.0, "air": 1.000277, "water": 1.333, "acrylic glass": 1.49, "polypropylene": 1.49}
+_IOR |= {"bk7": 1.5046, "pet": 1.575, "diamond": 2.419}
+_PLASTIC = {"plastic", "roughplastic"}
 
 
 def _snake(name: str) -> str:
@@ -245,6 +249,26 @@ def _texture(element: ET.Element, ctx: _Context) -> tuple[np.ndarray | None, np.
     return None, None, np.full(3, _DEFAULT_REFLECTANCE), uv_scale
 
 
+def _ior(props: dict[str, ET.Element], key: str, ctx: _Context, default: str) -> float:
+    """An index of refraction given as a number or by one of Mitsuba's names."""
+    value = ctx.attr(props[key], "value") if key in props else default
+    try:
+        return float(value)
+    except ValueError:
+        if value.lower() not in _IOR:
+            ctx.warn_once(f"ior:{value}", f"Mitsuba XML: index of refraction {value!r} is not known; using {default}")
+        return _IOR.get(value.lower(), _IOR[default])
+
+
+def _coat(kind: str, props: dict[str, ET.Element], ctx: _Context) -> dict:
+    """The dielectric coat of a plastic BSDF as :class:`Material` fields (none for other kinds)."""
+    if kind not in _PLASTIC:
+        return {}
+    ior = _ior(props, "int_ior", ctx, "polypropylene") / _ior(props, "ext_ior", ctx, "air")
+    nonlinear = "nonlinear" in props and ctx.attr(props["nonlinear"], "value", "false").lower() == "true"
+    return {"coat_ior": ior, "coat_nonlinear": nonlinear}
+
+
 def _material(element: ET.Element, ctx: _Context, name: str) -> Material:
     """Reduce a (possibly nested) BSDF chain to a :class:`Material`."""
     two_sided = False
@@ -287,7 +311,10 @@ def _material(element: ET.Element, ctx: _Context, name: str) -> Material:
             base = color if color is not None else base
         if is_conductor:
             base = np.clip(base, 0.0, 1.0) * _CONDUCTOR_GREY
-    return Material(name, base_color=base, texture=texture, opacity=opacity, uv_scale=uv_scale, two_sided=two_sided)
+    return Material(
+        name, base_color=base, texture=texture, opacity=opacity, uv_scale=uv_scale, two_sided=two_sided,
+        **_coat(kind, props, ctx),
+    )  # fmt: skip
 
 
 def _transform(element: ET.Element | None, ctx: _Context) -> np.ndarray:

@@ -26,6 +26,10 @@ class Material:
         emissive: a light source's own surface; dropped at load by default.
         emission: optional (3,) linear radiance of an emissive surface; None: the default lamp's.
         two_sided: back faces are legitimate surfaces (Mitsuba ``twosided``, glTF ``doubleSided``).
+        coat_ior: relative index of refraction of a clear dielectric coat over the diffuse base
+            (Mitsuba ``plastic``, ``roughplastic``); None: bare. Only baked lighting reads it.
+        coat_nonlinear: the coat's internal scattering deepens the base's colour (Mitsuba's
+            ``nonlinear``).
     """
 
     name: str
@@ -37,6 +41,8 @@ class Material:
     emissive: bool = False
     two_sided: bool = True
     emission: np.ndarray | None = None
+    coat_ior: float | None = None
+    coat_nonlinear: bool = False
 
     def __post_init__(self) -> None:
         self.base_color = np.clip(np.asarray(self.base_color, np.float32).reshape(3), 0.0, 1.0)

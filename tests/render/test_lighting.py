@@ -224,3 +224,62 @@ def test_gradient_check_keeps_its_thresholds_under_baked_lighting(tmp_path) -> N
     scores = np.array([[c.score(f) for f in FUNCTIONALS] for c in checks["default"]])
     assert np.median(scores[:, 0]) >= 0.99 and np.median(scores[:, 1]) >= 0.99  # interior rgb, depth
     assert np.median(scores[:, 2]) >= 0.95 and np.median(scores[:, 3]) >= 0.95  # full rgb, depth
+
+
+def test_fresnel_diffuse_reflectance_has_its_known_values() -> None:
+    assert lighting.fresnel_diffuse_reflectance(1.0) == pytest.approx(0.0, abs=1e-9)
+    # glass-like coats: 9.2 % reflected from outside, 59.6 % trapped inside (d'Eon & Irving's fits)
+    assert lighting.fresnel_diffuse_reflectance(1.5) == pytest.approx(0.0918, abs=5e-4)
+    assert lighting.fresnel_diffuse_reflectance(1 / 1.5) == pytest.approx(0.5963, abs=5e-4)
+
+
+@pytest.mark.parametrize("kind, tolerance", [("plastic", 0.01), ("roughplastic", 0.04)])
+def test_coated_albedo_matches_mitsubas_plastic(kind: str, tolerance: float) -> None:
+    """The albedo a coat gives its base equals Mitsuba's plastic BSDF's, averaged over cosine-
+    distributed view directions (a rough coat loses a few per cent more to microfacet shadowing)."""
+    from kadv.diagnostics.reference import _mitsuba
+
+    mi = _mitsuba()
+    rng = np.random.default_rng(0)
+    scene = box_room(0)
+    for rho in (0.2, 0.8):
+        for nonlinear in (False, True):
+            bsdf = mi.load_dict(
+                {"type": kind, "diffuse_reflectance": {"type": "rgb", "value": [rho] * 3}, "nonlinear": nonlinear}
+                | {"int_ior": 1.5, "ext_ior": 1.0}
+            )
+            total, samples = 0.0, 4000
+            for u in rng.random((samples, 5)):
+                radius, phi = math.sqrt(u[0]), 2 * math.pi * u[1]
+                si = mi.SurfaceInteraction3f()
+                si.wi = mi.Vector3f(radius * math.cos(phi), radius * math.sin(phi), math.sqrt(1 - u[0]))
+                si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+                total += bsdf.sample(mi.BSDFContext(), si, u[2], mi.Point2f(u[3], u[4]))[1][0]
+            scene.materials[0].coat_ior, scene.materials[0].coat_nonlinear = 1.5, nonlinear
+            coats = torch.from_numpy(lighting.coat_table(scene)[:1])
+            ours = lighting.coated_albedo(torch.full((1, 3), rho, dtype=torch.float64), coats)
+            assert float(ours[0, 0]) == pytest.approx(total / samples, abs=tolerance), (rho, nonlinear)
+
+
+def test_a_sun_through_a_window_is_shaded_per_hit_with_a_sharp_shadow(tmp_path) -> None:
+    """Lights of no extent (suns, point and spot lights) are not baked: each hit gets one shadow ray,
+    so a sun patch keeps its edges however coarse the lattice (a 3.5 m lattice step on a large
+    floor blurred the classroom's away). The sun goes through the 1 x 1 m hole at z = 0, y 1-2
+    along (0, -1, 1): its patch on the floor is x 1.5-2.5, z 1-2."""
+    toward_sun = np.array([0.0, 1.0, -1.0]) / math.sqrt(2.0)
+    sun = Emitters().sun(toward_sun, 5.0)
+    renderer = _baked(_room(albedo=0.5, window=True, emitters=sun), BakeConfig(texel=1.0, rays=8, bounces=0), tmp_path)
+    points = np.array([[2.0, 0.0, 1.02], [2.0, 0.0, 0.98], [1.52, 0.0, 1.5], [1.48, 0.0, 1.5], [2.0, 0.0, 1.5]])
+    up = np.tile([0.0, 1.0, 0.0], (len(points), 1))
+    irradiance = lighting.delta_irradiance(renderer, renderer.scene.emitters, points, up)
+    lit = 5.0 * toward_sun[1]
+    np.testing.assert_allclose(irradiance[:, 0], [lit, 0.0, lit, 0.0, lit], atol=1e-9)
+    # the lattice holds no direct sun (with no bounce, nothing) ...
+    assert np.abs(_irradiance_at(renderer, np.array([2.0, 1.0, 1.5]))).max() < 1e-6
+    # ... and a render looking straight down shows the patch, black around it
+    world_T_cam = torch.tensor(
+        [[1.0, 0, 0, 2.0], [0, 0, -1.0, 1.5], [0, 1.0, 0, 1.5], [0, 0, 0, 1.0]], dtype=torch.float64
+    )  # at (2, 1.5, 1.5): x right, image down along +z, looking along -y
+    out = renderer.render(world_T_cam, intrinsics_from_fov(90.0, 31, 31), 31, 31)
+    centre, outside = out.rgb[0, :, 15, 15], out.rgb[0, :, 15, 3]  # floor at x, z = (2, 1.5) and (0.84, 1.5)
+    assert (centre > 0.2).all() and (outside == 0).all()
