@@ -21,8 +21,9 @@ SCRIPT = Path(sys.executable).parent / "kadv-render"
 README = Path(__file__).resolve().parents[2] / "README.md"
 
 
-def _run(cwd: Path, *overrides: str) -> subprocess.CompletedProcess:
+def _run(cwd: Path, *overrides: str, cache: Path | None = None) -> subprocess.CompletedProcess:
     env = {**os.environ, "KADV_SCENES": str(scenes_root()), "HYDRA_FULL_ERROR": "0"}
+    env |= {"KADV_CACHE": str(cache)} if cache is not None else {}
     return subprocess.run(
         [str(SCRIPT), "hydra.run.dir=run", *overrides], cwd=cwd, capture_output=True, text=True, timeout=300, env=env
     )
@@ -45,6 +46,20 @@ def test_installed_script_writes_aligned_images_raw_depth_and_a_summary(tmp_path
     assert summary["validity"]["verdict"] == "valid" and "valid" in result.stdout
     assert summary["depth_range_m"] == pytest.approx([float(depth.min()), float(depth.max())])
     assert np.asarray(summary["K"]).shape == (3, 3) and np.asarray(summary["world_T_cam"]).shape == (4, 4)
+
+
+def test_baked_lighting_is_baked_once_then_read_from_the_cache(tmp_path: Path) -> None:
+    size = ["render.height=30", "render.width=40", "render.bake.texel=0.25", "render.bake.rays=8"]
+    images = {}
+    for name, lighting in (("direct", "direct"), ("first", "baked"), ("second", "baked")):
+        (tmp_path / name).mkdir()
+        result = _run(tmp_path / name, *size, f"render.lighting={lighting}", cache=tmp_path / "cache")
+        assert result.returncode == 0, result.stderr
+        assert ("baking box_room_0" in result.stderr) == (name == "first")  # the bake's progress bar
+        with Image.open(tmp_path / name / "run" / "rgb.png") as rgb:
+            images[name] = np.asarray(rgb)
+    assert len(list((tmp_path / "cache" / "lighting").glob("box_room_0-*.npz"))) == 1
+    assert np.array_equal(images["first"], images["second"]) and not np.array_equal(images["first"], images["direct"])
 
 
 def test_look_at_override_and_clear_error_for_bad_index(tmp_path: Path) -> None:
