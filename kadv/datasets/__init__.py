@@ -5,6 +5,7 @@ from __future__ import annotations
 from kadv.datasets.procedural import (
     HELD_OUT_SEED,
     MAX_SQUEEZED_ASPECT,
+    TRAINING_BAKE,
     ViewBatch,
     check_view_shares,
     render_procedural_views,
@@ -14,6 +15,7 @@ from kadv.datasets.procedural import (
 __all__ = [
     "HELD_OUT_SEED",
     "MAX_SQUEEZED_ASPECT",
+    "TRAINING_BAKE",
     "ViewBatch",
     "check_view_shares",
     "render_procedural_views",

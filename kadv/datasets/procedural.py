@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
-from dataclasses import dataclass
+import tempfile
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -12,13 +14,14 @@ from tqdm import tqdm
 from kadv.attack.init_views import InitViewConfig, sample_valid_views
 from kadv.geometry import intrinsics_from_fov
 from kadv.penalties import PenaltyConfig, random_valid_poses
-from kadv.render import ExactRenderer, Shading
+from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.scenes import box_room, procedural_room
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE
 
 __all__ = [
     "HELD_OUT_SEED",
     "MAX_SQUEEZED_ASPECT",
+    "TRAINING_BAKE",
     "ViewBatch",
     "check_view_shares",
     "render_procedural_views",
@@ -27,6 +30,9 @@ __all__ = [
 
 MAX_SQUEEZED_ASPECT = 2.0
 """The widest frame (width / height) a squeezed training view shows."""
+TRAINING_BAKE = BakeConfig(texel=0.1, max_points=300_000, rays=32, light_samples=16)
+"""The bake of a training room with baked lighting: coarser than the renderer's default (a room costs
+seconds, not tens of seconds), since a training view is small."""
 HELD_OUT_SEED = 7
 """The seed of the generated rooms the embedded models are measured on (``benchmarks/tiny_accuracy.py``);
 no training run may draw it."""
@@ -44,12 +50,15 @@ class ViewBatch:
     intrinsics: torch.Tensor | None = None
 
 
-def check_view_shares(furnished_share: float, attack_view_share: float, squeeze_share: float, prefix: str = "") -> None:
+def check_view_shares(
+    furnished_share: float, attack_view_share: float, squeeze_share: float, baked_share: float, prefix: str = ""
+) -> None:
     """Raise ValueError, naming ``prefix`` + the key, unless each share lies in [0, 1]."""
     shares = {
         "furnished_share": furnished_share,
         "attack_view_share": attack_view_share,
         "squeeze_share": squeeze_share,
+        "baked_share": baked_share,
     }
     for name, share in shares.items():
         if not 0.0 <= share <= 1.0:
@@ -92,6 +101,7 @@ def render_procedural_views(
     hall_share: float = HALL_SHARE,
     attack_view_share: float = 0.0,
     squeeze_share: float = 0.0,
+    baked_share: float = 0.0,
 ) -> ViewBatch:
     """Render ``count`` views, ``views_per_room`` per generated room, under random shading.
 
@@ -102,39 +112,49 @@ def render_procedural_views(
     above the floor, a level gaze: :func:`~kadv.attack.sample_valid_views`), the rest anywhere in
     the room (:func:`~kadv.penalties.random_valid_poses`). A ``squeeze_share`` of the rooms are
     seen through a wider frame (aspect drawn up to ``MAX_SQUEEZED_ASPECT``) squeezed into ``height``
-    x ``width``, as a model that resizes every image to its input size sees wide photographs.
+    x ``width``, as a model that resizes every image to its input size sees wide photographs. A
+    ``baked_share`` of the rooms, spread evenly, are lit by their baked global illumination
+    (``render.lighting=baked``, baked with ``TRAINING_BAKE`` into a scratch cache) instead of random
+    direct shading.
     Deterministic for a seed; distinct seeds give disjoint rooms (held-out evaluation uses another
     seed).
     """
-    check_view_shares(furnished_share, attack_view_share, squeeze_share)
-    rng = np.random.default_rng(seed)
-    rgb, depth, mask, world_T_cam, intrinsics = [], [], [], [], []
-    rooms = math.ceil(count / views_per_room)
-    for index in tqdm(range(rooms), desc="rendering rooms", disable=not progress):
-        room_seed = seed * 100003 + index
-        # room i is furnished when the running share first reaches the next whole room
-        if math.floor((index + 1) * furnished_share) > math.floor(index * furnished_share):
-            scene = procedural_room(seed=room_seed, corridor_share=corridor_share, hall_share=hall_share)
-            lights = None  # the room's own: its lamps and windows
-        else:
-            scene = box_room(seed=room_seed, num_boxes=int(rng.integers(2, 8)))
-            lo, hi = scene.bounds
-            lights = (tuple(rng.uniform(lo + 0.3, hi - 0.3)),)
-        shading = Shading(ambient=float(rng.uniform(0.3, 0.6)), diffuse=float(rng.uniform(0.3, 0.7)), lights=lights)
-        renderer = ExactRenderer(scene, shading)
-        fov = float(rng.uniform(55, 85))
-        n = min(views_per_room, count - index * views_per_room)
-        poses = training_poses(renderer, n, rng, fov, attack_view_share, height, width)
-        K = intrinsics_from_fov(fov, height, width)
-        # nothing is drawn when the share is 0, so those views are the views drawn before it existed
-        if squeeze_share > 0 and rng.random() < squeeze_share:
-            wide = round(height * rng.uniform(width / height, MAX_SQUEEZED_ASPECT))
-            K = intrinsics_from_fov(fov, height, wide)
-            K[0] *= width / wide  # the wide frame's columns squeezed into width
-        out = renderer.render(poses, K, height, width, supersample=2)
-        rgb.append(out.rgb)
-        depth.append(out.depth)
-        mask.append(out.mask)
-        world_T_cam.append(poses)
-        intrinsics.append(K.expand(len(poses), 3, 3))
-    return ViewBatch(*(torch.cat(parts) for parts in (rgb, depth, mask, world_T_cam, intrinsics)))
+    check_view_shares(furnished_share, attack_view_share, squeeze_share, baked_share)
+    # the rooms' bakes are made for this batch, into a scratch cache that goes with it
+    with contextlib.ExitStack() as stack:
+        folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="kadv-bakes-")) if baked_share > 0 else None
+        bake = replace(TRAINING_BAKE, cache=folder)
+        rng = np.random.default_rng(seed)
+        rgb, depth, mask, world_T_cam, intrinsics = [], [], [], [], []
+        rooms = math.ceil(count / views_per_room)
+        for index in tqdm(range(rooms), desc="rendering rooms", disable=not progress):
+            room_seed = seed * 100003 + index
+            # room i is furnished when the running share first reaches the next whole room
+            if math.floor((index + 1) * furnished_share) > math.floor(index * furnished_share):
+                scene = procedural_room(seed=room_seed, corridor_share=corridor_share, hall_share=hall_share)
+                lights = None  # the room's own: its lamps and windows
+            else:
+                scene = box_room(seed=room_seed, num_boxes=int(rng.integers(2, 8)))
+                lo, hi = scene.bounds
+                lights = (tuple(rng.uniform(lo + 0.3, hi - 0.3)),)
+            shading = Shading(ambient=float(rng.uniform(0.3, 0.6)), diffuse=float(rng.uniform(0.3, 0.7)), lights=lights)
+            # spread evenly without drawing, so the other rooms' views are those drawn before the share existed
+            if math.floor((index + 1) * baked_share) > math.floor(index * baked_share):
+                shading = replace(shading, lighting="baked", bake=bake)
+            renderer = ExactRenderer(scene, shading, progress=False)
+            fov = float(rng.uniform(55, 85))
+            n = min(views_per_room, count - index * views_per_room)
+            poses = training_poses(renderer, n, rng, fov, attack_view_share, height, width)
+            K = intrinsics_from_fov(fov, height, width)
+            # nothing is drawn when the share is 0, so those views are the views drawn before it existed
+            if squeeze_share > 0 and rng.random() < squeeze_share:
+                wide = round(height * rng.uniform(width / height, MAX_SQUEEZED_ASPECT))
+                K = intrinsics_from_fov(fov, height, wide)
+                K[0] *= width / wide  # the wide frame's columns squeezed into width
+            out = renderer.render(poses, K, height, width, supersample=2)
+            rgb.append(out.rgb)
+            depth.append(out.depth)
+            mask.append(out.mask)
+            world_T_cam.append(poses)
+            intrinsics.append(K.expand(len(poses), 3, 3))
+        return ViewBatch(*(torch.cat(parts) for parts in (rgb, depth, mask, world_T_cam, intrinsics)))

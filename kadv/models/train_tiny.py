@@ -43,13 +43,15 @@ class TinyTrainConfig:
     rooms are corridors and halls (both 0: the rooms of the generator before it drew them).
     ``attack_view_share`` of the views are drawn as the attack draws init views (eye height, level
     gaze), and a ``squeeze_share`` of the rooms are seen through wider frames squeezed to the
-    model's input size (as the model squeezes wide images). ``device`` trains on the CPU
-    (bit-identical weights for one config) or a CUDA device (faster; its weights differ in the last
-    bits). ``init_weights`` continues from an earlier run's weights (a kadv-tiny file, whose
-    channels win over ``channels``, or a kadv-tiny-dpt directory), so a long training can be done,
-    and reproduced, in stages. ``soup_with`` names earlier weights of the same architecture that the
-    trained weights are averaged with at the end (a uniform model soup; Wortsman et al., 2022):
-    weights along one fine-tuning path average into a model better than each.
+    model's input size (as the model squeezes wide images); a ``baked_share`` of the rooms are lit
+    by their baked global illumination (``TRAINING_BAKE``) instead of random direct shading.
+    ``device`` trains on the CPU (bit-identical weights for one config) or a CUDA device (faster;
+    its weights differ in the last bits). ``init_weights`` continues from an earlier run's weights
+    (a kadv-tiny file, whose channels win over ``channels``, or a kadv-tiny-dpt directory), so a
+    long training can be done, and reproduced, in stages. ``soup_with`` names earlier weights of
+    the same architecture that the trained weights are averaged with at the end (a uniform model
+    soup; Wortsman et al., 2022): weights along one fine-tuning path average into a model better
+    than each.
     """
 
     seed: int = 0
@@ -69,6 +71,7 @@ class TinyTrainConfig:
     hall_share: float = HALL_SHARE
     attack_view_share: float = 0.0
     squeeze_share: float = 0.0
+    baked_share: float = 0.0
     device: str = "cpu"
     soup_with: list[str] = field(default_factory=list)
 
@@ -93,7 +96,7 @@ class TinyTrainConfig:
                 f"from {HELD_OUT_SEED}, the seed of the held-out rooms the benchmark measures on"
             )
         check_shares(self.corridor_share, self.hall_share, "train.")
-        check_view_shares(self.furnished_share, self.attack_view_share, self.squeeze_share, "train.")
+        check_view_shares(self.furnished_share, self.attack_view_share, self.squeeze_share, self.baked_share, "train.")
         try:
             resolve_device(self.device)
         except ValueError as error:
@@ -158,6 +161,7 @@ def render_training_views(config: TinyTrainConfig, progress: bool = True) -> tup
         "hall_share": config.hall_share,
         "attack_view_share": config.attack_view_share,
         "squeeze_share": config.squeeze_share,
+        "baked_share": config.baked_share,
         "progress": progress,
     }
     train = render_procedural_views(config.train_views, config.seed, height, width, **rooms)

@@ -231,6 +231,7 @@ BAD_INPUTS = [
     ("kadv-train-tiny", ["train.seed=7"], "the held-out rooms"),
     ("kadv-train-tiny", ["train.hall_share=1.2"], "train.hall_share (1.2)"),
     ("kadv-train-tiny", ["train.squeeze_share=2"], "train.squeeze_share must be in [0, 1]"),
+    ("kadv-train-tiny", ["train.baked_share=-1"], "train.baked_share must be in [0, 1]"),
     ("kadv-train-tiny", ["train.device=tpu"], "train.device='tpu'"),
     ("kadv-train-tiny", ["train.init_weights=/no/such/tiny.safetensors"], "/no/such/tiny.safetensors"),
     ("kadv-train-tiny", ["train.soup_with=[/no/such/soup.safetensors]"], "train.soup_with: no such weights file"),

@@ -70,3 +70,16 @@ def test_a_squeeze_share_renders_wider_frames_into_the_same_pixels() -> None:
     assert bool(((fov_x > 55 - 1e-9) & (fov_x < 85 + 1e-9)).all()) and bool((K[:, 1, 1] >= K[:, 0, 0]).all())
     with pytest.raises(ValueError, match="squeeze_share"):
         render_procedural_views(4, seed=3, height=12, width=16, squeeze_share=1.5, progress=False)
+
+
+def test_a_baked_share_lights_rooms_by_their_baked_global_illumination(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("KADV_CACHE", str(tmp_path))  # where a bake would go if it were kept
+    direct = render_procedural_views(4, seed=3, height=12, width=16, views_per_room=2, progress=False)
+    half = render_procedural_views(4, seed=3, height=12, width=16, views_per_room=2, baked_share=0.5, progress=False)
+    again = render_procedural_views(4, seed=3, height=12, width=16, views_per_room=2, baked_share=0.5, progress=False)
+    # room 0 keeps its direct shading, room 1 is baked: the same cameras and depth, other colours
+    assert torch.equal(direct.rgb[:2], half.rgb[:2]) and torch.equal(direct.depth, half.depth)
+    assert not torch.equal(direct.rgb[2:], half.rgb[2:]) and torch.equal(half.rgb, again.rgb)
+    assert not any(tmp_path.rglob("*.npz"))  # the bakes went to a scratch cache, now gone
+    with pytest.raises(ValueError, match="baked_share"):
+        render_procedural_views(4, seed=3, height=12, width=16, baked_share=2.0, progress=False)

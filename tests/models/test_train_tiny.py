@@ -132,6 +132,7 @@ def test_train_tiny_soups_with_the_weights_it_names(tmp_path) -> None:
         ("seed", 1),  # the validation rooms
         ("attack_view_share", -0.5),
         ("squeeze_share", 2.0),
+        ("baked_share", -0.1),
         ("device", "tpu"),
         ("soup_with", ["/no/such/file"]),
     ],
