@@ -28,7 +28,7 @@ from kornia.metrics import psnr, ssim
 from kadv.geometry import axis_angle_to_matrix, intrinsics_from_fov
 from kadv.losses import aligned_depth, depth_metrics
 from kadv.models import DepthModel
-from kadv.render import ExactRenderer
+from kadv.render import ExactRenderer, RenderOutput
 from kadv.render.lighting import exposed, tone_map
 from kadv.report.figures import depth_colour_map, depth_range, save_figure
 from kadv.report.sweep import Table
@@ -187,6 +187,18 @@ def render_reference(mitsuba_scene, sensor: int, spp: int, seed: int = 0, denois
     return np.maximum(colour, 0.0).astype(np.float64)
 
 
+def _both_images(
+    mitsuba_scene, sensor: int, renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tensor,
+    height: int, width: int, spp: int, seed: int = 0, reference: np.ndarray | None = None,
+) -> tuple[RenderOutput, np.ndarray, np.ndarray]:  # fmt: skip
+    """kadv's render of a view, its image (H, W, 3), and Mitsuba's image of the same ``sensor``
+    exposed to match it (``reference``: Mitsuba's linear image when already rendered)."""
+    ours = renderer.render(world_T_cam, K, height, width, supersample=2)
+    linear = render_reference(mitsuba_scene, sensor, spp, seed) if reference is None else reference
+    kadv_rgb = ours.rgb[0].permute(1, 2, 0).numpy()
+    return ours, kadv_rgb, _display(linear * _exposure(linear, kadv_rgb))
+
+
 def _as_tensor(image: np.ndarray) -> torch.Tensor:
     return torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
 
@@ -224,15 +236,14 @@ def compare_view(
     renderers compared against one reference).
     """
     K = intrinsics_from_fov(fov_x_deg, height, width)
-    ours = renderer.render(world_T_cam, K, height, width, supersample=2)
+    ours, kadv_rgb, mitsuba_rgb = _both_images(
+        mitsuba_scene, sensor, renderer, world_T_cam, K, height, width, spp, seed, reference
+    )
     depth_ref = mitsuba_depth(mitsuba_scene, sensor, height, width)
     depth_ours = ours.depth[0, 0].double().numpy()
     both = (depth_ref > 0) & (depth_ours > 0)
     relative = np.abs(depth_ref[both] - depth_ours[both]) / depth_ours[both]
     depth_rel_err = float(np.median(relative)) if both.any() else math.nan
-    linear = render_reference(mitsuba_scene, sensor, spp, seed) if reference is None else reference
-    kadv_rgb = ours.rgb[0].permute(1, 2, 0).numpy()
-    mitsuba_rgb = _display(linear * _exposure(linear, kadv_rgb))
     image_psnr, image_ssim = _image_scores(kadv_rgb, mitsuba_rgb)
     with torch.no_grad():
         predictions = model(torch.cat([_as_tensor(mitsuba_rgb), _as_tensor(kadv_rgb)]))
@@ -328,10 +339,7 @@ def _delta1_both(
     mitsuba_scene, sensor: int, renderer: ExactRenderer, model: DepthModel, world_T_cam, K, height, width, spp
 ) -> tuple[float, float]:
     """The model's delta1 against kadv's exact depth, on kadv's image and on Mitsuba's."""
-    ours = renderer.render(world_T_cam, K, height, width, supersample=2)
-    linear = render_reference(mitsuba_scene, sensor, spp)
-    kadv_rgb = ours.rgb[0].permute(1, 2, 0).numpy()
-    mitsuba_rgb = _display(linear * _exposure(linear, kadv_rgb))
+    ours, kadv_rgb, mitsuba_rgb = _both_images(mitsuba_scene, sensor, renderer, world_T_cam, K, height, width, spp)
     with torch.no_grad():
         predictions = model(torch.cat([_as_tensor(kadv_rgb), _as_tensor(mitsuba_rgb)]))
     depth, mask = ours.depth.double().expand(2, -1, -1, -1), ours.mask.expand(2, -1, -1, -1)

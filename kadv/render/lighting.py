@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import time
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -30,6 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
+from kornia.color import linear_rgb_to_rgb, rgb_to_linear_rgb
 from scipy.spatial import cKDTree
 from tqdm import tqdm
 
@@ -149,17 +151,21 @@ class BakedLighting:
         return (values * weights[..., None].float()).sum(dim=1)
 
 
+def _channels_last(convert, values: torch.Tensor) -> torch.Tensor:
+    """kornia's colour ``convert`` (which takes (*, 3, H, W)) applied to colours (..., 3)."""
+    return convert(values.reshape(-1, 3).T[:, :, None])[:, :, 0].T.reshape(values.shape)
+
+
 def srgb_decode(srgb: torch.Tensor) -> torch.Tensor:
-    """Linear values of sRGB-encoded ones in [0, 1]."""
-    return torch.where(srgb <= 0.04045, srgb / 12.92, ((srgb.clamp_min(0.0) + 0.055) / 1.055) ** 2.4)
+    """Linear values (..., 3) of sRGB-encoded ones in [0, 1]."""
+    return _channels_last(rgb_to_linear_rgb, srgb)
 
 
 def tone_map(linear: torch.Tensor) -> torch.Tensor:
-    """Display values in [0, 1] of exposed linear radiance: a film-like shoulder ``1 - exp(-x)``
+    """Display values (..., 3) in [0, 1] of exposed linear radiance (..., 3): a film-like shoulder ``1 - exp(-x)``
     (linear in the shadows, highlights rolling off rather than clipping, as a camera's response
     does), then sRGB-encoded. The reference comparison tone-maps the path tracer's image the same way."""
-    film = -torch.expm1(-linear.clamp_min(0.0))
-    return torch.where(film <= 0.0031308, 12.92 * film, 1.055 * film.clamp_min(0.0031308) ** (1.0 / 2.4) - 0.055)
+    return _channels_last(linear_rgb_to_rgb, -torch.expm1(-linear.clamp_min(0.0)))
 
 
 def fresnel_diffuse_reflectance(eta: float, samples: int = 4096) -> float:
@@ -505,8 +511,6 @@ def _albedo(renderer: ExactRenderer, lattice: _Lattice) -> np.ndarray:
 
 def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, progress: bool = True) -> BakedLighting:
     """Bake the diffuse global illumination of ``renderer``'s scene (no cache: see :func:`load_or_bake`)."""
-    import time
-
     config = config or BakeConfig()
     start = time.perf_counter()
     rng = np.random.default_rng(config.seed)

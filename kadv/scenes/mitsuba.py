@@ -503,13 +503,10 @@ def parse_mitsuba(
                 cameras.append(camera)
         elif element.tag == "emitter":
             emitters = _emitter(element, ctx, emitters)
-            kind = ctx.attr(element, "type")
             props = _named(element, ctx)
-            if kind in ("point", "spot") and ("position" in props or "to_world" in props):
-                if "position" in props:
-                    lights.append([float(ctx.attr(props["position"], k, "0")) for k in "xyz"])
-                else:
-                    lights.append(_transform(props["to_world"], ctx)[:3, 3])
+            # the direct shading's lights: the point and spot lights the file places
+            if ctx.attr(element, "type") in ("point", "spot") and ("position" in props or "to_world" in props):
+                lights.append(emitters.point_positions[-1])
         elif element.tag in ("bsdf", "texture") or element.tag in _IGNORED:
             continue
         else:

@@ -46,6 +46,8 @@ def test_mitsuba_emitters_are_read_and_an_unbakeable_one_is_named_once(tmp_path:
     np.testing.assert_allclose(emitters.area_radiance, [[1, 2, 3], [1, 2, 3]])
     np.testing.assert_allclose(emitters.area_triangles[..., 2].max(), -4.0)  # file y = 2 -> world z = -2 x 2
     np.testing.assert_allclose(emitters.point_positions, [[2, 6, -4], [0, 0, -6]], atol=1e-12)
+    # the direct shading's lights: the point and spot lights, then the emitting shape's centre
+    np.testing.assert_allclose(scene.lights[:2], emitters.point_positions, atol=1e-12)
     np.testing.assert_allclose(emitters.point_intensity, [[4, 4, 4], [2, 2, 2]])
     np.testing.assert_allclose(emitters.spot_cos_cutoff, [-1.0, np.cos(np.radians(30))])
     np.testing.assert_allclose(emitters.spot_directions[1], [0, 0, 1], atol=1e-12)  # file -z -> world +z
