@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from common import REAL_SCENES
+from common import REAL_SCENES, scenes_root
 
 _CHILD = """
 import json, resource, sys, time
@@ -44,6 +44,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", default=",".join(("box_room", "procedural", *REAL_SCENES)))
     args = parser.parse_args()
+    for name in args.scenes.split(","):
+        if name not in ("box_room", "procedural") and not (scenes_root() / name / "scene.xml").is_file():
+            parser.error(f"--scenes: {name!r} is not box_room, procedural or a scene under {scenes_root()}")
     here = str(Path(__file__).resolve().parent)
     print(f"{'scene':<20} {'triangles':>10} {'points':>10} {'bake s':>8} {'cached s':>9} {'peak GiB':>9}")
     seconds = {}

@@ -117,7 +117,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("reference_out"))
     parser.add_argument("--survival-spp", type=int, default=64, help="spp of the adversarial views' renders")
     args = parser.parse_args()
+    for name in args.scenes.split(","):
+        if not (_scene_file(name).is_file() and _scene_file(name).suffix.lower() == ".xml"):
+            parser.error(f"--scenes: {name!r} is neither a shared scene's name nor a Mitsuba XML file")
     lightings = args.lightings.split(",")
+    if not set(lightings) <= {"direct", "baked"}:
+        parser.error(f"--lightings: each must be direct or baked, got {args.lightings!r}")
     default = Shading().lighting
     model = load_model("kadv_tiny")
     metrics = _METRICS

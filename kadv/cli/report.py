@@ -71,7 +71,10 @@ class _FromConfig:
 
 def main(argv: list[str] | None = None) -> None:
     """Write the report of the runs named on the command line."""
-    args = _parser().parse_args(argv)
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.reference_spp < 1:  # before the report's minutes, not after them
+        parser.error(f"--reference-spp must be >= 1, got {args.reference_spp}")
     try:
         sources = None if args.no_transfer else _FromConfig()
         written = write_report(

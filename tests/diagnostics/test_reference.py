@@ -113,3 +113,6 @@ def test_kadv_report_reference_scores_each_adversarial_view_on_both_renderers(tm
     refused = subprocess.run([*report, str(tmp_path / "box")], capture_output=True, text=True)
     assert refused.returncode == 2 and "no run's scene is a Mitsuba XML file" in refused.stderr
     assert len(refused.stderr.strip().splitlines()) == 2  # the skipped run's line, then the error
+    no_samples = [*report[:2], "--reference-spp", "0", *report[4:], str(tmp_path / "xml")]
+    refused = subprocess.run(no_samples, capture_output=True, text=True)
+    assert refused.returncode == 2 and "--reference-spp must be >= 1, got 0" in refused.stderr
