@@ -14,9 +14,11 @@ calls just before and just after it. overhead = the median over REPEATS x STEPS 
 The same ratio for runs whose render is replaced by one fixed output shows what the attack's own
 bookkeeping (objective terms, penalty, guard, records, optimiser) adds beside the render.
 The table's other parts are the fastest of several tries (noise only ever adds time). Then the time
-per restart-step for batches of B = 1, 2, 4, 8 restarts (the fastest of two steps).
+per restart-step for batches of B = 1, 2, 4, 8 restarts (the fastest of two steps). Last, what a
+black-box search is paced by: evaluations per second (evals_per_s) of an exact render (supersample 2)
+of EVAL_BATCH nearby views plus one forward pass of kadv-tiny on them, the fastest of three batches.
 
-Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto]
+Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto] [--backend auto|open3d|warp]
 """
 
 from __future__ import annotations
@@ -40,11 +42,13 @@ from kadv.losses import VGG16_TAPS, PerceptualLoss, depth_loss, vgg16_features
 from kadv.models import DepthModel, load_model
 from kadv.penalties import distance_to_surface, shortcut_penalty, step_guard, view_validity
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, DiffRenderOutput, ExactRenderer
+from kadv.render.casting import resolve_backend
 
 HEIGHT, WIDTH = 240, 320
 STEPS = 5
 REPEATS = 5
 BATCHES = (1, 2, 4, 8)
+EVAL_BATCH = 8
 
 
 def depth_anything_v2_small(folder: str) -> DepthModel:
@@ -261,15 +265,34 @@ def measure(
     return parts, overhead
 
 
+def evaluations_per_second(renderer: ExactRenderer, model: DepthModel, view, device: torch.device) -> float:
+    """Black-box evaluations per second: exact renders of EVAL_BATCH views near ``view`` and one
+    forward pass of ``model`` on them, the fastest of three batches."""
+    generator = torch.Generator().manual_seed(0)
+    offsets = 0.05 * (2 * torch.rand(EVAL_BATCH, 6, generator=generator, dtype=torch.float64) - 1)
+    poses = perturb_world_T_cam(view.world_T_cam.expand(EVAL_BATCH, 4, 4), offsets[:, :3], offsets[:, 3:])
+    K = intrinsics_from_fov(view.fov_x_deg, HEIGHT, WIDTH)
+
+    def evaluate() -> None:
+        rgb = renderer.render(poses, K, HEIGHT, WIDTH, supersample=2).rgb.to(device)
+        with torch.no_grad():
+            model(rgb)
+
+    return EVAL_BATCH / fastest_seconds(synchronised(evaluate, device), 3)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description="Time one gradient attack step, part by part.")
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda (the networks and the warp)")
+    parser.add_argument("--backend", default="auto", help="the exact render's ray caster: auto, open3d or warp")
+    args = parser.parse_args()
     try:
-        device = resolve_device(parser.parse_args().device)
+        device = resolve_device(args.device)
+        backend = resolve_backend(args.backend, device)
     except ValueError as error:
         parser.exit(2, f"{parser.prog}: error: {error}\n")  # one line and exit status 2, as the commands answer
     scene = load_bench_scene("grey_white_room")
-    renderer = ExactRenderer(scene)
+    renderer = ExactRenderer(scene, backend=backend, device=device)
     penalty = PenaltyConfig()
     view = file_init_views(renderer, penalty.margin)[0]
     results = {}
@@ -288,9 +311,10 @@ def main() -> None:
             )
     (parts, overhead), (_, overhead_tiny) = results.values()
     render, networks = parts["render fwd+bwd"], parts["networks"]
+    evals_per_s = evaluations_per_second(renderer, load_model("kadv_tiny").to(device), view, device)
     print(
         f"\nattack_step overhead={overhead:.2f} render_ms={render * 1e3:.0f} networks_ms={networks * 1e3:.0f} "
-        f"overhead_tiny={overhead_tiny:.2f} device={device.type}"
+        f"overhead_tiny={overhead_tiny:.2f} evals_per_s={evals_per_s:.1f} device={device.type} backend={backend}"
     )
 
 

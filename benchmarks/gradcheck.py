@@ -7,13 +7,14 @@ Per scene: 10 seeded poses (>= 0.3 m from any surface, >= 90% of pixels hit, ref
 by halving its step to cos >= 0.99), functionals sum(W * rgb) and sum(W * depth), interior and
 full, cosine of analytic vs reference 6-vectors (the smaller of the rotation and translation
 blocks). Prints a table of medians for the plain warp and the final method (warp + silhouettes).
-Run: .venv/bin/python benchmarks/gradcheck.py [poses] [height] [width] [device]
+Run: .venv/bin/python benchmarks/gradcheck.py [--poses N] [--height H] [--width W] [--device D]
+[--backend open3d|warp|auto] (the exact renders' ray caster, on the device)
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
-import sys
 import time
 from pathlib import Path
 
@@ -23,6 +24,7 @@ from common import scenes_root
 
 from kadv.diagnostics import FUNCTIONALS, gradient_check_poses
 from kadv.render import DiffRenderConfig, ExactRenderer
+from kadv.render.casting import resolve_backend
 from kadv.scenes import box_room, load_scene
 
 
@@ -42,7 +44,7 @@ CONFIGS = {
 }
 
 
-def main(poses: int = 10, height: int = 96, width: int = 128, device: str = "cpu") -> None:
+def main(poses: int = 10, height: int = 96, width: int = 128, device: str = "cpu", backend: str = "auto") -> None:
     scenes = {
         "box_room": box_room(seed=0),
         "grey_white_room": load_scene(scenes_root() / "grey_white_room" / "scene.xml"),
@@ -52,7 +54,7 @@ def main(poses: int = 10, height: int = 96, width: int = 128, device: str = "cpu
     for scene_name, scene in scenes.items():
         start = time.perf_counter()
         results = gradient_check_poses(
-            ExactRenderer(scene),
+            ExactRenderer(scene, backend=backend, device=device),
             poses,
             seed=0,
             fov_x_deg=70.0,
@@ -73,9 +75,20 @@ def main(poses: int = 10, height: int = 96, width: int = 128, device: str = "cpu
     full_real = min(medians["grey_white_room", m][f] for m in checked for f in ("rgb_full", "depth_full"))
     print(
         f"gradcheck interior_median_cos={interior:.3f} full_box_median_cos={full_box:.3f} "
-        f"full_real_median_cos={full_real:.3f}"
+        f"full_real_median_cos={full_real:.3f} backend={resolve_backend(backend, device)}"
     )
 
 
 if __name__ == "__main__":
-    main(*(int(v) for v in sys.argv[1:4]), *sys.argv[4:5])
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--poses", type=int, default=10)
+    parser.add_argument("--height", type=int, default=96)
+    parser.add_argument("--width", type=int, default=128)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--backend", default="auto", help="ray caster: auto, open3d or warp")
+    args = parser.parse_args()
+    try:
+        resolve_backend(args.backend, args.device)
+    except ValueError as error:
+        parser.exit(2, f"{parser.prog}: error: {error}\n")
+    main(args.poses, args.height, args.width, args.device, args.backend)

@@ -1,10 +1,11 @@
 """Render timings: exact render and cast per scene and size; DifferentiableRenderer forward+backward.
 
-Run: .venv/bin/python benchmarks/render.py
+Run: .venv/bin/python benchmarks/render.py [--backend auto|open3d|warp] [--device cpu|cuda]
 """
 
 from __future__ import annotations
 
+import argparse
 import statistics
 
 import torch
@@ -12,14 +13,15 @@ from common import bench_scenes, median_seconds
 
 from kadv.geometry import pixel_rays
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
+from kadv.render.casting import resolve_backend
 
 SIZES = ((240, 320), (480, 640))
 
 
-def exact_timings(scenes) -> None:
+def exact_timings(scenes, backend: str, device: str) -> None:
     print(f"{'scene':<22} {'size':>9} {'triangles':>10} {'render ms':>10} {'cast ms':>9}")
     for scene in scenes:
-        renderer = ExactRenderer(scene)
+        renderer = ExactRenderer(scene, backend=backend, device=device)
         camera = scene.cameras[0]
         for height, width in SIZES:
             K = camera.intrinsics(height, width)
@@ -32,13 +34,15 @@ def exact_timings(scenes) -> None:
             )
 
 
-def differentiable_timings(scenes, height: int = 240, width: int = 320) -> dict[str, list[float]]:
+def differentiable_timings(
+    scenes, backend: str, device: str, height: int = 240, width: int = 320
+) -> dict[str, list[float]]:
     """Prints the table; returns per-scene ms of the exact render and of the default configuration."""
     print(f"\nDifferentiableRenderer forward+backward at {height}x{width} (supersample 2, guard band 16)")
     summary: dict[str, list[float]] = {"exact": [], "default": []}
     print(f"{'scene':<22} {'mode':<34} {'ms':>8}")
     for scene in scenes:
-        renderer = ExactRenderer(scene)
+        renderer = ExactRenderer(scene, backend=backend, device=device)
         camera = scene.cameras[0]
         K = camera.intrinsics(height, width)
         base = camera.world_T_cam[None]
@@ -64,12 +68,20 @@ def differentiable_timings(scenes, height: int = 240, width: int = 320) -> dict[
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--backend", default="auto", help="ray caster: auto, open3d or warp")
+    parser.add_argument("--device", default="cpu", help="where the rays are cast (cpu, cuda)")
+    args = parser.parse_args()
+    try:
+        backend = resolve_backend(args.backend, args.device)
+    except ValueError as error:
+        parser.exit(2, f"{parser.prog}: error: {error}\n")
     scenes = bench_scenes()
-    exact_timings(scenes)
-    summary = differentiable_timings(scenes)
+    exact_timings(scenes, backend, args.device)
+    summary = differentiable_timings(scenes, backend, args.device)
     print(
         f"render exact_ms_mean={statistics.mean(summary['exact']):.0f} "
-        f"differentiable_default_ms_mean={statistics.mean(summary['default']):.0f}"
+        f"differentiable_default_ms_mean={statistics.mean(summary['default']):.0f} backend={backend}"
     )
 
 

@@ -2,13 +2,14 @@
 on the three shared scenes, which no training run ever sees.
 
 - Generated: 200 views of furnished rooms and 200 of box rooms from seed 7 (``HELD_OUT_SEED``, which
-  ``kadv-train-tiny`` refuses to train or validate on), at 240 x 320.
+  ``kadv-train-tiny`` refuses to train or validate on), at 240 x 320; with ``--lighting baked`` every
+  room is lit by its baked global illumination (``TRAINING_BAKE``), else by random direct shading.
 - Shared scenes: each scene's file camera plus 20 valid views drawn as the attack draws init-view
   candidates (``sample_valid_views``, unranked: seed 0, then seeds 1, 2, ... while fewer than 20
   are found, as in the Japanese classroom, whose 220 m ground puts most candidates outside), at
-  180 x 320; the mean is over all 63 views.
+  180 x 320, under ``--lighting`` (default: the renderer's); the mean is over all 63 views.
 
-Run: .venv/bin/python benchmarks/tiny_accuracy.py [--kadv-tiny FILE] [--kadv-tiny-dpt DIR]
+Run: .venv/bin/python benchmarks/tiny_accuracy.py [--kadv-tiny FILE] [--kadv-tiny-dpt DIR] [--lighting direct|baked]
 (other weights than the shipped ones, e.g. a training run's).
 """
 
@@ -29,7 +30,7 @@ from kadv.models import load_model
 from kadv.models.tiny import TINY_WEIGHTS
 from kadv.models.tiny_dpt import TINY_DPT_DIR
 from kadv.penalties import PenaltyConfig
-from kadv.render import ExactRenderer
+from kadv.render import ExactRenderer, Shading
 from kadv.scenes import load_scene
 
 SAMPLED_VIEWS = 20
@@ -37,10 +38,10 @@ SAMPLING_SEEDS = 10
 HEIGHT, WIDTH = 180, 320
 
 
-def shared_scene_views(name: str) -> ViewBatch:
-    """The file camera and ``SAMPLED_VIEWS`` sampled valid views of a shared scene."""
+def shared_scene_views(name: str, lighting: str) -> ViewBatch:
+    """The file camera and ``SAMPLED_VIEWS`` sampled valid views of a shared scene, lit by ``lighting``."""
     scene = load_scene(scenes_root() / name / "scene.xml")
-    renderer = ExactRenderer(scene)
+    renderer = ExactRenderer(scene, Shading(lighting=lighting))
     config = InitViewConfig()
     camera = scene.cameras[0]
     sampled = torch.zeros(0, 4, 4, dtype=torch.float64)
@@ -79,14 +80,17 @@ def main() -> None:
     parser.add_argument(
         "--models", nargs="+", default=["kadv_tiny", "kadv_tiny_dpt"], choices=["kadv_tiny", "kadv_tiny_dpt"]
     )
+    parser.add_argument("--lighting", default=Shading().lighting, choices=["direct", "baked"])
     args = parser.parse_args()
     weights = {"kadv_tiny": args.kadv_tiny, "kadv_tiny_dpt": args.kadv_tiny_dpt}
     models = {name: load_model(name, weights=weights[name]) for name in args.models}
+    baked_share = 1.0 if args.lighting == "baked" else 0.0
     held_out = {
-        "furnished": render_procedural_views(200, HELD_OUT_SEED, 240, 320, furnished_share=1.0, progress=False),
-        "box rooms": render_procedural_views(200, HELD_OUT_SEED, 240, 320, furnished_share=0.0, progress=False),
+        label: render_procedural_views(200, HELD_OUT_SEED, 240, 320, furnished_share=share, baked_share=baked_share)
+        for label, share in (("furnished", 1.0), ("box rooms", 0.0))
     }
-    shared = {name: shared_scene_views(name) for name in REAL_SCENES}
+    shared = {name: shared_scene_views(name, args.lighting) for name in REAL_SCENES}
+    print(f"lighting: {args.lighting}")
     columns = [*held_out, *(f"{name} file" for name in shared), *(f"{name} sampled" for name in shared), "shared mean"]
     print("| model | " + " | ".join(columns) + " |")
     print("|---" * (len(columns) + 1) + "|")

@@ -34,10 +34,10 @@ from kadv.cli.common import (
     checks_overrides,
     config_int,
     model_from_config,
+    renderer_from_config,
     reports_user_errors,
     scene_from_config,
     settings_from_node,
-    shading_from_config,
 )
 from kadv.device import resolve_device
 from kadv.io import atomic_write
@@ -125,7 +125,7 @@ def main(cfg: DictConfig) -> float:
         supersample=supersample, **OmegaConf.to_container(cfg.render.differentiable, resolve=True)
     )
     scene = scene_from_config(cfg.scene)
-    renderer = ExactRenderer(scene, shading_from_config(cfg.render))
+    renderer = renderer_from_config(scene, cfg.render, device)
     model = model_from_config(cfg.model)
     loss = depth_loss(
         cfg.loss.kind, cfg.loss.get("vgg_weights"), config_int(cfg.loss.get("window_size", 11), "loss.window_size", 1)

@@ -31,7 +31,7 @@ from kadv.errors import WeightsUnavailable
 from kadv.geometry import look_at
 from kadv.io import write_json
 from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
-from kadv.render import BakeConfig, Shading
+from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.scenes import Scene, box_room, load_scene, procedural_room
 
 __all__ = [
@@ -249,6 +249,12 @@ def shading_from_config(cfg: DictConfig) -> Shading:
         lighting=cfg.get("lighting", "direct"),
         bake=settings_from_node(BakeConfig, bake, "render.bake"),
     )
+
+
+def renderer_from_config(scene: Scene, cfg: DictConfig, device: torch.device | str = "cpu") -> ExactRenderer:
+    """The exact renderer of ``scene`` that a ``render/`` node describes: its shading and its ray
+    caster (``render.backend``, on ``device``; a run saved before backends existed casts with auto)."""
+    return ExactRenderer(scene, shading_from_config(cfg), backend=cfg.get("backend", "auto"), device=device)
 
 
 def check_render_config(cfg: DictConfig) -> tuple[int, int, int]:

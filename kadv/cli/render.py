@@ -29,14 +29,13 @@ from kadv.cli.common import (
     camera_from_config,
     check_render_config,
     checks_overrides,
+    renderer_from_config,
     reports_user_errors,
     scene_from_config,
-    shading_from_config,
 )
 from kadv.geometry import intrinsics_from_fov
 from kadv.io import atomic_write
 from kadv.penalties import view_validity
-from kadv.render import ExactRenderer
 from kadv.report import save_depth_png, save_rgb_png
 
 log = logging.getLogger(__name__)
@@ -52,7 +51,7 @@ def main(cfg: DictConfig) -> None:
     world_T_cam, fov = camera_from_config(cfg.camera, scene)
     height, width, supersample = check_render_config(cfg.render)
     penalty = PenaltyConfig(**OmegaConf.to_container(cfg.penalty, resolve=True))
-    renderer = ExactRenderer(scene, shading_from_config(cfg.render))
+    renderer = renderer_from_config(scene, cfg.render)
     note = "as given"
     if cfg.camera.world_T_cam is None and cfg.camera.eye is None:
         world_T_cam, moved = clear_file_camera(renderer, world_T_cam, penalty.margin)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from kadv.cli.common import USER_ERRORS, model_from_config, scene_from_config, shading_from_config
+from kadv.cli.common import USER_ERRORS, model_from_config, renderer_from_config, scene_from_config
 from kadv.models import DepthModel
 from kadv.render import ExactRenderer
 from kadv.report.build import write_report
@@ -58,9 +58,7 @@ class _FromConfig:
     def renderer_of(self, run: RunRecord) -> ExactRenderer:
         if run.scene not in self.renderers:
             config = OmegaConf.create(run.config)
-            self.renderers[run.scene] = ExactRenderer(
-                scene_from_config(config.scene), shading_from_config(config.render)
-            )
+            self.renderers[run.scene] = renderer_from_config(scene_from_config(config.scene), config.render)
         return self.renderers[run.scene]
 
     def model_of(self, run: RunRecord) -> DepthModel:

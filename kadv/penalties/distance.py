@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-import open3d as o3d
 import torch
 
 from kadv.checks import check_shape
@@ -21,8 +19,8 @@ class _SurfaceDistance(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, centres: torch.Tensor, renderer: ExactRenderer) -> torch.Tensor:
-        query = o3d.core.Tensor(centres.detach().cpu().numpy().astype(np.float32))
-        closest = torch.from_numpy(renderer.raycasting_scene.compute_closest_points(query)["points"].numpy())
+        caster = renderer.caster
+        closest = caster.closest_points(centres.detach().to(caster.device, torch.float32))
         offset = centres.detach() - closest.to(centres)
         distance = offset.norm(dim=-1)
         ctx.save_for_backward(offset / distance.clamp_min(1e-12)[:, None])
@@ -37,7 +35,7 @@ class _SurfaceDistance(torch.autograd.Function):
 def distance_to_surface(renderer: ExactRenderer, centres: torch.Tensor) -> torch.Tensor:
     """Distance (B,) in metres from each centre (B, 3) to the nearest triangle of the scene.
 
-    Uses the renderer's Open3D scene (``compute_closest_points``); differentiable in ``centres``.
+    Uses the renderer's ray caster (closest points); differentiable in ``centres``.
 
     Raises:
         ValueError: on a wrong shape or NaN/inf centres.

@@ -1,7 +1,8 @@
-"""Exact renderer: Embree ray casting (Open3D) with view-independent shading.
+"""Exact renderer: ray casting (Open3D's Embree or Warp's BVH, :mod:`kadv.render.casting`) with
+view-independent shading.
 
-All cameras of a call are cast in one batch against one ``RaycastingScene`` built per scene.
-Values are exact and bit-identical across runs; nothing here carries a gradient.
+All cameras of a call are cast in one batch against one caster built per scene. Values are exact
+and bit-identical across runs; nothing here carries a gradient.
 """
 
 from __future__ import annotations
@@ -10,13 +11,13 @@ import math
 from dataclasses import dataclass, fields
 
 import numpy as np
-import open3d as o3d
 import torch
 from torch.nn import functional as F
 
 from kadv.checks import check_shape
 from kadv.geometry.camera import pixel_rays
 from kadv.geometry.vector import dot
+from kadv.render.casting import RayCaster, make_caster
 from kadv.render.lighting import (
     BakedLighting,
     coat_table,
@@ -82,33 +83,15 @@ class RayHits:
         return self.triangle_ids >= 0
 
 
-def _open3d_rays(origins: np.ndarray, directions: np.ndarray) -> o3d.core.Tensor:
-    """Open3D's (N, 6) float32 rays from origins and directions (N, 3)."""
-    rays = np.empty((len(origins), 6), np.float32)  # filled in place: no float64 copy of the pair
-    rays[:, :3], rays[:, 3:] = origins, directions
-    return o3d.core.Tensor(rays)
-
-
-def _raycasting_scene(vertices: np.ndarray, faces: np.ndarray) -> o3d.t.geometry.RaycastingScene:
-    """An Open3D ray-casting scene of triangles ``faces`` (F, 3) of ``vertices`` (V, 3); triangle ids
-    are the rows of ``faces``."""
-    raycasting_scene = o3d.t.geometry.RaycastingScene()
-    if len(faces):
-        raycasting_scene.add_triangles(
-            o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32))
-        )
-    return raycasting_scene
-
-
-def _cast(
-    raycasting_scene: o3d.t.geometry.RaycastingScene, origins: np.ndarray, directions: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _cast(caster: RayCaster, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """First hits of rays (N, 3): t (inf on a miss), triangle id (-1 on a miss) and barycentrics."""
-    result = raycasting_scene.cast_rays(_open3d_rays(origins, directions))
-    # Open3D's ids are uint32, 2**32 - 1 on a miss: read as int32, that is -1 (and scenes have far
-    # fewer than 2**31 triangles); one conversion instead of a comparison and a select
-    ids = result["primitive_ids"].numpy().view(np.int32).astype(np.int64)
-    return result["t_hit"].numpy().astype(np.float64), ids, result["primitive_uvs"].numpy().astype(np.float64)
+    t, ids, bary = caster.first_hits(*_rays(caster, origins, directions))
+    return t.cpu().numpy().astype(np.float64), ids.cpu().numpy(), bary.cpu().numpy().astype(np.float64)
+
+
+def _rays(caster: RayCaster, *arrays: np.ndarray) -> list[torch.Tensor]:
+    """float32 tensors on the caster's device of arrays (N, 3)."""
+    return [torch.from_numpy(np.asarray(a, np.float32).reshape(-1, 3)).to(caster.device) for a in arrays]
 
 
 def pixel_angle(K: torch.Tensor) -> float:
@@ -121,17 +104,31 @@ class ExactRenderer:
     """Ray-cast renderer of a :class:`Scene`.
 
     Args:
-        scene: the scene; its triangles go into one Open3D ``RaycastingScene`` reused by every call.
+        scene: the scene; its triangles go into one ray caster reused by every call.
         shading: shading parameters; with ``lighting="baked"`` the scene's lighting is read from the
             bake cache, or baked there first.
         progress: show the bake's progress bar.
+        backend: the ray caster: ``"open3d"`` (Embree, CPU), ``"warp"`` (Warp's BVH on ``device``)
+            or ``"auto"`` (Warp on CUDA, Open3D on the CPU).
+        device: where the rays are cast.
     """
 
-    def __init__(self, scene: Scene, shading: Shading | None = None, progress: bool = True) -> None:
+    def __init__(
+        self,
+        scene: Scene,
+        shading: Shading | None = None,
+        progress: bool = True,
+        backend: str = "auto",
+        device: torch.device | str = "cpu",
+    ) -> None:
         self.scene = scene
         self.shading = shading or Shading()
         self.lights = scene_lights(scene, self.shading)
-        self.raycasting_scene = _raycasting_scene(scene.vertices, scene.faces)
+
+        def caster(vertices: np.ndarray, faces: np.ndarray) -> RayCaster:
+            return make_caster(vertices, faces, backend, device)
+
+        self.caster = caster(scene.vertices, scene.faces)
         # A ray that met a transparent texel continues in two smaller scenes: the first hit among the
         # opaque materials' triangles, and every hit on the alpha-masked ones (a few, where listing
         # them in the whole scene would list every wall behind).
@@ -139,8 +136,8 @@ class ExactRenderer:
         self._masked_face = np.r_[masked_faces, False]  # per triangle, and a False that a miss (id -1) reads
         self._opaque_faces, self._masked_faces = np.flatnonzero(~masked_faces), np.flatnonzero(masked_faces)
         if len(self._masked_faces):
-            self._opaque_scene = _raycasting_scene(scene.vertices, scene.faces[self._opaque_faces])
-            self._masked_scene = _raycasting_scene(scene.vertices, scene.faces[self._masked_faces])
+            self._opaque_scene = caster(scene.vertices, scene.faces[self._opaque_faces])
+            self._masked_scene = caster(scene.vertices, scene.faces[self._masked_faces])
         # shading reads these per hit: torch copies made once
         self._pyramids = {i: mip_pyramid(m.texture) for i, m in enumerate(scene.materials) if m.texture is not None}
         self._opacity = {
@@ -162,9 +159,7 @@ class ExactRenderer:
             self._sky = sky_emitters(scene)
             emitters = scene.emitters.area_triangles
             if len(emitters):  # the file's lamps and glowing panels, seen as a camera sees them
-                self._emitter_scene = _raycasting_scene(
-                    emitters.reshape(-1, 3), np.arange(3 * len(emitters)).reshape(-1, 3)
-                )
+                self._emitter_scene = caster(emitters.reshape(-1, 3), np.arange(3 * len(emitters)).reshape(-1, 3))
                 cross = np.cross(emitters[:, 1] - emitters[:, 0], emitters[:, 2] - emitters[:, 0])
                 self._emitter_normals = torch.from_numpy(cross)
                 self._emitter_colour = tone_map(
@@ -179,7 +174,7 @@ class ExactRenderer:
         """
         origins = origins.reshape(-1, 3)
         directions = directions.reshape(-1, 3)
-        t, ids, bary = _cast(self.raycasting_scene, origins, directions)
+        t, ids, bary = _cast(self.caster, origins, directions)
         if len(self._masked_faces):
             # the few rays that met a transparent texel take their first opaque hit from one cast and
             # one list of intersections, however many leaves they pass
@@ -206,23 +201,16 @@ class ExactRenderer:
     def intersections(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, ...]:
         """Every opaque intersection of rays (N, 3), sorted by ray then distance: ray index (M,),
         parameter t (M,), triangle id (M,) and barycentrics (M, 2)."""
-        return self._list_opaque(self.raycasting_scene, None, origins, directions)
+        return self._list_opaque(self.caster, None, origins, directions)
 
     def _list_opaque(
-        self,
-        raycasting_scene: o3d.t.geometry.RaycastingScene,
-        faces: np.ndarray | None,
-        origins: np.ndarray,
-        directions: np.ndarray,
+        self, caster: RayCaster, faces: np.ndarray | None, origins: np.ndarray, directions: np.ndarray
     ) -> tuple[np.ndarray, ...]:
-        """:meth:`intersections` in ``raycasting_scene``, whose triangle i is the scene's ``faces[i]``
-        (or i when ``faces`` is None)."""
-        result = raycasting_scene.list_intersections(_open3d_rays(origins, directions))
-        ray_ids = result["ray_ids"].numpy().astype(np.int64)
-        t = result["t_hit"].numpy().astype(np.float64)
-        ids = result["primitive_ids"].numpy().astype(np.int64)
+        """:meth:`intersections` in ``caster``, whose triangle i is the scene's ``faces[i]`` (or i
+        when ``faces`` is None)."""
+        ray_ids, t, ids, bary = (x.cpu().numpy() for x in caster.all_hits(*_rays(caster, origins, directions)))
+        t, bary = t.astype(np.float64), bary.astype(np.float64)
         ids = ids if faces is None else faces[ids]
-        bary = result["primitive_uvs"].numpy().astype(np.float64)
         if len(t):
             opaque = ~self.see_through(ids, bary)
             ray_ids, t, ids, bary = ray_ids[opaque], t[opaque], ids[opaque], bary[opaque]

@@ -1,0 +1,108 @@
+"""Ray casting behind one small interface, so the renderer, the layers, the silhouette term, the
+validity checks, the bake and the penalty are written once for every backend.
+
+Two backends implement :class:`RayCaster`: Open3D's Embree ``RaycastingScene`` (the CPU default)
+and NVIDIA Warp's BVH (:mod:`kadv.render.warp_caster`, on CUDA or Warp's CPU device; imported only
+when a Warp caster is built). Rays and results are torch tensors on the caster's device.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+import open3d as o3d
+import torch
+
+from kadv.device import resolve_device
+
+__all__ = ["BACKENDS", "Open3DCaster", "RayCaster", "make_caster", "resolve_backend"]
+
+BACKENDS = ("auto", "open3d", "warp")
+
+
+class RayCaster(ABC):
+    """Ray queries against one triangle mesh; triangle ids are the rows of its ``faces``.
+
+    Barycentrics follow Open3D: a hit (u, v) on triangle (a, b, c) lies at (1 - u - v) a + u b + v c.
+    Rays are (N, 3) float32 origins and directions on :attr:`device`; t is the ray parameter
+    (z-depth for directions with z = 1).
+    """
+
+    device: torch.device
+
+    @abstractmethod
+    def first_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """First hit of each ray: t (N,) float32 (inf on a miss), triangle id (N,) int64 (-1 on a miss)
+        and barycentrics (N, 2) float32."""
+
+    @abstractmethod
+    def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """Every hit of the rays, in no order: ray index (M,) int64, t (M,) float32, triangle id (M,)
+        int64 and barycentrics (M, 2) float32."""
+
+    @abstractmethod
+    def closest_points(self, points: torch.Tensor) -> torch.Tensor:
+        """(N, 3) float32 closest surface point to each of ``points`` (N, 3) float32."""
+
+
+class Open3DCaster(RayCaster):
+    """Open3D's Embree ``RaycastingScene`` on the CPU."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
+        self.device = torch.device("cpu")
+        self.scene = o3d.t.geometry.RaycastingScene()
+        if len(faces):
+            self.scene.add_triangles(
+                o3d.core.Tensor(vertices.astype(np.float32)), o3d.core.Tensor(faces.astype(np.uint32))
+            )
+
+    @staticmethod
+    def _rays(origins: torch.Tensor, directions: torch.Tensor) -> o3d.core.Tensor:
+        return o3d.core.Tensor(torch.cat([origins, directions], dim=1).numpy())
+
+    def first_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        result = self.scene.cast_rays(self._rays(origins, directions))
+        # Open3D's ids are uint32, 2**32 - 1 on a miss: read as int32, that is -1 (and scenes have far
+        # fewer than 2**31 triangles); one conversion instead of a comparison and a select
+        ids = torch.from_numpy(result["primitive_ids"].numpy().view(np.int32)).long()
+        return torch.from_numpy(result["t_hit"].numpy()), ids, torch.from_numpy(result["primitive_uvs"].numpy())
+
+    def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        result = self.scene.list_intersections(self._rays(origins, directions))
+        return (
+            torch.from_numpy(result["ray_ids"].numpy()).long(),
+            torch.from_numpy(result["t_hit"].numpy()),
+            torch.from_numpy(result["primitive_ids"].numpy()).long(),
+            torch.from_numpy(result["primitive_uvs"].numpy()),
+        )
+
+    def closest_points(self, points: torch.Tensor) -> torch.Tensor:
+        return torch.from_numpy(self.scene.compute_closest_points(o3d.core.Tensor(points.numpy()))["points"].numpy())
+
+
+def resolve_backend(backend: str, device: torch.device | str = "cpu") -> str:
+    """The backend that ``backend`` names on ``device``: "auto" is Warp on CUDA and Open3D on the CPU.
+
+    Raises:
+        ValueError: naming ``render.backend`` when it is none of :data:`BACKENDS`, or Open3D on CUDA.
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"render.backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    device = resolve_device(device)
+    if backend == "auto":
+        return "warp" if device.type == "cuda" else "open3d"
+    if backend == "open3d" and device.type != "cpu":
+        raise ValueError(f"render.backend=open3d casts on the CPU only, not on {device}: use render.backend=warp")
+    return backend
+
+
+def make_caster(
+    vertices: np.ndarray, faces: np.ndarray, backend: str = "auto", device: torch.device | str = "cpu"
+) -> RayCaster:
+    """A :class:`RayCaster` of triangles ``faces`` (F, 3) of ``vertices`` (V, 3) on ``device``."""
+    if resolve_backend(backend, device) == "warp":
+        from kadv.render.warp_caster import WarpCaster  # Warp loads only when a Warp caster is built
+
+        return WarpCaster(vertices, faces, resolve_device(device))
+    return Open3DCaster(vertices, faces)

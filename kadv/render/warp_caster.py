@@ -1,0 +1,176 @@
+"""The Warp ray-casting backend: one ``wp.Mesh`` BVH per scene, queried by kernels on CUDA or on
+Warp's CPU device, with torch tensors shared in and out without copies (``wp.from_torch``).
+
+Importing this module imports Warp and initialises it; :func:`kadv.render.casting.make_caster`
+imports it only when a Warp caster is built. Kernels compile on first use and are cached by Warp
+(``wp.config.kernel_cache_dir``, by default ``~/.cache/warp/<version>``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+import torch
+import warp as wp
+
+from kadv.render.casting import RayCaster
+
+__all__ = ["WarpCaster"]
+
+wp.config.quiet = True
+wp.init()
+
+# a hit is listed after the previous one when it lies this much further along the ray (relative to
+# its t, and at least _MIN_STEP): coincident triangles (t equal to float32 precision) list once
+_RELATIVE_STEP = 1e-6
+_MIN_STEP = 1e-7
+_MAX_HITS = 256  # hits listed per ray at most
+
+
+@wp.kernel
+def _first_hits(
+    mesh: wp.uint64,
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    t: wp.array(dtype=wp.float32),
+    ids: wp.array(dtype=wp.int64),
+    bary: wp.array(dtype=wp.vec2),
+):
+    i = wp.tid()
+    query = wp.mesh_query_ray(mesh, origins[i], directions[i], 1.0e30)
+    if query.result:
+        t[i] = query.t
+        ids[i] = wp.int64(query.face)
+        # Warp's (u, v) weigh the triangle's first two corners; Open3D's the last two
+        bary[i] = wp.vec2(query.v, 1.0 - query.u - query.v)
+    else:
+        t[i] = wp.inf
+        ids[i] = wp.int64(-1)
+        bary[i] = wp.vec2(0.0, 0.0)
+
+
+@wp.func
+def _next_start(t: float):
+    return t + wp.max(t * _RELATIVE_STEP, _MIN_STEP)
+
+
+@wp.kernel
+def _count_hits(
+    mesh: wp.uint64,
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    counts: wp.array(dtype=wp.int32),
+):
+    i = wp.tid()
+    start = wp.float32(0.0)  # a dynamic variable: the loop updates it
+    count = wp.int32(0)
+    while count < _MAX_HITS:
+        query = wp.mesh_query_ray(mesh, origins[i] + directions[i] * start, directions[i], 1.0e30)
+        if not query.result:
+            break
+        count += 1
+        start = _next_start(start + query.t)
+    counts[i] = count
+
+
+@wp.kernel
+def _list_hits(
+    mesh: wp.uint64,
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    offsets: wp.array(dtype=wp.int64),
+    counts: wp.array(dtype=wp.int32),
+    ray_ids: wp.array(dtype=wp.int64),
+    t: wp.array(dtype=wp.float32),
+    ids: wp.array(dtype=wp.int64),
+    bary: wp.array(dtype=wp.vec2),
+):
+    i = wp.tid()
+    start = wp.float32(0.0)  # a dynamic variable: the loop updates it
+    slot = offsets[i]
+    for _ in range(counts[i]):
+        query = wp.mesh_query_ray(mesh, origins[i] + directions[i] * start, directions[i], 1.0e30)
+        ray_ids[slot] = wp.int64(i)
+        t[slot] = start + query.t
+        ids[slot] = wp.int64(query.face)
+        bary[slot] = wp.vec2(query.v, 1.0 - query.u - query.v)
+        slot += wp.int64(1)
+        start = _next_start(start + query.t)
+
+
+@wp.kernel
+def _closest_points(
+    mesh: wp.uint64,
+    points: wp.array(dtype=wp.vec3),
+    closest: wp.array(dtype=wp.vec3),
+):
+    i = wp.tid()
+    query = wp.mesh_query_point_no_sign(mesh, points[i], 1.0e30)
+    closest[i] = wp.mesh_eval_position(mesh, query.face, query.u, query.v)
+
+
+class WarpCaster(RayCaster):
+    """Ray queries against a ``wp.Mesh`` BVH on ``device`` (the CPU or a CUDA device)."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, device: torch.device) -> None:
+        self.device = device
+        self._wp_device = wp.device_from_torch(device)
+        self._empty = len(faces) == 0
+        if self._empty:
+            return
+        points = torch.as_tensor(vertices, dtype=torch.float32, device=device).contiguous()
+        indices = torch.as_tensor(np.asarray(faces, np.int32).reshape(-1), device=device).contiguous()
+        # the mesh keeps its arrays: they must outlive it
+        self._points = wp.from_torch(points, dtype=wp.vec3)
+        self._indices = wp.from_torch(indices, dtype=wp.int32)
+        self.mesh = wp.Mesh(points=self._points, indices=self._indices)
+
+    def _launch(self, kernel, count: int, inputs: list) -> None:
+        """Launch ``kernel`` over ``count`` threads on torch's current stream; torch tensors in
+        ``inputs`` are shared with it (no copies)."""
+        if count == 0 or self._empty:
+            return
+        arrays = [_array(x) if isinstance(x, torch.Tensor) else x for x in inputs]
+        stream = wp.stream_from_torch(self.device) if self.device.type == "cuda" else None
+        with wp.ScopedStream(stream) if stream is not None else contextlib.nullcontext():
+            wp.launch(kernel, dim=count, inputs=[self.mesh.id, *arrays], device=self._wp_device)
+
+    def _rays(self, *rays: torch.Tensor) -> list[torch.Tensor]:
+        return [x.to(self.device, torch.float32).contiguous() for x in rays]
+
+    def first_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        n = len(origins)
+        t = torch.full((n,), torch.inf, device=self.device)
+        ids = torch.full((n,), -1, dtype=torch.int64, device=self.device)
+        bary = torch.zeros(n, 2, device=self.device)
+        self._launch(_first_hits, n, [*self._rays(origins, directions), t, ids, bary])
+        return t, ids, bary
+
+    def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        n = len(origins)
+        counts = torch.zeros(n, dtype=torch.int32, device=self.device)
+        rays = self._rays(origins, directions)
+        self._launch(_count_hits, n, [*rays, counts])
+        offsets = torch.cumsum(counts, 0, dtype=torch.int64) - counts
+        total = int(counts.sum())
+        ray_ids = torch.empty(total, dtype=torch.int64, device=self.device)
+        t = torch.empty(total, device=self.device)
+        ids = torch.empty(total, dtype=torch.int64, device=self.device)
+        bary = torch.empty(total, 2, device=self.device)
+        if total:
+            self._launch(_list_hits, n, [*rays, offsets, counts, ray_ids, t, ids, bary])
+        return ray_ids, t, ids, bary
+
+    def closest_points(self, points: torch.Tensor) -> torch.Tensor:
+        closest = torch.full((len(points), 3), torch.inf, device=self.device)
+        self._launch(_closest_points, len(points), [*self._rays(points), closest])
+        return closest
+
+
+def _array(x: torch.Tensor) -> wp.array:
+    """``x`` as a Warp array without a copy: (N, 3) as vec3, (N, 2) as vec2, (N,) as scalars."""
+    x = x.contiguous()
+    if x.ndim == 2:
+        return wp.from_torch(x, dtype={3: wp.vec3, 2: wp.vec2}[x.shape[1]])
+    return wp.from_torch(x)
