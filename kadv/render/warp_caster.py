@@ -9,6 +9,7 @@ imports it only when a Warp caster is built. Kernels compile on first use and ar
 from __future__ import annotations
 
 import contextlib
+import os
 
 import numpy as np
 import torch
@@ -18,7 +19,7 @@ from kadv.render.casting import RayCaster
 
 __all__ = ["WarpCaster"]
 
-wp.config.quiet = True
+wp.config.log_level = wp.LOG_WARNING  # no greeting, no line per module load
 wp.init()
 
 # a hit is listed after the previous one when it lies this much further along the ray (relative to
@@ -119,6 +120,7 @@ class WarpCaster(RayCaster):
         self._empty = len(faces) == 0
         if self._empty:
             return
+        _check_fits(len(vertices), len(faces), device)
         points = torch.as_tensor(vertices, dtype=torch.float32, device=device).contiguous()
         indices = torch.as_tensor(np.asarray(faces, np.int32).reshape(-1), device=device).contiguous()
         # the mesh keeps its arrays: they must outlive it
@@ -166,6 +168,26 @@ class WarpCaster(RayCaster):
         closest = torch.full((len(points), 3), torch.inf, device=self.device)
         self._launch(_closest_points, len(points), [*self._rays(points), closest])
         return closest
+
+
+def _free_bytes(device: torch.device) -> int:
+    """Bytes free on ``device``: the CUDA device's free memory, or the machine's available memory."""
+    if device.type == "cuda":
+        return torch.cuda.mem_get_info(device)[0]
+    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
+def _check_fits(vertices: int, faces: int, device: torch.device) -> None:
+    """Raise a ValueError with the figures when a scene's mesh and BVH would not fit on ``device``."""
+    # float32 points, int32 indices, and a BVH of 2F - 1 nodes of two 16-byte halves plus
+    # per-primitive bounds and indices, built with the same again in scratch
+    needed = 12 * vertices + 12 * faces + 2 * (64 * faces + 28 * faces)
+    free = _free_bytes(device)
+    if needed > free:
+        raise ValueError(
+            f"scene: {faces} triangles need about {needed / 2**20:.0f} MiB of {device} memory for Warp's "
+            f"ray-casting BVH, and {free / 2**20:.0f} MiB are free (render.backend=open3d casts on the CPU)"
+        )
 
 
 def _array(x: torch.Tensor) -> wp.array:

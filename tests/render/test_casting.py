@@ -63,7 +63,7 @@ def test_warp_lists_every_hit_along_a_ray_through_a_closed_box() -> None:
     caster = make_caster(room.vertices, room.faces, "warp")
     origins = torch.tensor([[-1.0, 1.5, 2.5], [2.0, 1.5, 2.5]])
     directions = torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    ray_ids, t, ids, bary = caster.all_hits(origins, directions)
+    ray_ids, t, _, _ = caster.all_hits(origins, directions)
     # the first ray enters at x = 0 and leaves at x = 4; the second starts inside and meets z = 5
     assert sorted(t[ray_ids == 0].tolist()) == pytest.approx([1.0, 5.0], abs=1e-5)
     assert t[ray_ids == 1].tolist() == pytest.approx([2.5], abs=1e-5)
@@ -79,10 +79,19 @@ def test_warp_lists_every_hit_along_a_ray_through_a_closed_box() -> None:
 def test_backend_choice_and_bad_names() -> None:
     assert resolve_backend("auto", "cpu") == "open3d"
     assert resolve_backend("warp", "cpu") == "warp"
-    with pytest.raises(ValueError, match="render.backend must be one of auto, open3d, warp, got 'bogus'"):
+    with pytest.raises(ValueError, match=r"render\.backend must be one of auto, open3d, warp, got .bogus."):
         resolve_backend("bogus")
 
 
 def test_importing_kadv_does_not_import_warp() -> None:
     code = "import sys, kadv, kadv.render; kadv.ExactRenderer(kadv.box_room(seed=0)); print('warp' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout == "False\n"
+
+
+def test_a_scene_too_large_for_the_device_is_refused_with_the_figures(monkeypatch) -> None:
+    from kadv.render import warp_caster
+
+    room = box_room(seed=0)
+    monkeypatch.setattr(warp_caster, "_free_bytes", lambda device: 1024)
+    with pytest.raises(ValueError, match=rf"scene: {room.num_triangles} triangles need about .* MiB of cpu memory"):
+        make_caster(room.vertices, room.faces, "warp")
