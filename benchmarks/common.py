@@ -13,6 +13,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import yaml
+
 from kadv.scenes import Scene, box_room, load_scene
 
 REAL_SCENES = ("grey_white_room", "modern_hall", "japanese_classroom")
@@ -20,6 +22,13 @@ REAL_SCENES = ("grey_white_room", "modern_hall", "japanese_classroom")
 
 def scenes_root() -> Path:
     return Path(os.environ.get("KADV_TEST_SCENES", Path(__file__).resolve().parents[2] / "shared" / "scenes"))
+
+
+def default_lighting() -> str:
+    """The lighting the commands render with by default (``render.lighting`` in conf/render/exact.yaml)."""
+    return yaml.safe_load((Path(__file__).resolve().parents[1] / "conf" / "render" / "exact.yaml").read_text())[
+        "lighting"
+    ]
 
 
 def bench_scenes() -> list[Scene]:

@@ -21,7 +21,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from common import REAL_SCENES, scenes_root
+from common import REAL_SCENES, default_lighting, scenes_root
 from tqdm import tqdm
 
 from kadv.attack import InitViewConfig, PenaltyConfig, file_init_views, sample_init_views
@@ -123,7 +123,7 @@ def main() -> None:
     lightings = args.lightings.split(",")
     if not set(lightings) <= {"direct", "baked"}:
         parser.error(f"--lightings: each must be direct or baked, got {args.lightings!r}")
-    default = Shading().lighting
+    default = default_lighting()
     model = load_model("kadv_tiny")
     metrics = _METRICS
     header = ["view", "depth_rel_err", *(f"{m} {lighting}" for lighting in lightings for m in metrics)]

@@ -20,7 +20,7 @@ import statistics
 from pathlib import Path
 
 import torch
-from common import REAL_SCENES, scenes_root, timings
+from common import REAL_SCENES, default_lighting, scenes_root, timings
 
 from kadv.attack import InitViewConfig, sample_valid_views
 from kadv.datasets import HELD_OUT_SEED, ViewBatch, render_procedural_views
@@ -80,7 +80,7 @@ def main() -> None:
     parser.add_argument(
         "--models", nargs="+", default=["kadv_tiny", "kadv_tiny_dpt"], choices=["kadv_tiny", "kadv_tiny_dpt"]
     )
-    parser.add_argument("--lighting", default=Shading().lighting, choices=["direct", "baked"])
+    parser.add_argument("--lighting", default=default_lighting(), choices=["direct", "baked"])
     args = parser.parse_args()
     weights = {"kadv_tiny": args.kadv_tiny, "kadv_tiny_dpt": args.kadv_tiny_dpt}
     models = {name: load_model(name, weights=weights[name]) for name in args.models}

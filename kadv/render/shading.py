@@ -43,7 +43,9 @@ class Shading:
             the scene bounds.
         background: RGB of rays that hit nothing.
         lighting: ``"direct"`` (ambient + Lambertian lights, no shadows) or ``"baked"`` (the
-            scene's emitters with shadows and diffuse inter-reflection, baked once per scene).
+            scene's emitters with shadows and diffuse inter-reflection, baked once per scene). The
+            commands default to ``"baked"`` (``render.lighting``); a renderer built here shades
+            ``"direct"`` unless asked, so that building one never starts a bake of minutes.
         bake: the bake's settings, for ``lighting="baked"``.
     """
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from kadv.diagnostics import FUNCTIONALS, gradient_check_poses, occlusion_edge_mask, smooth_weights
@@ -29,9 +30,12 @@ def test_occlusion_edges_are_marked_only_where_depth_jumps() -> None:
     assert float(edges.float().mean()) > 0.05  # boxes in front of walls
 
 
-def test_gradient_check_on_box_room_poses_meets_the_thresholds() -> None:
-    """A fast version of benchmarks/gradcheck.py on three box-room poses, the default configuration."""
-    checks = gradient_check_poses(ExactRenderer(box_room(seed=0)), 3, 0, 70.0, 48, 64, {"default": DiffRenderConfig()})
+@pytest.mark.parametrize("backend", ["open3d", "warp"])
+def test_gradient_check_on_box_room_poses_meets_the_thresholds(backend: str) -> None:
+    """A fast version of benchmarks/gradcheck.py on three box-room poses, the default configuration,
+    with either ray caster."""
+    renderer = ExactRenderer(box_room(seed=0), backend=backend)
+    checks = gradient_check_poses(renderer, 3, 0, 70.0, 48, 64, {"default": DiffRenderConfig()})
     scores = np.array([[c.score(f) for f in FUNCTIONALS] for c in checks["default"]])
     assert np.median(scores[:, 0]) >= 0.99 and np.median(scores[:, 1]) >= 0.99  # interior rgb, depth
     assert np.median(scores[:, 2]) >= 0.95 and np.median(scores[:, 3]) >= 0.95  # full rgb, depth
