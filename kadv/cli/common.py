@@ -139,6 +139,15 @@ def _composition_error(config_name: str, arguments: list[str]) -> str | None:
             parent, _, key = cause.full_key.rpartition(".")
             return f"{message}: {parent or 'the config'} has no key {key!r}" + _keys_of(config_name, firsts, parent)
         return _one_line(f"{message} {cause or ''}")
+    for override in overrides:
+        parent, _, key = override.key_or_group.rpartition(".")
+        # "+node.key=value" adds a key Hydra would otherwise refuse; in kadv's own nodes no code reads
+        # it, so it is refused as a misspelt key is (Hydra's nodes and the open ones take any key)
+        if override.is_add() and parent and not parent.startswith("hydra") and parent not in OPEN_NODES:
+            others = [f for f in firsts if f.lstrip("+~").partition("=")[0] != override.key_or_group]
+            found = OmegaConf.select(_compose(config_name, others), override.key_or_group)
+            if found is None:
+                return f"{override.input_line}: {parent} has no key {key!r}" + _keys_of(config_name, firsts, parent)
     return None
 
 
@@ -162,6 +171,14 @@ def _compose(config_name: str, overrides: list[str]) -> DictConfig:
 
 # Hydra's own flags; with any other (--cfg, --config-name, --help, ...) Hydra composes as it likes.
 _RUN_FLAGS = {"-m", "--multirun", "-r", "--run"}
+# nodes whose keys are the user's own (a custom model's keyword arguments): set without Hydra's "+"
+OPEN_NODES = ("model.args",)
+
+
+def _open_keys(arguments: list[str]) -> list[str]:
+    """``arguments`` with ``node.key=value`` under an open node written ``++node.key=value`` (add or
+    set), so that a user's keyword argument needs no "+"."""
+    return [f"++{a}" if any(a.startswith(f"{node}.") for node in OPEN_NODES) else a for a in arguments]
 
 
 def checks_overrides(command: str) -> Callable[[Callable[[], Any]], Callable[[], Any]]:
@@ -175,7 +192,7 @@ def checks_overrides(command: str) -> Callable[[Callable[[], Any]], Callable[[],
     def decorate(entry: Callable[[], Any]) -> Callable[[], Any]:
         @functools.wraps(entry)
         def wrapped() -> Any:
-            arguments = sys.argv[1:]
+            sys.argv[1:] = arguments = _open_keys(sys.argv[1:])
             message = _unknown_group_option(command, arguments)
             if message is None and all(a in _RUN_FLAGS or not a.startswith("-") for a in arguments):
                 message = _composition_error(command.replace("-", "_"), [a for a in arguments if a not in _RUN_FLAGS])

@@ -225,6 +225,8 @@ BAD_INPUTS = [
     ("kadv-render", ["render.lighting=sunny"], "render.lighting must be 'direct' or 'baked', got 'sunny'"),
     ("kadv-render", ["render.lighting=baked", "render.bake.rays=0"], "render.bake.rays must be an integer >= 1"),
     ("kadv-attack", ["render.lighting=baked", "+render.bake.samples=4"], "render.bake.samples"),
+    ("kadv-attack", ["+render.foo=1"], "+render.foo=1: render has no key 'foo'; it has: height, width"),
+    ("kadv-render", ["+render.shading.glow=2"], "render.shading has no key 'glow'; it has: ambient"),
     ("kadv-attack", ["render.backend=bogus"], "render.backend must be one of auto, open3d, warp, got 'bogus'"),
     ("kadv-render", ["scene=procedural", "scene.seed=abc"], "scene.seed must be an integer, got 'abc'"),
     ("kadv-render", ["scene=file", "scene.path=/no/such/room.glb"], "/no/such/room.glb"),

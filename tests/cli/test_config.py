@@ -10,7 +10,7 @@ from omegaconf import OmegaConf
 
 from kadv.attack import DEFAULT_METHOD, AttackConfig, InitViewConfig, get_method
 from kadv.cli.attack import attack_settings
-from kadv.cli.common import shading_from_config
+from kadv.cli.common import _open_keys, shading_from_config
 from kadv.models import EMBEDDED, PRESETS
 from kadv.models.train_tiny import TinyTrainConfig
 from kadv.penalties import PenaltyConfig
@@ -116,3 +116,10 @@ def test_paper_sweep_is_the_study_grid() -> None:
         10,
         "perceptual",
     )
+
+
+def test_a_custom_models_keyword_arguments_need_no_plus() -> None:
+    overrides = _open_keys(["model=custom", "model.args.width=4", "model.args.depth=2,3", "render.height=48"])
+    assert overrides == ["model=custom", "++model.args.width=4", "++model.args.depth=2,3", "render.height=48"]
+    cfg = _compose("kadv_attack", *overrides[:2], "++model.args.depth=2", overrides[3])
+    assert OmegaConf.to_container(cfg.model.args) == {"width": 4, "depth": 2}
