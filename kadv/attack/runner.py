@@ -64,6 +64,7 @@ def attack(
                 result.views.append(completed[index])
                 continue
             bar.set_description(f"{config.method} attack, init view {index + 1}/{len(init_views)}")
+            bar.set_postfix_str("", refresh=False)  # the previous init view's best is not this one's
             differentiable.reset()
             context = SearchContext(objective, differentiable, init, height, width, config)
             view_result = method.search(context, np.random.default_rng([seed, index]), bar)

@@ -2,11 +2,13 @@
 
 Every file is written atomically; ``summary.json`` is written last, so a run directory holding it
 is complete. Each init view's result is saved under ``partial/`` as soon as it is done, so an
-interrupted run resumes without recomputing (or rewriting) it.
+interrupted run resumes without recomputing (or rewriting) it; once the summary is written, the
+run needs none of it, and ``partial/`` goes (but for files set aside as unreadable).
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import logging
@@ -231,6 +233,12 @@ def write_run(
         init_views=per_view,
     )
     summary.write(run_dir / SUMMARY)
+    # after the summary: a run cut short before it still finds every finished init view there. Files
+    # set aside as unreadable stay for the user to look at.
+    for path in (run_dir / _PARTIAL).glob("init*.json"):
+        path.unlink()
+    with contextlib.suppress(OSError):
+        (run_dir / _PARTIAL).rmdir()
     return summary
 
 

@@ -6,6 +6,7 @@ import time
 import numpy as np
 import pytest
 import torch
+from tqdm import tqdm
 
 from kadv import DifferentiableRenderer, ExactRenderer
 from kadv.attack import (
@@ -22,6 +23,7 @@ from kadv.attack import (
     get_method,
     gradient_search,
     register_proposer,
+    runner,
     select_top_views,
     separated,
 )
@@ -256,3 +258,27 @@ def test_bad_method_settings_name_their_key() -> None:
         ValueError, match=r"attack.method=random needs attack.budget_evaluations or attack.budget_seconds"
     ):
         AttackConfig("random", budget_evaluations=None)
+
+
+def test_the_progress_bar_forgets_the_previous_init_views_best(tiny_objective, differentiable, file_view, monkeypatch):
+    shown: list[tuple[str, str]] = []
+
+    class Bar(tqdm):
+        def set_description(self, desc=None, refresh=True):
+            shown.append(("description", desc))
+            super().set_description(desc, refresh)
+
+        def set_postfix_str(self, s="", refresh=True):
+            shown.append(("postfix", s))
+            super().set_postfix_str(s, refresh)
+
+        def set_postfix(self, ordered_dict=None, refresh=True, **kwargs):
+            shown.append(("postfix", ",".join(f"{k}={v}" for k, v in kwargs.items())))
+            super().set_postfix(ordered_dict, refresh, **kwargs)
+
+    monkeypatch.setattr(runner, "tqdm", Bar)
+    _run(tiny_objective, differentiable, [file_view, file_view], method="random", budget_evaluations=6)
+    second = shown.index(("description", "random attack, init view 2/2"))
+    before = [value for kind, value in shown[:second] if kind == "postfix"]
+    assert before and before[-1].startswith("L_depth=")  # init view 1 showed its best
+    assert shown[second + 1] == ("postfix", "")  # and init view 2 starts without it

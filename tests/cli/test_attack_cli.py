@@ -17,6 +17,7 @@ from PIL import Image
 from transformers import CHMv2Config
 
 from kadv import box_room
+from kadv.report.summary import SCHEMA_VERSION
 
 BIN = Path(sys.executable).parent
 SMALL = [
@@ -136,28 +137,30 @@ def test_a_killed_run_resumes_without_redoing_finished_init_views(demo_runs: Pat
     assert result.returncode == 0, result.stderr
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["resumed_init_views"] == [0]
-    assert part.stat().st_mtime_ns == written
-    assert sorted(p.name for p in (tmp_path / "run" / "partial").iterdir()) == ["init0.json", "init1.json"]
+    # the finished run needs no partial results any more; the run it resumed used the one written
+    assert written and not (tmp_path / "run" / "partial").exists()
     assert (tmp_path / "run" / "trajectory.csv").read_bytes() == (demo_runs / "first" / "trajectory.csv").read_bytes()
+
+
+def test_a_finished_run_keeps_no_partial_results(demo_runs: Path) -> None:
+    assert (demo_runs / "first" / "summary.json").is_file() and not (demo_runs / "first" / "partial").exists()
 
 
 def test_unreadable_partial_files_are_set_aside_and_recomputed(demo_runs: Path, tmp_path: Path) -> None:
     run = tmp_path / "run"
     shutil.copytree(demo_runs / "second", run)
     (run / "summary.json").unlink()
+    (run / "partial").mkdir()
     cut = run / "partial" / "init0.json"
-    cut.write_text(cut.read_text()[:100])  # a file cut short mid-write by something other than kadv
+    cut.write_text(f'{{"schema": {SCHEMA_VERSION}, "init": {{"index": 0')  # cut short mid-write by something else
     older = run / "partial" / "init1.json"
-    data = json.loads(older.read_text())
-    older.write_text(json.dumps({**data, "schema": data["schema"] - 1}))  # a kadv whose results had another shape
+    older.write_text(json.dumps({"schema": SCHEMA_VERSION - 1, "records": []}))  # another kadv's results
     result = _run("kadv-attack", tmp_path, "run", *SMALL, "video=false")
     assert result.returncode == 0, result.stderr
     warnings = [line for line in (result.stdout + result.stderr).splitlines() if "cannot be read" in line]
     assert len(warnings) == 2 and "init0.json" in warnings[0] and "init1.json" in warnings[1], warnings
     assert "Expecting" in warnings[0] and "schema version" in warnings[1]
-    assert (run / "partial" / "init0.json.unreadable").is_file() and (
-        run / "partial" / "init1.json.unreadable"
-    ).is_file()
+    assert sorted(p.name for p in (run / "partial").iterdir()) == ["init0.json.unreadable", "init1.json.unreadable"]
     assert json.loads((run / "summary.json").read_text())["resumed_init_views"] == []
     assert (run / "trajectory.csv").read_bytes() == (demo_runs / "first" / "trajectory.csv").read_bytes()
 
