@@ -16,7 +16,7 @@ from kadv.attack.init_views import (
     save_init_params,
     score_views,
 )
-from kadv.attack.loop import Proposer, fitness, proposer_search
+from kadv.attack.loop import Proposer, fitness, proposer_search, register_proposer
 from kadv.attack.methods.cma import CMASettings
 from kadv.attack.methods.gradient import GradientSettings, gradient_ascent, gradient_search
 from kadv.attack.methods.hybrid import HybridSettings
@@ -33,7 +33,7 @@ from kadv.attack.records import (
     select_top_views,
     separated,
 )
-from kadv.attack.registry import METHODS, NoSettings, SearchMethod, get_method, register_method, register_proposer
+from kadv.attack.registry import METHODS, NoSettings, SearchMethod, get_method, register_method
 from kadv.attack.runner import attack
 from kadv.attack.search import DEFAULT_METHOD, AttackConfig, Clock, SearchContext
 from kadv.penalties import PenaltyConfig

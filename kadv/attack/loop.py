@@ -8,16 +8,19 @@ seconds budget ends. Proposers only propose.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
 from kadv.attack.records import InitViewResult, ViewRecord, incumbent_path
+from kadv.attack.registry import NoSettings, register_method
 from kadv.attack.search import SearchContext
 
-__all__ = ["Proposer", "fitness", "proposer_search"]
+__all__ = ["Proposer", "fitness", "proposer_search", "register_proposer"]
 
 
 def fitness(records: list[ViewRecord]) -> np.ndarray:
@@ -65,3 +68,14 @@ def proposer_search(
         bar.update(count)
         step += 1
     return context.result(records, incumbent_path(records))
+
+
+def register_proposer(name: str, settings: type = NoSettings) -> Callable[[type], type]:
+    """Class decorator: register an ask/tell :class:`Proposer` as method ``name``, driven by
+    :func:`proposer_search`."""
+
+    def decorate(proposer: type) -> type:
+        register_method(name, settings)(functools.partial(proposer_search, proposer))
+        return proposer
+
+    return decorate

@@ -2,20 +2,20 @@
 
 A method is a function ``search(context, rng, bar) -> InitViewResult`` with a settings dataclass
 (its ``attack.<name>`` config node). Black-box methods are written as ask/tell proposers
-(:class:`kadv.attack.loop.Proposer`) and registered with :func:`register_proposer`; the shared
-loop owns the budgets, the init view at step 0, the step guard, validity and records.
+(:class:`kadv.attack.loop.Proposer`) and registered with :func:`kadv.attack.loop.register_proposer`;
+the shared loop owns the budgets, the init view at step 0, the step guard, validity and records.
+The built-in methods register themselves when :mod:`kadv.attack` imports :mod:`kadv.attack.methods`.
+
+Dependencies point one way: registry <- search <- loop <- methods <- runner.
 """
 
 from __future__ import annotations
 
-import functools
-import importlib
-import pkgutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["METHODS", "NoSettings", "SearchMethod", "get_method", "register_method", "register_proposer"]
+__all__ = ["METHODS", "NoSettings", "SearchMethod", "get_method", "register_method"]
 
 
 @dataclass(frozen=True)
@@ -56,31 +56,8 @@ def register_method(
     return decorate
 
 
-def register_proposer(name: str, settings: type = NoSettings) -> Callable[[type], type]:
-    """Class decorator: register an ask/tell :class:`~kadv.attack.loop.Proposer` as method ``name``,
-    driven by the shared loop."""
-    from kadv.attack.loop import proposer_search
-
-    def decorate(proposer: type) -> type:
-        register_method(name, settings)(functools.partial(proposer_search, proposer))
-        return proposer
-
-    return decorate
-
-
-@functools.cache
-def _load_builtin() -> None:
-    """Import every module of :mod:`kadv.attack.methods` once, so each registers itself: adding a
-    method is adding a module there (and its YAML under ``conf/attack/``)."""
-    import kadv.attack.methods as package
-
-    for module in pkgutil.iter_modules(package.__path__):
-        importlib.import_module(f"{package.__name__}.{module.name}")
-
-
 def get_method(name: str) -> SearchMethod:
     """The method registered as ``name``; a ValueError naming the known ones otherwise."""
-    _load_builtin()
     if name not in METHODS:
         raise ValueError(f"attack.method must be one of {', '.join(sorted(METHODS))}, got {name!r}")
     return METHODS[name]

@@ -15,6 +15,7 @@ import torch
 from kadv.attack.init_views import InitView
 from kadv.attack.objective import Objective, ObjectiveTerms
 from kadv.attack.records import Budget, InitViewResult, ViewRecord, select_top_views
+from kadv.attack.registry import get_method
 from kadv.geometry import intrinsics_from_fov, matrix_to_axis_angle, perturb_world_T_cam
 from kadv.penalties import step_guard, view_validity
 from kadv.render import DifferentiableRenderer, RenderOutput
@@ -73,8 +74,6 @@ class AttackConfig:
     min_separation_deg: float = 3.0
 
     def __post_init__(self) -> None:
-        from kadv.attack.registry import get_method
-
         method = get_method(self.method)
         if self.settings is None:
             object.__setattr__(self, "settings", method.settings())
@@ -104,8 +103,6 @@ class AttackConfig:
     @property
     def evaluations(self) -> int | None:
         """Forward passes per init view: the budget, or the method's own end (None: unbounded)."""
-        from kadv.attack.registry import get_method
-
         natural = get_method(self.method).evaluations(self.settings)
         if self.budget_evaluations is None:
             return natural

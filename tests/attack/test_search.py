@@ -1,7 +1,9 @@
 from __future__ import annotations
 
+import ast
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -282,3 +284,14 @@ def test_the_progress_bar_forgets_the_previous_init_views_best(tiny_objective, d
     before = [value for kind, value in shown[:second] if kind == "postfix"]
     assert before and before[-1].startswith("L_depth=")  # init view 1 showed its best
     assert shown[second + 1] == ("postfix", "")  # and init view 2 starts without it
+
+
+def test_the_search_modules_import_each_other_in_one_direction() -> None:
+    layers = ["registry", "search", "loop", "methods", "runner"]
+    folder = Path(runner.__file__).parent
+    for index, name in enumerate(layers[:3]):
+        tree = ast.parse((folder / f"{name}.py").read_text())  # function-level imports included
+        imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        imported |= {alias.name for n in ast.walk(tree) if isinstance(n, ast.Import) for alias in n.names}
+        later = {f"kadv.attack.{layer}" for layer in layers[index + 1 :]}
+        assert not {m for m in imported if any(m == x or m.startswith(f"{x}.") for x in later)}, name

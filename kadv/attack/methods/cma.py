@@ -7,9 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from kadv.attack.loop import Proposer, fitness
+from kadv.attack.loop import Proposer, fitness, register_proposer
 from kadv.attack.records import ViewRecord
-from kadv.attack.registry import register_proposer
 
 __all__ = ["CMAProposer", "CMASettings"]
 

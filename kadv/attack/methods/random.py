@@ -6,8 +6,7 @@ from dataclasses import dataclass
 
 import torch
 
-from kadv.attack.loop import Proposer
-from kadv.attack.registry import register_proposer
+from kadv.attack.loop import Proposer, register_proposer
 
 __all__ = ["RandomProposer", "RandomSettings"]
 
