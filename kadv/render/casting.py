@@ -59,7 +59,8 @@ class Open3DCaster(RayCaster):
 
     @staticmethod
     def _rays(origins: torch.Tensor, directions: torch.Tensor) -> o3d.core.Tensor:
-        return o3d.core.Tensor(torch.cat([origins, directions], dim=1).numpy())
+        # one copy into Open3D's (N, 6) layout, whose memory Open3D then shares
+        return o3d.core.Tensor.from_numpy(torch.cat([origins, directions], dim=1).numpy())
 
     def first_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         result = self.scene.cast_rays(self._rays(origins, directions))
@@ -78,7 +79,8 @@ class Open3DCaster(RayCaster):
         )
 
     def closest_points(self, points: torch.Tensor) -> torch.Tensor:
-        return torch.from_numpy(self.scene.compute_closest_points(o3d.core.Tensor(points.numpy()))["points"].numpy())
+        query = o3d.core.Tensor.from_numpy(np.ascontiguousarray(points.numpy()))
+        return torch.from_numpy(self.scene.compute_closest_points(query)["points"].numpy())
 
 
 def resolve_backend(backend: str, device: torch.device | str = "cpu") -> str:

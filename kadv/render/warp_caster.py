@@ -29,75 +29,48 @@ _MIN_STEP = 1e-7
 _MAX_HITS = 256  # hits listed per ray at most
 
 
-@wp.kernel
-def _first_hits(
-    mesh: wp.uint64,
-    origins: wp.array(dtype=wp.vec3),
-    directions: wp.array(dtype=wp.vec3),
-    t: wp.array(dtype=wp.float32),
-    ids: wp.array(dtype=wp.int64),
-    bary: wp.array(dtype=wp.vec2),
-):
-    i = wp.tid()
-    query = wp.mesh_query_ray(mesh, origins[i], directions[i], 1.0e30)
-    if query.result:
-        t[i] = query.t
-        ids[i] = wp.int64(query.face)
-        # Warp's (u, v) weigh the triangle's first two corners; Open3D's the last two
-        bary[i] = wp.vec2(query.v, 1.0 - query.u - query.v)
-    else:
-        t[i] = wp.inf
-        ids[i] = wp.int64(-1)
-        bary[i] = wp.vec2(0.0, 0.0)
-
-
 @wp.func
 def _next_start(t: float):
     return t + wp.max(t * _RELATIVE_STEP, _MIN_STEP)
 
 
 @wp.kernel
-def _count_hits(
+def _walk(
     mesh: wp.uint64,
     origins: wp.array(dtype=wp.vec3),
     directions: wp.array(dtype=wp.vec3),
+    fill: int,
     counts: wp.array(dtype=wp.int32),
-):
-    i = wp.tid()
-    start = wp.float32(0.0)  # a dynamic variable: the loop updates it
-    count = wp.int32(0)
-    while count < _MAX_HITS:
-        query = wp.mesh_query_ray(mesh, origins[i] + directions[i] * start, directions[i], 1.0e30)
-        if not query.result:
-            break
-        count += 1
-        start = _next_start(start + query.t)
-    counts[i] = count
-
-
-@wp.kernel
-def _list_hits(
-    mesh: wp.uint64,
-    origins: wp.array(dtype=wp.vec3),
-    directions: wp.array(dtype=wp.vec3),
     offsets: wp.array(dtype=wp.int64),
-    counts: wp.array(dtype=wp.int32),
     ray_ids: wp.array(dtype=wp.int64),
     t: wp.array(dtype=wp.float32),
     ids: wp.array(dtype=wp.int64),
     bary: wp.array(dtype=wp.vec2),
 ):
+    """Walk each ray from hit to hit. With ``fill`` 0, count its hits (at most _MAX_HITS) into
+    ``counts``; else write its first ``counts[i]`` hits from slot ``offsets[i]`` on."""
     i = wp.tid()
+    limit = _MAX_HITS
+    if fill != 0:
+        limit = counts[i]
     start = wp.float32(0.0)  # a dynamic variable: the loop updates it
+    count = wp.int32(0)
     slot = offsets[i]
-    for _ in range(counts[i]):
+    while count < limit:
         query = wp.mesh_query_ray(mesh, origins[i] + directions[i] * start, directions[i], 1.0e30)
-        ray_ids[slot] = wp.int64(i)
-        t[slot] = start + query.t
-        ids[slot] = wp.int64(query.face)
-        bary[slot] = wp.vec2(query.v, 1.0 - query.u - query.v)
-        slot += wp.int64(1)
+        if not query.result:
+            break
+        if fill != 0:
+            ray_ids[slot] = wp.int64(i)
+            t[slot] = start + query.t
+            ids[slot] = wp.int64(query.face)
+            # Warp's (u, v) weigh the triangle's first two corners; Open3D's the last two
+            bary[slot] = wp.vec2(query.v, 1.0 - query.u - query.v)
+            slot += wp.int64(1)
+        count += 1
         start = _next_start(start + query.t)
+    if fill == 0:
+        counts[i] = count
 
 
 @wp.kernel
@@ -146,14 +119,20 @@ class WarpCaster(RayCaster):
         t = torch.full((n,), torch.inf, device=self.device)
         ids = torch.full((n,), -1, dtype=torch.int64, device=self.device)
         bary = torch.zeros(n, 2, device=self.device)
-        self._launch(_first_hits, n, [*self._rays(origins, directions), t, ids, bary])
+        ones = torch.ones(n, dtype=torch.int32, device=self.device)
+        slots = torch.arange(n, device=self.device)
+        self._launch(_walk, n, [*self._rays(origins, directions), 1, ones, slots, slots.clone(), t, ids, bary])
         return t, ids, bary
 
     def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         n = len(origins)
-        counts = torch.zeros(n, dtype=torch.int32, device=self.device)
         rays = self._rays(origins, directions)
-        self._launch(_count_hits, n, [*rays, counts])
+        counts = torch.zeros(n, dtype=torch.int32, device=self.device)
+        offsets = torch.zeros(n, dtype=torch.int64, device=self.device)
+        nothing = [
+            torch.zeros(0, dtype=dtype, device=self.device) for dtype in (torch.int64, torch.float32, torch.int64)
+        ]
+        self._launch(_walk, n, [*rays, 0, counts, offsets, *nothing, torch.zeros(0, 2, device=self.device)])
         offsets = torch.cumsum(counts, 0, dtype=torch.int64) - counts
         total = int(counts.sum())
         ray_ids = torch.empty(total, dtype=torch.int64, device=self.device)
@@ -161,7 +140,7 @@ class WarpCaster(RayCaster):
         ids = torch.empty(total, dtype=torch.int64, device=self.device)
         bary = torch.empty(total, 2, device=self.device)
         if total:
-            self._launch(_list_hits, n, [*rays, offsets, counts, ray_ids, t, ids, bary])
+            self._launch(_walk, n, [*rays, 1, counts, offsets, ray_ids, t, ids, bary])
         return ray_ids, t, ids, bary
 
     def closest_points(self, points: torch.Tensor) -> torch.Tensor:

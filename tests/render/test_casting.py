@@ -34,9 +34,7 @@ def test_warp_renders_and_distances_equal_open3d(name: str) -> None:
     open3d = ExactRenderer(scene, Shading(), backend="open3d")
     warp = ExactRenderer(scene, Shading(), backend="warp")
     camera = scene.cameras[0]
-    poses = torch.cat(
-        [camera.world_T_cam[None], random_valid_poses(open3d, 3, np.random.default_rng(0), 70.0)]
-    )
+    poses = torch.cat([camera.world_T_cam[None], random_valid_poses(open3d, 3, np.random.default_rng(0), 70.0)])
     K = intrinsics_from_fov(70.0, HEIGHT, WIDTH)
     a, b = (r.render(poses, K, HEIGHT, WIDTH) for r in (open3d, warp))
     assert (a.mask == b.mask).float().mean() >= 0.999
