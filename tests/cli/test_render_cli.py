@@ -96,7 +96,7 @@ def test_readme_examples_render_valid_views(overrides: list[str], tmp_path: Path
 
 
 def test_the_file_camera_beside_a_wall_is_moved_clear(tmp_path: Path) -> None:
-    result = _run(tmp_path, "scene=grey_white_room", "render.height=24", "render.width=32")
+    result = _run(tmp_path, "scene=grey_white_room", "render.lighting=direct", "render.height=24", "render.width=32")
     assert result.returncode == 0, result.stderr
     assert "moved" in json.loads((tmp_path / "run" / "render.json").read_text())["camera"]
 

@@ -96,7 +96,7 @@ def test_kadv_report_reference_scores_each_adversarial_view_on_both_renderers(tm
     binaries = Path(sys.executable).parent
     path = scenes_root() / "modern_hall" / "scene.xml"
     small = ["render.height=24", "render.width=32", "init.count=1", "init.candidates=8", "attack=random"]
-    small += ["attack.budget_evaluations=12", "video=false", "progress=false"]
+    small += ["attack.budget_evaluations=12", "video=false", "progress=false", "render.lighting=direct"]
     for name, scene in (("xml", ["scene=file", f"scene.path={path}"]), ("box", ["scene=box_room"])):
         command = [str(binaries / "kadv-attack"), f"hydra.run.dir={tmp_path / name}", *scene, *small]
         subprocess.run(command, check=True, capture_output=True, cwd=tmp_path)
