@@ -31,7 +31,7 @@ import time
 from collections.abc import Callable
 
 import torch
-from common import fastest_seconds, load_bench_scene, timings
+from common import add_backend_option, checked_backend, fastest_seconds, load_bench_scene, timings
 from torch.optim.optimizer import register_optimizer_step_post_hook
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
@@ -42,7 +42,6 @@ from kadv.losses import VGG16_TAPS, PerceptualLoss, depth_loss, vgg16_features
 from kadv.models import DepthModel, load_model
 from kadv.penalties import distance_to_surface, shortcut_penalty, step_guard, view_validity
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, DiffRenderOutput, ExactRenderer
-from kadv.render.casting import resolve_backend
 
 HEIGHT, WIDTH = 240, 320
 STEPS = 5
@@ -284,13 +283,13 @@ def evaluations_per_second(renderer: ExactRenderer, model: DepthModel, view, dev
 def main() -> None:
     parser = argparse.ArgumentParser(description="Time one gradient attack step, part by part.")
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda (the networks and the warp)")
-    parser.add_argument("--backend", default="auto", help="the exact render's ray caster: auto, open3d or warp")
+    add_backend_option(parser)
     args = parser.parse_args()
     try:
         device = resolve_device(args.device)
-        backend = resolve_backend(args.backend, device)
     except ValueError as error:
         parser.exit(2, f"{parser.prog}: error: {error}\n")  # one line and exit status 2, as the commands answer
+    backend = checked_backend(parser, args.backend, device)
     scene = load_bench_scene("grey_white_room")
     renderer = ExactRenderer(scene, backend=backend, device=device)
     penalty = PenaltyConfig()

@@ -8,13 +8,16 @@ from kadv.runtime import configure_runtime
 
 configure_runtime()
 
+import argparse
 import statistics
 import time
 from collections.abc import Callable
 from pathlib import Path
 
+import torch
 import yaml
 
+from kadv.render.casting import resolve_backend
 from kadv.scenes import Scene, box_room, load_scene
 
 REAL_SCENES = ("grey_white_room", "modern_hall", "japanese_classroom")
@@ -22,6 +25,19 @@ REAL_SCENES = ("grey_white_room", "modern_hall", "japanese_classroom")
 
 def scenes_root() -> Path:
     return Path(os.environ.get("KADV_TEST_SCENES", Path(__file__).resolve().parents[2] / "shared" / "scenes"))
+
+
+def add_backend_option(parser: argparse.ArgumentParser) -> None:
+    """``--backend``: the exact renderer's ray caster."""
+    parser.add_argument("--backend", default="auto", help="the exact render's ray caster: auto, open3d or warp")
+
+
+def checked_backend(parser: argparse.ArgumentParser, backend: str, device: str | torch.device) -> str:
+    """The caster ``backend`` names on ``device``; a bad name ends the script in one line, exit 2."""
+    try:
+        return resolve_backend(backend, device)
+    except ValueError as error:
+        parser.exit(2, f"{parser.prog}: error: {error}\n")  # as the commands answer
 
 
 def default_lighting() -> str:

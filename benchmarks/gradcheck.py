@@ -20,11 +20,10 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from common import scenes_root
+from common import add_backend_option, checked_backend, scenes_root
 
 from kadv.diagnostics import FUNCTIONALS, gradient_check_poses
 from kadv.render import DiffRenderConfig, ExactRenderer
-from kadv.render.casting import resolve_backend
 from kadv.scenes import box_room, load_scene
 
 
@@ -44,7 +43,7 @@ CONFIGS = {
 }
 
 
-def main(poses: int = 10, height: int = 96, width: int = 128, device: str = "cpu", backend: str = "auto") -> None:
+def main(poses: int = 10, height: int = 96, width: int = 128, device: str = "cpu", backend: str = "open3d") -> None:
     scenes = {
         "box_room": box_room(seed=0),
         "grey_white_room": load_scene(scenes_root() / "grey_white_room" / "scene.xml"),
@@ -75,7 +74,7 @@ def main(poses: int = 10, height: int = 96, width: int = 128, device: str = "cpu
     full_real = min(medians["grey_white_room", m][f] for m in checked for f in ("rgb_full", "depth_full"))
     print(
         f"gradcheck interior_median_cos={interior:.3f} full_box_median_cos={full_box:.3f} "
-        f"full_real_median_cos={full_real:.3f} backend={resolve_backend(backend, device)}"
+        f"full_real_median_cos={full_real:.3f} backend={backend}"
     )
 
 
@@ -85,10 +84,6 @@ if __name__ == "__main__":
     parser.add_argument("--height", type=int, default=96)
     parser.add_argument("--width", type=int, default=128)
     parser.add_argument("--device", default="cpu")
-    parser.add_argument("--backend", default="auto", help="ray caster: auto, open3d or warp")
+    add_backend_option(parser)
     args = parser.parse_args()
-    try:
-        resolve_backend(args.backend, args.device)
-    except ValueError as error:
-        parser.exit(2, f"{parser.prog}: error: {error}\n")
-    main(args.poses, args.height, args.width, args.device, args.backend)
+    main(args.poses, args.height, args.width, args.device, checked_backend(parser, args.backend, args.device))

@@ -9,11 +9,10 @@ import argparse
 import statistics
 
 import torch
-from common import bench_scenes, median_seconds
+from common import add_backend_option, bench_scenes, checked_backend, median_seconds
 
 from kadv.geometry import pixel_rays
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
-from kadv.render.casting import resolve_backend
 
 SIZES = ((240, 320), (480, 640))
 
@@ -69,13 +68,10 @@ def differentiable_timings(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--backend", default="auto", help="ray caster: auto, open3d or warp")
+    add_backend_option(parser)
     parser.add_argument("--device", default="cpu", help="where the rays are cast (cpu, cuda)")
     args = parser.parse_args()
-    try:
-        backend = resolve_backend(args.backend, args.device)
-    except ValueError as error:
-        parser.exit(2, f"{parser.prog}: error: {error}\n")
+    backend = checked_backend(parser, args.backend, args.device)
     scenes = bench_scenes()
     exact_timings(scenes, backend, args.device)
     summary = differentiable_timings(scenes, backend, args.device)

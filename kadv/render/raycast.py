@@ -136,8 +136,8 @@ class ExactRenderer:
         self._masked_face = np.r_[masked_faces, False]  # per triangle, and a False that a miss (id -1) reads
         self._opaque_faces, self._masked_faces = np.flatnonzero(~masked_faces), np.flatnonzero(masked_faces)
         if len(self._masked_faces):
-            self._opaque_scene = caster(scene.vertices, scene.faces[self._opaque_faces])
-            self._masked_scene = caster(scene.vertices, scene.faces[self._masked_faces])
+            self._opaque_caster = caster(scene.vertices, scene.faces[self._opaque_faces])
+            self._masked_caster = caster(scene.vertices, scene.faces[self._masked_faces])
         # shading reads these per hit: torch copies made once
         self._pyramids = {i: mip_pyramid(m.texture) for i, m in enumerate(scene.materials) if m.texture is not None}
         self._opacity = {
@@ -151,7 +151,7 @@ class ExactRenderer:
         self._face_normals = torch.from_numpy(scene.face_normals.astype(np.float64))
         self._lights = torch.from_numpy(self.lights.astype(np.float32))
         self.baked: BakedLighting | None = None
-        self._emitter_scene = None
+        self._emitter_caster = None
         self._coats = torch.from_numpy(coat_table(scene)).float()[torch.from_numpy(scene.material_ids)]
         if self.shading.lighting == "baked":
             self.baked = load_or_bake(self, self.shading.bake, progress)
@@ -159,7 +159,7 @@ class ExactRenderer:
             self._sky = sky_emitters(scene)
             emitters = scene.emitters.area_triangles
             if len(emitters):  # the file's lamps and glowing panels, seen as a camera sees them
-                self._emitter_scene = caster(emitters.reshape(-1, 3), np.arange(3 * len(emitters)).reshape(-1, 3))
+                self._emitter_caster = caster(emitters.reshape(-1, 3), np.arange(3 * len(emitters)).reshape(-1, 3))
                 cross = np.cross(emitters[:, 1] - emitters[:, 0], emitters[:, 2] - emitters[:, 0])
                 self._emitter_normals = torch.from_numpy(cross)
                 self._emitter_colour = tone_map(
@@ -187,10 +187,10 @@ class ExactRenderer:
         """First opaque hit (t, triangle id, barycentrics) of rays (N, 3) whose first hit is a
         transparent texel: the nearer of the first hit on an opaque material's triangle and the
         first opaque texel among the hits on alpha-masked triangles."""
-        t, local, bary = _cast(self._opaque_scene, origins, directions)
+        t, local, bary = _cast(self._opaque_caster, origins, directions)
         ids = np.where(local >= 0, self._opaque_faces[np.maximum(local, 0)], -1)
         ray_ids, t_masked, ids_masked, bary_masked = self._list_opaque(
-            self._masked_scene, self._masked_faces, origins, directions
+            self._masked_caster, self._masked_faces, origins, directions
         )
         first = np.r_[True, ray_ids[1:] != ray_ids[:-1]] if len(ray_ids) else np.zeros(0, bool)
         nearer = first & (t_masked < t[ray_ids])
@@ -308,7 +308,7 @@ class ExactRenderer:
                 sky = sky_radiance(self._sky, F.normalize(dirs, dim=1).numpy())
                 background = tone_map(torch.from_numpy(sky * self.baked.exposure).float())
             rgb = torch.where(hit[:, None], shaded, background)
-            if self._emitter_scene is not None:
+            if self._emitter_caster is not None:
                 rgb = self._emitters_seen(rgb, hits, origins, directions)
         maps = {"rgb": np.ascontiguousarray(rgb.numpy())}
         if geometry:
@@ -342,7 +342,7 @@ class ExactRenderer:
         """``rgb`` (N, 3) with the colour of an area emitter wherever a ray meets one before any
         surface: its radiance on its emitting side, black behind. Emitters are no geometry (they
         carry no depth): only the colour shows them."""
-        t, ids, _ = _cast(self._emitter_scene, origins.reshape(-1, 3), directions.reshape(-1, 3))
+        t, ids, _ = _cast(self._emitter_caster, origins.reshape(-1, 3), directions.reshape(-1, 3))
         seen = torch.from_numpy((ids >= 0) & (t < np.where(hits.hit, hits.t, np.inf)))
         ids = torch.from_numpy(np.maximum(ids, 0))
         facing = dot(self._emitter_normals.index_select(0, ids), torch.from_numpy(directions.reshape(-1, 3))) < 0
