@@ -1,21 +1,22 @@
-"""Every search method on one anytime scale: the best valid L_depth found so far (and that view's
-delta1) against wall seconds and against model forward passes, from the same init views.
+"""Every search method with every loss on one anytime scale: the incumbent (best valid view by the
+pair's own loss) against wall seconds, scored on the same measures for all: its delta1 drop (the
+failure users report), AbsRel rise and L_depth gain (SSIM) over the init view.
 
-Setup (each an option, so a user reruns it for their own model, loss, size, scenes and device):
-kadv-tiny with SSIM at 96x128 on the box room and the three ../shared scenes, from the file camera
-plus 2 sampled init views each. The budget per init view is the seconds that --gradient-steps steps
-of the gradient attack with 3 restarts take from the first init view; every method then runs under
-that seconds budget (the gradient with no step limit). A method's gain at time t is the mean over
-init views of (best valid L_depth by t - init L_depth); its delta1 drop is the mean of (init
-delta1 - delta1 of that view). Writes search_anytime.png (mean gain against seconds and against
-forward passes, 95% bootstrap bands over init views), search_anytime.md (gain and delta1 drop at
-10/25/50/100% of the budget) and search_anytime.json (every curve) to --out.
+Setup (each an option, so a user reruns it for their own model, losses, size, scenes and device):
+kadv-tiny at 96x128 under the commands' default lighting on the box room and the three ../shared
+scenes, from the file camera plus --sampled sampled init views each (drawn with --seed, which also
+seeds the searches). Every method+loss pair gets --seconds per init view. Writes
+search_anytime.png (mean delta1 drop and L_depth gain against seconds, 95% bootstrap bands over
+init views), search_anytime.md (the table at 10/25/50/100% of the budget, and the screening rate at
+each hybrid screen scale) and search_anytime.json (every curve) to --out. A method written
+``hybrid@0.5`` is hybrid with attack.hybrid.screen_scale=0.5.
 
-The last line names the method that leads at the full budget on both measures (else the one with
-the largest delta1 drop, the failure users report) and its ratios against the strongest of
-random, cma and nevergrad on each measure.
+The last line names the pair with the largest delta1 drop at the full budget and its ratios: on
+delta1 drop against the strongest baseline (random, cma, nevergrad) with the study's SSIM loss, and
+against the strongest baseline with the pair's own loss; on L_depth gain against the strongest
+SSIM baseline.
 
-Run: .venv/bin/python benchmarks/search_anytime.py [--gradient-steps 100] [--methods ...] [--device cpu]
+Run: .venv/bin/python benchmarks/search_anytime.py [--seconds 10] [--losses ssim,absrel,delta1] [--seed 0]
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 
 import matplotlib
@@ -30,14 +32,16 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from common import REAL_SCENES, load_bench_scene
+from common import REAL_SCENES, default_lighting, load_bench_scene
 
 from kadv.attack import (
     AttackConfig,
     GradientSettings,
+    HybridSettings,
     InitViewConfig,
     Objective,
     PenaltyConfig,
+    SearchContext,
     attack,
     best_so_far,
     file_init_views,
@@ -47,7 +51,7 @@ from kadv.attack import (
 from kadv.device import resolve_device
 from kadv.losses import depth_loss
 from kadv.models import load_model
-from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
+from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer, Shading
 
 BASELINES = ("random", "cma", "nevergrad")
 FRACTIONS = (0.1, 0.25, 0.5, 1.0)
@@ -69,140 +73,194 @@ def bootstrap_band(samples: np.ndarray, rng: np.random.Generator, draws: int = 1
     return np.percentile(means, 2.5, axis=0), np.percentile(means, 97.5, axis=0)
 
 
+def method_settings(label: str) -> tuple[str, object | None]:
+    """``hybrid@0.5`` -> ("hybrid", HybridSettings(screen_scale=0.5)); any other label names a method
+    (the gradient's steps unbounded, so that the seconds end it)."""
+    name, _, scale = label.partition("@")
+    get_method(name)
+    if name == "gradient":
+        return name, GradientSettings(steps=2**31)
+    if not scale:
+        return name, None
+    if name != "hybrid":
+        raise ValueError(f"--methods: only hybrid takes @<screen scale>, got {label!r}")
+    return name, HybridSettings(screen_scale=float(scale))
+
+
+def screening_rate(objective: Objective, differentiable, view, height: int, width: int, scale: float) -> float:
+    """Views per second that hybrid's screening evaluates at ``scale`` (batches of 8, after one
+    warm-up; the first call also warms the forward passes up for the timed searches)."""
+    context = SearchContext(
+        objective, differentiable, view, height, width, AttackConfig(budget_evaluations=None, budget_seconds=60.0)
+    )
+    params = context.config.sample_ball(np.random.default_rng(0).random((8, 6)))
+    context.evaluate(1, params, scale=scale)
+    started = time.perf_counter()
+    for _ in range(3):
+        context.evaluate(1, params, scale=scale)
+    return 24 / (time.perf_counter() - started)
+
+
 def run(args: argparse.Namespace) -> dict:
     device = resolve_device(args.device)
-    model, loss, penalty = load_model(args.model), depth_loss(args.loss), PenaltyConfig()
-    curves: dict = {"budget_seconds": None, "views": []}
+    model, penalty = load_model(args.model), PenaltyConfig()
+    losses = {name: depth_loss(name) for name in args.losses.split(",")}
+    methods = args.methods.split(",")
+    curves: dict = {"budget_seconds": args.seconds, "views": [], "screening": {}}
     for name in args.scenes.split(","):
-        renderer = ExactRenderer(load_bench_scene(name))
-        objective = Objective(model, loss, renderer, penalty, device=device)
+        renderer = ExactRenderer(load_bench_scene(name), Shading(lighting=args.lighting))
+        objectives = {loss: Objective(model, fn, renderer, penalty, device=device) for loss, fn in losses.items()}
         differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(), device)
         views = file_init_views(renderer, penalty.margin)[:1]
-        views += sample_init_views(renderer, model, args.sampled, 0, InitViewConfig(), penalty, args.height, args.width)
+        views += sample_init_views(
+            renderer, model, args.sampled, args.seed, InitViewConfig(), penalty, args.height, args.width
+        )
+        if not curves["screening"]:
+            first = next(iter(objectives.values()))
+            curves["screening"] = {
+                str(scale): screening_rate(first, differentiable, views[0], args.height, args.width, scale)
+                for scale in sorted({1.0} | {float(m.partition("@")[2]) for m in methods if "@" in m}, reverse=True)
+            }
+            print("screening views/s: " + ", ".join(f"scale {k}: {v:.1f}" for k, v in curves["screening"].items()))
+            warm_up = AttackConfig("gradient", GradientSettings(steps=1), budget_evaluations=None)
+            attack(first, differentiable, views[:1], args.height, args.width, warm_up, args.seed, progress=False)
         for view in views:
-
-            def search(config: AttackConfig):
-                return attack(
-                    objective, differentiable, [view], args.height, args.width, config, 0, progress=False
-                ).views[0]
-
-            if curves["budget_seconds"] is None:
-                timed = search(
-                    AttackConfig(
-                        "gradient", GradientSettings(steps=args.gradient_steps, restarts=3), budget_evaluations=None
+            entry = {"scene": name, "view": view.name, "pairs": {}}
+            for loss, objective in objectives.items():
+                for label in methods:
+                    method, settings = method_settings(label)
+                    config = AttackConfig(method, settings, budget_evaluations=None, budget_seconds=args.seconds)
+                    if method == "gradient":
+                        config = AttackConfig(
+                            method,
+                            get_method(method).settings(steps=2**31),
+                            budget_evaluations=None,
+                            budget_seconds=args.seconds,
+                        )
+                    result = attack(
+                        objective, differentiable, [view], args.height, args.width, config, args.seed, progress=False
+                    ).views[0]
+                    init = result.init_record
+                    curve = best_so_far(result.records)
+                    entry["pairs"][f"{label}+{loss}"] = {
+                        "init": [init.l_depth, init.delta1, init.abs_rel],
+                        "curve": curve,
+                        "evaluations": result.budget.forward,
+                        "uninformative_chosen": sum(r.verdict == "uninformative" for r in result.top),
+                    }
+                    best = curve[-1]
+                    print(
+                        f"{name:<20} {view.name:<9} {label + '+' + loss:<22} delta1 {init.delta1:.3f} -> {best[3]:.3f} "
+                        f"AbsRel {init.abs_rel:.3f} -> {best[4]:.3f} L_depth {init.l_depth:.4f} -> {best[2]:.4f} "
+                        f"{result.budget.forward:>5} views",
+                        flush=True,
                     )
-                )
-                curves["budget_seconds"] = timed.budget.seconds
-                print(
-                    f"budget: {args.gradient_steps} gradient steps x 3 restarts took {timed.budget.seconds:.1f} s",
-                    flush=True,
-                )
-            entry = {"scene": name, "view": view.name, "methods": {}}
-            for method in args.methods.split(","):
-                settings = GradientSettings(steps=2**31) if method == "gradient" else None
-                result = search(
-                    AttackConfig(method, settings, budget_evaluations=None, budget_seconds=curves["budget_seconds"])
-                )
-                init = result.init_record
-                entry["methods"][method] = {
-                    "init_l_depth": init.l_depth,
-                    "init_delta1": init.delta1,
-                    "curve": best_so_far(result.records),
-                    "evaluations": result.budget.forward,
-                }
-                best = entry["methods"][method]["curve"][-1]
-                print(
-                    f"{name:<20} {view.name:<9} {method:<10} init {init.l_depth:.4f} best {best[2]:.4f} "
-                    f"(delta1 {init.delta1:.3f} -> {best[3]:.3f}) {result.budget.forward:>5} views",
-                    flush=True,
-                )
             curves["views"].append(entry)
     return curves
 
 
+# per measure: its index in a curve point and in "init", and its sign (a drop counts init - value)
+MEASURES = {"delta1 drop": (3, 1, -1.0), "AbsRel rise": (4, 2, 1.0), "L_depth gain": (2, 0, 1.0)}
+
+
+def measure_curves(curves: dict, pair: str, measure: str, seconds: np.ndarray) -> np.ndarray:
+    """(init views, grid) of one measure of one pair's incumbent against seconds."""
+    point, initial, sign = MEASURES[measure]
+    rows = []
+    for view in curves["views"]:
+        entry = view["pairs"][pair]
+        rows.append(step_curve([(c[1], sign * (c[point] - entry["init"][initial])) for c in entry["curve"]], seconds))
+    return np.array(rows)
+
+
 def summarise(curves: dict, out: Path) -> str:
     budget = curves["budget_seconds"]
-    methods = list(curves["views"][0]["methods"])
+    pairs = list(curves["views"][0]["pairs"])
     seconds = np.linspace(0.0, budget, GRID)
-    most = max(m["evaluations"] for v in curves["views"] for m in v["methods"].values())
-    evaluations = np.linspace(1, most, GRID)
     rng = np.random.default_rng(0)
-    figure, axes = plt.subplots(1, 2, figsize=(11, 4))
-    gain, drop = {}, {}
-    for method in methods:
-        by_time, by_count, drops = [], [], []
-        for view in curves["views"]:
-            entry = view["methods"][method]
-            curve = entry["curve"]
-            by_time.append(step_curve([(c[1], c[2] - entry["init_l_depth"]) for c in curve], seconds))
-            by_count.append(step_curve([(c[0], c[2] - entry["init_l_depth"]) for c in curve], evaluations))
-            drops.append(step_curve([(c[1], entry["init_delta1"] - c[3]) for c in curve], seconds))
-        for axis, x, samples in ((axes[0], seconds, np.array(by_time)), (axes[1], evaluations, np.array(by_count))):
-            (line,) = axis.plot(x, samples.mean(axis=0), label=method)
-            axis.fill_between(x, *bootstrap_band(samples, rng), color=line.get_color(), alpha=0.2)
-        gain[method], drop[method] = np.array(by_time).mean(axis=0), np.array(drops).mean(axis=0)
-    axes[0].set_xlabel("seconds per init view")
-    axes[1].set_xlabel("model forward passes per init view")
-    for axis in axes:
-        axis.set_ylabel("mean L_depth gain (best valid view so far)")
-        axis.legend(fontsize=8)
-    figure.suptitle(f"Anytime search, {len(curves['views'])} init views, 95% bootstrap bands")
+    figure, axes = plt.subplots(1, 2, figsize=(13, 5))
+    values = {m: {} for m in MEASURES}
+    for pair in pairs:
+        for measure in MEASURES:
+            values[measure][pair] = measure_curves(curves, pair, measure, seconds)
+        style = "-" if pair.split("+")[0] not in BASELINES else "--"
+        for axis, measure in zip(axes, ("delta1 drop", "L_depth gain")):
+            samples = values[measure][pair]
+            (line,) = axis.plot(seconds, samples.mean(axis=0), style, label=pair, lw=1.2)
+            if pair.split("+")[0] not in BASELINES:
+                axis.fill_between(seconds, *bootstrap_band(samples, rng), color=line.get_color(), alpha=0.12)
+    for axis, measure in zip(axes, ("delta1 drop", "L_depth gain")):
+        axis.set_xlabel("seconds per init view")
+        axis.set_ylabel(f"mean {measure} of the incumbent")
+    axes[0].legend(fontsize=6, ncol=2)
+    figure.suptitle(f"Anytime search, {len(curves['views'])} init views (bands: 95% bootstrap, kadv's methods)")
     figure.tight_layout()
     figure.savefig(out / "search_anytime.png", dpi=90)
     plt.close(figure)
     columns = [round(f * (GRID - 1)) for f in FRACTIONS]
+    final = {p: {m: float(values[m][p][:, -1].mean()) for m in MEASURES} for p in pairs}
     lines = [
-        "| method | "
-        + " | ".join(f"gain {f:.0%}" for f in FRACTIONS)
-        + " | "
+        "| method+loss | "
         + " | ".join(f"delta1 drop {f:.0%}" for f in FRACTIONS)
-        + " |",
-        "|---" * (1 + 2 * len(FRACTIONS)) + "|",
+        + " | AbsRel rise | L_depth gain | views |",
+        "|---" * (4 + len(FRACTIONS)) + "|",
     ]
-    for method in methods:
+    for pair in sorted(pairs, key=lambda p: -final[p]["delta1 drop"]):
+        drop = values["delta1 drop"][pair].mean(axis=0)
+        views = np.mean([v["pairs"][pair]["evaluations"] for v in curves["views"]])
         lines.append(
-            f"| {method} | "
-            + " | ".join(f"{gain[method][c]:.4f}" for c in columns)
-            + " | "
-            + " | ".join(f"{drop[method][c]:.3f}" for c in columns)
-            + " |"
+            f"| {pair} | "
+            + " | ".join(f"{drop[c]:.3f}" for c in columns)
+            + f" | {final[pair]['AbsRel rise']:.3f} | {final[pair]['L_depth gain']:.4f} | {views:.0f} |"
         )
+    rates = ", ".join(f"scale {k}: {v:.1f} views/s" for k, v in curves["screening"].items())
+    uninformative = sum(p["uninformative_chosen"] for v in curves["views"] for p in v["pairs"].values())
     table = "\n".join(lines) + "\n"
-    (out / "search_anytime.md").write_text(f"Budget {budget:.1f} s per init view.\n\n{table}")
-    final = {m: (gain[m][-1], drop[m][-1]) for m in methods}
-    leaders = [m for m in methods if all(final[m][0] >= final[o][0] and final[m][1] >= final[o][1] for o in methods)]
-    default = leaders[0] if leaders else max(methods, key=lambda m: final[m][1])
-    baselines = [m for m in BASELINES if m in methods]
-    best_gain = max(final[m][0] for m in baselines)
-    best_drop = max(final[m][1] for m in baselines)
+    (out / "search_anytime.md").write_text(
+        f"Budget {budget:.1f} s per init view, {len(curves['views'])} init views. Screening: {rates}. "
+        f"Uninformative views chosen: {uninformative}.\n\n{table}"
+    )
     print(table)
+    default = max(pairs, key=lambda p: final[p]["delta1 drop"])
+    loss = default.split("+")[1]
+    ssim = [p for p in pairs if p.split("+")[0] in BASELINES and p.endswith("+ssim")]
+    same = [p for p in pairs if p.split("+")[0] in BASELINES and p.endswith(f"+{loss}")]
+    best_drop = max(final[p]["delta1 drop"] for p in ssim)
+    same_drop = max(final[p]["delta1 drop"] for p in same)
+    best_gain = max(final[p]["L_depth gain"] for p in ssim)
+    drop = final[default]["delta1 drop"]
     return (
-        f"search_anytime default={default} gain_vs_best_baseline={final[default][0] / best_gain:.2f} "
-        f"delta1_drop_vs_best_baseline={final[default][1] / best_drop:.2f}"
+        f"search_anytime default={default} delta1_drop_vs_best_baseline={drop / best_drop:.2f} "
+        f"delta1_drop_vs_same_loss_baseline={drop / same_drop:.2f} "
+        f"gain_vs_best_baseline={final[default]['L_depth gain'] / best_gain:.2f} uninformative_chosen={uninformative}"
     )
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description="Anytime comparison of kadv's search methods.")
+    parser = argparse.ArgumentParser(description="Anytime comparison of kadv's search methods and losses.")
     parser.add_argument("--model", default="kadv_tiny")
-    parser.add_argument("--loss", default="ssim")
+    parser.add_argument("--losses", default="ssim,absrel,delta1")
     parser.add_argument("--height", type=int, default=96)
     parser.add_argument("--width", type=int, default=128)
     parser.add_argument("--scenes", default=",".join(("box_room", *REAL_SCENES)))
-    parser.add_argument("--sampled", type=int, default=2, help="sampled init views per scene (beside the file camera)")
-    parser.add_argument(
-        "--gradient-steps", type=int, default=100, help="the budget: this many gradient steps x 3 restarts"
-    )
-    parser.add_argument("--methods", default="gradient,random,cma,nevergrad,hybrid")
+    parser.add_argument("--sampled", type=int, default=1, help="sampled init views per scene (beside the file camera)")
+    parser.add_argument("--seconds", type=float, default=10.0, help="the budget per init view and pair")
+    parser.add_argument("--methods", default="gradient,random,cma,nevergrad,hybrid,hybrid@0.5")
+    parser.add_argument("--lighting", default=default_lighting(), choices=["direct", "baked"])
+    parser.add_argument("--seed", type=int, default=0, help="seeds the sampled init views and the searches")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", default="search_anytime_out")
     parser.add_argument("--from-json", help="summarise an earlier run's search_anytime.json instead of running")
     args = parser.parse_args()
     try:
-        for method in args.methods.split(","):
-            get_method(method)
-        if not set(BASELINES) & set(args.methods.split(",")):
+        for label in args.methods.split(","):
+            method_settings(label)
+        for loss in args.losses.split(","):
+            depth_loss(loss)
+        if not set(BASELINES) & {m.partition("@")[0] for m in args.methods.split(",")}:
             raise ValueError(f"--methods must include one of {', '.join(BASELINES)} to compare against")
+        if "ssim" not in args.losses.split(","):
+            raise ValueError("--losses must include ssim, the study's loss the ratios compare against")
         resolve_device(args.device)
     except ValueError as error:
         print(f"search_anytime: error: {error}", file=sys.stderr)

@@ -47,6 +47,10 @@ _SAMPLING_ROUNDS = 30
 # a hair inside the margin.
 _MIN_CLEARING_STEP = 0.005
 _CLEARING_OVERSHOOT = 1.05
+# Candidate centres: half within this many metres (horizontally) of a file camera, the rest over
+# the camera region; points are drawn this many times over, since only those inside are kept.
+_NEAR_CAMERA = 3.0
+_OVERSAMPLE = 4
 # Missed pixels hold depth 0; a view's depth range divides by at least this.
 _MIN_DEPTH = 1e-6
 
@@ -254,20 +258,46 @@ def score_views(
     return ViewScores(**{key: torch.cat(values) for key, values in scores.items()})
 
 
+def _inside_points(
+    renderer: ExactRenderer, count: int, rng: np.random.Generator, clearance: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Up to ``count`` points (N, 3) of the walkable inside and the height of the floor below each (N,).
+
+    Half are drawn near the scene file's cameras (within :data:`_NEAR_CAMERA` metres
+    horizontally; all of them when it has none) and half over the camera region, ``_OVERSAMPLE``
+    times as many as wanted. A point is inside when a surface lies straight below it (a floor) and
+    straight above it (a ceiling): a scene's bounds may hold far more than its rooms (a garden, a
+    220 m ground plane), and rooms at any level of any scene still get candidates. A scene with no
+    ceiling over any drawn point (a roofless ruin, a courtyard) is all outdoors: then a floor suffices.
+    """
+    lo, hi = renderer.scene.camera_region
+    inner_lo, inner_hi = lo + clearance, np.maximum(hi - clearance, lo + clearance)
+    drawn = _OVERSAMPLE * count
+    points = rng.uniform(inner_lo, inner_hi, size=(drawn, 3))
+    cameras = np.array([camera.world_T_cam[:3, 3].tolist() for camera in renderer.scene.cameras]).reshape(-1, 3)
+    if len(cameras):
+        near = rng.random(drawn) < 0.5
+        offsets = rng.uniform(-_NEAR_CAMERA, _NEAR_CAMERA, size=(drawn, 3))
+        around = cameras[rng.integers(0, len(cameras), drawn)] + offsets
+        points[near, 0] = np.clip(around[near, 0], inner_lo[0], inner_hi[0])
+        points[near, 2] = np.clip(around[near, 2], inner_lo[2], inner_hi[2])
+    down = np.broadcast_to(np.array([0.0, -1.0, 0.0]), points.shape)
+    below = renderer.cast(points, down)
+    above = renderer.cast(points, -down)
+    inside = below.hit & (above.hit if bool((below.hit & above.hit).any()) else True)
+    return points[inside][:count], (points[:, 1] - np.where(below.hit, below.t, np.nan))[inside][:count]
+
+
 def _candidate_poses(
     renderer: ExactRenderer, config: InitViewConfig, count: int, rng: np.random.Generator, clearance: float
 ) -> torch.Tensor:
-    """Up to ``count`` candidate poses; their centres stand at eye height above the surface found
-    straight below a random point of the camera region (a scene's bounds may hold far more than its
-    rooms: a garden, a street), so rooms at any level of any scene get candidates."""
-    lo, hi = renderer.scene.camera_region
-    points = rng.uniform(lo + clearance, np.maximum(hi - clearance, lo + clearance), size=(count, 3))
-    down = np.broadcast_to(np.array([0.0, -1.0, 0.0]), points.shape)
-    below = renderer.cast(points, down)
-    floor = points[:, 1] - np.where(below.hit, below.t, np.nan)
-    centres = points.copy()
-    centres[:, 1] = floor + rng.uniform(*config.eye_height, count)
-    centres = centres[below.hit & (centres[:, 1] < hi[1] - clearance)]
+    """Up to ``count`` candidate poses; their centres stand at eye height above the floor under a
+    point of the walkable inside (:func:`_inside_points`)."""
+    hi = renderer.scene.camera_region[1]
+    centres, floor = _inside_points(renderer, count, rng, clearance)
+    centres = centres.copy()
+    centres[:, 1] = floor + rng.uniform(*config.eye_height, len(centres))
+    centres = centres[centres[:, 1] < hi[1] - clearance]
     count = len(centres)
     yaw = rng.uniform(0.0, 2.0 * math.pi, count)
     pitch = np.radians(rng.uniform(*config.pitch_deg, count))

@@ -64,7 +64,7 @@ def proposer_search(
         rows = context.evaluate(step, params[:count])
         records += rows
         proposer.tell(rows)
-        bar.set_postfix(L_depth=f"{max(r.l_depth for r in records if r.valid or r is records[0]):.4f}", refresh=False)
+        bar.set_postfix(loss=f"{max(r.loss for r in records if r.rankable or r is records[0]):.4f}", refresh=False)
         bar.update(count)
         step += 1
     return context.result(records, incumbent_path(records))

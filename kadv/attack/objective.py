@@ -1,4 +1,8 @@
-"""The attack objective: L_depth between ground truth and prediction, minus the shortcut penalty.
+"""The attack objective: a loss between ground truth and prediction, minus the shortcut penalty.
+
+The loss is the study's L_depth (``loss=perceptual|ssim``) or a loss on the aligned prediction
+(``loss=absrel|delta1``); either way every view also gets L_depth, delta1 and AbsRel, so searches
+with different losses are compared on the same measures.
 
 Per sample (B,), so that the restarts of one init view go through renderer, model and loss as
 one batch.
@@ -12,7 +16,7 @@ from dataclasses import dataclass
 import torch
 
 from kadv.device import resolve_device
-from kadv.losses import depth_metrics, minmax_normalize, to_comparison_space
+from kadv.losses import AlignedLoss, depth_metrics, minmax_normalize, ssim_loss, to_comparison_space
 from kadv.models import DepthModel
 from kadv.penalties import PenaltyConfig, distance_to_surface, shortcut_penalty
 from kadv.render import ExactRenderer
@@ -25,8 +29,9 @@ class ObjectiveTerms:
     """The objective's parts for B views; tensors (B,) unless said otherwise.
 
     Attributes:
-        objective: L_depth - lambda * L_dist (to maximise), differentiable.
-        l_depth: depth discrepancy, differentiable.
+        objective: loss - lambda * L_dist (to maximise), differentiable.
+        loss: the attacked loss, differentiable (L_depth itself for the study's losses).
+        l_depth: L_depth, the study's depth discrepancy (differentiable when it is the loss).
         l_dist: shortcut penalty, differentiable.
         distance: optical centre to nearest surface, metres.
         delta1, abs_rel: the prediction's accuracy after scale-and-shift alignment (no gradient).
@@ -34,6 +39,7 @@ class ObjectiveTerms:
     """
 
     objective: torch.Tensor
+    loss: torch.Tensor
     l_depth: torch.Tensor
     l_dist: torch.Tensor
     distance: torch.Tensor
@@ -43,15 +49,17 @@ class ObjectiveTerms:
 
 
 class Objective:
-    """L_depth(D, phi(I)) - lambda * L_dist(c) for a differentiable render.
+    """loss(D, phi(I)) - lambda * L_dist(c) for a differentiable render.
 
-    Ground truth and prediction go into one comparison space (a metric model's depth is converted),
-    each is min-max normalised to [0, 1] over the valid pixels, and ``loss`` compares them;
-    gradients flow through both maps.
+    For L_depth, ground truth and prediction go into one comparison space (a metric model's depth
+    is converted), each is min-max normalised to [0, 1] over the valid pixels, and ``loss``
+    compares them. An :class:`~kadv.losses.AlignedLoss` sees the raw prediction and aligns it to
+    the ground truth in the comparison space; L_depth is then measured with SSIM. Gradients flow
+    through both maps.
 
     Args:
         model: the depth model under attack.
-        loss: per-sample discrepancy (B,) of two normalised maps (B, 1, H, W).
+        loss: per-sample discrepancy (B,) of two normalised maps (B, 1, H, W), or an aligned loss.
         renderer: the scene's exact renderer (for the distance to the nearest surface).
         penalty: d_th and lambda.
         space: "disparity" or "depth".
@@ -73,6 +81,7 @@ class Objective:
         self.device = resolve_device(device)
         self.model = model.to(self.device)
         self.loss = loss.to(self.device) if isinstance(loss, torch.nn.Module) else loss
+        self.measure = ssim_loss if isinstance(loss, AlignedLoss) else self.loss
         self.renderer = renderer
         self.penalty = penalty
         self.space = space
@@ -82,7 +91,13 @@ class Objective:
         mask = mask & (depth > 0)
         gt = minmax_normalize(to_comparison_space(depth, "depth", self.space, mask), mask)
         pred = minmax_normalize(to_comparison_space(prediction, self.model.output_kind, self.space, mask), mask)
-        return self.loss(gt.float(), pred.float()).double()
+        return self.measure(gt.float(), pred.float()).double()
+
+    def attacked_loss(self, depth: torch.Tensor, prediction: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+        """The loss the search climbs (B,) between ground-truth z-depth and a prediction (B, 1, H, W)."""
+        if isinstance(self.loss, AlignedLoss):
+            return self.loss(prediction.double(), depth.double(), mask, self.model.output_kind, self.space)
+        return self.l_depth(depth, prediction, mask)
 
     def __call__(
         self,
@@ -113,13 +128,19 @@ class Objective:
         """
         rgb, depth, mask = rgb.to(self.device), depth.to(self.device), mask.to(self.device)
         prediction = self.model(rgb.float(), K)
-        l_depth = self.l_depth(depth, prediction, mask).cpu()
+        loss = self.attacked_loss(depth, prediction, mask).cpu()
+        if self.measure is self.loss:
+            l_depth = loss
+        else:
+            with torch.no_grad():
+                l_depth = self.l_depth(depth, prediction, mask).cpu()
         distance = distance_to_surface(self.renderer, world_T_cam[:, :3, 3])
         l_dist = shortcut_penalty(distance, self.penalty.d_th)
         with torch.no_grad():
             metrics = depth_metrics(prediction.double(), depth.double(), mask, self.model.output_kind)
         return ObjectiveTerms(
-            objective=l_depth - self.penalty.weight * l_dist,
+            objective=loss - self.penalty.weight * l_dist,
+            loss=loss,
             l_depth=l_depth,
             l_dist=l_dist,
             distance=distance.detach(),

@@ -38,7 +38,7 @@ class ViewRecord:
             world metres, relative to the init view's pose.
         theta: absolute axis-angle of the camera's orientation (3).
         centre: optical centre in world metres (3).
-        l_depth, l_dist, objective: the objective's terms.
+        l_depth, l_dist, objective: the objective's terms (L_depth is recorded whatever the loss).
         delta1, abs_rel: the prediction's accuracy after scale-and-shift alignment.
         verdict: ``view_validity``'s verdict ("valid", "inside an object", ...).
         guard_fraction: fraction of the proposed move that the step guard let through (1: all).
@@ -46,6 +46,10 @@ class ViewRecord:
             the exact render (NaN and False for views rendered exactly).
         seconds: wall-clock seconds since the search from this init view began (machine-dependent,
             so ``trajectory.csv`` leaves it out).
+        loss: the attacked loss, which ranks views (L_depth unless the run's loss is another; a
+            record built without it takes L_depth).
+        scale: the render's size relative to the run's: views screened smaller are never chosen
+            or ranked, their best are re-scored at full size.
     """
 
     step: int
@@ -65,10 +69,21 @@ class ViewRecord:
     depth_error: float = math.nan
     refreshed: bool = False
     seconds: float = math.nan
+    loss: float = math.nan
+    scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        if math.isnan(self.loss):
+            self.loss = self.l_depth
 
     @property
     def valid(self) -> bool:
         return self.verdict == "valid"
+
+    @property
+    def rankable(self) -> bool:
+        """A valid view scored at the run's full size: one a search may choose or follow."""
+        return self.valid and self.scale == 1.0
 
     def world_T_cam(self, init_world_T_cam: torch.Tensor) -> torch.Tensor:
         """The view's pose (4, 4), recomputed exactly from the init pose and the parameters."""
@@ -104,7 +119,7 @@ class InitViewResult:
     Attributes:
         init: the init view.
         records: every evaluated view in order of evaluation.
-        top: the adversarial views, highest L_depth first.
+        top: the adversarial views, highest loss first.
         budget: what the search cost.
         path: the views a report follows as the search's trajectory, in order.
     """
@@ -129,24 +144,24 @@ class AttackResult:
 
 
 def _improvements(records: list[ViewRecord]) -> list[tuple[int, ViewRecord]]:
-    """(evaluations so far, view) for the first view and each valid view that raised the best L_depth."""
-    out, best = [(1, records[0])], records[0].l_depth if records[0].valid else -math.inf
+    """(evaluations so far, view) for the first view and each rankable view that raised the best loss."""
+    out, best = [(1, records[0])], records[0].loss if records[0].rankable else -math.inf
     for count, record in enumerate(records[1:], start=2):
-        if record.valid and record.l_depth > best:
+        if record.rankable and record.loss > best:
             out.append((count, record))
-            best = record.l_depth
+            best = record.loss
     return out
 
 
 def incumbent_path(records: list[ViewRecord]) -> list[ViewRecord]:
-    """The init view, then each valid view that raised the best L_depth so far, in evaluation order."""
+    """The init view, then each rankable view that raised the best loss so far, in evaluation order."""
     return [record for _, record in _improvements(records)]
 
 
-def best_so_far(records: list[ViewRecord]) -> list[tuple[int, float, float, float]]:
-    """(evaluations, seconds, L_depth, delta1) each time the best valid L_depth so far rose: the
-    search's anytime curve, starting at the init view."""
-    return [(count, r.seconds, r.l_depth, r.delta1) for count, r in _improvements(records)]
+def best_so_far(records: list[ViewRecord]) -> list[tuple[int, float, float, float, float, float]]:
+    """(evaluations, seconds, L_depth, delta1, AbsRel, loss) of the incumbent each time the best
+    rankable loss so far rose: the search's anytime curve, starting at the init view."""
+    return [(count, r.seconds, r.l_depth, r.delta1, r.abs_rel, r.loss) for count, r in _improvements(records)]
 
 
 def _angle_between(theta_a: list[float], theta_b: list[float]) -> float:
@@ -166,9 +181,9 @@ def separated(a: ViewRecord, b: ViewRecord, min_distance: float, min_angle_deg: 
 def select_top_views(
     records: list[ViewRecord], count: int, min_distance: float, min_angle_deg: float
 ) -> list[ViewRecord]:
-    """Up to ``count`` valid views of highest L_depth, each separated from those chosen before it.
+    """Up to ``count`` rankable views of highest loss, each separated from those chosen before it.
 
-    Greedy in order of L_depth (ties keep evaluation order), so the result is deterministic.
+    Greedy in order of loss (ties keep evaluation order), so the result is deterministic.
 
     Examples:
         >>> def view(l_depth, x, verdict="valid"):
@@ -178,7 +193,7 @@ def select_top_views(
         [0.5, 0.4]
     """
     chosen: list[ViewRecord] = []
-    for record in sorted((r for r in records if r.valid), key=lambda r: -r.l_depth):
+    for record in sorted((r for r in records if r.rankable), key=lambda r: -r.loss):
         if len(chosen) == count:
             break
         if all(separated(record, other, min_distance, min_angle_deg) for other in chosen):

@@ -239,13 +239,13 @@ class SearchContext:
         refreshed: bool = False,
         lanes: list[int] | range | None = None,
         render: RenderOutput | None = None,
+        scale: float = 1.0,
     ) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view, with the view's validity verdict (from ``render``, the
-        views' exact render, when given) and the search's clock."""
+        views' exact render, when given, at ``scale`` times the run's size) and the search's clock."""
         pose = world_T_cam.detach()
-        validity = view_validity(
-            self.renderer, pose, self.K, self.height, self.width, render=render, **self.validity_options
-        )
+        K, height, width = self.size(scale)
+        validity = view_validity(self.renderer, pose, K, height, width, render=render, **self.validity_options)
         theta = matrix_to_axis_angle(pose[:, :3, :3])
         lanes = lanes if lanes is not None else range(len(pose))
         seconds = self.clock.elapsed()
@@ -260,6 +260,7 @@ class SearchContext:
                     theta=theta[b].tolist(),
                     centre=pose[b, :3, 3].tolist(),
                     l_depth=float(terms.l_depth[b].detach()),
+                    loss=float(terms.loss[b].detach()),
                     l_dist=float(terms.l_dist[b].detach()),
                     objective=float(terms.objective[b].detach()),
                     delta1=float(terms.delta1[b]),
@@ -271,24 +272,33 @@ class SearchContext:
                     depth_error=depth_error,
                     refreshed=refreshed,
                     seconds=seconds,
+                    scale=scale,
                 )
             )
         return rows
 
-    def evaluate(self, step: int, params: torch.Tensor, lanes: list[int] | range | None = None) -> list[ViewRecord]:
-        """Move from the init view to each pose (B, 6) through the step guard, render exactly,
-        evaluate and record, counting the views against the budget."""
+    def size(self, scale: float = 1.0) -> tuple[torch.Tensor, int, int]:
+        """Intrinsics (3, 3), height and width of renders at ``scale`` times the run's size."""
+        if scale == 1.0:
+            return self.K, self.height, self.width
+        height, width = max(8, round(scale * self.height)), max(8, round(scale * self.width))
+        return intrinsics_from_fov(self.init.fov_x_deg, height, width), height, width
+
+    def evaluate(
+        self, step: int, params: torch.Tensor, lanes: list[int] | range | None = None, scale: float = 1.0
+    ) -> list[ViewRecord]:
+        """Move from the init view to each pose (B, 6) through the step guard, render exactly at
+        ``scale`` times the run's size, evaluate and record, counting the views against the budget."""
         started = time.perf_counter()
         params = self.config.project(params)
         reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
         params = torch.cat([params[:, :3], reached], dim=1)
+        K, height, width = self.size(scale)
         with torch.no_grad():
             pose = perturb_world_T_cam(self.base(len(params)), params[:, :3], params[:, 3:])
-            out = self.renderer.render(
-                pose, self.K, self.height, self.width, supersample=self.differentiable.config.supersample
-            )
-            terms = self.objective(out.rgb, out.depth, out.mask, pose, self.K)
-        rows = self.records(step, params, pose, terms, fraction, lanes=lanes, render=out)
+            out = self.renderer.render(pose, K, height, width, supersample=self.differentiable.config.supersample)
+            terms = self.objective(out.rgb, out.depth, out.mask, pose, K)
+        rows = self.records(step, params, pose, terms, fraction, lanes=lanes, render=out, scale=scale)
         self.clock.spent(len(params), time.perf_counter() - started)
         return rows
 

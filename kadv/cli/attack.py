@@ -33,6 +33,7 @@ from kadv.cli.common import (
     check_render_config,
     checks_overrides,
     config_int,
+    loss_from_config,
     model_from_config,
     renderer_from_config,
     reports_user_errors,
@@ -41,7 +42,6 @@ from kadv.cli.common import (
 )
 from kadv.device import resolve_device
 from kadv.io import atomic_write
-from kadv.losses import depth_loss
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
 from kadv.report.run import (
     SUMMARY,
@@ -127,9 +127,7 @@ def main(cfg: DictConfig) -> float:
     scene = scene_from_config(cfg.scene)
     renderer = renderer_from_config(scene, cfg.render, device)
     model = model_from_config(cfg.model)
-    loss = depth_loss(
-        cfg.loss.kind, cfg.loss.get("vgg_weights"), config_int(cfg.loss.get("window_size", 11), "loss.window_size", 1)
-    )
+    loss = loss_from_config(cfg.loss)
     objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space, device=device)
     config_text = OmegaConf.to_yaml(cfg, resolve=True)
     atomic_write(run_dir / "config.yaml", lambda tmp: tmp.write_text(config_text))

@@ -30,6 +30,7 @@ from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBase
 from kadv.errors import WeightsUnavailable
 from kadv.geometry import look_at
 from kadv.io import write_json
+from kadv.losses import DELTA1_TEMPERATURE, AlignedLoss, depth_loss
 from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
 from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.scenes import Scene, box_room, load_scene, procedural_room
@@ -236,6 +237,16 @@ def config_float(value: Any, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ValueError(f"{key} must be a finite number, got {value!r}")
     return float(value)
+
+
+def loss_from_config(cfg: DictConfig) -> Callable | AlignedLoss:
+    """The attack loss a ``loss/`` config node names (see :func:`kadv.losses.depth_loss`)."""
+    return depth_loss(
+        cfg.kind,
+        cfg.get("vgg_weights"),
+        config_int(cfg.get("window_size", 11), "loss.window_size", 1),
+        config_float(cfg.get("temperature", DELTA1_TEMPERATURE), "loss.temperature"),
+    )
 
 
 def scene_from_config(cfg: DictConfig) -> Scene:

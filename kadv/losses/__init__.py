@@ -1,17 +1,22 @@
-"""Depth-discrepancy losses (perceptual VGG-16, SSIM), normalisation, alignment and metrics."""
+"""Depth-discrepancy losses (perceptual VGG-16, SSIM; AbsRel, smooth delta1), normalisation, alignment and metrics."""
 
 from __future__ import annotations
 
 from kadv.losses.align import align_scale_shift, minmax_normalize, to_comparison_space
+from kadv.losses.aligned import ALIGNED_LOSSES, DELTA1_TEMPERATURE, AlignedLoss, absrel_loss, soft_delta1_loss
 from kadv.losses.metrics import aligned_depth, depth_metrics
 from kadv.losses.perceptual import PerceptualLoss, depth_loss, ssim_loss
 from kadv.losses.ssi import gradient_matching, ssi_loss
 from kadv.losses.vgg import VGG16_TAPS, VGG16_URL, load_vgg16_state_dict, vgg16_features
 
 __all__ = [
+    "ALIGNED_LOSSES",
+    "DELTA1_TEMPERATURE",
     "VGG16_TAPS",
     "VGG16_URL",
+    "AlignedLoss",
     "PerceptualLoss",
+    "absrel_loss",
     "align_scale_shift",
     "aligned_depth",
     "depth_loss",
@@ -19,6 +24,7 @@ __all__ = [
     "gradient_matching",
     "load_vgg16_state_dict",
     "minmax_normalize",
+    "soft_delta1_loss",
     "ssi_loss",
     "ssim_loss",
     "to_comparison_space",

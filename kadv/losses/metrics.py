@@ -10,13 +10,18 @@ __all__ = ["aligned_depth", "depth_metrics"]
 
 
 def aligned_depth(
-    prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor, prediction_kind: str = "disparity"
+    prediction: torch.Tensor,
+    gt_depth: torch.Tensor,
+    mask: torch.Tensor,
+    prediction_kind: str = "disparity",
+    space: str = "disparity",
 ) -> torch.Tensor:
-    """The prediction as metric depth (B, 1, H, W): converted to disparity, aligned to the ground
-    truth's disparity by least squares on ``mask``, and converted back.
+    """The prediction as metric depth (B, 1, H, W): converted to ``space``, aligned to the ground
+    truth there by least squares on ``mask``, and converted back. Differentiable in both maps.
 
-    Aligned disparities below 1/max(gt) are clamped there, so a prediction that needs a negative
-    depth comes out as the farthest ground-truth depth rather than being dropped.
+    Aligned values are clamped at the end of the ground truth's range on the side where depth would
+    turn negative (disparity at 1/max(gt), depth at min(gt)), so a prediction that needs a negative
+    depth comes out as a ground-truth depth rather than being dropped.
 
     Examples:
         >>> depth = 1.0 + torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4) / 4
@@ -25,9 +30,11 @@ def aligned_depth(
         >>> torch.allclose(aligned_depth(disparity, depth, mask, "disparity"), depth)
         True
     """
-    gt_disparity = to_comparison_space(gt_depth, "depth", "disparity", mask)
-    pred_disparity = to_comparison_space(prediction, prediction_kind, "disparity", mask)
-    aligned = align_scale_shift(pred_disparity, gt_disparity, mask)
+    target = to_comparison_space(gt_depth, "depth", space, mask)
+    aligned = align_scale_shift(to_comparison_space(prediction, prediction_kind, space, mask), target, mask)
+    if space == "depth":
+        floor = torch.where(mask, gt_depth, torch.full_like(gt_depth, torch.inf)).amin(dim=(1, 2, 3), keepdim=True)
+        return torch.maximum(aligned, floor)
     floor = 1.0 / torch.where(mask, gt_depth, torch.zeros_like(gt_depth)).amax(dim=(1, 2, 3), keepdim=True)
     return 1.0 / torch.maximum(aligned, floor)
 

@@ -11,6 +11,7 @@ from kornia.enhance import normalize
 from kornia.losses import ssim_loss as kornia_ssim_loss
 from torch import nn
 
+from kadv.losses.aligned import ALIGNED_LOSSES, DELTA1_TEMPERATURE, AlignedLoss
 from kadv.losses.vgg import VGG16_TAPS, load_vgg16_state_dict, vgg16_features
 
 __all__ = ["IMAGENET_MEAN", "IMAGENET_STD", "PerceptualLoss", "depth_loss", "ssim_loss"]
@@ -75,9 +76,10 @@ def ssim_loss(a: torch.Tensor, b: torch.Tensor, window_size: int = 11) -> torch.
 
 
 def depth_loss(
-    kind: str, vgg_weights: str | Path | None = None, window_size: int = 11
-) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
-    """The L_depth discrepancy a ``loss/`` config names: "perceptual" (VGG-16) or "ssim".
+    kind: str, vgg_weights: str | Path | None = None, window_size: int = 11, temperature: float = DELTA1_TEMPERATURE
+) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | AlignedLoss:
+    """The attack loss a ``loss/`` config names: the study's L_depth on normalised maps, "perceptual"
+    (VGG-16) or "ssim", or an :class:`AlignedLoss` on the aligned prediction, "absrel" or "delta1".
 
     Raises:
         ValueError: an unknown kind or a bad window size.
@@ -94,4 +96,6 @@ def depth_loss(
         if window_size < 3 or window_size % 2 == 0:
             raise ValueError(f"loss.window_size must be an odd integer >= 3, got {window_size}")
         return partial(ssim_loss, window_size=window_size)
-    raise ValueError(f"loss.kind must be 'perceptual' or 'ssim', got {kind!r}")
+    if kind in ALIGNED_LOSSES:
+        return AlignedLoss(kind, temperature)
+    raise ValueError(f"loss.kind must be one of perceptual, ssim, {', '.join(ALIGNED_LOSSES)}, got {kind!r}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from kadv.losses import depth_loss
+from kadv.losses import DELTA1_TEMPERATURE, depth_loss
 from kadv.models import DepthModel
 from kadv.render import ExactRenderer
 from kadv.report.html import save_mean_curves, write_html
@@ -45,7 +45,12 @@ def write_report(
         stems.append("methods")
     if renderer_of is not None and model_of is not None:
         loss_config = runs[0].config["loss"]
-        loss = depth_loss(loss_config["kind"], loss_config.get("vgg_weights"), int(loss_config.get("window_size", 11)))
+        loss = depth_loss(
+            loss_config["kind"],
+            loss_config.get("vgg_weights"),
+            int(loss_config.get("window_size", 11)),
+            float(loss_config.get("temperature", DELTA1_TEMPERATURE)),
+        )
         tables += transfer_tables(runs, renderer_of, model_of, loss, loss_config.get("space", "disparity"), progress)
         stems += ["transfer_delta1", "transfer_l_depth"]
     written = [path for table, stem in zip(tables, stems) for path in table.write(out, stem)]

@@ -27,7 +27,7 @@ __all__ = [
 ]
 
 # bumped whenever a field below, InitViewResult or ViewRecord changes shape
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 
 def _check_schema(data: object, path: Path) -> dict:
@@ -51,6 +51,7 @@ class ViewMetrics:
     l_depth: float
     l_dist: float
     objective: float
+    loss: float
     delta1: float
     abs_rel: float
     theta: list[float]
@@ -65,6 +66,7 @@ class ViewMetrics:
             record.l_depth,
             record.l_dist,
             record.objective,
+            record.loss,
             record.delta1,
             record.abs_rel,
             record.theta,
@@ -77,12 +79,15 @@ class ViewMetrics:
 
 @dataclass
 class AnytimePoint:
-    """The best valid view so far, each time it improved: after how many evaluations and seconds."""
+    """The best valid view so far (by the run's loss), each time it improved: after how many
+    evaluations and seconds, and its measures."""
 
     evaluations: int
     seconds: float
     l_depth: float
     delta1: float
+    abs_rel: float
+    loss: float
 
 
 @dataclass

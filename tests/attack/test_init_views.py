@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from kadv import ExactRenderer, look_at
+from kadv import ExactRenderer, box_room, look_at
 from kadv.attack import (
     InitViewConfig,
     InitViewError,
@@ -16,10 +16,12 @@ from kadv.attack import (
     file_init_views,
     load_init_params,
     sample_init_views,
+    sample_valid_views,
     save_init_params,
     score_views,
 )
 from kadv.penalties import distance_to_surface, view_validity
+from kadv.scenes import Scene
 from tests.conftest import cached_real_scene
 
 PENALTY = PenaltyConfig()
@@ -95,3 +97,36 @@ def test_an_init_view_inside_a_box_is_refused(tiny_objective) -> None:
     )
     with pytest.raises(InitViewError, match=r"boxed.*inside an object"):
         check_init_views(renderer, [inside], PENALTY, 24, 32)
+
+
+def _room_on_a_large_ground() -> Scene:
+    """The box room standing on a 220 m x 220 m ground plane, its bounds mostly outdoors (as the
+    classroom's are), its file camera kept and no interior box to say where the room is."""
+    room = box_room(seed=0)
+    half = 110.0
+    ground = np.array([[-half, -0.05, -half], [half, -0.05, -half], [half, -0.05, half], [-half, -0.05, half]])
+    faces = np.array([[0, 2, 1], [0, 3, 2]]) + len(room.vertices)  # facing up
+    return Scene(
+        np.concatenate([room.vertices, ground]),
+        np.concatenate([room.faces, faces]),
+        np.concatenate([room.uvs, np.zeros((2, 3, 2), np.float32)]),
+        np.concatenate([room.normals, np.tile(np.float32([0, 1, 0]), (2, 3, 1))]),
+        np.concatenate([room.material_ids, [0, 0]]),
+        room.materials,
+        cameras=room.cameras,
+        name="room_on_ground",
+    )
+
+
+def test_sampled_centres_lie_inside_the_room_not_on_a_large_outdoor_ground() -> None:
+    scene = _room_on_a_large_ground()
+    room_lo, room_hi = box_room(seed=0).bounds
+    assert np.prod(np.diff(scene.bounds[:, [0, 2]], axis=0)) > 1000 * np.prod(
+        np.diff([room_lo, room_hi], axis=0)[0, [0, 2]]
+    )
+    renderer = ExactRenderer(scene)
+    poses = sample_valid_views(renderer, 24, 0, InitViewConfig(), PENALTY, 48, 64)
+    assert len(poses) == 24
+    centres = poses[:, :3, 3].numpy()
+    inside = ((centres > room_lo) & (centres < room_hi)).all(axis=1)
+    assert inside.all(), centres[~inside]

@@ -15,6 +15,7 @@ from kadv.attack import (
     METHODS,
     AttackConfig,
     GradientSettings,
+    HybridSettings,
     NevergradSettings,
     Objective,
     PenaltyConfig,
@@ -282,7 +283,7 @@ def test_the_progress_bar_forgets_the_previous_init_views_best(tiny_objective, d
     _run(tiny_objective, differentiable, [file_view, file_view], method="random", budget_evaluations=6)
     second = shown.index(("description", "random attack, init view 2/2"))
     before = [value for kind, value in shown[:second] if kind == "postfix"]
-    assert before and before[-1].startswith("L_depth=")  # init view 1 showed its best
+    assert before and before[-1].startswith("loss=")  # init view 1 showed its best
     assert shown[second + 1] == ("postfix", "")  # and init view 2 starts without it
 
 
@@ -295,3 +296,61 @@ def test_the_search_modules_import_each_other_in_one_direction() -> None:
         imported |= {alias.name for n in ast.walk(tree) if isinstance(n, ast.Import) for alias in n.names}
         later = {f"kadv.attack.{layer}" for layer in layers[index + 1 :]}
         assert not {m for m in imported if any(m == x or m.startswith(f"{x}.") for x in later)}, name
+
+
+def _lanes(records: list[ViewRecord]) -> dict[int, list[ViewRecord]]:
+    lanes: dict[int, list[ViewRecord]] = {}
+    for record in records:
+        lanes.setdefault(record.restart, []).append(record)
+    return lanes
+
+
+def test_trust_region_steps_from_the_incumbent_undo_failures_and_restart_stalled_lanes(
+    tiny_objective, differentiable, file_view
+) -> None:
+    """Replays each refined lane: every step leaves the lane's incumbent (never the view of a step
+    that failed) with the step length the grow/shrink rule gives, so no incumbent falls; a lane
+    whose step shrinks below stall_scale restarts from a screened view."""
+    settings = HybridSettings(screen_fraction=0.4, population=8, refine_views=2, stall_scale=0.3)
+    result = _run(
+        tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_evaluations=40
+    )
+    view = result.views[0]
+    screened = [r for r in view.records if r.step <= 2]
+    refined = [r for r in view.records if r.step > 2]
+    lanes = _lanes(refined)
+    assert len(lanes) > 2  # some lane stalled and restarted under a new id
+    screened_params = [r.params for r in screened]
+    for lane in lanes.values():
+        assert lane[0].params in screened_params  # a lane starts at a screened view, evaluated for its gradient
+        incumbent, radius = lane[0], 1.0
+        for record in lane[1:]:
+            step = np.subtract(record.params[:3], incumbent.params[:3])
+            assert float(np.linalg.norm(step)) == pytest.approx(settings.lr_rotation * radius, rel=1e-9)
+            if record.rankable and record.objective > incumbent.objective:
+                incumbent, radius = record, radius * settings.grow
+            else:
+                radius *= settings.shrink
+            if radius < settings.stall_scale:  # the lane restarts elsewhere, or afresh here once none is left
+                radius = 1.0
+    path = [r.loss for r in view.path]
+    assert path == sorted(path) and view.path[-1].loss == max(r.loss for r in view.records if r.rankable)
+
+
+def test_screening_at_a_reduced_size_re_scores_its_best_views_at_full_size(
+    tiny_objective, differentiable, file_view
+) -> None:
+    settings = HybridSettings(screen_fraction=0.5, screen_scale=0.5, population=8, refine_views=2)
+    # half of 34 views screens: the init view at full size, then two batches of 8 at half size
+    result = _run(
+        tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_evaluations=34
+    )
+    view = result.views[0]
+    small = [r for r in view.records if r.scale == 0.5]
+    assert len(small) == 16 and view.init_record.scale == 1.0
+    rescored = [r for r in view.records if r.scale == 1.0 and r.step == 3]
+    # the re-scored views are the best separated screened ones, evaluated again at full size
+    best = select_top_views([ViewRecord(**{**r.__dict__, "scale": 1.0}) for r in small], len(rescored), 0.05, 3.0)
+    assert [r.params for r in rescored] == [r.params for r in best] and len(rescored) == 8
+    assert all(r.scale == 1.0 for r in view.top + view.path)  # only full-size views are chosen or followed
+    assert any(a.l_depth != b.l_depth for a, b in zip(rescored, best))  # the sizes score differently

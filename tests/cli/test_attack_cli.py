@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import shutil
@@ -7,8 +9,8 @@ import signal
 import subprocess
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -17,6 +19,9 @@ from PIL import Image
 from transformers import CHMv2Config
 
 from kadv import box_room
+from kadv.cli.attack import main as attack_main
+from kadv.cli.render import main as render_main
+from kadv.cli.train_tiny import main as train_tiny_main
 from kadv.report.summary import SCHEMA_VERSION
 
 BIN = Path(sys.executable).parent
@@ -203,6 +208,9 @@ BAD_INPUTS = [
     ("kadv-attack", ["scene=file", "scene.path={corrupt}"], "corrupt.xml"),
     ("kadv-attack", ["attack=gradient", "attack.gradient.steps=-3"], "attack.gradient.steps"),
     ("kadv-attack", ["attack.method=adam"], "attack.method must be one of"),
+    ("kadv-attack", ["attack.hybrid.screen_scale=2"], "attack.hybrid.screen_scale must be in (0, 1], got 2"),
+    ("kadv-attack", ["loss=delta1", "loss.temperature=0"], "loss.temperature must be positive, got 0"),
+    ("kadv-attack", ["loss.kind=rmse"], "loss.kind must be one of perceptual, ssim, absrel, delta1, got 'rmse'"),
     # a key the composed config lacks: Hydra's own message is five lines and exit 1
     ("kadv-attack", ["attack.gradient.steps=-3"], "attack has no key 'gradient'; it has: "),
     ("kadv-attack", ["camera.eye=[1,2"], "cannot parse the overrides"),
@@ -247,9 +255,40 @@ _SIZE = {"kadv-attack": SMALL[:2], "kadv-render": SMALL[:2]}
 _DIRECT = {"kadv-attack": ["render.lighting=direct"], "kadv-render": ["render.lighting=direct"]}
 
 
+_MAINS = {"kadv-attack": attack_main, "kadv-render": render_main, "kadv-train-tiny": train_tiny_main}
+
+
+def _run_in_process(tool: str, run_dir: Path, *overrides: str) -> subprocess.CompletedProcess:
+    """``tool`` called as its console script would call it, in this process: its exit status and stderr."""
+    stderr = io.StringIO()
+    with mock.patch.object(sys, "argv", [tool, f"hydra.run.dir={run_dir}", *overrides]):
+        with contextlib.redirect_stderr(stderr):
+            try:
+                _MAINS[tool]()
+                code = 0
+            except SystemExit as exit_:
+                code = exit_.code
+    return subprocess.CompletedProcess([tool, *overrides], code, "", stderr.getvalue())
+
+
+def _bad_input_case(case: int, root: Path, values: dict, in_process: bool) -> subprocess.CompletedProcess:
+    tool, overrides, _ = BAD_INPUTS[case]
+    overrides = [o.format(**values) for o in overrides]
+    # the cases that reach a render need no bake (a fresh cache), unless about lighting
+    direct = [] if any("lighting" in o or "bake" in o for o in overrides) else _DIRECT.get(tool, [])
+    overrides = [*_SIZE.get(tool, []), *direct, *overrides]
+    if in_process:
+        return _run_in_process(tool, root / f"run{case}", *overrides)
+    return _run(tool, root, f"run{case}", *overrides, env=_OFFLINE)
+
+
+_OFFLINE = {"HF_HUB_OFFLINE": "1", "HYDRA_FULL_ERROR": "0"}
+# one case per command also goes through its installed console script, in its own process
+_THROUGH_SCRIPTS = {tool: next(i for i, case in enumerate(BAD_INPUTS) if case[0] == tool) for tool in _MAINS}
+
+
 @pytest.fixture(scope="module")
-def bad_input_results(tmp_path_factory) -> dict[int, subprocess.CompletedProcess]:
-    """Every BAD_INPUTS case run once; side by side, since each spends its seconds importing."""
+def bad_input_values(tmp_path_factory) -> tuple[Path, dict]:
     root = tmp_path_factory.mktemp("bad_inputs")
     corrupt = root / "corrupt.xml"
     corrupt.write_text("<scene version='0.6.0'><shape type='obj'>")
@@ -257,18 +296,29 @@ def bad_input_results(tmp_path_factory) -> dict[int, subprocess.CompletedProcess
     wrong_model.write_text("import torch\n\ndef make():\n    return torch.nn.Conv2d(3, 2, 1)\n")
     canopy = root / "canopy"
     CHMv2Config().save_pretrained(canopy)  # refused on its config, before any weights are read
-    values = {"corrupt": corrupt, "inside": _inside_box_params(root), "wrong_model": wrong_model, "canopy": canopy}
-    offline = {"HF_HUB_OFFLINE": "1", "HF_HOME": str(root / "hf"), "HYDRA_FULL_ERROR": "0"}
+    return root, {"corrupt": corrupt, "inside": _inside_box_params(root), "wrong_model": wrong_model, "canopy": canopy}
 
-    def run(case: int) -> subprocess.CompletedProcess:
-        tool, overrides, _ = BAD_INPUTS[case]
-        overrides = [o.format(**values) for o in overrides]
-        # the cases that reach a render need no bake (four at once in a fresh cache), unless about lighting
-        direct = [] if any("lighting" in o or "bake" in o for o in overrides) else _DIRECT.get(tool, [])
-        return _run(tool, root, f"run{case}", *_SIZE.get(tool, []), *direct, *overrides, env=offline)
 
-    with ThreadPoolExecutor(max_workers=4) as pool:
-        return dict(enumerate(pool.map(run, range(len(BAD_INPUTS)))))
+@pytest.fixture(scope="module")
+def bad_input_results(bad_input_values) -> dict[int, subprocess.CompletedProcess]:
+    """Every BAD_INPUTS case run once, in this process: each command is its ``main`` with the
+    script's arguments, so the cases skip the seconds of importing that a process spends."""
+    root, values = bad_input_values
+    with pytest.MonkeyPatch.context() as patch:
+        patch.chdir(root)
+        for name, value in {**_OFFLINE, "HF_HOME": str(root / "hf")}.items():
+            patch.setenv(name, value)
+        return {case: _bad_input_case(case, root, values, in_process=True) for case in range(len(BAD_INPUTS))}
+
+
+@pytest.mark.parametrize("tool", sorted(_THROUGH_SCRIPTS))
+def test_bad_input_through_the_installed_script_gives_one_line_and_exit_status_2(tool, bad_input_values) -> None:
+    root, values = bad_input_values
+    case = _THROUGH_SCRIPTS[tool]
+    result = _bad_input_case(case, root, values, in_process=False)
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.strip().splitlines() == [f"{tool}: error: " + result.stderr.split(": error: ", 1)[1].strip()]
+    assert BAD_INPUTS[case][2] in result.stderr and "Traceback" not in result.stderr
 
 
 @pytest.mark.parametrize("case", range(len(BAD_INPUTS)), ids=[" ".join(o) for _, o, _ in BAD_INPUTS])

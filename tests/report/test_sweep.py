@@ -14,7 +14,7 @@ from kadv.report.summary import SCHEMA_VERSION, AnytimePoint, InitViewSummary, R
 
 
 def _metrics(l_depth: float, delta1: float, png: str) -> ViewMetrics:
-    return ViewMetrics(l_depth, 0.0, l_depth, delta1, 0.1, [0.0, 0.0, 0.0], [1.0, 1.5, 1.0], 0, 0, png)
+    return ViewMetrics(l_depth, 0.0, l_depth, l_depth, delta1, 0.1, [0.0, 0.0, 0.0], [1.0, 1.5, 1.0], 0, 0, png)
 
 
 def _run(folder: Path, method: str, init: float, adversarial: float, delta1: tuple[float, float]) -> RunSummary:
@@ -32,7 +32,10 @@ def _run(folder: Path, method: str, init: float, adversarial: float, delta1: tup
         adversarial=[_metrics(adversarial, delta1[1], "views/init0_adv0.png")],
         adversarial_mean={"l_depth": adversarial, "delta1": delta1[1], "abs_rel": 0.1},
         l_depth_gain=adversarial - init,
-        anytime=[AnytimePoint(1, 0.1, init, delta1[0]), AnytimePoint(9, 2.0, adversarial, delta1[1])],
+        anytime=[
+            AnytimePoint(1, 0.1, init, delta1[0], 0.1, init),
+            AnytimePoint(9, 2.0, adversarial, delta1[1], 0.2, adversarial),
+        ],
         evaluations=10,
         invalid_views=0,
         uninformative_views=0,

@@ -94,7 +94,7 @@ def gradient_ascent(
             out.refreshed,
             render=out.exact,
         )
-        bar.set_postfix(L_depth=f"{float(terms.l_depth.detach().max()):.4f}", refresh=False)
+        bar.set_postfix(loss=f"{float(terms.loss.detach().max()):.4f}", refresh=False)
         bar.update(batch)
         if step == steps:
             clock.spent(batch, time.perf_counter() - started)
@@ -113,9 +113,9 @@ def gradient_ascent(
 
 
 def best_lane(records: list[ViewRecord]) -> list[ViewRecord]:
-    """The records of the lane (restart) whose valid views reach the largest L_depth."""
+    """The records of the lane (restart) whose rankable views reach the largest loss."""
     lanes = sorted({r.restart for r in records})
-    best = max(lanes, key=lambda b: max((r.l_depth for r in records if r.restart == b and r.valid), default=-math.inf))
+    best = max(lanes, key=lambda b: max((r.loss for r in records if r.restart == b and r.rankable), default=-math.inf))
     return [r for r in records if r.restart == best]
 
 

@@ -1,9 +1,11 @@
-"""Screen, then refine: a space-filling design over the bounds, then batched gradient ascent from
-the best screened views for the rest of the budget."""
+"""Screen, then refine: a space-filling design over the bounds (optionally at a reduced size, its
+best views re-scored at full size), then trust-region gradient steps from the best screened views
+for the rest of the budget."""
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -11,12 +13,14 @@ import torch
 from scipy.stats import qmc
 from tqdm import tqdm
 
-from kadv.attack.methods.gradient import best_lane, gradient_ascent
-from kadv.attack.records import InitViewResult, incumbent_path, select_top_views
+from kadv.attack.records import InitViewResult, ViewRecord, incumbent_path, select_top_views
 from kadv.attack.registry import register_method
 from kadv.attack.search import SearchContext
 
-__all__ = ["HybridSettings", "hybrid_search"]
+__all__ = ["HybridSettings", "hybrid_search", "trust_region_refine"]
+
+# Restart starts held per refined lane (each is re-scored at full size when screening ran smaller).
+_POOL_PER_LANE = 3
 
 
 @dataclass(frozen=True)
@@ -25,23 +29,135 @@ class HybridSettings:
 
     Attributes:
         screen_fraction: share of the budget (evaluations, or seconds) spent screening.
+        screen_scale: screening renders and scores at this share of the run's height and width;
+            below 1 its best separated views are re-scored at full size before refinement.
         population: screening views per evaluated batch (a power of two keeps Sobol points balanced).
-        refine_views: gradient runs, batched, from the best separated valid screened views.
-        lr_rotation, lr_translation: their Adam learning rates (radians, metres).
+        refine_views: trust-region lanes, batched, from the best separated valid screened views.
+        lr_rotation, lr_translation: a lane's first step lengths (radians, metres) along the
+            normalised gradient of the rotation vector and of the centre offset.
+        grow, shrink: a step that raises the objective multiplies the lane's step length by
+            ``grow``; one that does not is undone and multiplies it by ``shrink``.
+        stall_scale: a lane whose step length has shrunk below this share of the first restarts
+            from the next best separated screened view (or, when none is left, with its first step
+            length where it is).
     """
 
     screen_fraction: float = 0.5
+    screen_scale: float = 1.0
     population: int = 8
     refine_views: int = 2
     lr_rotation: float = 0.02
     lr_translation: float = 0.03
+    grow: float = 1.5
+    shrink: float = 0.5
+    stall_scale: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name, low, high in (("screen_scale", 0.0, 1.0), ("shrink", 0.0, 1.0 - 1e-9), ("stall_scale", 0.0, 1.0)):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and low < value <= high):
+                raise ValueError(
+                    f"attack.hybrid.{name} must be in ({low:g}, {high:g}{']' if high == 1 else ')'}, got {value}"
+                )
+        if not (math.isfinite(self.grow) and self.grow >= 1.0):
+            raise ValueError(f"attack.hybrid.grow must be >= 1, got {self.grow}")
+
+
+def _steps(gradient: torch.Tensor, radius: torch.Tensor, settings: HybridSettings) -> torch.Tensor:
+    """Moves (L, 6): each lane's gradient, normalised per block (rotation, translation), times its
+    step lengths."""
+    step = torch.zeros_like(gradient)
+    for block, length in ((slice(0, 3), settings.lr_rotation), (slice(3, 6), settings.lr_translation)):
+        part = gradient[:, block]
+        step[:, block] = length * radius[:, None] * part / part.norm(dim=1, keepdim=True).clamp_min(1e-30)
+    return step
+
+
+def trust_region_refine(
+    context: SearchContext,
+    starts: list[ViewRecord],
+    pool: list[ViewRecord],
+    settings: HybridSettings,
+    bar: tqdm,
+    first_step: int,
+) -> list[ViewRecord]:
+    """Batched trust-region gradient ascent from ``starts`` within the context's budget; its records.
+
+    Each lane keeps an incumbent (a rankable view and the objective's gradient there). A step goes
+    along the normalised gradient from the incumbent, pulled within the pose bounds and through the
+    step guard; it becomes the incumbent only if it is rankable and raises the objective (then the
+    step grows), otherwise it is undone (and the step shrinks). A lane whose step has shrunk below
+    ``stall_scale`` restarts from the next view of ``pool``. So no lane's incumbent ever falls.
+    Lane ids (records' ``restart``) are new for each restart.
+    """
+    clock = context.clock
+    lanes = clock.allows(len(starts))
+    if lanes == 0:
+        return []
+    pool = list(pool)
+    ids = list(range(lanes))
+    next_id = lanes
+    current = torch.tensor([r.params for r in starts[:lanes]], dtype=torch.float64)  # incumbents
+    best = torch.full((lanes,), -math.inf, dtype=torch.float64)
+    gradient = torch.zeros(lanes, 6, dtype=torch.float64)
+    radius = torch.ones(lanes, dtype=torch.float64)
+    fresh = torch.ones(lanes, dtype=torch.bool)  # the trial is the incumbent itself: evaluate for its gradient
+    base = context.base(lanes)
+    records: list[ViewRecord] = []
+    step = first_step
+    while clock.allows(lanes) == lanes:
+        started = time.perf_counter()
+        proposal = context.config.project(
+            current + torch.where(fresh[:, None], 0.0, _steps(gradient, radius, settings))
+        )
+        reached, fraction = context.guard(current[:, 3:], proposal[:, 3:])
+        trial = torch.cat([proposal[:, :3], reached], dim=1).requires_grad_(True)
+        out = context.differentiable(trial, base, context.K, context.height, context.width)
+        terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
+        rows = context.records(
+            step,
+            trial,
+            out.world_T_cam,
+            terms,
+            fraction,
+            (out.coverage, out.rgb_error, out.depth_error),
+            out.refreshed,
+            lanes=list(ids),
+            render=out.exact,
+        )
+        records += rows
+        value = terms.objective.detach()
+        rankable = torch.tensor([r.rankable for r in rows])
+        accepted = fresh | (rankable & (value > best))
+        backward = int(accepted.sum())
+        if backward:
+            (terms.objective * accepted).sum().backward()
+            gradient[accepted] = trial.grad[accepted]
+            current[accepted] = trial.detach()[accepted]
+            best[accepted] = torch.where(
+                rankable[accepted], value[accepted], torch.full_like(value[accepted], -math.inf)
+            )
+        radius = torch.where(accepted & ~fresh, radius * settings.grow, radius)
+        radius = torch.where(accepted, radius, radius * settings.shrink)
+        fresh = torch.zeros_like(fresh)
+        for lane in torch.nonzero(radius < settings.stall_scale).flatten().tolist():
+            radius[lane] = 1.0
+            if pool:
+                current[lane] = torch.tensor(pool.pop(0).params, dtype=torch.float64)
+                best[lane], fresh[lane] = -math.inf, True
+                ids[lane], next_id = next_id, next_id + 1
+        bar.set_postfix(loss=f"{max((r.loss for r in records if r.rankable), default=math.nan):.4f}", refresh=False)
+        bar.update(lanes)
+        clock.spent(lanes, time.perf_counter() - started, backward=backward)
+        step += 1
+    return records
 
 
 @register_method("hybrid", HybridSettings)
 def hybrid_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) -> InitViewResult:
-    """Scrambled Sobol points spread over the bounds' balls, then gradient ascent from the best.
+    """Scrambled Sobol points spread over the bounds' balls, then trust-region ascent from the best.
 
-    The path is the screening's successive best views, then the best refined run.
+    The path is the successive best rankable views (the incumbent never falls).
     """
     settings, clock, config = context.config.settings, context.clock, context.config
     screen_views = math.ceil(settings.screen_fraction * clock.evaluations) if clock.evaluations is not None else None
@@ -61,15 +177,34 @@ def hybrid_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) -
         count = clock.allows(wanted)
         if count == 0:
             break
-        records += context.evaluate(step, config.sample_ball(sobol.random(settings.population)[:count]))
+        unit = sobol.random(settings.population)[:count]
+        records += context.evaluate(step, config.sample_ball(unit), scale=settings.screen_scale)
         bar.update(count)
         step += 1
-    screened = list(records)
-    starts = select_top_views(screened, settings.refine_views, config.min_separation, config.min_separation_deg)
-    if starts:
-        start = torch.tensor([r.params for r in starts], dtype=torch.float64)
-        records += gradient_ascent(
-            context, start, 2**31, settings.lr_rotation, settings.lr_translation, bar, first_step=step
+    candidates = select_top_views(
+        [r if r.scale == 1.0 else _as_full(r) for r in records],
+        settings.refine_views * (1 + _POOL_PER_LANE),
+        config.min_separation,
+        config.min_separation_deg,
+    )
+    if settings.screen_scale < 1.0 and candidates:
+        # re-score at full size what screening ranked at a reduced one; the init view is already full size
+        small = [r for r in candidates if r.step > 0]
+        count = clock.allows(len(small))
+        if count:
+            params = torch.tensor([r.params for r in small[:count]], dtype=torch.float64)
+            records += context.evaluate(step, params)
+            bar.update(count)
+            step += 1
+        candidates = select_top_views(
+            [r for r in records if r.scale == 1.0], len(candidates), config.min_separation, config.min_separation_deg
         )
-    refined = records[len(screened) :]
-    return context.result(records, incumbent_path(screened) + (best_lane(refined) if refined else []))
+    starts, pool = candidates[: settings.refine_views], candidates[settings.refine_views :]
+    if starts:
+        records += trust_region_refine(context, starts, pool, settings, bar, step)
+    return context.result(records, incumbent_path(records))
+
+
+def _as_full(record: ViewRecord) -> ViewRecord:
+    """A reduced-size screened view, ranked as if it were full size (for choosing what to re-score)."""
+    return ViewRecord(**{**record.__dict__, "scale": 1.0})
