@@ -173,32 +173,69 @@ def measure_curves(curves: dict, pair: str, measure: str, seconds: np.ndarray) -
     return np.array(rows)
 
 
+LOSS_STYLES = {"delta1": "-", "absrel": "--", "ssim": ":", "perceptual": "-."}
+
+
+def final_measures(curves: dict) -> dict[str, dict[str, float]]:
+    """Each pair's mean of every measure at the full budget."""
+    seconds = np.linspace(0.0, curves["budget_seconds"], GRID)
+    pairs = list(curves["views"][0]["pairs"])
+    return {p: {m: float(measure_curves(curves, p, m, seconds)[:, -1].mean()) for m in MEASURES} for p in pairs}
+
+
+def ratios(final: dict[str, dict[str, float]], default: str) -> dict[str, float]:
+    """``default``'s delta1 drop against the strongest SSIM baseline and the strongest baseline with
+    its own loss, and its L_depth gain against the strongest SSIM baseline."""
+    loss = default.split("+")[1]
+    baselines = [p for p in final if p.split("+")[0] in BASELINES]
+    ssim = [p for p in baselines if p.endswith("+ssim")]
+    same = [p for p in baselines if p.endswith(f"+{loss}")]
+    return {
+        "delta1_drop_vs_best_baseline": final[default]["delta1 drop"] / max(final[p]["delta1 drop"] for p in ssim),
+        "delta1_drop_vs_same_loss_baseline": final[default]["delta1 drop"] / max(final[p]["delta1 drop"] for p in same),
+        "gain_vs_best_baseline": final[default]["L_depth gain"] / max(final[p]["L_depth gain"] for p in ssim),
+    }
+
+
+def plot(curves: dict, path: Path, banded: list[str]) -> None:
+    """delta1 drop and L_depth gain against seconds for every pair: a colour per method, a line
+    style per loss; 95% bootstrap bands for the ``banded`` pairs."""
+    seconds = np.linspace(0.0, curves["budget_seconds"], GRID)
+    pairs = list(curves["views"][0]["pairs"])
+    methods = sorted({p.split("+")[0] for p in pairs})
+    rng = np.random.default_rng(0)
+    figure, axes = plt.subplots(1, 2, figsize=(13, 5))
+    for pair in pairs:
+        method, loss = pair.split("+")
+        colour = plt.get_cmap("tab10")(methods.index(method))
+        for axis, measure in zip(axes, ("delta1 drop", "L_depth gain")):
+            samples = measure_curves(curves, pair, measure, seconds)
+            axis.plot(seconds, samples.mean(axis=0), LOSS_STYLES.get(loss, "-"), color=colour, label=pair, lw=1.3)
+            if pair in banded:
+                axis.fill_between(seconds, *bootstrap_band(samples, rng), color=colour, alpha=0.12)
+    for axis, measure in zip(axes, ("delta1 drop", "L_depth gain")):
+        axis.set_xlabel("seconds per init view")
+        axis.set_ylabel(f"mean {measure} of the incumbent")
+    axes[0].legend(fontsize=6, ncol=3)
+    figure.suptitle(
+        f"Anytime search, {len(curves['views'])} init views; line style: loss (solid delta1, dashed absrel, "
+        f"dotted ssim); bands: 95% bootstrap of {', '.join(banded)}",
+        fontsize=9,
+    )
+    figure.tight_layout()
+    figure.savefig(path, dpi=90)
+    plt.close(figure)
+
+
 def summarise(curves: dict, out: Path) -> str:
     budget = curves["budget_seconds"]
     pairs = list(curves["views"][0]["pairs"])
     seconds = np.linspace(0.0, budget, GRID)
-    rng = np.random.default_rng(0)
-    figure, axes = plt.subplots(1, 2, figsize=(13, 5))
-    values = {m: {} for m in MEASURES}
-    for pair in pairs:
-        for measure in MEASURES:
-            values[measure][pair] = measure_curves(curves, pair, measure, seconds)
-        style = "-" if pair.split("+")[0] not in BASELINES else "--"
-        for axis, measure in zip(axes, ("delta1 drop", "L_depth gain")):
-            samples = values[measure][pair]
-            (line,) = axis.plot(seconds, samples.mean(axis=0), style, label=pair, lw=1.2)
-            if pair.split("+")[0] not in BASELINES:
-                axis.fill_between(seconds, *bootstrap_band(samples, rng), color=line.get_color(), alpha=0.12)
-    for axis, measure in zip(axes, ("delta1 drop", "L_depth gain")):
-        axis.set_xlabel("seconds per init view")
-        axis.set_ylabel(f"mean {measure} of the incumbent")
-    axes[0].legend(fontsize=6, ncol=2)
-    figure.suptitle(f"Anytime search, {len(curves['views'])} init views (bands: 95% bootstrap, kadv's methods)")
-    figure.tight_layout()
-    figure.savefig(out / "search_anytime.png", dpi=90)
-    plt.close(figure)
+    final = final_measures(curves)
+    default = max(pairs, key=lambda p: final[p]["delta1 drop"])
+    ssim = [p for p in pairs if p.split("+")[0] in BASELINES and p.endswith("+ssim")]
+    plot(curves, out / "search_anytime.png", [default, max(ssim, key=lambda p: final[p]["delta1 drop"])])
     columns = [round(f * (GRID - 1)) for f in FRACTIONS]
-    final = {p: {m: float(values[m][p][:, -1].mean()) for m in MEASURES} for p in pairs}
     lines = [
         "| method+loss | "
         + " | ".join(f"delta1 drop {f:.0%}" for f in FRACTIONS)
@@ -206,7 +243,7 @@ def summarise(curves: dict, out: Path) -> str:
         "|---" * (4 + len(FRACTIONS)) + "|",
     ]
     for pair in sorted(pairs, key=lambda p: -final[p]["delta1 drop"]):
-        drop = values["delta1 drop"][pair].mean(axis=0)
+        drop = measure_curves(curves, pair, "delta1 drop", seconds).mean(axis=0)
         views = np.mean([v["pairs"][pair]["evaluations"] for v in curves["views"]])
         lines.append(
             f"| {pair} | "
@@ -221,19 +258,32 @@ def summarise(curves: dict, out: Path) -> str:
         f"Uninformative views chosen: {uninformative}.\n\n{table}"
     )
     print(table)
-    default = max(pairs, key=lambda p: final[p]["delta1 drop"])
-    loss = default.split("+")[1]
-    ssim = [p for p in pairs if p.split("+")[0] in BASELINES and p.endswith("+ssim")]
-    same = [p for p in pairs if p.split("+")[0] in BASELINES and p.endswith(f"+{loss}")]
-    best_drop = max(final[p]["delta1 drop"] for p in ssim)
-    same_drop = max(final[p]["delta1 drop"] for p in same)
-    best_gain = max(final[p]["L_depth gain"] for p in ssim)
-    drop = final[default]["delta1 drop"]
-    return (
-        f"search_anytime default={default} delta1_drop_vs_best_baseline={drop / best_drop:.2f} "
-        f"delta1_drop_vs_same_loss_baseline={drop / same_drop:.2f} "
-        f"gain_vs_best_baseline={final[default]['L_depth gain'] / best_gain:.2f} uninformative_chosen={uninformative}"
+    measured = " ".join(f"{k}={v:.2f}" for k, v in ratios(final, default).items())
+    return f"search_anytime default={default} {measured} uninformative_chosen={uninformative}"
+
+
+def across_seeds(runs: list[dict], out: Path) -> str:
+    """The pairs every run holds, their delta1 drop at the full budget per run, and the leader's
+    ratios with their range over the runs (seeds)."""
+    finals = [final_measures(curves) for curves in runs]
+    pairs = [p for p in finals[0] if all(p in f for f in finals)]
+    mean = {p: float(np.mean([f[p]["delta1 drop"] for f in finals])) for p in pairs}
+    lines = ["| method+loss | mean delta1 drop | min | max |", "|---|---|---|---|"]
+    for pair in sorted(pairs, key=lambda p: -mean[p]):
+        drops = [f[pair]["delta1 drop"] for f in finals]
+        lines.append(f"| {pair} | {mean[pair]:.3f} | {min(drops):.3f} | {max(drops):.3f} |")
+    table = "\n".join(lines) + "\n"
+    (out / "search_anytime_seeds.md").write_text(
+        f"{len(runs)} runs (seeds), delta1 drop at the full budget.\n\n{table}"
     )
+    print(table)
+    default = max(pairs, key=lambda p: mean[p])
+    per_seed = [ratios({p: f[p] for p in pairs}, default) for f in finals]
+    parts = []
+    for key in per_seed[0]:
+        values = [r[key] for r in per_seed]
+        parts.append(f"{key}={np.mean(values):.2f} {key}_min={min(values):.2f} {key}_max={max(values):.2f}")
+    return f"search_anytime seeds={len(runs)} default={default} " + " ".join(parts)
 
 
 def main() -> None:
@@ -250,7 +300,11 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="seeds the sampled init views and the searches")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", default="search_anytime_out")
-    parser.add_argument("--from-json", help="summarise an earlier run's search_anytime.json instead of running")
+    parser.add_argument(
+        "--from-json",
+        help="summarise earlier runs' search_anytime.json instead of running; several (comma-separated, "
+        "e.g. one per seed) also give each ratio's range over them",
+    )
     args = parser.parse_args()
     try:
         for label in args.methods.split(","):
@@ -267,6 +321,13 @@ def main() -> None:
         sys.exit(2)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.from_json and "," in args.from_json:
+        runs = [json.loads(Path(p).read_text()) for p in args.from_json.split(",")]
+        for index, curves in enumerate(runs):
+            (out / f"run{index}").mkdir(exist_ok=True)
+            print(summarise(curves, out / f"run{index}"))
+        print(across_seeds(runs, out))
+        return
     curves = json.loads(Path(args.from_json).read_text()) if args.from_json else run(args)
     (out / "search_anytime.json").write_text(json.dumps(curves))
     print(summarise(curves, out))

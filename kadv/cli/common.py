@@ -33,7 +33,7 @@ from kadv.io import write_json
 from kadv.losses import DELTA1_TEMPERATURE, AlignedLoss, depth_loss
 from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
 from kadv.render import BakeConfig, ExactRenderer, Shading
-from kadv.scenes import Scene, box_room, load_scene, procedural_room
+from kadv.scenes import Scene, scene_from_node
 
 __all__ = [
     "FAILURE",
@@ -250,17 +250,15 @@ def loss_from_config(cfg: DictConfig) -> Callable | AlignedLoss:
 
 
 def scene_from_config(cfg: DictConfig) -> Scene:
-    """Build the scene a ``scene/`` config node describes (``kind``: box_room, procedural or file)."""
+    """Build the scene a ``scene/`` config node describes (``kind``: box_room, procedural or file),
+    its numbers checked first so that a wrong one is named."""
+    if cfg.kind in ("box_room", "procedural"):
+        config_int(cfg.seed, "scene.seed")
     if cfg.kind == "box_room":
-        return box_room(
-            seed=config_int(cfg.seed, "scene.seed"), num_boxes=config_int(cfg.num_boxes, "scene.num_boxes", 0)
-        )
-    if cfg.kind == "procedural":
-        return procedural_room(seed=config_int(cfg.seed, "scene.seed"))
-    if cfg.kind == "file":
-        options = OmegaConf.to_container(cfg.get("options") or {}, resolve=True)
-        return load_scene(Path(cfg.path).expanduser(), **options)
-    raise ValueError(f"scene.kind must be 'box_room', 'procedural' or 'file', got {cfg.kind!r}")
+        config_int(cfg.num_boxes, "scene.num_boxes", 0)
+    # reading cfg.path refuses a missing one (???) in OmegaConf's words, which name the key
+    path = cfg.path if cfg.kind == "file" else None
+    return scene_from_node(OmegaConf.to_container(cfg, resolve=True), path=path)
 
 
 def shading_from_config(cfg: DictConfig) -> Shading:

@@ -1,4 +1,4 @@
-"""Run artefacts: images, the run directory and its summary, sweep tables and the HTML report.
+"""Run artefacts: images, the run directory and its summary, sweep tables, the HTML report and the 3-D viewer.
 
 The names below load on first use, so that a command writing only images (``kadv-render``) does
 not import the attack, the models and the report's plotting.
@@ -18,6 +18,7 @@ _EXPORTS = {
     "save_rgb_png": "kadv.report.images",
     "write_report": "kadv.report.build",
     "write_run": "kadv.report.run",
+    "view": "kadv.report.viewer",
 }
 
 if TYPE_CHECKING:  # the same names, for type checkers and the API reference
@@ -25,7 +26,17 @@ if TYPE_CHECKING:  # the same names, for type checkers and the API reference
     from kadv.report.images import save_depth_png, save_rgb_png
     from kadv.report.run import write_run
     from kadv.report.summary import SCHEMA_VERSION, RunInfo, RunSummary
+    from kadv.report.viewer import view
 
-__all__ = ["SCHEMA_VERSION", "RunInfo", "RunSummary", "save_depth_png", "save_rgb_png", "write_report", "write_run"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "RunInfo",
+    "RunSummary",
+    "save_depth_png",
+    "save_rgb_png",
+    "view",
+    "write_report",
+    "write_run",
+]
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -9,14 +9,24 @@ import imageio.v2 as imageio
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import PolyCollection
-from PIL import Image, ImageDraw
+from PIL import Image, ImageDraw, ImageFont
 
 from kadv.attack.records import InitViewResult, best_so_far
 from kadv.io import atomic_write
 from kadv.report.images import depth_colour_map, depth_range
 from kadv.scenes import Scene
 
-__all__ = ["annotate", "colourise", "save_curves", "save_figure", "save_four_panel", "save_map", "save_video"]
+__all__ = [
+    "PlanRaster",
+    "colourise",
+    "loss_label",
+    "save_curves",
+    "save_figure",
+    "save_four_panel",
+    "save_map",
+    "save_video",
+    "video_frame",
+]
 
 
 def save_figure(path: Path, figure: plt.Figure) -> Path:
@@ -64,25 +74,39 @@ def save_four_panel(
     return save_figure(Path(path), figure)
 
 
+_LOSS_LABELS = {
+    "ssim": "L_depth (SSIM)",
+    "perceptual": "L_depth (perceptual)",
+    "absrel": "AbsRel (aligned)",
+    "delta1": "smooth delta1 error share",
+}
+
+
 def _grid(count: int) -> tuple[int, int]:
     columns = min(count, 3)
     return math.ceil(count / columns), columns
 
 
-def save_curves(path: str | Path, results: list[InitViewResult]) -> Path:
-    """L_depth of every evaluated view against the evaluations so far, the best valid one so far and
-    the search's path, per init view, with the init view's value and the adversarial views marked."""
+def loss_label(kind: str) -> str:
+    """How figures name the loss a run attacked (its ``loss.kind``)."""
+    return _LOSS_LABELS.get(kind, kind)
+
+
+def save_curves(path: str | Path, results: list[InitViewResult], label: str = "L_depth") -> Path:
+    """The attacked loss (named ``label``) of every evaluated view against the evaluations so far,
+    the best valid one so far and the search's path, per init view, with the init view's value and
+    the adversarial views marked."""
     rows, columns = _grid(len(results))
     figure, axes = plt.subplots(rows, columns, figsize=(4.6 * columns, 3.2 * rows), squeeze=False)
     for axis, result in zip(axes.flat, results):
         order = {id(r): count for count, r in enumerate(result.records, start=1)}
         valid = [r for r in result.records if r.valid]
-        axis.scatter([order[id(r)] for r in valid], [r.l_depth for r in valid], s=6, alpha=0.4, label="evaluated views")
+        axis.scatter([order[id(r)] for r in valid], [r.loss for r in valid], s=6, alpha=0.4, label="evaluated views")
         invalid = [r for r in result.records if not r.valid]
         if invalid:
             axis.scatter(
                 [order[id(r)] for r in invalid],
-                [r.l_depth for r in invalid],
+                [r.loss for r in invalid],
                 marker="x",
                 s=10,
                 color="grey",
@@ -91,7 +115,7 @@ def save_curves(path: str | Path, results: list[InitViewResult]) -> Path:
         curve = best_so_far(result.records)
         axis.step(
             [c[0] for c in curve] + [len(result.records)],
-            [c[2] for c in curve] + [curve[-1][2]],
+            [c[5] for c in curve] + [curve[-1][5]],
             where="post",
             color="k",
             lw=1.5,
@@ -99,15 +123,15 @@ def save_curves(path: str | Path, results: list[InitViewResult]) -> Path:
         )
         axis.plot(
             [order[id(r)] for r in result.path],
-            [r.l_depth for r in result.path],
+            [r.loss for r in result.path],
             color="tab:orange",
             lw=1.0,
             label="path",
         )
-        axis.axhline(result.init_record.l_depth, color="k", ls="--", lw=1, label="init view")
+        axis.axhline(result.init_record.loss, color="k", ls="--", lw=1, label="init view")
         axis.scatter(
             [order[id(r)] for r in result.top],
-            [r.l_depth for r in result.top],
+            [r.loss for r in result.top],
             marker="*",
             s=120,
             color="red",
@@ -116,7 +140,7 @@ def save_curves(path: str | Path, results: list[InitViewResult]) -> Path:
         )
         axis.set_title(f"{result.init.name}")
         axis.set_xlabel("evaluated views")
-        axis.set_ylabel("L_depth")
+        axis.set_ylabel(label)
     for axis in list(axes.flat)[len(results) :]:
         axis.set_axis_off()
     # one legend under the panels: inside them it hid the best views, which sit top right
@@ -146,23 +170,23 @@ def _arrow(axis: plt.Axes, pose: np.ndarray, length: float, **style) -> None:
     )
 
 
-def save_map(path: str | Path, scene: Scene, results: list[InitViewResult]) -> Path:
-    """Top-down plan with every evaluated camera centre coloured by L_depth, the search's path (grey),
-    the init view (black) and the adversarial views (red) with their view directions, one panel per
-    init view."""
+def save_map(path: str | Path, scene: Scene, results: list[InitViewResult], label: str = "L_depth") -> Path:
+    """Top-down plan with every evaluated camera centre coloured by the attacked loss (named
+    ``label``), the search's path (grey), the init view (black) and the adversarial views (red) with
+    their view directions, one panel per init view."""
     poses = np.array([r.init.world_T_cam.numpy() for r in results])
     cut = float(poses[:, 1, 3].max()) + 0.3
     polygons = _plan_polygons(scene, cut)
     lo, hi = scene.bounds
     size = float(max(hi[0] - lo[0], hi[2] - lo[2]))
-    values = [r.l_depth for result in results for r in result.records]
+    values = [r.loss for result in results for r in result.records]
     norm = plt.Normalize(min(values), max(values))
     rows, columns = _grid(len(results))
     figure, axes = plt.subplots(rows, columns, figsize=(4.6 * columns, 4.2 * rows), squeeze=False)
     for axis, result in zip(axes.flat, results):
         axis.add_collection(PolyCollection(polygons, facecolors="0.6", edgecolors="0.45", linewidths=0.3))
         xz = np.array([[r.centre[0], r.centre[2]] for r in result.records])
-        points = axis.scatter(xz[:, 0], xz[:, 1], c=[r.l_depth for r in result.records], cmap="viridis", norm=norm, s=8)
+        points = axis.scatter(xz[:, 0], xz[:, 1], c=[r.loss for r in result.records], cmap="viridis", norm=norm, s=8)
         trail = np.array([[r.centre[0], r.centre[2]] for r in result.path])
         axis.plot(trail[:, 0], trail[:, 1], color="0.3", lw=0.8)
         init = result.init.world_T_cam.numpy()
@@ -179,7 +203,7 @@ def save_map(path: str | Path, scene: Scene, results: list[InitViewResult]) -> P
         axis.set_ylabel("z [m]")
         axis.set_title(result.init.name)
         axis.legend(fontsize=7, loc="upper right")
-        figure.colorbar(points, ax=axis, fraction=0.046, pad=0.02, label="L_depth")
+        figure.colorbar(points, ax=axis, fraction=0.046, pad=0.02, label=label)
     for axis in list(axes.flat)[len(results) :]:
         axis.set_axis_off()
     figure.tight_layout()
@@ -187,21 +211,72 @@ def save_map(path: str | Path, scene: Scene, results: list[InitViewResult]) -> P
 
 
 def save_video(path: str | Path, frames: list[np.ndarray], fps: int = 8) -> Path:
-    """Write uint8 frames (H, W, 3) as an H.264 MP4 (imageio-ffmpeg ships the encoder)."""
+    """Write uint8 frames (H, W, 3) as an H.264 MP4 in yuv420p, which browsers play (imageio-ffmpeg
+    ships the encoder)."""
     height, width = frames[0].shape[:2]
-    pad = ((0, height % 2), (0, width % 2), (0, 0))  # H.264 wants even sizes
+    pad = ((0, height % 2), (0, width % 2), (0, 0))  # yuv420p halves the chroma: even sizes
     even = [np.pad(frame, pad) for frame in frames]
 
     def write(tmp: Path) -> None:
-        imageio.mimwrite(tmp, even, fps=fps, format="FFMPEG", codec="libx264", macro_block_size=2)
+        imageio.mimwrite(
+            tmp, even, fps=fps, format="FFMPEG", codec="libx264", pixelformat="yuv420p", macro_block_size=2
+        )
 
     return atomic_write(path, write)
 
 
-def annotate(frame: np.ndarray, text: str) -> np.ndarray:
-    """The frame with a line of text on a dark band at its top."""
-    image = Image.fromarray(frame)
-    draw = ImageDraw.Draw(image)
-    draw.rectangle((0, 0, image.width, 12), fill=(0, 0, 0))
-    draw.text((3, 0), text, fill=(255, 255, 255))
-    return np.asarray(image)
+class PlanRaster:
+    """A top-down plan of the scene as a square image, with the world-to-pixel map to draw on it.
+
+    Args:
+        scene: the scene.
+        cut_height: the plan's cut (see :func:`_plan_polygons`).
+        size: the image's side in pixels.
+    """
+
+    def __init__(self, scene: Scene, cut_height: float, size: int) -> None:
+        lo, hi = scene.bounds
+        centre = (lo[[0, 2]] + hi[[0, 2]]) / 2
+        self.half = 0.55 * float(max(hi[0] - lo[0], hi[2] - lo[2]))
+        self.origin, self.size = centre - self.half, size
+        figure = plt.figure(figsize=(size / 100, size / 100), dpi=100)
+        axis = figure.add_axes((0, 0, 1, 1))
+        axis.add_collection(PolyCollection(_plan_polygons(scene, cut_height), facecolors="0.6", edgecolors="0.45"))
+        axis.set_xlim(self.origin[0], self.origin[0] + 2 * self.half)
+        axis.set_ylim(self.origin[1] + 2 * self.half, self.origin[1])  # z grows downwards, as in map.png
+        axis.set_axis_off()
+        figure.canvas.draw()
+        self.image = np.asarray(figure.canvas.buffer_rgba())[..., :3].copy()
+        plt.close(figure)
+
+    def pixel(self, x: float, z: float) -> tuple[float, float]:
+        """Where the world point (x, z) falls on the image (column, row)."""
+        scale = self.size / (2 * self.half)
+        return (x - self.origin[0]) * scale, (z - self.origin[1]) * scale
+
+    def with_camera(self, trail: np.ndarray, world_T_cam: np.ndarray) -> np.ndarray:
+        """The plan with the search's trail of centres (N, 3) and the camera at ``world_T_cam``."""
+        image = Image.fromarray(self.image)
+        draw = ImageDraw.Draw(image)
+        if len(trail) > 1:
+            draw.line([self.pixel(c[0], c[2]) for c in trail], fill=(60, 60, 60), width=2)
+        x, z = self.pixel(world_T_cam[0, 3], world_T_cam[2, 3])
+        forward = world_T_cam[:3, 2]
+        length = 0.08 * self.size / max(float(np.hypot(forward[0], forward[2])), 1e-6)
+        draw.line([(x, z), (x + length * forward[0], z + length * forward[2])], fill=(220, 20, 20), width=3)
+        draw.ellipse((x - 5, z - 5, x + 5, z + 5), fill=(220, 20, 20))
+        return np.asarray(image)
+
+
+def video_frame(panels: list[np.ndarray], plan: np.ndarray, text: str, height: int = 240) -> np.ndarray:
+    """Panels (each (h, w, 3) uint8) scaled to ``height`` side by side, then the plan, under a band
+    of ``text``."""
+    scaled = [
+        np.asarray(Image.fromarray(p).resize((round(p.shape[1] * height / p.shape[0]), height), Image.NEAREST))
+        for p in panels
+    ]
+    plan = np.asarray(Image.fromarray(plan).resize((height, height), Image.BILINEAR))
+    row = np.concatenate([*scaled, plan], axis=1)
+    band = Image.new("RGB", (row.shape[1], 28), (0, 0, 0))
+    ImageDraw.Draw(band).text((6, 4), text, fill=(255, 255, 255), font=ImageFont.load_default(size=18))
+    return np.concatenate([np.asarray(band), row], axis=0)

@@ -51,8 +51,32 @@ def save_mean_curves(path: Path, runs: list[RunRecord]) -> Path:
         plt.close(figure)
 
 
-def _data_uri(path: Path) -> str:
-    return "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+def _data_uri(path: Path, kind: str = "image/png") -> str:
+    return f"data:{kind};base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+
+
+def _worst_video(runs: list[RunRecord], out_dir: Path) -> dict | None:
+    """The run whose kept view lost the most delta1 from its init view, when it wrote its video (the
+    video follows that init view's search)."""
+    drops = [
+        (view.init.delta1 - view.adversarial[0].delta1, run, view)
+        for run in runs
+        if (run.path / "trajectory.mp4").is_file()
+        for view in run.summary.init_views
+        if view.adversarial
+    ]
+    if not drops:
+        return None
+    _, run, view = max(drops, key=lambda item: item[0])
+    return {
+        "model": run.model,
+        "scene": run.scene,
+        "method": run.method,
+        "init_delta1": view.init.delta1,
+        "delta1": view.adversarial[0].delta1,
+        "video": _data_uri(run.path / "trajectory.mp4", "video/mp4"),
+        "href": Path(os.path.relpath(run.path, out_dir)).as_posix() + "/",
+    }
 
 
 def _gallery(runs: list[RunRecord], out_dir: Path) -> list[dict]:
@@ -83,7 +107,8 @@ def _gallery(runs: list[RunRecord], out_dir: Path) -> list[dict]:
 
 def write_html(path: Path, tables: list[Table], curves: Path, runs: list[RunRecord]) -> Path:
     """Render ``report.html``: every table (sortable by clicking a header), the curves, the gallery of
-    the worst adversarial views linking to their run folders, and the scene maps; images embedded."""
+    the worst adversarial views linking to their run folders, the worst failure's video and the
+    scene maps; images and the video embedded."""
     environment = jinja2.Environment(
         loader=jinja2.PackageLoader("kadv.report", "templates"), autoescape=jinja2.select_autoescape(["html", "j2"])
     )
@@ -91,6 +116,7 @@ def write_html(path: Path, tables: list[Table], curves: Path, runs: list[RunReco
         tables=tables,
         curves=_data_uri(curves),
         gallery=_gallery(runs, path.parent),
+        worst=_worst_video(runs, path.parent),
         runs=len(runs),
         models=sorted({r.model for r in runs}),
         scenes=sorted({r.scene for r in runs}),

@@ -17,16 +17,27 @@ from dataclasses import fields
 from importlib import metadata
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 import torch
 
-from kadv.attack import AttackResult, InitView, InitViewResult, Objective, ViewRecord, best_so_far
+from kadv.attack import AttackResult, InitView, InitViewResult, Objective, ViewRecord, best_so_far, incumbent_path
 from kadv.attack.records import Budget
 from kadv.geometry import intrinsics_from_fov
 from kadv.io import atomic_write
 from kadv.losses import aligned_depth
 from kadv.penalties.validity import UNINFORMATIVE
-from kadv.report.figures import annotate, colourise, save_curves, save_four_panel, save_map, save_video
+from kadv.report.figures import (
+    PlanRaster,
+    colourise,
+    loss_label,
+    save_curves,
+    save_four_panel,
+    save_map,
+    save_video,
+    video_frame,
+)
+from kadv.report.images import depth_range
 from kadv.report.summary import (
     AnytimePoint,
     InitViewSummary,
@@ -44,6 +55,8 @@ _PARTIAL = "partial"
 log = logging.getLogger(__name__)
 _PACKAGES = ("kadv", "torch", "kornia", "open3d-cpu", "trimesh", "transformers", "numpy", "cma", "nevergrad")
 _MAX_VIDEO_FRAMES = 200
+# the video's panels are this many pixels high (upscaled from small attack renders)
+_VIDEO_HEIGHT = 240
 
 
 def is_complete(run_dir: str | Path) -> bool:
@@ -159,29 +172,35 @@ def _save_views(views_dir: Path, index: int, view: InitViewResult, render: _View
     return [f"views/{name}.png" for name in names]
 
 
-def _video_frames(view: InitViewResult, render: _ViewRenderer) -> list[np.ndarray]:
-    """The search's path (see :class:`InitViewResult`), image | depth | prediction per frame."""
-    path = view.path
-    path = path[:: max(1, len(path) // _MAX_VIDEO_FRAMES + (len(path) % _MAX_VIDEO_FRAMES > 0))]
+def _video_frames(view: InitViewResult, render: _ViewRenderer, plan: PlanRaster) -> list[np.ndarray]:
+    """The search in evaluation order, one frame per full-size evaluated view (evenly thinned to
+    at most :data:`_MAX_VIDEO_FRAMES`): image | depth | prediction | error and the plan with the
+    camera and the path of the best views so far, with the step, L_depth and delta1 written above."""
+    order = {id(r): position for position, r in enumerate(view.records)}
+    shown = [r for r in view.records if r.scale == 1.0]
+    shown = shown[:: max(1, -(-len(shown) // _MAX_VIDEO_FRAMES))]
+    incumbents = incumbent_path(view.records)
     frames = []
-    for start in range(0, len(path), 16):
-        chunk = path[start : start + 16]
+    for start in range(0, len(shown), 16):
+        chunk = shown[start : start + 16]
         maps = render(view.init, chunk)
         for b, record in enumerate(chunk):
-            mask = maps["mask"][b]
-            low, high = np.percentile(maps["depth"][b][mask], [1, 99]) if mask.any() else (0.0, 1.0)
-            rgb = (np.clip(maps["rgb"][b], 0, 1) * 255 + 0.5).astype(np.uint8)
-            frame = np.concatenate(
-                [rgb, colourise(maps["depth"][b], mask, low, high), colourise(maps["aligned"][b], mask, low, high)],
-                axis=1,
+            mask, depth, aligned = maps["mask"][b], maps["depth"][b], maps["aligned"][b]
+            low, high = depth_range(depth, mask)
+            error = np.where(mask, np.abs(aligned - depth) / np.maximum(depth, 1e-6), 0.0)
+            panels = [
+                (np.clip(maps["rgb"][b], 0, 1) * 255 + 0.5).astype(np.uint8),
+                colourise(depth, mask, low, high),
+                colourise(aligned, mask, low, high),
+                (matplotlib.colormaps["magma"](np.clip(error / 0.5, 0, 1))[..., :3] * 255).astype(np.uint8),
+            ]
+            best = [r for r in incumbents if order[id(r)] <= order[id(record)]]
+            text = (
+                f"{view.init.name}  step {record.step}  L_depth {record.l_depth:.4f}  delta1 {record.delta1:.3f}"
+                f"  (best so far: delta1 {best[-1].delta1:.3f})   image | depth | prediction | |pred-gt|/gt | plan"
             )
-            frames.append(
-                annotate(
-                    frame,
-                    f"step {record.step}  L_depth {record.l_depth:.4f}  "
-                    f"delta1 {record.delta1:.3f}   image | depth | prediction",
-                )
-            )
+            trail = np.array([r.centre for r in best])
+            frames.append(video_frame(panels, plan.with_camera(trail, maps["world_T_cam"][b]), text, _VIDEO_HEIGHT))
     return frames
 
 
@@ -215,11 +234,14 @@ def write_run(
         _init_view_summary(index, view, _save_views(run_dir / "views", index, view, render))
         for index, view in enumerate(result.views)
     ]
-    save_curves(run_dir / "loss.png", result.views)
-    save_map(run_dir / "map.png", objective.renderer.scene, result.views)
-    if video:
-        best = max(result.views, key=lambda v: (v.top[0].l_depth - v.init_record.l_depth) if v.top else -np.inf)
-        save_video(run_dir / "trajectory.mp4", _video_frames(best, render))
+    label = loss_label(info.loss)
+    save_curves(run_dir / "loss.png", result.views, label)
+    save_map(run_dir / "map.png", objective.renderer.scene, result.views, label)
+    if video:  # the worst failure: the init view whose kept view lost the most delta1
+        worst = max(result.views, key=lambda v: (v.init_record.delta1 - v.top[0].delta1) if v.top else -np.inf)
+        cut = float(worst.init.world_T_cam[1, 3]) + 0.3
+        plan = PlanRaster(objective.renderer.scene, cut, _VIDEO_HEIGHT)
+        save_video(run_dir / "trajectory.mp4", _video_frames(worst, render, plan))
     kept = [v for v in per_view if v.adversarial]
     summary = RunSummary(
         **vars(info),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from kadv.scenes.box_rooms import box_room
 from kadv.scenes.emitters import Emitters
+from kadv.scenes.from_node import scene_from_node
 from kadv.scenes.load import SUPPORTED_SUFFIXES, load_scene
 from kadv.scenes.procedural import procedural_room
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
@@ -18,4 +19,5 @@ __all__ = [
     "box_room",
     "load_scene",
     "procedural_room",
+    "scene_from_node",
 ]

@@ -184,7 +184,8 @@ def test_same_seed_gives_identical_trajectories(method, settings, tiny_objective
         for _ in range(2)
     ]
     assert trajectory_rows(runs[0]) == trajectory_rows(runs[1])
-    assert len(trajectory_rows(runs[0])) == 20
+    # the whole budget, less what is left when a batch of refined lanes no longer fits
+    assert 20 - 1 <= len(trajectory_rows(runs[0])) <= 20
 
 
 def test_same_seed_gives_bit_identical_gradient_records(tiny_objective, differentiable, file_view) -> None:
@@ -311,7 +312,7 @@ def test_trust_region_steps_from_the_incumbent_undo_failures_and_restart_stalled
     """Replays each refined lane: every step leaves the lane's incumbent (never the view of a step
     that failed) with the step length the grow/shrink rule gives, so no incumbent falls; a lane
     whose step shrinks below stall_scale restarts from a screened view."""
-    settings = HybridSettings(screen_fraction=0.4, population=8, refine_views=2, stall_scale=0.3)
+    settings = HybridSettings(screen_fraction=0.4, screen_scale=1.0, population=8, refine_views=2, stall_scale=0.3)
     result = _run(
         tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_evaluations=40
     )

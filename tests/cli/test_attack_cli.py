@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 from unittest import mock
 
+import imageio_ffmpeg
 import numpy as np
 import pytest
 import torch
@@ -105,13 +106,28 @@ def test_run_directory_holds_every_artefact(demo_runs: Path) -> None:
             assert arrays["rgb"].shape == (48, 64, 3) and arrays["depth"].shape == (48, 64)
             assert arrays["world_T_cam"].shape == (4, 4) and arrays["K"].shape == (3, 3)
             assert np.allclose(arrays["world_T_cam"][:3, 3], entry["centre"])
-        assert all(a["l_depth"] >= b["l_depth"] for a, b in zip(view["adversarial"], view["adversarial"][1:]))
+        assert all(a["loss"] >= b["loss"] for a, b in zip(view["adversarial"], view["adversarial"][1:]))
     for picture in ("loss.png", "map.png"):
         with Image.open(run / picture) as image:
             assert min(image.size) > 200
     assert (run / "trajectory.mp4").stat().st_size > 1000
     assert not (demo_runs / "second" / "trajectory.mp4").exists()
     assert "attack" in (run / "config.yaml").read_text()
+
+
+def test_the_video_is_h264_yuv420p_with_four_tall_panels_and_the_plan_per_step(demo_runs: Path) -> None:
+    run = demo_runs / "first"
+    reader = imageio_ffmpeg.read_frames(str(run / "trajectory.mp4"))
+    meta = next(reader)
+    frames = list(reader)
+    assert meta["codec"] == "h264" and meta["pix_fmt"].startswith("yuv420p"), meta
+    width, height = meta["size"]
+    # four panels of 240 x 320 (the 48 x 64 renders, upscaled) and the 240 x 240 plan, under a 28 px band
+    assert (width, height) == (4 * 320 + 240, 28 + 240)
+    # one frame per evaluated view of the init view that lost the most delta1: 2 restarts x 5 steps
+    assert len(frames) == 10
+    first = np.frombuffer(frames[0], np.uint8).reshape(height, width, 3)
+    assert first[:28].mean() < first[28:].mean()  # the text band above the panels
 
 
 def test_a_complete_run_is_skipped(demo_runs: Path) -> None:

@@ -43,7 +43,7 @@ class HybridSettings:
     """
 
     screen_fraction: float = 0.5
-    screen_scale: float = 1.0
+    screen_scale: float = 0.5
     population: int = 8
     refine_views: int = 2
     lr_rotation: float = 0.02

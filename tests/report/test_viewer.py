@@ -1,0 +1,161 @@
+"""kadv-view: the viewer's scene, cameras and controls through viser's API, in headless Chromium,
+and its bad inputs."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import shutil
+import socket
+import subprocess
+import sys
+from pathlib import Path
+from unittest import mock
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from kadv.cli.attack import main as attack_main
+from kadv.cli.view import main as view_main
+from kadv.report import view
+
+SMALL = [
+    "render.height=48",
+    "render.width=64",
+    "render.lighting=direct",
+    "attack=random",
+    "attack.budget_evaluations=9",
+    "attack.top_n=2",
+    "init.count=2",
+    "init.candidates=8",
+    "progress=false",
+    "video=false",
+]
+
+
+def _attack(run_dir: Path, *overrides: str) -> Path:
+    with mock.patch.object(sys, "argv", ["kadv-attack", f"hydra.run.dir={run_dir}", *SMALL, *overrides]):
+        attack_main()
+    return run_dir
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory) -> Path:
+    """A two-model sweep of small finished runs on the box room."""
+    root = tmp_path_factory.mktemp("sweep")
+    _attack(root / "tiny", "model=kadv_tiny")
+    _attack(root / "dpt", "model=kadv_tiny_dpt")
+    return root
+
+
+def _cameras(run: Path) -> list[str]:
+    summary = json.loads((run / "summary.json").read_text())
+    names = []
+    for init in summary["init_views"]:
+        names += [f"init{init['index']}"] + [f"init{init['index']}_adv{k}" for k in range(len(init["adversarial"]))]
+    return names
+
+
+def test_a_run_shows_every_camera_and_selecting_one_shows_its_panel(sweep: Path) -> None:
+    run = sweep / "tiny"
+    viewer = view(run, port=_free_port())
+    try:
+        assert sorted(viewer.frusta) == sorted(_cameras(run))  # one frustum per init and kept adversarial view
+        assert len(viewer.rows) == sum(1 for _ in open(run / "trajectory.csv")) - 1
+        chosen = next(name for name in viewer.frusta if "_adv" in name)
+        camera = viewer.select(chosen)
+        panel = np.asarray(Image.open(camera.panel).convert("RGB"))
+        assert viewer.view_choice.value == chosen and np.array_equal(viewer.panel.image, panel)
+        assert f"**{chosen}**" in viewer.metrics.content
+        start = viewer.step_text.content
+        viewer.step.value = 3  # the slider steps through the search
+        assert viewer.step_text.content != start and viewer.step_text.content.startswith("step ")
+        first = np.array(json.loads((run / "summary.json").read_text())["init_views"][0]["init_world_T_cam"])
+        eye, target = np.array(viewer.server.initial_camera.position), np.array(viewer.server.initial_camera.look_at)
+        # the viewer opens just behind the first init view, looking the way it looks
+        assert np.linalg.norm(eye - first[:3, 3]) < 1.0
+        assert np.dot(target - eye, first[:3, 2]) > 0.9 * np.linalg.norm(target - eye)
+    finally:
+        viewer.stop()
+
+
+def test_a_sweep_opens_and_choosing_another_run_shows_its_cameras(sweep: Path) -> None:
+    viewer = view(sweep, port=_free_port())
+    try:
+        assert len(viewer.run_names) == 2
+        before = {name: handle.position.copy() for name, handle in viewer.frusta.items()}
+        other = next(name for name in viewer.run_names if name != viewer.run_choice.value)
+        viewer.run_choice.value = other  # as the panel's run list does
+        index = viewer.run_names.index(other)
+        assert sorted(viewer.frusta) == sorted(_cameras(viewer.runs[index].path))
+        after = {name: handle.position for name, handle in viewer.frusta.items()}
+        moved = [name for name in before if name in after and not np.allclose(before[name], after[name])]
+        assert moved  # the other model's sampled init views and adversarial views stand elsewhere
+    finally:
+        viewer.stop()
+
+
+def test_chromium_draws_the_scene(sweep: Path, tmp_path: Path) -> None:
+    chromium = shutil.which("chromium")
+    assert chromium, "headless Chromium is missing: apt-get install -y chromium"
+    viewer = view(sweep / "tiny", port=_free_port())
+    try:
+        shot = tmp_path / "viewer.png"
+        subprocess.run(
+            [
+                chromium,
+                "--headless",
+                "--no-sandbox",
+                "--use-angle=swiftshader",
+                "--enable-unsafe-swiftshader",
+                f"--user-data-dir={tmp_path / 'chromium'}",
+                "--window-size=1000,700",
+                "--virtual-time-budget=15000",
+                f"--screenshot={shot}",
+                viewer.url,
+            ],
+            capture_output=True,
+            timeout=120,
+            check=False,
+        )
+        pixels = np.asarray(Image.open(shot).convert("RGB")).reshape(-1, 3)
+    finally:
+        viewer.stop()
+    colours, counts = np.unique(pixels // 8, axis=0, return_counts=True)
+    background = counts.max() / len(pixels)
+    assert background < 0.6 and len(colours) > 200, (background, len(colours))  # the room, not an empty page
+
+
+def _view_command(*args: str) -> tuple[int, str]:
+    stderr = io.StringIO()
+    with contextlib.redirect_stderr(stderr):
+        with pytest.raises(SystemExit) as exit_:
+            view_main(list(args))
+    return exit_.value.code, stderr.getvalue()
+
+
+def test_bad_input_gives_one_line_and_exit_status_2(sweep: Path, tmp_path: Path) -> None:
+    code, text = _view_command(str(tmp_path))
+    assert code == 2 and text.startswith("kadv-view: error: no complete run") and len(text.splitlines()) == 1
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        code, text = _view_command(str(sweep / "tiny"), "--port", str(port))
+    assert code == 2 and f"--port {port}" in text and "in use" in text and len(text.splitlines()) == 1
+    moved = tmp_path / "moved_run"
+    shutil.copytree(sweep / "tiny", moved)
+    config = (moved / "config.yaml").read_text()
+    (moved / "config.yaml").write_text(
+        config.replace("kind: box_room", "kind: file\n  path: /gone/room.glb\n  options: {}")
+    )
+    code, text = _view_command(str(moved), "--port", str(_free_port()))
+    assert code == 2 and "/gone/room.glb" in text and "--scene" in text and len(text.splitlines()) == 1
