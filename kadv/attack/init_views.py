@@ -325,7 +325,10 @@ def sample_valid_views(
     least ``config.min_hit_fraction`` of their pixels."""
     rng = np.random.default_rng([seed, 7919])
     clearance = 2.0 * penalty.d_th if config.clearance is None else config.clearance
-    small_h, small_w = max(8, height // 4), max(8, width // 4)
+    # validity is checked at a quarter of the size (at least 8 pixels a side), keeping the aspect: a
+    # squarer frame would see more of the room than the view does
+    scale = max(0.25, 8.0 / min(height, width))
+    small_h, small_w = max(8, round(scale * height)), max(8, round(scale * width))
     K = intrinsics_from_fov(config.fov_x_deg, small_h, small_w)
     accepted: list[torch.Tensor] = []
     for _ in range(_SAMPLING_ROUNDS):

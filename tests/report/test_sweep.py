@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 from pathlib import Path
 
 import numpy as np
@@ -98,3 +99,17 @@ def test_tables_for_each_method_delta1_drop_and_anytime_curves(tmp_path: Path) -
     html = (tmp_path / "out" / "report.html").read_text()
     assert "Anytime curves" in html and "(random attack)" in html  # the gallery's worst view: random's
     assert Image.open(tmp_path / "out" / "curves.png").size[0] > 300
+
+
+def test_the_page_embeds_the_video_of_the_run_that_lost_the_most_delta1(tmp_path: Path) -> None:
+    _run(tmp_path / "sweep" / "a", "gradient", 0.05, 0.15, (0.98, 0.80))
+    _run(tmp_path / "sweep" / "b", "random", 0.05, 0.35, (0.98, 0.40))
+    for name in ("a", "b"):
+        (tmp_path / "sweep" / name / "trajectory.mp4").write_bytes(f"video of {name}".encode())
+    write_report([tmp_path / "sweep"], tmp_path / "out", progress=False)
+    html = (tmp_path / "out" / "report.html").read_text()
+    embedded = "data:video/mp4;base64," + base64.b64encode(b"video of b").decode("ascii")
+    assert f'<video controls muted loop playsinline src="{embedded}">' in html  # b lost 0.58, a 0.18
+    (tmp_path / "sweep" / "b" / "trajectory.mp4").unlink()
+    write_report([tmp_path / "sweep"], tmp_path / "out", progress=False)
+    assert base64.b64encode(b"video of a").decode("ascii") in (tmp_path / "out" / "report.html").read_text()

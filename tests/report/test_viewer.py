@@ -20,6 +20,8 @@ from PIL import Image
 from kadv.cli.attack import main as attack_main
 from kadv.cli.view import main as view_main
 from kadv.report import view
+from kadv.report.viewer import _display_mesh, scene_colours
+from kadv.scenes import procedural_room
 
 SMALL = [
     "render.height=48",
@@ -159,3 +161,15 @@ def test_bad_input_gives_one_line_and_exit_status_2(sweep: Path, tmp_path: Path)
     )
     code, text = _view_command(str(moved), "--port", str(_free_port()))
     assert code == 2 and "/gone/room.glb" in text and "--scene" in text and len(text.splitlines()) == 1
+
+
+def test_the_scene_keeps_its_colours_and_large_scenes_are_decimated() -> None:
+    scene = procedural_room(seed=3)
+    colours = scene_colours(scene)
+    assert colours.shape == (scene.num_triangles, 3) and len(np.unique(colours, axis=0)) > 20  # textures, not one grey
+    whole = _display_mesh(scene, scene.num_triangles)
+    assert len(whole.faces) == scene.num_triangles
+    assert np.array_equal(whole.visual.vertex_colors[::3, :3], colours)  # each triangle its own colour
+    budget = scene.num_triangles // 4
+    small = _display_mesh(scene, budget)
+    assert len(small.faces) <= budget and len(np.unique(small.visual.vertex_colors[:, :3], axis=0)) > 20
