@@ -28,7 +28,7 @@ def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="kadv-view", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("path", type=Path, help="a run directory or a sweep directory")
+    parser.add_argument("path", type=Path, metavar="RUN_OR_SWEEP", help="a run directory or a sweep directory")
     parser.add_argument("--host", default="127.0.0.1", help="address to listen on (default: this machine only)")
     parser.add_argument("--port", type=int, default=8080, help="port (default 8080)")
     parser.add_argument("--scene", type=Path, help="the scene file, when it has moved since the run")
