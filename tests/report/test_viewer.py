@@ -16,6 +16,7 @@ from unittest import mock
 import numpy as np
 import pytest
 from PIL import Image
+from viser import CameraFrustumHandle
 
 from kadv.cli.attack import main as attack_main
 from kadv.cli.view import main as view_main
@@ -71,6 +72,10 @@ def test_a_run_shows_every_camera_and_selecting_one_shows_its_panel(sweep: Path)
     viewer = view(run, port=_free_port())
     try:
         assert sorted(viewer.frusta) == sorted(_cameras(run))  # one frustum per init and kept adversarial view
+        # viser's own scene holds exactly those, besides the slider's marker
+        nodes = viewer.server.scene._handle_from_node_name  # viser lists its nodes nowhere public
+        frusta = sorted(name for name, handle in nodes.items() if isinstance(handle, CameraFrustumHandle))
+        assert frusta == sorted([f"/cameras/{name}" for name in _cameras(run)] + ["/step"])
         assert len(viewer.rows) == sum(1 for _ in open(run / "trajectory.csv")) - 1
         chosen = next(name for name in viewer.frusta if "_adv" in name)
         camera = viewer.select(chosen)
