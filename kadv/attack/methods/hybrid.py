@@ -53,12 +53,11 @@ class HybridSettings:
     stall_scale: float = 0.1
 
     def __post_init__(self) -> None:
-        for name, low, high in (("screen_scale", 0.0, 1.0), ("shrink", 0.0, 1.0 - 1e-9), ("stall_scale", 0.0, 1.0)):
+        for name in ("screen_scale", "shrink", "stall_scale"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and low < value <= high):
-                raise ValueError(
-                    f"attack.hybrid.{name} must be in ({low:g}, {high:g}{']' if high == 1 else ')'}, got {value}"
-                )
+            if not (math.isfinite(value) and 0.0 < value <= 1.0) or (name == "shrink" and value == 1.0):
+                interval = "(0, 1)" if name == "shrink" else "(0, 1]"
+                raise ValueError(f"attack.hybrid.{name} must be in {interval}, got {value}")
         if not (math.isfinite(self.grow) and self.grow >= 1.0):
             raise ValueError(f"attack.hybrid.grow must be >= 1, got {self.grow}")
 
@@ -134,9 +133,7 @@ def trust_region_refine(
             (terms.objective * accepted).sum().backward()
             gradient[accepted] = trial.grad[accepted]
             current[accepted] = trial.detach()[accepted]
-            best[accepted] = torch.where(
-                rankable[accepted], value[accepted], torch.full_like(value[accepted], -math.inf)
-            )
+            best[accepted] = torch.where(rankable, value, torch.full_like(value, -math.inf))[accepted]
         radius = torch.where(accepted & ~fresh, radius * settings.grow, radius)
         radius = torch.where(accepted, radius, radius * settings.shrink)
         fresh = torch.zeros_like(fresh)
