@@ -74,6 +74,9 @@ def save_four_panel(
     return save_figure(Path(path), figure)
 
 
+# the video's plan shows at least this many metres on each side of the search's centre
+_PLAN_MARGIN = 3.0
+
 _LOSS_LABELS = {
     "ssim": "L_depth (SSIM)",
     "perceptual": "L_depth (perceptual)",
@@ -226,18 +229,21 @@ def save_video(path: str | Path, frames: list[np.ndarray], fps: int = 8) -> Path
 
 
 class PlanRaster:
-    """A top-down plan of the scene as a square image, with the world-to-pixel map to draw on it.
+    """A top-down plan of the scene around some points as a square image, with the world-to-pixel
+    map to draw on it.
 
     Args:
         scene: the scene.
         cut_height: the plan's cut (see :func:`_plan_polygons`).
         size: the image's side in pixels.
+        around: (N, 3) points the plan frames (a search's camera centres), with a margin of at
+            least :data:`_PLAN_MARGIN` metres: a scene's bounds may hold a 200 m garden.
     """
 
-    def __init__(self, scene: Scene, cut_height: float, size: int) -> None:
-        lo, hi = scene.bounds
-        centre = (lo[[0, 2]] + hi[[0, 2]]) / 2
-        self.half = 0.55 * float(max(hi[0] - lo[0], hi[2] - lo[2]))
+    def __init__(self, scene: Scene, cut_height: float, size: int, around: np.ndarray) -> None:
+        lo, hi = around[:, [0, 2]].min(axis=0), around[:, [0, 2]].max(axis=0)
+        centre = (lo + hi) / 2
+        self.half = max(0.55 * float(max(hi - lo)), _PLAN_MARGIN)
         self.origin, self.size = centre - self.half, size
         figure = plt.figure(figsize=(size / 100, size / 100), dpi=100)
         axis = figure.add_axes((0, 0, 1, 1))

@@ -240,7 +240,8 @@ def write_run(
     if video:  # the worst failure: the init view whose kept view lost the most delta1
         worst = max(result.views, key=lambda v: (v.init_record.delta1 - v.top[0].delta1) if v.top else -np.inf)
         cut = float(worst.init.world_T_cam[1, 3]) + 0.3
-        plan = PlanRaster(objective.renderer.scene, cut, _VIDEO_HEIGHT)
+        centres = np.array([r.centre for r in worst.records])
+        plan = PlanRaster(objective.renderer.scene, cut, _VIDEO_HEIGHT, centres)
         save_video(run_dir / "trajectory.mp4", _video_frames(worst, render, plan))
     kept = [v for v in per_view if v.adversarial]
     summary = RunSummary(

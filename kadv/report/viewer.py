@@ -31,10 +31,11 @@ __all__ = ["MAX_TRIANGLES", "CameraView", "RunViewer", "scene_colours", "view"]
 # Scenes above this many triangles are decimated (quadric, Open3D) before they are sent to the
 # browser: a client draws a few hundred thousand smoothly, millions stutter.
 MAX_TRIANGLES = 200_000
-# the opening camera stands this far behind and above the first init view (metres)
-_OPENING_BACK, _OPENING_UP = 0.6, 0.25
-# frusta are this share of the scene's horizontal size, and a quarter metre at least
-_FRUSTUM_SHARE, _FRUSTUM_MIN = 0.04, 0.25
+# the opening camera stands at most this far behind and above the first init view (metres)
+_OPENING_BACK, _OPENING_UP = 0.5, 0.2
+# frusta sizes in metres (scenes are in metres; a scene's bounds may hold a 200 m garden, so they do
+# not follow the bounds)
+_INIT_FRUSTUM, _ADVERSARIAL_FRUSTUM, _STEP_FRUSTUM, _FRUSTUM_LINE = 0.3, 0.24, 0.15, 0.006
 
 
 @dataclass
@@ -157,6 +158,21 @@ def _display_mesh(scene: Scene, max_triangles: int) -> trimesh.Trimesh:
     )
 
 
+def _opening_camera(scene: Scene, world_T_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eye and target of the viewer's first camera: the init view's pose, moved back and up by up to
+    :data:`_OPENING_BACK` and :data:`_OPENING_UP` metres (half way to a surface behind or above, so
+    it stays in the room), looking where the view looks; its own frustum then sits in front of it."""
+    caster = o3d.t.geometry.RaycastingScene()
+    caster.add_triangles(
+        o3d.core.Tensor(scene.vertices.astype(np.float32)), o3d.core.Tensor(scene.faces.astype(np.uint32))
+    )
+    centre, forward, up = world_T_cam[:3, 3], world_T_cam[:3, 2], np.array([0.0, 1.0, 0.0])
+    rays = np.array([[*centre, *(-forward)], [*centre, *up]], np.float32)
+    free = caster.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy()
+    eye = centre - min(_OPENING_BACK, 0.5 * free[0]) * forward + min(_OPENING_UP, 0.5 * free[1]) * up
+    return eye, centre + 2.0 * forward
+
+
 def _rgb(values: np.ndarray, cmap: str, low: float, high: float) -> np.ndarray:
     scaled = (np.asarray(values, np.float64) - low) / max(high - low, 1e-12)
     return (matplotlib.colormaps[cmap](np.clip(scaled, 0.0, 1.0))[..., :3] * 255).astype(np.uint8)
@@ -229,8 +245,6 @@ class RunViewer:
         scene_api.reset()
         scene = self.scene_of(run)
         scene_api.add_mesh_trimesh("/scene", _display_mesh(scene, self.max_triangles))
-        lo, hi = scene.bounds
-        size = max(_FRUSTUM_MIN, _FRUSTUM_SHARE * float(max(hi[0] - lo[0], hi[2] - lo[2])))
         self.rows = trajectory(run)
         centres = np.array([[r["c_x"], r["c_y"], r["c_z"]] for r in self.rows])
         l_depth = np.array([r["l_depth"] for r in self.rows])
@@ -238,7 +252,7 @@ class RunViewer:
             "/evaluated",
             centres,
             _rgb(l_depth, "viridis", l_depth.min(), l_depth.max()),
-            point_size=0.015,
+            point_size=0.01,
             point_shape="circle",
         )
         self.views = {v.name: v for v in camera_views(run)}
@@ -250,7 +264,8 @@ class RunViewer:
                 f"/cameras/{camera.name}",
                 fov=float(fov_y),
                 aspect=width / height,
-                scale=size * (1.0 if "_adv" not in camera.name else 0.8),
+                scale=_ADVERSARIAL_FRUSTUM if "_adv" in camera.name else _INIT_FRUSTUM,
+                thickness=_FRUSTUM_LINE,
                 color=tuple(int(c) for c in _rgb([camera.delta1], "RdYlGn", 0.0, 1.0)[0]),
                 image=camera.image,
                 wxyz=_wxyz(camera.world_T_cam[:3, :3]),
@@ -263,12 +278,9 @@ class RunViewer:
             if len(path) > 1:
                 segments = np.stack([path[:-1], path[1:]], axis=1)
                 scene_api.add_line_segments(f"/paths/init{init.index}", segments, (40, 40, 40), thickness=0.01)
-        # open at the first init view, a step behind and above it (outside its own frustum), looking
-        # where it looks
-        pose = np.array(run.summary.init_views[0].init_world_T_cam)
-        eye = pose[:3, 3] - _OPENING_BACK * pose[:3, 2] + np.array([0.0, _OPENING_UP, 0.0])
+        eye, target = _opening_camera(scene, np.array(run.summary.init_views[0].init_world_T_cam))
         self.server.initial_camera.position = tuple(eye)
-        self.server.initial_camera.look_at = tuple(pose[:3, 3] + 2.0 * pose[:3, 2])
+        self.server.initial_camera.look_at = tuple(target)
         self.server.initial_camera.up = (0.0, 1.0, 0.0)
         self.view_choice.options = list(self.views)
         self.select(next(iter(self.views)))
@@ -307,7 +319,8 @@ class RunViewer:
             "/step",
             fov=float(np.radians(camera.fov_x_deg)) * 0.75,
             aspect=4 / 3,
-            scale=0.15,
+            scale=_STEP_FRUSTUM,
+            thickness=_FRUSTUM_LINE,
             color=(255, 200, 0),
             wxyz=_wxyz(pose[:3, :3]),
             position=pose[:3, 3],
