@@ -48,9 +48,19 @@ from kadv.report.summary import (
     write_partial,
 )
 
-__all__ = ["SUMMARY", "is_complete", "load_partial_results", "save_partial_result", "trajectory_rows", "write_run"]
+__all__ = [
+    "SUMMARY",
+    "TRAJECTORY",
+    "is_complete",
+    "load_partial_results",
+    "read_trajectory",
+    "save_partial_result",
+    "trajectory_rows",
+    "write_run",
+]
 
 SUMMARY = "summary.json"
+TRAJECTORY = "trajectory.csv"
 _PARTIAL = "partial"
 log = logging.getLogger(__name__)
 _PACKAGES = ("kadv", "torch", "kornia", "open3d-cpu", "trimesh", "transformers", "numpy", "cma", "nevergrad")
@@ -111,6 +121,28 @@ def trajectory_rows(result: AttackResult) -> list[dict]:
             )
             rows.append(row)
     return rows
+
+
+def _vector(row: dict[str, str], prefix: str) -> list[float]:
+    return [float(row[f"{prefix}_{axis}"]) for axis in "xyz"]
+
+
+def read_trajectory(path: str | Path) -> dict[int, list[ViewRecord]]:
+    """The records a ``trajectory.csv`` (:func:`trajectory_rows`) holds, per init view index, in
+    evaluation order; their ``seconds``, which the file leaves out, are NaN."""
+    with open(path, newline="") as file:
+        rows = list(csv.DictReader(file))
+    parse = {"step": int, "restart": int, "verdict": str, "refreshed": lambda text: text == "True"}
+    records: dict[int, list[ViewRecord]] = {}
+    for row in rows:
+        values = {f.name: parse.get(f.name, float)(row[f.name]) for f in fields(ViewRecord) if f.name in row}
+        values |= {
+            "theta": _vector(row, "theta"),
+            "centre": _vector(row, "c"),
+            "params": _vector(row, "omega") + _vector(row, "delta"),
+        }
+        records.setdefault(int(row["init_view"]), []).append(ViewRecord(**values))
+    return records
 
 
 def _write_csv(path: Path, rows: list[dict]) -> Path:
@@ -229,7 +261,7 @@ def write_run(
     """
     run_dir = Path(run_dir)
     render = _ViewRenderer(objective, info.height, info.width, supersample)
-    _write_csv(run_dir / "trajectory.csv", trajectory_rows(result))
+    _write_csv(run_dir / TRAJECTORY, trajectory_rows(result))
     per_view = [
         _init_view_summary(index, view, _save_views(run_dir / "views", index, view, render))
         for index, view in enumerate(result.views)

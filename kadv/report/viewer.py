@@ -7,7 +7,6 @@ and adversarial cameras as frusta showing their images, and the searches' paths.
 from __future__ import annotations
 
 import contextlib
-import csv
 import io
 import socket
 from collections.abc import Callable
@@ -21,8 +20,9 @@ import open3d as o3d
 import torch
 import trimesh
 
-from kadv.geometry import axis_angle_to_matrix
+from kadv.attack.records import ViewRecord, incumbent_path
 from kadv.render.shading import albedo, mip_pyramid, uv_density
+from kadv.report.run import TRAJECTORY, read_trajectory
 from kadv.report.sweep import RunRecord, collect_runs
 from kadv.scenes import Scene, scene_from_node
 
@@ -36,6 +36,7 @@ _OPENING_BACK, _OPENING_UP = 0.5, 0.2
 # frusta sizes in metres (scenes are in metres; a scene's bounds may hold a 200 m garden, so they do
 # not follow the bounds)
 _INIT_FRUSTUM, _ADVERSARIAL_FRUSTUM, _STEP_FRUSTUM, _FRUSTUM_LINE = 0.3, 0.24, 0.15, 0.006
+_STEP_COLOUR = (255, 200, 0)
 
 
 @dataclass
@@ -62,62 +63,30 @@ class CameraView:
     image: np.ndarray
 
 
-def _pose(theta: list[float], centre: list[float]) -> np.ndarray:
-    pose = np.eye(4)
-    pose[:3, :3] = axis_angle_to_matrix(torch.tensor(theta, dtype=torch.float64)[None])[0].numpy()
-    pose[:3, 3] = centre
-    return pose
-
-
-def _image(run: RunRecord, png: str) -> np.ndarray:
-    """The rendered image of a view: the ``rgb`` its ``views/*.npz`` holds."""
-    data = np.load(run.path / Path(png).with_suffix(".npz"))
-    return (np.clip(data["rgb"], 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
-
-
 def camera_views(run: RunRecord) -> list[CameraView]:
-    """The init and adversarial views of a run, in the summary's order."""
+    """The init and adversarial views of a run, in the summary's order; each one's pose and image
+    are those its ``views/*.npz`` holds."""
     views = []
     for init in run.summary.init_views:
-        kept = [(f"init{init.index}", np.array(init.init_world_T_cam), init.init)]
-        kept += [(f"init{init.index}_adv{k}", _pose(a.theta, a.centre), a) for k, a in enumerate(init.adversarial)]
-        for name, pose, metrics in kept:
+        kept = [(f"init{init.index}", init.init)] + [
+            (f"init{init.index}_adv{k}", a) for k, a in enumerate(init.adversarial)
+        ]
+        for name, metrics in kept:
+            arrays = np.load(run.path / Path(metrics.png).with_suffix(".npz"))
+            image = (np.clip(arrays["rgb"], 0.0, 1.0) * 255 + 0.5).astype(np.uint8)
             views.append(
                 CameraView(
                     name,
                     init.index,
-                    pose,
+                    arrays["world_T_cam"],
                     init.fov_x_deg,
                     metrics.delta1,
                     metrics.l_depth,
                     run.path / metrics.png,
-                    _image(run, metrics.png),
+                    image,
                 )
             )
     return views
-
-
-def trajectory(run: RunRecord) -> list[dict]:
-    """``trajectory.csv``'s rows, numbers parsed."""
-    with open(run.path / "trajectory.csv", newline="") as file:
-        rows = list(csv.DictReader(file))
-    for row in rows:
-        for key, value in row.items():
-            if key != "verdict":
-                row[key] = float(value) if value not in ("True", "False") else value == "True"
-    return rows
-
-
-def incumbent_centres(rows: list[dict], init_index: int) -> np.ndarray:
-    """(N, 3) centres of an init view's incumbents in evaluation order: the init view, then each valid
-    full-size view that raised the best loss (as :func:`kadv.attack.incumbent_path` follows them)."""
-    rows = [r for r in rows if int(r["init_view"]) == init_index]
-    path, best = [rows[0]], -np.inf
-    for row in rows:
-        if row["verdict"] == "valid" and row.get("scale", 1.0) == 1.0 and row.get("loss", row["l_depth"]) > best:
-            best = row.get("loss", row["l_depth"])
-            path.append(row)
-    return np.array([[r["c_x"], r["c_y"], r["c_z"]] for r in path])
 
 
 def scene_colours(scene: Scene) -> np.ndarray:
@@ -211,8 +180,8 @@ class RunViewer:
         self.run_names = [f"{r.model} x {r.scene} x {r.method} ({r.path.name})" for r in runs]
         self.views: dict[str, CameraView] = {}
         self.frusta: dict[str, object] = {}
-        self.rows: list[dict] = []
-        self._steps: list[int] = []  # rows of the selected view's search
+        self.records: dict[int, list[ViewRecord]] = {}  # the run's evaluated views per init view
+        self._steps: list[ViewRecord] = []  # the selected view's search
         gui = self.server.gui
         self.run_choice = gui.add_dropdown("run", self.run_names, initial_value=self.run_names[0])
         self.view_choice = gui.add_dropdown("view", ["-"], initial_value="-")
@@ -245,12 +214,12 @@ class RunViewer:
         scene_api.reset()
         scene = self.scene_of(run)
         scene_api.add_mesh_trimesh("/scene", _display_mesh(scene, self.max_triangles))
-        self.rows = trajectory(run)
-        centres = np.array([[r["c_x"], r["c_y"], r["c_z"]] for r in self.rows])
-        l_depth = np.array([r["l_depth"] for r in self.rows])
+        self.records = read_trajectory(run.path / TRAJECTORY)
+        evaluated = [r for records in self.records.values() for r in records]
+        l_depth = np.array([r.l_depth for r in evaluated])
         scene_api.add_point_cloud(
             "/evaluated",
-            centres,
+            np.array([r.centre for r in evaluated]),
             _rgb(l_depth, "viridis", l_depth.min(), l_depth.max()),
             point_size=0.01,
             point_shape="circle",
@@ -258,26 +227,21 @@ class RunViewer:
         self.views = {v.name: v for v in camera_views(run)}
         self.frusta = {}
         for camera in self.views.values():
-            height, width = camera.image.shape[:2]
-            fov_y = 2 * np.arctan(np.tan(np.radians(camera.fov_x_deg) / 2) * height / width)
-            frustum = scene_api.add_camera_frustum(
+            frustum = self._add_frustum(
                 f"/cameras/{camera.name}",
-                fov=float(fov_y),
-                aspect=width / height,
-                scale=_ADVERSARIAL_FRUSTUM if "_adv" in camera.name else _INIT_FRUSTUM,
-                thickness=_FRUSTUM_LINE,
-                color=tuple(int(c) for c in _rgb([camera.delta1], "RdYlGn", 0.0, 1.0)[0]),
-                image=camera.image,
-                wxyz=_wxyz(camera.world_T_cam[:3, :3]),
-                position=camera.world_T_cam[:3, 3],
+                camera,
+                camera.world_T_cam,
+                _ADVERSARIAL_FRUSTUM if "_adv" in camera.name else _INIT_FRUSTUM,
+                tuple(int(c) for c in _rgb([camera.delta1], "RdYlGn", 0.0, 1.0)[0]),
+                camera.image,
             )
             frustum.on_click(lambda _, name=camera.name: self.select(name))
             self.frusta[camera.name] = frustum
-        for init in run.summary.init_views:
-            path = incumbent_centres(self.rows, init.index)
+        for index, records in self.records.items():
+            path = np.array([r.centre for r in incumbent_path(records)])
             if len(path) > 1:
                 segments = np.stack([path[:-1], path[1:]], axis=1)
-                scene_api.add_line_segments(f"/paths/init{init.index}", segments, (40, 40, 40), thickness=0.01)
+                scene_api.add_line_segments(f"/paths/init{index}", segments, (40, 40, 40), thickness=0.01)
         eye, target = _opening_camera(scene, np.array(run.summary.init_views[0].init_world_T_cam))
         self.server.initial_camera.position = tuple(eye)
         self.server.initial_camera.look_at = tuple(target)
@@ -303,7 +267,7 @@ class RunViewer:
             f"**{name}**: delta1 {camera.delta1:.3f}, L_depth {camera.l_depth:.4f}, "
             f"centre {np.round(camera.world_T_cam[:3, 3], 3).tolist()}"
         )
-        self._steps = [i for i, r in enumerate(self.rows) if int(r["init_view"]) == camera.init_index]
+        self._steps = self.records[camera.init_index]
         self.step.max = max(len(self._steps) - 1, 1)
         self.step.value = 0
         self.show_step(0)
@@ -312,22 +276,38 @@ class RunViewer:
         """Mark the ``index``-th evaluated view of the selected view's search."""
         if not self._steps:
             return
-        row = self.rows[self._steps[min(index, len(self._steps) - 1)]]
-        pose = _pose([row["theta_x"], row["theta_y"], row["theta_z"]], [row["c_x"], row["c_y"], row["c_z"]])
+        record = self._steps[min(index, len(self._steps) - 1)]
         camera = self.views[self.view_choice.value]
-        self.server.scene.add_camera_frustum(
-            "/step",
-            fov=float(np.radians(camera.fov_x_deg)) * 0.75,
-            aspect=4 / 3,
-            scale=_STEP_FRUSTUM,
-            thickness=_FRUSTUM_LINE,
-            color=(255, 200, 0),
-            wxyz=_wxyz(pose[:3, :3]),
-            position=pose[:3, 3],
+        init = self.views[f"init{camera.init_index}"]
+        self._add_frustum(
+            "/step", camera, record.world_T_cam(torch.from_numpy(init.world_T_cam)).numpy(), _STEP_FRUSTUM
         )
         self.step_text.content = (
-            f"step {int(row['step'])}, lane {int(row['restart'])}: L_depth {row['l_depth']:.4f}, "
-            f"delta1 {row['delta1']:.3f}, {row['verdict']}"
+            f"step {record.step}, lane {record.restart}: L_depth {record.l_depth:.4f}, "
+            f"delta1 {record.delta1:.3f}, {record.verdict}"
+        )
+
+    def _add_frustum(
+        self,
+        name: str,
+        camera: CameraView,
+        world_T_cam: np.ndarray,
+        scale: float,
+        colour: tuple[int, int, int] = _STEP_COLOUR,
+        image: np.ndarray | None = None,
+    ):
+        """A frustum of ``camera``'s field of view and aspect at ``world_T_cam`` (4, 4)."""
+        height, width = camera.image.shape[:2]
+        return self.server.scene.add_camera_frustum(
+            name,
+            fov=float(2 * np.arctan(np.tan(np.radians(camera.fov_x_deg) / 2) * height / width)),
+            aspect=width / height,
+            scale=scale,
+            thickness=_FRUSTUM_LINE,
+            color=colour,
+            image=image,
+            wxyz=_wxyz(world_T_cam[:3, :3]),
+            position=world_T_cam[:3, 3],
         )
 
     def fly_to(self, name: str, client=None) -> None:

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import ast
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -31,7 +32,7 @@ from kadv.attack import (
     separated,
 )
 from kadv.render import DiffRenderConfig
-from kadv.report.run import trajectory_rows
+from kadv.report.run import _write_csv, read_trajectory, trajectory_rows
 
 H, W = 48, 64
 BUILT_IN = ("gradient", "random", "cma", "nevergrad", "hybrid")
@@ -355,3 +356,12 @@ def test_screening_at_a_reduced_size_re_scores_its_best_views_at_full_size(
     assert [r.params for r in rescored] == [r.params for r in best] and len(rescored) == 8
     assert all(r.scale == 1.0 for r in view.top + view.path)  # only full-size views are chosen or followed
     assert any(a.l_depth != b.l_depth for a, b in zip(rescored, best))  # the sizes score differently
+
+
+def test_trajectory_csv_reads_back_the_records_it_was_written_from(
+    tiny_objective, differentiable, file_view, tmp_path
+) -> None:
+    result = _run(tiny_objective, differentiable, [file_view], method="hybrid", budget_evaluations=20)
+    path = _write_csv(tmp_path / "trajectory.csv", trajectory_rows(result))
+    written = [dataclasses.replace(r, seconds=math.nan) for r in result.views[0].records]
+    assert repr(read_trajectory(path)) == repr({0: written})  # repr: NaN fields compare too

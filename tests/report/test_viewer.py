@@ -76,7 +76,9 @@ def test_a_run_shows_every_camera_and_selecting_one_shows_its_panel(sweep: Path)
         nodes = viewer.server.scene._handle_from_node_name  # viser lists its nodes nowhere public
         frusta = sorted(name for name, handle in nodes.items() if isinstance(handle, CameraFrustumHandle))
         assert frusta == sorted([f"/cameras/{name}" for name in _cameras(run)] + ["/step"])
-        assert len(viewer.rows) == sum(1 for _ in open(run / "trajectory.csv")) - 1
+        assert (
+            sum(len(records) for records in viewer.records.values()) == sum(1 for _ in open(run / "trajectory.csv")) - 1
+        )
         chosen = next(name for name in viewer.frusta if "_adv" in name)
         camera = viewer.select(chosen)
         panel = np.asarray(Image.open(camera.panel).convert("RGB"))
