@@ -11,7 +11,7 @@ import math
 
 import torch
 
-from kadv.losses.metrics import aligned_depth
+from kadv.losses.metrics import aligned_on_valid, mean_on_valid
 
 __all__ = ["ALIGNED_LOSSES", "DELTA1_TEMPERATURE", "AlignedLoss", "absrel_loss", "soft_delta1_loss"]
 
@@ -24,11 +24,6 @@ DELTA1_TEMPERATURE = 0.05
 def _check_temperature(temperature: float) -> None:
     if not (math.isfinite(temperature) and temperature > 0):
         raise ValueError(f"loss.temperature must be positive, got {temperature}")
-
-
-def _valid(gt_depth: torch.Tensor, mask: torch.Tensor, min_depth: float) -> tuple[torch.Tensor, torch.Tensor]:
-    mask = mask & (gt_depth > min_depth)
-    return mask, mask.to(gt_depth.dtype).sum(dim=(1, 2, 3)).clamp_min(1.0)
 
 
 def absrel_loss(
@@ -48,10 +43,8 @@ def absrel_loss(
         >>> absrel_loss(2.0 / depth + 1.0, depth, mask).abs().item() < 1e-9  # right up to scale and shift
         True
     """
-    mask, count = _valid(gt_depth, mask, min_depth)
-    safe_gt = torch.where(mask, gt_depth, torch.ones_like(gt_depth))
-    error = (aligned_depth(prediction, gt_depth, mask, prediction_kind, space) - safe_gt).abs() / safe_gt
-    return torch.where(mask, error, torch.zeros_like(error)).sum(dim=(1, 2, 3)) / count
+    mask, count, safe_gt, aligned = aligned_on_valid(prediction, gt_depth, mask, prediction_kind, space, min_depth)
+    return mean_on_valid((aligned - safe_gt).abs() / safe_gt, mask, count)
 
 
 def soft_delta1_loss(
@@ -74,16 +67,16 @@ def soft_delta1_loss(
         True
     """
     _check_temperature(temperature)
-    mask, count = _valid(gt_depth, mask, min_depth)
-    safe_gt = torch.where(mask, gt_depth, torch.ones_like(gt_depth))
-    log_ratio = torch.log(aligned_depth(prediction, gt_depth, mask, prediction_kind, space) / safe_gt).abs()
+    mask, count, safe_gt, aligned = aligned_on_valid(prediction, gt_depth, mask, prediction_kind, space, min_depth)
+    log_ratio = torch.log(aligned / safe_gt).abs()
     margin = math.log(1.25)
     floor = torch.sigmoid(torch.tensor(-margin / temperature, dtype=log_ratio.dtype))
     wrong = (torch.sigmoid((log_ratio - margin) / temperature) - floor) / (1.0 - floor)
-    return torch.where(mask, wrong, torch.zeros_like(wrong)).sum(dim=(1, 2, 3)) / count
+    return mean_on_valid(wrong, mask, count)
 
 
-ALIGNED_LOSSES = {"absrel": absrel_loss, "delta1": soft_delta1_loss}
+# the loss.kind values of the aligned losses
+ALIGNED_LOSSES = ("absrel", "delta1")
 
 
 class AlignedLoss:

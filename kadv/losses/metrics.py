@@ -6,7 +6,7 @@ import torch
 
 from kadv.losses.align import align_scale_shift, to_comparison_space
 
-__all__ = ["aligned_depth", "depth_metrics"]
+__all__ = ["aligned_depth", "aligned_on_valid", "depth_metrics", "mean_on_valid"]
 
 
 def aligned_depth(
@@ -39,6 +39,28 @@ def aligned_depth(
     return 1.0 / torch.maximum(aligned, floor)
 
 
+def aligned_on_valid(
+    prediction: torch.Tensor,
+    gt_depth: torch.Tensor,
+    mask: torch.Tensor,
+    prediction_kind: str = "disparity",
+    space: str = "disparity",
+    min_depth: float = 1e-3,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """What the metrics and the aligned losses score on: the valid pixels (ground truth above
+    ``min_depth``), their count per map (B,), the ground truth with 1 elsewhere (safe to divide by),
+    and the prediction as :func:`aligned_depth` aligns it in ``space``."""
+    mask = mask & (gt_depth > min_depth)
+    count = mask.to(gt_depth.dtype).sum(dim=(1, 2, 3)).clamp_min(1.0)
+    safe_gt = torch.where(mask, gt_depth, torch.ones_like(gt_depth))
+    return mask, count, safe_gt, aligned_depth(prediction, gt_depth, mask, prediction_kind, space)
+
+
+def mean_on_valid(values: torch.Tensor, mask: torch.Tensor, count: torch.Tensor) -> torch.Tensor:
+    """Mean (B,) of per-pixel ``values`` (B, 1, H, W) over ``mask``, ``count`` pixels per map."""
+    return torch.where(mask, values, torch.zeros_like(values)).sum(dim=(1, 2, 3)) / count
+
+
 def depth_metrics(
     prediction: torch.Tensor,
     gt_depth: torch.Tensor,
@@ -65,13 +87,11 @@ def depth_metrics(
         >>> metrics["delta1"].tolist(), metrics["abs_rel"].abs().max().item() < 1e-9
         ([1.0], True)
     """
-    mask = mask & (gt_depth > min_depth)
-    pred_depth = aligned_depth(prediction, gt_depth, mask, prediction_kind)
-    weight = mask.to(gt_depth.dtype)
-    count = weight.sum(dim=(1, 2, 3)).clamp_min(1.0)
-    safe_gt = torch.where(mask, gt_depth, torch.ones_like(gt_depth))
+    mask, count, safe_gt, pred_depth = aligned_on_valid(
+        prediction, gt_depth, mask, prediction_kind, min_depth=min_depth
+    )
     ratio = torch.maximum(pred_depth / safe_gt, safe_gt / pred_depth)
-    result = {f"delta{k}": ((ratio < 1.25**k) & mask).to(gt_depth.dtype).sum(dim=(1, 2, 3)) / count for k in (1, 2, 3)}
-    result["abs_rel"] = (weight * (pred_depth - safe_gt).abs() / safe_gt).sum(dim=(1, 2, 3)) / count
-    result["rmse"] = ((weight * (pred_depth - safe_gt) ** 2).sum(dim=(1, 2, 3)) / count).sqrt()
+    result = {f"delta{k}": mean_on_valid((ratio < 1.25**k).to(gt_depth.dtype), mask, count) for k in (1, 2, 3)}
+    result["abs_rel"] = mean_on_valid((pred_depth - safe_gt).abs() / safe_gt, mask, count)
+    result["rmse"] = mean_on_valid((pred_depth - safe_gt) ** 2, mask, count).sqrt()
     return result

@@ -352,7 +352,7 @@ def test_screening_at_a_reduced_size_re_scores_its_best_views_at_full_size(
     assert len(small) == 16 and view.init_record.scale == 1.0
     rescored = [r for r in view.records if r.scale == 1.0 and r.step == 3]
     # the re-scored views are the best separated screened ones, evaluated again at full size
-    best = select_top_views([ViewRecord(**{**r.__dict__, "scale": 1.0}) for r in small], len(rescored), 0.05, 3.0)
+    best = select_top_views([dataclasses.replace(r, scale=1.0) for r in small], len(rescored), 0.05, 3.0)
     assert [r.params for r in rescored] == [r.params for r in best] and len(rescored) == 8
     assert all(r.scale == 1.0 for r in view.top + view.path)  # only full-size views are chosen or followed
     assert any(a.l_depth != b.l_depth for a, b in zip(rescored, best))  # the sizes score differently

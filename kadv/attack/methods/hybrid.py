@@ -4,6 +4,7 @@ for the rest of the budget."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -179,7 +180,7 @@ def hybrid_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) -
         bar.update(count)
         step += 1
     candidates = select_top_views(
-        [r if r.scale == 1.0 else _as_full(r) for r in records],
+        [dataclasses.replace(r, scale=1.0) for r in records],  # rank the reduced-size views too
         settings.refine_views * (1 + _POOL_PER_LANE),
         config.min_separation,
         config.min_separation_deg,
@@ -200,8 +201,3 @@ def hybrid_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) -
     if starts:
         records += trust_region_refine(context, starts, pool, settings, bar, step)
     return context.result(records, incumbent_path(records))
-
-
-def _as_full(record: ViewRecord) -> ViewRecord:
-    """A reduced-size screened view, ranked as if it were full size (for choosing what to re-score)."""
-    return ViewRecord(**{**record.__dict__, "scale": 1.0})
