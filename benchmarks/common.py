@@ -73,6 +73,12 @@ def fastest_seconds(fn: Callable[[], object], repeats: int = 3, warmup: int = 1)
     return min(timings(fn, repeats, warmup))
 
 
+def scene_file(name: str) -> Path:
+    """A shared scene's XML by name, else the path as given (a scene file of the user's)."""
+    path = scenes_root() / name / "scene.xml"
+    return path if name in REAL_SCENES or path.is_file() else Path(name)
+
+
 def load_bench_scene(name: str) -> Scene:
     """A real scene by name, or the procedural box room for "box_room"."""
     return box_room(seed=0) if name == "box_room" else load_scene(scenes_root() / name / "scene.xml")

@@ -21,7 +21,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from common import REAL_SCENES, default_lighting, scenes_root
+from common import REAL_SCENES, default_lighting, scene_file
 from tqdm import tqdm
 
 from kadv.attack import InitViewConfig, PenaltyConfig, file_init_views, sample_init_views
@@ -39,13 +39,6 @@ from kadv.render import ExactRenderer, Shading
 from kadv.report.summary import RunSummary
 from kadv.report.sweep import Table
 from kadv.scenes import load_scene
-
-
-def _scene_file(name: str) -> Path:
-    """A shared scene's XML by name, else the path as given."""
-    path = scenes_root() / name / "scene.xml"
-    return path if name in REAL_SCENES or path.is_file() else Path(name)
-
 
 _METRICS = ["psnr", "ssim", "pred_delta1"]
 # the demo's attack (experiment=demo) on another scene: kadv-tiny, SSIM loss, 2 init views of 123 views
@@ -118,7 +111,7 @@ def main() -> None:
     parser.add_argument("--survival-spp", type=int, default=64, help="spp of the adversarial views' renders")
     args = parser.parse_args()
     for name in args.scenes.split(","):
-        if not (_scene_file(name).is_file() and _scene_file(name).suffix.lower() == ".xml"):
+        if not (scene_file(name).is_file() and scene_file(name).suffix.lower() == ".xml"):
             parser.error(f"--scenes: {name!r} is neither a shared scene's name nor a Mitsuba XML file")
     lightings = args.lightings.split(",")
     if not set(lightings) <= {"direct", "baked"}:
@@ -136,7 +129,7 @@ def main() -> None:
     depth_errors: list[float] = []
     scene_summary: dict[str, dict[str, list[float]]] = {lighting: {m: [] for m in metrics} for lighting in lightings}
     for name in args.scenes.split(","):
-        path = _scene_file(name)
+        path = scene_file(name)
         scene = load_scene(path)
         renderers, bake = {}, "-"
         for lighting in lightings:

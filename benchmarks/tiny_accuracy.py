@@ -1,16 +1,19 @@
 """delta1 (after scale-and-shift alignment) of the embedded models on held-out generated rooms and
-on the three shared scenes, which no training run ever sees.
+on real scenes, which no training run ever sees (the three shared scenes, or ``--scenes``).
 
 - Generated: 200 views of furnished rooms and 200 of box rooms from seed 7 (``HELD_OUT_SEED``, which
   ``kadv-train-tiny`` refuses to train or validate on), at 240 x 320; with ``--lighting baked`` every
   room is lit by its baked global illumination (``TRAINING_BAKE``), else by random direct shading.
-- Shared scenes: each scene's file camera plus 20 valid views drawn as the attack draws init-view
+- Real scenes (``--scenes``: shared scenes' names or paths to any scene file, comma-separated; the
+  three shared scenes by default): each scene's file camera plus 20 valid views drawn as the attack draws init-view
   candidates (``sample_valid_views``, unranked: seed 0, then seeds 1, 2, ... while fewer than 20
   are found, as in the Japanese classroom, whose 220 m ground puts most candidates outside), at
-  180 x 320, under ``--lighting`` (default: the renderer's); the mean is over all 63 views.
+  180 x 320, under ``--lighting`` (default: the renderer's); the mean is over all their views (63
+  for the shared scenes).
 
 Run: .venv/bin/python benchmarks/tiny_accuracy.py [--kadv-tiny FILE] [--kadv-tiny-dpt DIR] [--lighting direct|baked]
-(other weights than the shipped ones, e.g. a training run's).
+[--scenes NAME_OR_PATH,...] (other weights than the shipped ones, e.g. a training run's; other scenes, e.g.
+rooms of your own).
 """
 
 from __future__ import annotations
@@ -20,10 +23,10 @@ import statistics
 from pathlib import Path
 
 import torch
-from common import REAL_SCENES, default_lighting, scenes_root, timings
+from common import REAL_SCENES, default_lighting, scene_file, timings
 
 from kadv.attack import InitViewConfig, sample_valid_views
-from kadv.datasets import HELD_OUT_SEED, ViewBatch, render_procedural_views
+from kadv.datasets import HELD_OUT_SEED, RoomMix, ViewBatch, render_procedural_views
 from kadv.geometry import intrinsics_from_fov
 from kadv.losses import depth_metrics
 from kadv.models import load_model
@@ -38,9 +41,9 @@ SAMPLING_SEEDS = 10
 HEIGHT, WIDTH = 180, 320
 
 
-def shared_scene_views(name: str, lighting: str) -> ViewBatch:
-    """The file camera and ``SAMPLED_VIEWS`` sampled valid views of a shared scene, lit by ``lighting``."""
-    scene = load_scene(scenes_root() / name / "scene.xml")
+def real_scene_views(path: Path, lighting: str) -> ViewBatch:
+    """The file camera and ``SAMPLED_VIEWS`` sampled valid views of the scene at ``path``, lit by ``lighting``."""
+    scene = load_scene(path)
     renderer = ExactRenderer(scene, Shading(lighting=lighting))
     config = InitViewConfig()
     camera = scene.cameras[0]
@@ -51,12 +54,17 @@ def shared_scene_views(name: str, lighting: str) -> ViewBatch:
         more = sample_valid_views(renderer, SAMPLED_VIEWS - len(sampled), seed, config, PenaltyConfig(), HEIGHT, WIDTH)
         sampled = torch.cat([sampled, more])
     if len(sampled) < SAMPLED_VIEWS:
-        raise SystemExit(f"{name}: {len(sampled)} valid views from {SAMPLING_SEEDS} seeds, not {SAMPLED_VIEWS}")
+        raise SystemExit(f"{path}: {len(sampled)} valid views from {SAMPLING_SEEDS} seeds, not {SAMPLED_VIEWS}")
     outputs = [
         renderer.render(camera.world_T_cam, camera.intrinsics(HEIGHT, WIDTH), HEIGHT, WIDTH, supersample=2),
         renderer.render(sampled, intrinsics_from_fov(config.fov_x_deg, HEIGHT, WIDTH), HEIGHT, WIDTH, supersample=2),
     ]
     return ViewBatch(*(torch.cat([getattr(out, key) for out in outputs]) for key in ("rgb", "depth", "mask")))
+
+
+def _label(name: str, path: Path) -> str:
+    """A scene's column name: its shared name, else its file's folder (scene.xml) or stem."""
+    return name if name in REAL_SCENES else (path.parent.name if path.stem == "scene" else path.stem)
 
 
 def per_view_delta1(model: torch.nn.Module, views: ViewBatch) -> torch.Tensor:
@@ -81,17 +89,26 @@ def main() -> None:
         "--models", nargs="+", default=["kadv_tiny", "kadv_tiny_dpt"], choices=["kadv_tiny", "kadv_tiny_dpt"]
     )
     parser.add_argument("--lighting", default=default_lighting(), choices=["direct", "baked"])
+    parser.add_argument(
+        "--scenes", default=",".join(REAL_SCENES), help="comma-separated shared scenes' names or scene files' paths"
+    )
     args = parser.parse_args()
+    paths = {name: scene_file(name) for name in args.scenes.split(",")}
+    for name, path in paths.items():
+        if not path.is_file():
+            parser.error(f"--scenes: {name!r} is neither a shared scene's name nor a scene file")
     weights = {"kadv_tiny": args.kadv_tiny, "kadv_tiny_dpt": args.kadv_tiny_dpt}
     models = {name: load_model(name, weights=weights[name]) for name in args.models}
     baked_share = 1.0 if args.lighting == "baked" else 0.0
     held_out = {
-        label: render_procedural_views(200, HELD_OUT_SEED, 240, 320, furnished_share=share, baked_share=baked_share)
+        label: render_procedural_views(
+            200, HELD_OUT_SEED, 240, 320, RoomMix(furnished_share=share, baked_share=baked_share)
+        )
         for label, share in (("furnished", 1.0), ("box rooms", 0.0))
     }
-    shared = {name: shared_scene_views(name, args.lighting) for name in REAL_SCENES}
+    shared = {_label(name, path): real_scene_views(path, args.lighting) for name, path in paths.items()}
     print(f"lighting: {args.lighting}")
-    columns = [*held_out, *(f"{name} file" for name in shared), *(f"{name} sampled" for name in shared), "shared mean"]
+    columns = [*held_out, *(f"{name} file" for name in shared), *(f"{name} sampled" for name in shared), "real mean"]
     print("| model | " + " | ".join(columns) + " |")
     print("|---" * (len(columns) + 1) + "|")
     results = {}

@@ -34,6 +34,7 @@ from kadv.losses import DELTA1_TEMPERATURE, AlignedLoss, depth_loss
 from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
 from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.scenes import Scene, scene_from_node
+from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, ROOM_FEATURES, check_shares
 
 __all__ = [
     "FAILURE",
@@ -256,6 +257,9 @@ def scene_from_config(cfg: DictConfig) -> Scene:
         config_int(cfg.seed, "scene.seed")
     if cfg.kind == "box_room":
         config_int(cfg.num_boxes, "scene.num_boxes", 0)
+    if cfg.kind == "procedural":
+        features = {name: config_float(cfg.get(name, 0.0), f"scene.{name}") for name in ROOM_FEATURES}
+        check_shares(CORRIDOR_SHARE, HALL_SHARE, "scene.", **features)
     # reading cfg.path refuses a missing one (???) in OmegaConf's words, which name the key
     path = cfg.path if cfg.kind == "file" else None
     return scene_from_node(OmegaConf.to_container(cfg, resolve=True), path=path)

@@ -6,8 +6,8 @@ from kadv.datasets.procedural import (
     HELD_OUT_SEED,
     MAX_SQUEEZED_ASPECT,
     TRAINING_BAKE,
+    RoomMix,
     ViewBatch,
-    check_view_shares,
     render_procedural_views,
     training_poses,
 )
@@ -16,8 +16,8 @@ __all__ = [
     "HELD_OUT_SEED",
     "MAX_SQUEEZED_ASPECT",
     "TRAINING_BAKE",
+    "RoomMix",
     "ViewBatch",
-    "check_view_shares",
     "render_procedural_views",
     "training_poses",
 ]

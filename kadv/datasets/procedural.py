@@ -16,23 +16,26 @@ from kadv.geometry import intrinsics_from_fov
 from kadv.penalties import PenaltyConfig, random_valid_poses
 from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.scenes import box_room, procedural_room
-from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE
+from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, ROOM_FEATURES, check_shares
 
 __all__ = [
     "HELD_OUT_SEED",
     "MAX_SQUEEZED_ASPECT",
     "TRAINING_BAKE",
+    "RoomMix",
     "ViewBatch",
-    "check_view_shares",
     "render_procedural_views",
     "training_poses",
 ]
 
 MAX_SQUEEZED_ASPECT = 2.0
 """The widest frame (width / height) a squeezed training view shows."""
-TRAINING_BAKE = BakeConfig(texel=0.1, max_points=300_000, rays=32, light_samples=16)
-"""The bake of a training room with baked lighting: coarser than the renderer's default (a room costs
-seconds, not tens of seconds), since a training view is small."""
+TRAINING_BAKE = BakeConfig(texel=0.25, max_points=100_000, rays=256, light_samples=16)
+"""The bake of a training room with baked lighting: a coarser lattice than the renderer's default
+(a room costs seconds, not tens of seconds, and a training view is small), with more gather rays,
+so that its indirect light is as smooth as a full bake's (with 32 rays on a 0.1 m lattice, as
+before, walls lit by bounced light were mottled; the shipped stages up to kadv-tiny 7 and
+kadv-tiny-dpt 6 trained on that)."""
 HELD_OUT_SEED = 7
 """The seed of the generated rooms the embedded models are measured on (``benchmarks/tiny_accuracy.py``);
 no training run may draw it."""
@@ -50,19 +53,50 @@ class ViewBatch:
     intrinsics: torch.Tensor | None = None
 
 
-def check_view_shares(
-    furnished_share: float, attack_view_share: float, squeeze_share: float, baked_share: float, prefix: str = ""
-) -> None:
-    """Raise ValueError, naming ``prefix`` + the key, unless each share lies in [0, 1]."""
-    shares = {
-        "furnished_share": furnished_share,
-        "attack_view_share": attack_view_share,
-        "squeeze_share": squeeze_share,
-        "baked_share": baked_share,
-    }
-    for name, share in shares.items():
-        if not 0.0 <= share <= 1.0:
-            raise ValueError(f"{prefix}{name} must be in [0, 1], got {share}")
+@dataclass(frozen=True)
+class RoomMix:
+    """What the generated training rooms and their views are made of; every share lies in [0, 1].
+
+    Attributes:
+        furnished_share: rooms that are furnished rooms (``procedural_room``), spread evenly; the
+            rest are box rooms lit from a random point.
+        corridor_share, hall_share: furnished rooms that are corridors and halls (both 0: the rooms
+            of the generator before it drew them).
+        stairs_share, sun_share, glazing_share: furnished rooms with a flight of stairs, with a sun
+            through a window, and windows that are glazed walls (``procedural_room``'s shares).
+        attack_view_share: views drawn as the attack draws its init views (eye height, a level
+            gaze); the rest anywhere in the room.
+        squeeze_share: rooms seen through a wider frame (aspect drawn up to ``MAX_SQUEEZED_ASPECT``)
+            squeezed into the views' size, as a model that resizes every image sees wide photographs.
+        baked_share: rooms, spread evenly, lit by their baked global illumination
+            (``render.lighting=baked``, baked with ``bake``) instead of random direct shading.
+        bake: the bake of those rooms (``TRAINING_BAKE``).
+    With a share at 0, nothing it would draw is drawn, so the rooms and views are those drawn before
+    it existed.
+    """
+
+    furnished_share: float = 0.0
+    corridor_share: float = CORRIDOR_SHARE
+    hall_share: float = HALL_SHARE
+    stairs_share: float = 0.0
+    sun_share: float = 0.0
+    glazing_share: float = 0.0
+    attack_view_share: float = 0.0
+    squeeze_share: float = 0.0
+    baked_share: float = 0.0
+    bake: BakeConfig = TRAINING_BAKE
+
+    def check(self, prefix: str = "") -> None:
+        """Raise ValueError, naming ``prefix`` + the key, unless each share lies in [0, 1] and the
+        corridor and hall shares sum to at most 1."""
+        check_shares(self.corridor_share, self.hall_share, prefix, **self.room_features())
+        for name in ("furnished_share", "attack_view_share", "squeeze_share", "baked_share"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{prefix}{name} must be in [0, 1], got {getattr(self, name)}")
+
+    def room_features(self) -> dict[str, float]:
+        """The furnished rooms' feature shares, as ``procedural_room`` takes them."""
+        return {name: getattr(self, name) for name in ROOM_FEATURES}
 
 
 def training_poses(
@@ -94,44 +128,36 @@ def render_procedural_views(
     seed: int,
     height: int,
     width: int,
+    mix: RoomMix = RoomMix(),
     views_per_room: int = 8,
-    furnished_share: float = 0.0,
     progress: bool = True,
-    corridor_share: float = CORRIDOR_SHARE,
-    hall_share: float = HALL_SHARE,
-    attack_view_share: float = 0.0,
-    squeeze_share: float = 0.0,
-    baked_share: float = 0.0,
 ) -> ViewBatch:
-    """Render ``count`` views, ``views_per_room`` per generated room, under random shading.
+    """Render ``count`` views, ``views_per_room`` per generated room, as ``mix`` says.
 
-    Room ``i`` is ``procedural_room(seed * 100003 + i)`` (furnished, lit at its lamps and windows;
-    ``corridor_share`` and ``hall_share`` pass to it) for a ``furnished_share`` of the rooms, spread
-    evenly, else ``box_room(seed * 100003 + i)`` lit from a random point. An
-    ``attack_view_share`` of the views are drawn as the attack draws its init views (eye height
-    above the floor, a level gaze: :func:`~kadv.attack.sample_valid_views`), the rest anywhere in
-    the room (:func:`~kadv.penalties.random_valid_poses`). A ``squeeze_share`` of the rooms are
-    seen through a wider frame (aspect drawn up to ``MAX_SQUEEZED_ASPECT``) squeezed into ``height``
-    x ``width``, as a model that resizes every image to its input size sees wide photographs. A
-    ``baked_share`` of the rooms, spread evenly, are lit by their baked global illumination
-    (``render.lighting=baked``, baked with ``TRAINING_BAKE`` into a scratch cache) instead of random
-    direct shading.
-    Deterministic for a seed; distinct seeds give disjoint rooms (held-out evaluation uses another
-    seed).
+    Room ``i`` is ``procedural_room(seed * 100003 + i)`` (furnished, lit at its lamps and windows)
+    for ``mix.furnished_share`` of the rooms, else ``box_room(seed * 100003 + i)`` lit from a random
+    point, each under random direct shading or, for ``mix.baked_share`` of them, its baked light
+    (into a scratch cache). Deterministic for a seed; distinct seeds give disjoint rooms (held-out
+    evaluation uses another seed).
+
+    Raises:
+        ValueError: a share of ``mix`` outside [0, 1] (see :meth:`RoomMix.check`).
     """
-    check_view_shares(furnished_share, attack_view_share, squeeze_share, baked_share)
+    mix.check()
     # the rooms' bakes are made for this batch, into a scratch cache that goes with it
     with contextlib.ExitStack() as stack:
-        folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="kadv-bakes-")) if baked_share > 0 else None
-        bake = replace(TRAINING_BAKE, cache=folder)
+        folder = stack.enter_context(tempfile.TemporaryDirectory(prefix="kadv-bakes-")) if mix.baked_share > 0 else None
+        bake = replace(mix.bake, cache=folder)
         rng = np.random.default_rng(seed)
         rgb, depth, mask, world_T_cam, intrinsics = [], [], [], [], []
         rooms = math.ceil(count / views_per_room)
         for index in tqdm(range(rooms), desc="rendering rooms", disable=not progress):
             room_seed = seed * 100003 + index
             # room i is furnished when the running share first reaches the next whole room
-            if math.floor((index + 1) * furnished_share) > math.floor(index * furnished_share):
-                scene = procedural_room(seed=room_seed, corridor_share=corridor_share, hall_share=hall_share)
+            if math.floor((index + 1) * mix.furnished_share) > math.floor(index * mix.furnished_share):
+                scene = procedural_room(
+                    seed=room_seed, corridor_share=mix.corridor_share, hall_share=mix.hall_share, **mix.room_features()
+                )
                 lights = None  # the room's own: its lamps and windows
             else:
                 scene = box_room(seed=room_seed, num_boxes=int(rng.integers(2, 8)))
@@ -139,15 +165,15 @@ def render_procedural_views(
                 lights = (tuple(rng.uniform(lo + 0.3, hi - 0.3)),)
             shading = Shading(ambient=float(rng.uniform(0.3, 0.6)), diffuse=float(rng.uniform(0.3, 0.7)), lights=lights)
             # spread evenly without drawing, so the other rooms' views are those drawn before the share existed
-            if math.floor((index + 1) * baked_share) > math.floor(index * baked_share):
+            if math.floor((index + 1) * mix.baked_share) > math.floor(index * mix.baked_share):
                 shading = replace(shading, lighting="baked", bake=bake)
             renderer = ExactRenderer(scene, shading, progress=False)
             fov = float(rng.uniform(55, 85))
             n = min(views_per_room, count - index * views_per_room)
-            poses = training_poses(renderer, n, rng, fov, attack_view_share, height, width)
+            poses = training_poses(renderer, n, rng, fov, mix.attack_view_share, height, width)
             K = intrinsics_from_fov(fov, height, width)
             # nothing is drawn when the share is 0, so those views are the views drawn before it existed
-            if squeeze_share > 0 and rng.random() < squeeze_share:
+            if mix.squeeze_share > 0 and rng.random() < mix.squeeze_share:
                 wide = round(height * rng.uniform(width / height, MAX_SQUEEZED_ASPECT))
                 K = intrinsics_from_fov(fov, height, wide)
                 K[0] *= width / wide  # the wide frame's columns squeezed into width

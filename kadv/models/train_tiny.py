@@ -5,14 +5,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
-from kadv.datasets import HELD_OUT_SEED, ViewBatch, check_view_shares, render_procedural_views
+from kadv.datasets import HELD_OUT_SEED, TRAINING_BAKE, RoomMix, ViewBatch, render_procedural_views
 from kadv.device import resolve_device
 from kadv.losses import ssi_loss
 from kadv.models.base import DepthModel
@@ -25,11 +25,22 @@ from kadv.models.tiny import (
     load_kadv_tiny,
 )
 from kadv.models.tiny_dpt import load_kadv_tiny_dpt, tiny_dpt_model, tiny_dpt_network
-from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, check_shares
+from kadv.render import BakeConfig
+from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE
 
-__all__ = ["ARCHITECTURES", "TinyTrainConfig", "fit", "load_soup", "render_training_views", "soup", "train_tiny"]
+__all__ = [
+    "ARCHITECTURES",
+    "AUGMENTATIONS",
+    "TinyTrainConfig",
+    "fit",
+    "load_soup",
+    "render_training_views",
+    "soup",
+    "train_tiny",
+]
 
 ARCHITECTURES = ("unet", "dpt")
+AUGMENTATIONS = ("basic", "strong")
 
 
 @dataclass
@@ -44,7 +55,11 @@ class TinyTrainConfig:
     ``attack_view_share`` of the views are drawn as the attack draws init views (eye height, level
     gaze), and a ``squeeze_share`` of the rooms are seen through wider frames squeezed to the
     model's input size (as the model squeezes wide images); a ``baked_share`` of the rooms are lit
-    by their baked global illumination (``TRAINING_BAKE``) instead of random direct shading.
+    by their baked global illumination (``bake``: ``TRAINING_BAKE`` unless given, a BakeConfig or
+    its keys) instead of random direct shading. ``stairs_share``, ``sun_share`` and
+    ``glazing_share`` pass to :func:`~kadv.scenes.procedural_room` (flights of stairs, a sun
+    through a window, glazed walls). ``augment`` is "basic" (flips, gain, colour balance) or
+    "strong" (also a tone curve, saturation and a zoom).
     ``device`` trains on the CPU (bit-identical weights for one config) or a CUDA device (faster;
     its weights differ in the last bits). ``init_weights`` continues from an earlier run's weights
     (a kadv-tiny file, whose channels win over ``channels``, or a kadv-tiny-dpt directory), so a
@@ -72,6 +87,11 @@ class TinyTrainConfig:
     attack_view_share: float = 0.0
     squeeze_share: float = 0.0
     baked_share: float = 0.0
+    stairs_share: float = 0.0
+    sun_share: float = 0.0
+    glazing_share: float = 0.0
+    bake: BakeConfig | dict = field(default_factory=lambda: TRAINING_BAKE)
+    augment: str = "basic"
     device: str = "cpu"
     soup_with: list[str] = field(default_factory=list)
 
@@ -90,13 +110,22 @@ class TinyTrainConfig:
             raise ValueError(f"train.channels must be positive integers, got {list(self.channels)}")
         if self.architecture not in ARCHITECTURES:
             raise ValueError(f"train.architecture must be one of {', '.join(ARCHITECTURES)}, got {self.architecture!r}")
+        if self.augment not in AUGMENTATIONS:
+            raise ValueError(f"train.augment must be one of {', '.join(AUGMENTATIONS)}, got {self.augment!r}")
         if HELD_OUT_SEED in (self.seed, self.val_seed) or self.seed == self.val_seed:
             raise ValueError(
                 f"train.seed ({self.seed}) and train.val_seed ({self.val_seed}) must differ from each other and "
                 f"from {HELD_OUT_SEED}, the seed of the held-out rooms the benchmark measures on"
             )
-        check_shares(self.corridor_share, self.hall_share, "train.")
-        check_view_shares(self.furnished_share, self.attack_view_share, self.squeeze_share, self.baked_share, "train.")
+        if isinstance(self.bake, dict):
+            try:
+                self.bake = replace(TRAINING_BAKE, **self.bake)
+            except TypeError:
+                unknown = sorted(set(self.bake) - {f.name for f in fields(BakeConfig)})
+                raise ValueError(f"train.bake has no key(s) {', '.join(unknown)}") from None
+            except ValueError as error:  # BakeConfig names its keys as the renderer's node
+                raise ValueError(str(error).replace("render.bake.", "train.bake.")) from None
+        self.mix().check("train.")
         try:
             resolve_device(self.device)
         except ValueError as error:
@@ -105,13 +134,44 @@ class TinyTrainConfig:
             if path is not None and not Path(path).expanduser().exists():
                 raise FileNotFoundError(f"train.{key}: no such weights file or directory: {path}")
 
+    def mix(self) -> RoomMix:
+        """The rooms and views this run trains on."""
+        return RoomMix(**{f.name: getattr(self, f.name) for f in fields(RoomMix)})
 
-def _augment(rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor, generator: torch.Generator):
+
+def _augment(
+    rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor, generator: torch.Generator, strong: bool = False
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Flip, gain and colour balance; ``strong`` adds a tone curve, saturation and a zoom."""
     flip = torch.rand(rgb.shape[0], generator=generator) < 0.5
     rgb, depth, mask = (torch.where(flip[:, None, None, None], x.flip(-1), x) for x in (rgb, depth, mask))
     gain = 0.7 + 0.6 * torch.rand(rgb.shape[0], 1, 1, 1, generator=generator)
     bias = 0.1 * (torch.rand(rgb.shape[0], 3, 1, 1, generator=generator) - 0.5)
-    return (rgb * gain + bias).clamp(0, 1), depth, mask
+    rgb = rgb * gain + bias
+    if strong:  # drawn after the basic draws, so a basic run draws what it drew before
+        rgb, depth, mask = _tone_and_zoom(rgb.clamp(0, 1), depth, mask, generator)
+    return rgb.clamp(0, 1), depth, mask
+
+
+def _tone_and_zoom(
+    rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor, generator: torch.Generator
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """A gamma of 0.7-1.4 and saturation of 0.6-1.3 (renderers and cameras tone-map differently),
+    then a crop of 1/1.3 to all of the view, resized back: a narrower field of view, as lenses differ."""
+    n = rgb.shape[0]
+    gamma = torch.exp(0.35 * (2 * torch.rand(n, 1, 1, 1, generator=generator) - 1))
+    saturation = 0.6 + 0.7 * torch.rand(n, 1, 1, 1, generator=generator)
+    rgb = rgb.clamp_min(1e-6) ** gamma
+    grey = rgb.mean(dim=1, keepdim=True)
+    rgb = grey + saturation * (rgb - grey)
+    scale = 1 / (1 + 0.3 * torch.rand(n, generator=generator))
+    shift = (1 - scale)[:, None] * (2 * torch.rand(n, 2, generator=generator) - 1)
+    theta = torch.zeros(n, 2, 3)
+    theta[:, 0, 0], theta[:, 1, 1], theta[:, :, 2] = scale, scale, shift
+    grid = torch.nn.functional.affine_grid(theta, list(rgb.shape), align_corners=False)
+    sample = lambda x, mode: torch.nn.functional.grid_sample(x, grid, mode=mode, align_corners=False)
+    # depth and its mask by the nearest sample, so no pixel blends a near and a far surface
+    return sample(rgb, "bilinear"), sample(depth, "nearest"), sample(mask.float(), "nearest") > 0.5
 
 
 def fit(model: DepthModel, train: ViewBatch, config: TinyTrainConfig, progress: bool = True) -> list[float]:
@@ -131,7 +191,9 @@ def fit(model: DepthModel, train: ViewBatch, config: TinyTrainConfig, progress: 
     for _ in bar:
         index = torch.randint(len(train.rgb), (config.batch_size,), generator=generator)
         # drawn on the CPU whatever the device, so a seed draws the same batches everywhere
-        rgb, depth, mask = _augment(train.rgb[index], train.depth[index], train.mask[index], generator)
+        rgb, depth, mask = _augment(
+            train.rgb[index], train.depth[index], train.mask[index], generator, config.augment == "strong"
+        )
         rgb, depth, mask = rgb.to(device), depth.to(device), mask.to(device)
         loss = ssi_loss(_predict(model, rgb), depth, mask, config.gradient_weight)
         optimiser.zero_grad()
@@ -155,17 +217,8 @@ def _predict(model: DepthModel, rgb: torch.Tensor) -> torch.Tensor:
 def render_training_views(config: TinyTrainConfig, progress: bool = True) -> tuple[ViewBatch, ViewBatch]:
     """The training and validation views ``config`` names, at kadv-tiny's working size."""
     height, width = TINY_PREPROCESS.size
-    rooms = {
-        "furnished_share": config.furnished_share,
-        "corridor_share": config.corridor_share,
-        "hall_share": config.hall_share,
-        "attack_view_share": config.attack_view_share,
-        "squeeze_share": config.squeeze_share,
-        "baked_share": config.baked_share,
-        "progress": progress,
-    }
-    train = render_procedural_views(config.train_views, config.seed, height, width, **rooms)
-    val = render_procedural_views(config.val_views, config.val_seed, height, width, **rooms)
+    train = render_procedural_views(config.train_views, config.seed, height, width, config.mix(), progress=progress)
+    val = render_procedural_views(config.val_views, config.val_seed, height, width, config.mix(), progress=progress)
     return train, val
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 from kadv.scenes.box_rooms import box_room
 from kadv.scenes.load import load_scene
-from kadv.scenes.procedural import procedural_room
+from kadv.scenes.procedural import ROOM_FEATURES, procedural_room
 from kadv.scenes.scene import Scene
 
 __all__ = ["scene_from_node"]
@@ -19,7 +19,8 @@ def scene_from_node(node: Mapping[str, Any], path: str | Path | None = None) -> 
     """Build the scene of a ``scene/`` node (``kind``: box_room, procedural or file).
 
     Args:
-        node: the node's keys (``kind``, ``seed``, ``num_boxes``, ``path``, ``options``).
+        node: the node's keys (``kind``, ``seed``, ``num_boxes``, a procedural room's feature shares,
+            ``path``, ``options``).
         path: for a file scene, read this file instead of the node's ``path`` (a moved scene).
 
     Raises:
@@ -30,7 +31,7 @@ def scene_from_node(node: Mapping[str, Any], path: str | Path | None = None) -> 
     if kind == "box_room":
         return box_room(seed=node.get("seed", 0), num_boxes=node.get("num_boxes", 4))
     if kind == "procedural":
-        return procedural_room(seed=node.get("seed", 0))
+        return procedural_room(seed=node.get("seed", 0), **{name: node[name] for name in ROOM_FEATURES if name in node})
     if kind == "file":
         return load_scene(Path(path if path is not None else node["path"]).expanduser(), **(node.get("options") or {}))
     raise ValueError(f"scene.kind must be 'box_room', 'procedural' or 'file', got {kind!r}")

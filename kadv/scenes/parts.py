@@ -6,7 +6,7 @@ import numpy as np
 
 from kadv.scenes.scene import MeshPart
 
-__all__ = ["box_parts", "facing", "overlapped", "planar_quad", "quad_part"]
+__all__ = ["box_parts", "facing", "hexahedron_parts", "overlapped", "planar_quad", "quad_part"]
 
 _QUAD_FACES = np.array([[0, 2, 1], [0, 3, 2]])
 
@@ -72,4 +72,21 @@ def box_parts(lo: np.ndarray, hi: np.ndarray, material: int, name: str, tile: fl
         corners = overlapped(corners)
         extent = (np.linalg.norm(corners[1] - corners[0]) / tile, np.linalg.norm(corners[3] - corners[0]) / tile)
         parts.append(quad_part(corners, material, f"{name}.face{index}", extent))
+    return parts
+
+
+_HEXAHEDRON_FACES = np.array([[0, 1, 2, 3], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
+
+
+def hexahedron_parts(corners: np.ndarray, material: int, name: str, tile: float) -> list[MeshPart]:
+    """The six outward-facing faces of a convex hexahedron (a sloped beam, a stair stringer):
+    ``corners`` (8, 3) are the bottom face's corners in order around it, then the top face's, each
+    above its bottom corner; one texture repeat per ``tile`` metres from each face's corner."""
+    corners = np.asarray(corners, np.float64)
+    centre = corners.mean(axis=0)
+    parts = []
+    for index, face in enumerate(_HEXAHEDRON_FACES):
+        quad = overlapped(facing(corners[face], corners[face].mean(axis=0) - centre))
+        extent = (np.linalg.norm(quad[1] - quad[0]) / tile, np.linalg.norm(quad[3] - quad[0]) / tile)
+        parts.append(quad_part(quad, material, f"{name}.face{index}", extent))
     return parts

@@ -21,10 +21,10 @@ from kadv.geometry.camera import Camera
 from kadv.geometry.pose import look_at
 from kadv.scenes.emitters import MISSING_ENVMAP_RADIANCE, Emitters
 from kadv.scenes.materials import textured_materials
-from kadv.scenes.parts import box_parts, facing, overlapped, planar_quad, quad_part
+from kadv.scenes.parts import box_parts, facing, hexahedron_parts, overlapped, planar_quad, quad_part
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 
-__all__ = ["CORRIDOR_SHARE", "HALL_SHARE", "check_shares", "procedural_room"]
+__all__ = ["CORRIDOR_SHARE", "HALL_SHARE", "ROOM_FEATURES", "check_shares", "procedural_room"]
 
 _UP = np.array([0.0, 1.0, 0.0])
 _EYE_CLEARANCE = 1.0  # metres kept free of furniture around the file camera
@@ -35,6 +35,8 @@ CORRIDOR_SHARE = 0.15
 """The default share of generated footprints that are corridors."""
 HALL_SHARE = 0.15
 """The default share of generated footprints that are halls."""
+ROOM_FEATURES = ("stairs_share", "sun_share", "glazing_share")
+"""``procedural_room``'s shares of what real rooms have and its first rooms lacked (each 0 by default)."""
 
 
 def _rects_overlap(a: np.ndarray, b: np.ndarray, gap: float = 0.0) -> bool:
@@ -282,6 +284,22 @@ def _outdoors(
         )
 
 
+def _glazing_bars(
+    b: _Builder, wall: _Wall, opening: tuple[float, float, float, float, str], thickness: float, name: str
+) -> None:
+    """Mullions and transoms across a glazed opening, about every 0.6-1.5 m, at the pane's plane."""
+    rng = b.rng
+    u0, u1, v0, v1, _ = opening
+    bar, material = rng.uniform(0.03, 0.08), b.material(("plain", "wood")[int(rng.integers(2))])
+    w0, w1 = -thickness / 2 - 0.03, -thickness / 2 + 0.03
+    spacing = rng.uniform(0.6, 1.5, size=2)
+    columns, rows = max(1, round((u1 - u0) / spacing[0])), int(rng.integers(0, 3))
+    for index, u in enumerate(np.linspace(u0, u1, columns + 1)[1:-1]):
+        b.box(wall.point(u - bar / 2, v0, w0), wall.point(u + bar / 2, v1, w1), material, f"{name}.mullion{index}")
+    for index, v in enumerate(np.sort(rng.uniform(v0 + 0.3, v1 - 0.3, size=rows)) if v1 - v0 > 0.6 else []):
+        b.box(wall.point(u0, v - bar / 2, w0), wall.point(u1, v + bar / 2, w1), material, f"{name}.transom{index}")
+
+
 def _add_openings(
     b: _Builder,
     walls: list[_Wall],
@@ -291,18 +309,25 @@ def _add_openings(
     paint: int,
     floor: int,
     glass: int,
+    glazing_share: float = 0.0,
 ) -> list[np.ndarray]:
     """Doors and windows cut into the walls, each with what lies behind it; returns the floor
-    rectangles kept clear in front of the doors."""
+    rectangles kept clear in front of the doors. A ``glazing_share`` of the windows are glazed
+    walls: wide, from near the floor or sill to near the ceiling, divided by glazing bars."""
     rng = b.rng
     outside: list[np.ndarray] = list(rects)  # floor rectangles nothing outside may enter
     clear = []
     plans = ["door"] * int(rng.integers(0, 3)) + ["window"] * int(rng.integers(1, 4))
     for kind in plans:
+        # nothing is drawn when the share is 0, so those rooms are the rooms drawn before it existed
+        glazed = kind == "window" and glazing_share > 0 and rng.random() < glazing_share
         for _ in range(20):
             wall = walls[int(rng.integers(len(walls)))]
             if kind == "door":
                 width, v0, v1 = rng.uniform(0.8, 1.6), 0.0, min(rng.uniform(2.0, 2.3), height - 0.15)
+            elif glazed:
+                v0 = rng.choice([rng.uniform(0.02, 0.1), rng.uniform(0.6, 1.0)])
+                width, v1 = rng.uniform(0.3, 0.9) * wall.length, height - rng.uniform(0.15, 0.5)
             else:
                 v0 = rng.uniform(0.5, 1.0)
                 width, v1 = rng.uniform(0.7, 2.2), min(v0 + rng.uniform(0.9, 1.8), height - 0.2)
@@ -340,10 +365,101 @@ def _add_openings(
                     ]
                 )
                 b.quad(pane, np.array([wall.inward[0], 0.0, wall.inward[1]]), glass, f"{name}.glass")
+                if glazed:
+                    _glazing_bars(b, wall, opening, thickness, name)
                 _outdoors(b, wall, thickness, extent, name)
                 b.lights.append(wall.point((u0 + u1) / 2, (v0 + v1) / 2, 0.4))
             break
     return clear
+
+
+def _add_stairs(
+    b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height: float, occupied: list[np.ndarray]
+) -> np.ndarray | None:
+    """A straight flight along a wall up to an opening in the ceiling, with a stairwell above it:
+    solid, floating (slabs from the wall) or open (slabs on a stringer) steps, often a railing.
+    Returns the ceiling's opening (x0, z0, x1, z1), or None when no wall has room for the flight."""
+    rng = b.rng
+    steps = int(np.ceil(height / rng.uniform(0.16, 0.2)))
+    rise, going, width = height / steps, rng.uniform(0.24, 0.32), rng.uniform(0.8, 1.4)
+    run, style = steps * going, str(rng.choice(["solid", "floating", "open"]))
+    tread, rail = (
+        b.material(("wood", "floor", "plain")[int(rng.integers(3))]),
+        b.material(("plain", "wood")[int(rng.integers(2))]),
+    )
+    slab = rng.uniform(0.04, 0.1)
+    for _ in range(20):
+        wall = walls[int(rng.integers(len(walls)))]
+        if wall.length < run + 0.4:
+            continue
+        start = rng.uniform(0.2, wall.length - run - 0.2)
+        if any(start < o1 + 0.1 and o0 < start + run + 0.1 for o0, o1, *_ in wall.openings):
+            continue
+        rect = wall.rect(start, start + run, 0.02, width + 0.05)
+        if not any(_inside(rect, r, 0.01) for r in rects) or any(_rects_overlap(rect, o, _GAP) for o in occupied):
+            continue
+        break
+    else:
+        return None
+    up = bool(rng.random() < 0.5)  # climbing along the wall's direction, or against it
+    span = lambda i: (
+        (start + i * going, start + (i + 1) * going) if up else (start + run - (i + 1) * going, start + run - i * going)
+    )
+    for i in range(steps):
+        u0, u1 = span(i)
+        bottom = 0.0 if style == "solid" else (i + 1) * rise - slab
+        lo, hi = wall.point(u0, bottom, 0.005), wall.point(u1, (i + 1) * rise, width)
+        b.box(np.minimum(lo, hi), np.maximum(lo, hi), tread, f"stairs.step{i}")
+    foot, head = (start, start + run) if up else (start + run, start)
+    if style == "open":  # a stringer under the steps' open ends, from the floor to the ceiling
+        beam = lambda u, y: [wall.point(u, y, width - 0.06), wall.point(u, y, width)]
+        bottom = [*beam(foot, 0.0), *beam(head, height - 0.3)[::-1]]
+        b.parts += hexahedron_parts(
+            np.array(bottom + [p + [0, 0.3, 0] for p in bottom]), rail, "stairs.stringer", b.tile
+        )
+    if style != "solid" or rng.random() < 0.6:  # balusters on the open side and a sloped handrail
+        post = rng.uniform(0.02, 0.05)
+        for i in range(steps):
+            u = sum(span(i)) / 2
+            lo, hi = (
+                wall.point(u - post / 2, (i + 1) * rise, width - 0.05 - post),
+                wall.point(u + post / 2, (i + 1) * rise + 0.9, width - 0.05),
+            )
+            b.box(np.minimum(lo, hi), np.maximum(lo, hi), rail, f"stairs.baluster{i}")
+        along = [wall.point(foot, rise + 0.9, width - 0.08), wall.point(foot, rise + 0.9, width - 0.02)]
+        top = [wall.point(head, height + 0.9, width - 0.02), wall.point(head, height + 0.9, width - 0.08)]
+        bottom = along + top
+        b.parts += hexahedron_parts(
+            np.array(bottom + [p + [0, 0.05, 0] for p in bottom]), rail, "stairs.handrail", b.tile
+        )
+    # headroom of 2 m over every step: the ceiling opens above the flight's upper part
+    first = int(np.floor((height - 2.0) / rise))
+    hole = wall.rect(*sorted((span(first)[0 if up else 1], head)), 0.0, width + 0.1)
+    occupied.append(wall.rect(*sorted((foot - (1.0 if up else -1.0), head)), 0.0, width + 0.1))
+    _stairwell(b, hole, height, rng.uniform(2.4, 3.0), b.material("wall"))
+    return hole
+
+
+def _stairwell(b: _Builder, hole: np.ndarray, height: float, rise: float, paint: int) -> None:
+    """The closed shaft above the ceiling's opening ``hole`` (x0, z0, x1, z1): four walls and a
+    ceiling ``rise`` metres up, facing into it."""
+    x0, z0, x1, z1 = hole
+    top = height + rise
+    centre = np.array([(x0 + x1) / 2, height + rise / 2, (z0 + z1) / 2])
+    for index, ((ax, az), (bx, bz)) in enumerate(pairwise([(x0, z0), (x1, z0), (x1, z1), (x0, z1), (x0, z0)])):
+        corners = np.array([[ax, height, az], [bx, height, bz], [bx, top, bz], [ax, top, az]])
+        b.quad(corners, centre - corners.mean(axis=0), paint, f"stairwell.wall{index}")
+    b.quad(np.array([[x0, top, z0], [x1, top, z0], [x1, top, z1], [x0, top, z1]]), -_UP, paint, "stairwell.ceiling")
+
+
+def _without(rect: np.ndarray, hole: np.ndarray | None) -> list[np.ndarray]:
+    """The floor rectangle ``rect`` less the rectangle ``hole``, as up to four rectangles."""
+    if hole is None or not _rects_overlap(rect, hole):
+        return [rect]
+    x0, z0, x1, z1 = rect
+    h0, g0, h1, g1 = max(hole[0], x0), max(hole[1], z0), min(hole[2], x1), min(hole[3], z1)
+    pieces = [(x0, z0, h0, z1), (h1, z0, x1, z1), (h0, z0, h1, g0), (h0, g1, h1, z1)]
+    return [np.array(p) for p in pieces if p[2] - p[0] > 1e-6 and p[3] - p[1] > 1e-6]
 
 
 # Furniture in a local frame: u along the wall it backs onto (or its own front), y up, w away from
@@ -553,13 +669,63 @@ def _add_decor(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height:
         b.quad(corners, -_UP, bulb, f"lamp{index}.bulb")
 
 
-def check_shares(corridor_share: float, hall_share: float, prefix: str = "") -> None:
-    """Raise ValueError, naming ``prefix`` + the key, unless both shares lie in [0, 1] and sum to at most 1."""
+def _floors_and_ceilings(
+    b: _Builder, rects: list[np.ndarray], height: float, floor: int, ceiling: int, hole: np.ndarray | None
+) -> list[MeshPart]:
+    """The floor and ceiling quads of each floor rectangle, the ceiling open over ``hole``."""
+    parts = []
+    for index, rect in enumerate(rects):
+        x0, z0, x1, z1 = rect
+        parts.append(
+            planar_quad(
+                facing(np.array([[x0, 0, z0], [x1, 0, z0], [x1, 0, z1], [x0, 0, z1]]), _UP),
+                floor,
+                f"floor{index}",
+                b.tile,
+            )
+        )
+        for piece, (x0, z0, x1, z1) in enumerate(_without(rect, hole)):
+            corners = np.array([[x0, height, z0], [x1, height, z0], [x1, height, z1], [x0, height, z1]])
+            name = f"ceiling{index}" if hole is None else f"ceiling{index}.piece{piece}"
+            parts.append(planar_quad(facing(corners, -_UP), ceiling, name, b.tile))
+    return parts
+
+
+def _daylight(rng: np.random.Generator, walls: list[_Wall], sun_share: float) -> Emitters:
+    """The sky the windows show (the lamps' bulbs are area emitters of the default radiance) and,
+    for a ``sun_share`` of the rooms with windows, a sun shining in through one of them; with the
+    share > 0 the sky's radiance varies too (0.5-3 times the default)."""
+    sky = np.full(3, MISSING_ENVMAP_RADIANCE)
+    if sun_share == 0:  # nothing is drawn, so those rooms are the rooms drawn before suns existed
+        return Emitters(sky_radiance=sky)
+    sky = sky * np.exp(rng.uniform(np.log(0.5), np.log(3.0)))
+    windows = [wall for wall in walls for *_, kind in wall.openings if kind == "window"]
+    if not windows or rng.random() >= sun_share:
+        return Emitters(sky_radiance=sky)
+    wall = windows[int(rng.integers(len(windows)))]
+    elevation, azimuth = np.radians(rng.uniform(20, 60)), np.radians(rng.uniform(-50, 50))
+    out = -wall.inward  # towards the sun, seen from the room: out through the window and up
+    out = np.array(
+        [out[0] * np.cos(azimuth) - out[1] * np.sin(azimuth), out[0] * np.sin(azimuth) + out[1] * np.cos(azimuth)]
+    )
+    direction = np.array([out[0] * np.cos(elevation), np.sin(elevation), out[1] * np.cos(elevation)])
+    # a clear day's sun gives a few to ten times the irradiance of the sky (pi x its radiance)
+    tint = np.array([1.0, rng.uniform(0.9, 1.0), rng.uniform(0.75, 0.95)])
+    irradiance = np.pi * sky * rng.uniform(3.0, 10.0) * tint
+    return Emitters(sky_radiance=sky, sun_directions=direction[None], sun_irradiance=irradiance[None])
+
+
+def check_shares(corridor_share: float, hall_share: float, prefix: str = "", **shares: float) -> None:
+    """Raise ValueError, naming ``prefix`` + the key, unless both shares lie in [0, 1] and sum to at
+    most 1, and each of the other ``shares`` (by name) lies in [0, 1]."""
     if not (0.0 <= corridor_share <= 1.0 and 0.0 <= hall_share <= 1.0 and corridor_share + hall_share <= 1.0):
         raise ValueError(
             f"{prefix}corridor_share ({corridor_share}) and {prefix}hall_share ({hall_share}) "
             "must lie in [0, 1] and sum to at most 1"
         )
+    for name, share in shares.items():
+        if not 0.0 <= share <= 1.0:
+            raise ValueError(f"{prefix}{name} must be in [0, 1], got {share}")
 
 
 def procedural_room(
@@ -569,6 +735,9 @@ def procedural_room(
     drop_transparent: bool = True,
     corridor_share: float = CORRIDOR_SHARE,
     hall_share: float = HALL_SHARE,
+    stairs_share: float = 0.0,
+    sun_share: float = 0.0,
+    glazing_share: float = 0.0,
 ) -> Scene:
     """A furnished room, the same for the same seed, bit for bit.
 
@@ -586,11 +755,20 @@ def procedural_room(
         drop_transparent: leave out the windows' glass (as loaded scenes do by default).
         corridor_share, hall_share: the chances of a corridor and of a hall; with both 0 the rooms
             are those of kadv's generator before it drew halls and corridors.
+        stairs_share: the chance of a straight flight of stairs along a wall, up to an opening in
+            the ceiling (solid, floating or open steps, often a railing).
+        sun_share: the chance of a sun shining in through a window (seen by ``render.lighting=baked``;
+            with the share > 0 the sky's radiance also varies from room to room).
+        glazing_share: the chance of each window being a glazed wall (wide, near floor or sill to
+            near the ceiling, divided by glazing bars).
+        With the last three 0 (the default) the rooms are those drawn before they existed, bit for bit.
 
     Raises:
-        ValueError: a share outside [0, 1], or shares summing over 1.
+        ValueError: a share outside [0, 1], or corridor and hall shares summing over 1.
     """
-    check_shares(corridor_share, hall_share)
+    check_shares(
+        corridor_share, hall_share, stairs_share=stairs_share, sun_share=sun_share, glazing_share=glazing_share
+    )
     rng = np.random.default_rng(seed)
     b = _Builder(rng, tile)
     rects, walls = _footprint(rng, corridor_share, hall_share)
@@ -598,23 +776,19 @@ def procedural_room(
     floor = b.material(("wood", "floor", "fabric")[int(rng.choice(3, p=[0.5, 0.3, 0.2]))])
     ceiling, paints = b.material("wall"), [b.material("wall"), b.material("wall")]
     glass = b.special(Material("glass", transparent=True))
-    clear = _add_openings(b, walls, rects, height, thickness, paints[0], floor, glass)
+    clear = _add_openings(b, walls, rects, height, thickness, paints[0], floor, glass, glazing_share)
     for index, wall in enumerate(walls):  # most walls share one paint, an accent wall may differ
         _wall_pieces(b, wall, height, paints[int(rng.random() < 0.2)], f"wall{index}")
-    for index, rect in enumerate(rects):
-        x0, z0, x1, z1 = rect
-        b.quad(np.array([[x0, 0, z0], [x1, 0, z0], [x1, 0, z1], [x0, 0, z1]]), _UP, floor, f"floor{index}")
-        b.quad(
-            np.array([[x0, height, z0], [x1, height, z0], [x1, height, z1], [x0, height, z1]]),
-            -_UP,
-            ceiling,
-            f"ceiling{index}",
-        )
+    floors_at = len(b.parts)  # floors and ceilings go here, so rooms without stairs keep their parts' order
     first = rects[0]
     eye = np.array([min(1.0, (first[2] - first[0]) / 4), rng.uniform(1.3, 1.7), min(1.0, (first[3] - first[1]) / 4)])
     occupied = [*clear, np.array([eye[0], eye[2], eye[0], eye[2]]) + _EYE_CLEARANCE * np.array([-1, -1, 1, 1])]
+    # nothing is drawn when a share is 0, so those rooms are the rooms drawn before it existed
+    hole = _add_stairs(b, walls, rects, height, occupied) if stairs_share > 0 and rng.random() < stairs_share else None
+    b.parts[floors_at:floors_at] = _floors_and_ceilings(b, rects, height, floor, ceiling, hole)
     _add_furniture(b, walls, rects, height, occupied)
     _add_decor(b, walls, rects, height, eye)
+    emitters = _daylight(rng, walls, sun_share)
     centre = np.mean([(r[:2] + r[2:]) / 2 for r in rects], axis=0)
     target = np.array([centre[0], 1.0, centre[1]])
     camera = Camera(
@@ -632,6 +806,5 @@ def procedural_room(
         name=f"procedural_room_{seed}",
         drop_transparent=drop_transparent,
         interior=interior,
-        # daylight through the windows (the lamps' bulbs are area emitters of the default radiance)
-        emitters=Emitters(sky_radiance=np.full(3, MISSING_ENVMAP_RADIANCE)),
+        emitters=emitters,
     )

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from kadv.datasets import MAX_SQUEEZED_ASPECT, render_procedural_views, training_poses
+from kadv.datasets import MAX_SQUEEZED_ASPECT, RoomMix, render_procedural_views, training_poses
 from kadv.geometry import intrinsics_from_fov
 from kadv.penalties import view_validity
 from kadv.render import ExactRenderer
@@ -27,13 +27,13 @@ def test_views_are_deterministic_per_seed_and_consistent() -> None:
 def test_a_share_of_the_rooms_is_furnished() -> None:
     boxes = render_procedural_views(4, seed=3, height=12, width=16, views_per_room=2, progress=False)
     mixed = render_procedural_views(
-        4, seed=3, height=12, width=16, views_per_room=2, furnished_share=0.5, progress=False
+        4, seed=3, height=12, width=16, views_per_room=2, mix=RoomMix(furnished_share=0.5), progress=False
     )
     # room 0 is a box room in both, room 1 is furnished in the mix
     assert torch.equal(boxes.rgb[:2], mixed.rgb[:2])
     assert not torch.equal(boxes.depth[2:], mixed.depth[2:])
     with pytest.raises(ValueError, match="furnished_share"):
-        render_procedural_views(4, seed=3, height=12, width=16, furnished_share=1.5, progress=False)
+        render_procedural_views(4, seed=3, height=12, width=16, mix=RoomMix(furnished_share=1.5), progress=False)
 
 
 def test_an_attack_view_share_draws_views_at_eye_height_with_a_level_gaze() -> None:
@@ -50,13 +50,13 @@ def test_an_attack_view_share_draws_views_at_eye_height_with_a_level_gaze() -> N
     K = intrinsics_from_fov(70.0, 12, 16)
     assert half.shape == (16, 4, 4) and bool(view_validity(renderer, half, K, 12, 16).valid.all())
     with pytest.raises(ValueError, match="attack_view_share"):
-        render_procedural_views(4, seed=3, height=12, width=16, attack_view_share=-0.1, progress=False)
+        render_procedural_views(4, seed=3, height=12, width=16, mix=RoomMix(attack_view_share=-0.1), progress=False)
 
 
 def test_a_squeeze_share_renders_wider_frames_into_the_same_pixels() -> None:
     plain = render_procedural_views(8, seed=3, height=12, width=16, views_per_room=4, progress=False)
     squeezed = render_procedural_views(
-        8, seed=3, height=12, width=16, views_per_room=4, squeeze_share=1.0, progress=False
+        8, seed=3, height=12, width=16, views_per_room=4, mix=RoomMix(squeeze_share=1.0), progress=False
     )
     K = squeezed.intrinsics
     assert squeezed.rgb.shape == plain.rgb.shape
@@ -69,17 +69,35 @@ def test_a_squeeze_share_renders_wider_frames_into_the_same_pixels() -> None:
     fov_x = torch.rad2deg(2 * torch.atan(8 / K[:, 0, 0]))
     assert bool(((fov_x > 55 - 1e-9) & (fov_x < 85 + 1e-9)).all()) and bool((K[:, 1, 1] >= K[:, 0, 0]).all())
     with pytest.raises(ValueError, match="squeeze_share"):
-        render_procedural_views(4, seed=3, height=12, width=16, squeeze_share=1.5, progress=False)
+        render_procedural_views(4, seed=3, height=12, width=16, mix=RoomMix(squeeze_share=1.5), progress=False)
 
 
 def test_a_baked_share_lights_rooms_by_their_baked_global_illumination(tmp_path, monkeypatch) -> None:
     monkeypatch.setenv("KADV_CACHE", str(tmp_path))  # where a bake would go if it were kept
     direct = render_procedural_views(4, seed=3, height=12, width=16, views_per_room=2, progress=False)
-    half = render_procedural_views(4, seed=3, height=12, width=16, views_per_room=2, baked_share=0.5, progress=False)
-    again = render_procedural_views(4, seed=3, height=12, width=16, views_per_room=2, baked_share=0.5, progress=False)
+    half = render_procedural_views(
+        4, seed=3, height=12, width=16, views_per_room=2, mix=RoomMix(baked_share=0.5), progress=False
+    )
+    again = render_procedural_views(
+        4, seed=3, height=12, width=16, views_per_room=2, mix=RoomMix(baked_share=0.5), progress=False
+    )
     # room 0 keeps its direct shading, room 1 is baked: the same cameras and depth, other colours
     assert torch.equal(direct.rgb[:2], half.rgb[:2]) and torch.equal(direct.depth, half.depth)
     assert not torch.equal(direct.rgb[2:], half.rgb[2:]) and torch.equal(half.rgb, again.rgb)
     assert not any(tmp_path.rglob("*.npz"))  # the bakes went to a scratch cache, now gone
     with pytest.raises(ValueError, match="baked_share"):
-        render_procedural_views(4, seed=3, height=12, width=16, baked_share=2.0, progress=False)
+        render_procedural_views(4, seed=3, height=12, width=16, mix=RoomMix(baked_share=2.0), progress=False)
+
+
+def test_the_room_features_reach_the_furnished_rooms_only() -> None:
+    features = RoomMix(stairs_share=1.0, sun_share=1.0, glazing_share=1.0)
+    boxes = render_procedural_views(2, seed=3, height=12, width=16, views_per_room=2, progress=False)
+    assert torch.equal(boxes.depth, render_procedural_views(2, 3, 12, 16, features, 2, progress=False).depth)
+    furnished = RoomMix(furnished_share=1.0)
+    plain = render_procedural_views(2, seed=3, height=12, width=16, mix=furnished, views_per_room=2, progress=False)
+    featured = render_procedural_views(
+        2, 3, 12, 16, RoomMix(**{**features.room_features(), "furnished_share": 1.0}), 2, progress=False
+    )
+    assert not torch.equal(plain.depth, featured.depth)
+    with pytest.raises(ValueError, match="stairs_share"):
+        render_procedural_views(2, seed=3, height=12, width=16, mix=RoomMix(stairs_share=-1.0), progress=False)

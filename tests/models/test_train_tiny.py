@@ -54,6 +54,20 @@ def test_fit_is_deterministic_and_learns() -> None:
     assert sum(losses[-10:]) < 0.8 * sum(losses[:10]), losses
 
 
+def test_strong_augmentation_zooms_depth_exactly() -> None:
+    views = render_procedural_views(4, seed=3, height=32, width=40, progress=False)
+    rgb, depth, mask = views.rgb, views.depth, views.mask
+    basic = training._augment(rgb, depth, mask, torch.Generator().manual_seed(0))
+    again = training._augment(rgb, depth, mask, torch.Generator().manual_seed(0))
+    strong = training._augment(rgb, depth, mask, torch.Generator().manual_seed(0), strong=True)
+    assert all(torch.equal(a, b) for a, b in zip(basic, again))
+    assert all(torch.equal(b, d) or torch.equal(b, d.flip(-1)) for b, d in zip(basic[1], depth))  # flips only
+    assert strong[0].shape == rgb.shape and not torch.equal(strong[0], basic[0])
+    # zoomed by nearest samples: every depth is one the view had, and its mask still marks the hits
+    assert bool(torch.isin(strong[1], depth).all()) and torch.equal(strong[2], strong[1] > 0)
+    assert not torch.equal(strong[1], basic[1])
+
+
 def test_train_tiny_continues_from_init_weights(tmp_path) -> None:
     torch.manual_seed(1)
     start = save_kadv_tiny(TinyDepthNet((8, 8, 8, 8, 16)), tmp_path / "start.safetensors")
@@ -133,6 +147,12 @@ def test_train_tiny_soups_with_the_weights_it_names(tmp_path) -> None:
         ("attack_view_share", -0.5),
         ("squeeze_share", 2.0),
         ("baked_share", -0.1),
+        ("stairs_share", 1.5),
+        ("sun_share", -0.2),
+        ("glazing_share", 2.0),
+        ("bake", {"rays": 0}),
+        ("bake", {"glow": 1}),
+        ("augment", "heavy"),
         ("device", "tpu"),
         ("soup_with", ["/no/such/file"]),
     ],

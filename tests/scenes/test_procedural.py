@@ -6,9 +6,11 @@ import pytest
 from kadv.penalties import random_valid_poses, view_validity
 from kadv.penalties.validity import fibonacci_sphere
 from kadv.render import ExactRenderer
-from kadv.scenes import procedural_room
+from kadv.scenes import procedural_room, scene_from_node
 
 SEEDS = range(12)  # rooms, an L, a hall (2) and corridors along x (3) and z (11)
+FEATURES = {"stairs_share": 1.0, "sun_share": 1.0, "glazing_share": 1.0}
+UP = np.array([0.0, 1.0, 0.0])
 
 
 def _floor_sides(room) -> list[float]:
@@ -27,10 +29,18 @@ def test_same_seed_same_room_bit_for_bit() -> None:
     )
 
 
+def _floor_grid(room, y: float, step: float = 0.1) -> np.ndarray:
+    """(N, 3) points ``step`` apart over the room's interior at height ``y``."""
+    (x0, _, z0), (x1, _, z1) = room.interior
+    x, z = np.meshgrid(np.arange(x0 + step / 2, x1, step), np.arange(z0 + step / 2, z1, step))
+    return np.stack([x.ravel(), np.full(x.size, y), z.ravel()], axis=1)
+
+
+@pytest.mark.parametrize("features", [{}, FEATURES], ids=["plain", "stairs-sun-glazing"])
 @pytest.mark.parametrize("seed", SEEDS)
-def test_rooms_are_closed_but_for_their_windows_and_their_cameras_valid(seed: int) -> None:
-    scene = procedural_room(seed=seed)
-    glazed = ExactRenderer(procedural_room(seed=seed, drop_transparent=False))
+def test_rooms_are_closed_but_for_their_windows_and_their_cameras_valid(seed: int, features: dict) -> None:
+    scene = procedural_room(seed=seed, **features)
+    glazed = ExactRenderer(procedural_room(seed=seed, drop_transparent=False, **features))
     glass = [i for i, m in enumerate(glazed.scene.materials) if m.transparent]
     renderer = ExactRenderer(scene)
     camera = scene.cameras[0]
@@ -75,7 +85,74 @@ def test_rooms_vary_and_are_lit_at_their_lamps_and_windows() -> None:
 
 
 def test_the_shares_choose_the_footprints() -> None:
+    for name in FEATURES:
+        with pytest.raises(ValueError, match=name):
+            procedural_room(0, **{name: 1.5})
     assert all(_floor_sides(procedural_room(seed, corridor_share=0, hall_share=0))[1] <= 8.0 for seed in SEEDS)
     assert all(_floor_sides(procedural_room(seed, corridor_share=1, hall_share=0))[1] >= 10.0 for seed in SEEDS)
     with pytest.raises(ValueError, match="sum to at most 1"):
         procedural_room(0, corridor_share=0.6, hall_share=0.6)
+
+
+def test_a_flight_of_stairs_climbs_to_an_opening_onto_a_closed_stairwell() -> None:
+    flights = 0
+    for seed in SEEDS:
+        plain, room = procedural_room(seed), procedural_room(seed, **FEATURES)
+        height = float(room.interior[1, 1])
+        below = _floor_grid(room, height - 0.05)  # just under the ceiling
+        below = below[ExactRenderer(plain).cast(below, np.broadcast_to(UP, below.shape)).t < 0.1]  # (not an L's cut)
+        up = ExactRenderer(room).cast(below, np.broadcast_to(UP, below.shape))
+        opening = up.t > 1.0  # rays that pass the ceiling's plane
+        if not opening.any():  # no wall of this room has room for a flight
+            continue
+        flights += 1
+        # the stairwell is closed, 2.4-3 m high, its floor the flight's top step
+        assert up.hit[opening].all() and (up.t[opening] > 2.3).all() and (up.t[opening] < 3.1).all()
+        above = below[opening] + [0.0, 0.5, 0.0]
+        down = ExactRenderer(room).cast(above, np.broadcast_to(-UP, above.shape))
+        levels = height + 0.45 - down.t[down.hit]
+        # the flight climbs to the upper floor (the top step, flush with it, holds the rays' origins
+        # under the opening when its slab is thicker than 5 cm: the next lies one rise, under 0.2 m, lower)
+        assert height - 0.21 <= levels.max() <= height + 0.01
+        steps = np.unique(np.round(levels[(levels > 0.3) & (levels < height + 0.01)], 2))
+        assert len(steps) >= 5, steps  # the steps below the opening, each a rise higher
+    assert flights >= 3
+
+
+def test_a_sun_shines_in_through_a_window_under_a_varied_sky() -> None:
+    lit, skies = 0, set()
+    for seed in SEEDS:
+        room = procedural_room(seed, sun_share=1.0)
+        assert len(procedural_room(seed).emitters.sun_directions) == 0
+        (direction,) = room.emitters.sun_directions
+        assert np.sin(np.radians(20)) - 1e-9 <= direction[1] <= np.sin(np.radians(60)) + 1e-9
+        skies.add(float(room.emitters.sky_radiance[0]))
+        floor = _floor_grid(room, 0.02)
+        escaped = ~ExactRenderer(room).cast(floor, np.broadcast_to(direction, floor.shape)).hit
+        lit += bool(escaped.any())  # a patch of the floor sees the sun
+    assert lit >= 2 * len(SEEDS) // 3
+    assert len(skies) == len(SEEDS) and 0.5 <= min(skies) and max(skies) <= 3.0
+
+
+def test_glazed_walls_let_more_of_the_outside_in() -> None:
+    def glass_area(**features) -> float:
+        area = 0.0
+        for seed in SEEDS:
+            room = procedural_room(seed, drop_transparent=False, **features)
+            glass = [i for i, m in enumerate(room.materials) if m.transparent]
+            corners = room.vertices[room.faces[np.isin(room.material_ids, glass)]]
+            area += (
+                0.5
+                * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1).sum()
+            )
+        return area
+
+    assert glass_area(glazing_share=1.0) > 2.0 * glass_area()
+
+
+def test_a_scene_node_passes_the_feature_shares() -> None:
+    node = {"kind": "procedural", "seed": 4, "stairs_share": 1.0, "sun_share": 1.0, "glazing_share": 0.0}
+    featured, plain = scene_from_node(node), scene_from_node({"kind": "procedural", "seed": 4})
+    assert np.array_equal(plain.vertices, procedural_room(4).vertices)
+    assert np.array_equal(featured.vertices, procedural_room(4, stairs_share=1.0, sun_share=1.0).vertices)
+    assert len(featured.emitters.sun_directions) == 1
