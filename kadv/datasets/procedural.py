@@ -62,8 +62,9 @@ class RoomMix:
             rest are box rooms lit from a random point.
         corridor_share, hall_share: furnished rooms that are corridors and halls (both 0: the rooms
             of the generator before it drew them).
-        stairs_share, sun_share, glazing_share: furnished rooms with a flight of stairs, with a sun
-            through a window, and windows that are glazed walls (``procedural_room``'s shares).
+        stairs_share, sun_share, glazing_share, trim_share, round_share: furnished rooms with a
+            flight of stairs, with a sun through a window, windows that are glazed walls, with
+            mouldings, and with round things (``procedural_room``'s shares).
         attack_view_share: views drawn as the attack draws its init views (eye height, a level
             gaze); the rest anywhere in the room.
         squeeze_share: rooms seen through a wider frame (aspect drawn up to ``MAX_SQUEEZED_ASPECT``)
@@ -81,6 +82,8 @@ class RoomMix:
     stairs_share: float = 0.0
     sun_share: float = 0.0
     glazing_share: float = 0.0
+    trim_share: float = 0.0
+    round_share: float = 0.0
     attack_view_share: float = 0.0
     squeeze_share: float = 0.0
     baked_share: float = 0.0

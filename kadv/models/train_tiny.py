@@ -56,9 +56,10 @@ class TinyTrainConfig:
     gaze), and a ``squeeze_share`` of the rooms are seen through wider frames squeezed to the
     model's input size (as the model squeezes wide images); a ``baked_share`` of the rooms are lit
     by their baked global illumination (``bake``: ``TRAINING_BAKE`` unless given, a BakeConfig or
-    its keys) instead of random direct shading. ``stairs_share``, ``sun_share`` and
-    ``glazing_share`` pass to :func:`~kadv.scenes.procedural_room` (flights of stairs, a sun
-    through a window, glazed walls). ``augment`` is "basic" (flips, gain, colour balance) or
+    its keys) instead of random direct shading. ``stairs_share``, ``sun_share``,
+    ``glazing_share``, ``trim_share`` and ``round_share`` pass to
+    :func:`~kadv.scenes.procedural_room` (flights of stairs, a sun through a window, glazed walls,
+    mouldings, round things). ``augment`` is "basic" (flips, gain, colour balance) or
     "strong" (also a tone curve, saturation and a zoom).
     ``device`` trains on the CPU (bit-identical weights for one config) or a CUDA device (faster;
     its weights differ in the last bits). ``init_weights`` continues from an earlier run's weights
@@ -90,6 +91,8 @@ class TinyTrainConfig:
     stairs_share: float = 0.0
     sun_share: float = 0.0
     glazing_share: float = 0.0
+    trim_share: float = 0.0
+    round_share: float = 0.0
     bake: BakeConfig | dict = field(default_factory=lambda: TRAINING_BAKE)
     augment: str = "basic"
     device: str = "cpu"

@@ -60,7 +60,7 @@ __all__ = [
     "tone_map",
 ]
 
-_BAKE_VERSION = 5  # part of the cache key: raise it when the bake's arithmetic changes
+_BAKE_VERSION = 7  # part of the cache key: raise it when the bake's arithmetic changes
 _OFFSET = 1e-3  # metres: ray origins leave the surface by this much, and keep as far from its edges
 _LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 _SLIVER = 8.0
@@ -467,25 +467,24 @@ def _meter(renderer: ExactRenderer, rng: np.random.Generator, count: int = 4096)
     return np.repeat(eyes, count, axis=0), directions.reshape(-1, 3)
 
 
-def _nearest(lattice: _Lattice, renderer: ExactRenderer, hits, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(N,) the lattice point nearest each hit (-1 on a miss), on the side the ray arrived from, and
-    (N,) whether that side is a back face."""
-    back = renderer.back_facing(hits, directions)
+def _nearest(lattice: _Lattice, renderer: ExactRenderer, hits, directions: np.ndarray) -> np.ndarray:
+    """(N,) the lattice point nearest each hit (-1 on a miss), on the side the ray arrived from."""
     taps, weights = lattice_taps(
         torch.from_numpy(lattice.resolution),
         torch.from_numpy(lattice.offsets),
         torch.from_numpy(np.maximum(hits.triangle_ids, 0)),
         torch.from_numpy(hits.barycentrics),
-        torch.from_numpy(back),
+        torch.from_numpy(renderer.back_facing(hits, directions)),
     )
     nearest = taps.gather(1, weights.argmax(dim=1, keepdim=True))[:, 0].numpy()
-    return np.where(hits.hit, nearest, -1), back
+    return np.where(hits.hit, nearest, -1)
 
 
 def _filter_weights(lattice: _Lattice, neighbours: int, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Neighbour indices and normalised weights (N, k) of the noise filter: nearby ``valid`` points
     facing the same way on the same plane (within a few millimetres), by a Gaussian of their
-    distance in units of the lattice spacing. A row with no valid neighbour has zero weights."""
+    distance in units of the lattice spacing. A point with no valid neighbour (a small part
+    buried whole, as an ornament against a wall) averages its neighbours' own estimates instead."""
     # twice the neighbours: each point's twin on the other side shares its position
     k = min(2 * neighbours, len(lattice.points))
     distance, index = cKDTree(lattice.points).query(lattice.points, k=k, workers=-1)
@@ -493,9 +492,31 @@ def _filter_weights(lattice: _Lattice, neighbours: int, valid: np.ndarray) -> tu
     distance = distance.reshape(len(lattice.points), k)
     facing = np.einsum("nd,nkd->nk", lattice.face_normals, lattice.face_normals[index]) > 0.9
     plane = np.abs(np.einsum("nd,nkd->nk", lattice.face_normals, lattice.points[index] - lattice.points[:, None]))
-    weights = np.exp(-((distance / lattice.spacing[:, None]) ** 2)) * facing * (plane < 4 * _OFFSET) * valid[index]
+    near = np.exp(-((distance / lattice.spacing[:, None]) ** 2)) * facing * (plane < 4 * _OFFSET)
+    weights = near * valid[index]
+    weights = np.where(weights.sum(axis=1, keepdims=True) > 0, weights, near)
     total = weights.sum(axis=1, keepdims=True)
     return index, (weights / np.where(total > 0, total, 1.0)).astype(np.float32)
+
+
+def _buried(lattice: _Lattice, hit_point: np.ndarray) -> np.ndarray:
+    """(N,) whether each lattice point lies inside geometry or beyond a seam: more than
+    ``_BURIED_SHARE`` of its gather rays (``hit_point`` (N, rays): the lattice point each met, -1 on
+    a miss) met a triangle on the side from which the fewest rays meet it.
+
+    A triangle's visible side is the side most rays meet, not its winding's front: files leave
+    windings to chance on two-sided materials (a wall wound outwards is one surface seen from the
+    room), while from a point inside an object or past an overlapping wall's rim most rays meet
+    surfaces from behind."""
+    per_side = len(lattice.points) // 2
+    met = hit_point[hit_point >= 0]
+    triangles = len(lattice.resolution)
+    # the lattice point a ray met lies on the side the ray arrived from: its index says which
+    from_front = np.bincount(lattice.triangle_ids[met[met < per_side]], minlength=triangles)
+    from_back = np.bincount(lattice.triangle_ids[met[met >= per_side]], minlength=triangles)
+    back_hidden = from_back <= from_front  # a tie: the winding's front is the visible side
+    met_hidden = (hit_point >= 0) & ((hit_point >= per_side) == back_hidden[lattice.triangle_ids[hit_point]])
+    return met_hidden.mean(axis=1) > _BURIED_SHARE
 
 
 def _albedo(renderer: ExactRenderer, lattice: _Lattice) -> np.ndarray:
@@ -527,7 +548,6 @@ def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, pro
     delta = np.zeros((count, 3))
     sky = np.zeros((count, 3))
     hit_point = np.empty((count, config.rays), np.int32)
-    buried = np.empty(count, bool)
     chunk = max(1, 2_000_000 // config.rays)
     steps = range(0, count, chunk)
     for begin in tqdm(steps, desc=f"baking {scene.name}", unit="chunk", disable=not progress, leave=False):
@@ -541,10 +561,9 @@ def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, pro
         escaped = ~hits.hit
         sky_seen = np.where(escaped[:, None], sky_radiance(emitters, directions), 0.0)
         sky[begin:end] = np.pi * sky_seen.reshape(end - begin, config.rays, 3).mean(axis=1)
-        nearest, back = _nearest(lattice, renderer, hits, directions)
+        nearest = _nearest(lattice, renderer, hits, directions)
         hit_point[begin:end] = nearest.reshape(end - begin, config.rays)
-        buried[begin:end] = back.reshape(end - begin, config.rays).mean(axis=1) > _BURIED_SHARE
-    index, weights = _filter_weights(lattice, config.neighbours, ~buried)
+    index, weights = _filter_weights(lattice, config.neighbours, ~_buried(lattice, hit_point))
     smooth = lambda values: np.einsum("nk,nkc->nc", weights, values[index])
     # the delta lights' own term is shaded per hit, with sharp shadows (a lattice point may stand
     # metres apart on a large floor); the light they bounce is baked
@@ -559,7 +578,7 @@ def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, pro
     irradiance = baked + delta
     # exposure: the median radiance the scene's cameras see, mapped to the key grey
     meter = renderer.cast(eyes, meter_directions)
-    seen, _ = _nearest(lattice, renderer, meter, meter_directions)
+    seen = _nearest(lattice, renderer, meter, meter_directions)
     seen = seen[seen >= 0]
     radiance = (albedo[seen] * irradiance[seen] / np.pi) @ _LUMINANCE if len(seen) else np.zeros(1)
     median = float(np.median(radiance))

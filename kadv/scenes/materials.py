@@ -72,8 +72,8 @@ def textured_materials(rng: np.random.Generator, role: str, count: int) -> list[
     neutral tints real rooms have), "floor" (planks, tiles, carpet-like grain), "furniture"
     (anything, including photographs and bold patterns), "wood" (grain in brown tints), "fabric"
     (woven grain, checks, stripes), "picture" (a photograph, mapped once), "plain" (one flat
-    colour), "ground" (bright grass or gravel outdoors) and "backdrop" (a bright outdoor view,
-    mapped once).
+    colour), "ground" (bright grass or gravel outdoors), "backdrop" (a bright outdoor view,
+    mapped once) and "foliage" (leaves' dark greens).
     """
     materials = []
     for index in range(count):
@@ -109,6 +109,8 @@ def textured_materials(rng: np.random.Generator, role: str, count: int) -> list[
             texture = _grey_photo(rng, rng.uniform([0.55, 0.6, 0.45], [0.9, 0.95, 0.8]), contrast=0.5)
         elif role == "backdrop":
             texture = _backdrop(rng)
+        elif role == "foliage":
+            texture = _grey_photo(rng, rng.uniform([0.1, 0.25, 0.05], [0.35, 0.6, 0.25]), contrast=0.8)
         else:
             raise ValueError(f"unknown material role {role!r}")
         materials.append(Material(f"{role}{index}", base_color=np.ones(3), texture=np.clip(texture, 0, 1)))

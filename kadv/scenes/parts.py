@@ -6,7 +6,7 @@ import numpy as np
 
 from kadv.scenes.scene import MeshPart
 
-__all__ = ["box_parts", "facing", "hexahedron_parts", "overlapped", "planar_quad", "quad_part"]
+__all__ = ["box_parts", "facing", "hexahedron_parts", "mesh_part", "overlapped", "planar_quad", "quad_part"]
 
 _QUAD_FACES = np.array([[0, 2, 1], [0, 3, 2]])
 
@@ -90,3 +90,16 @@ def hexahedron_parts(corners: np.ndarray, material: int, name: str, tile: float)
         extent = (np.linalg.norm(quad[1] - quad[0]) / tile, np.linalg.norm(quad[3] - quad[0]) / tile)
         parts.append(quad_part(quad, material, f"{name}.face{index}", extent))
     return parts
+
+
+def mesh_part(vertices: np.ndarray, faces: np.ndarray, material: int, name: str, tile: float) -> MeshPart:
+    """A triangle mesh (a trimesh primitive: a cylinder, a sphere) with UVs projected along each
+    face's dominant axis, one texture repeat per ``tile`` metres; ``faces`` (F, 3) wound outwards."""
+    vertices, faces = np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
+    corners = vertices[faces]
+    normal = np.abs(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+    dominant = normal.argmax(axis=1)
+    # the two axes other than the dominant one, per face: (F, 2)
+    others = np.array([[1, 2], [0, 2], [0, 1]])[dominant]
+    uv = np.take_along_axis(corners, np.repeat(others[:, None, :], 3, axis=1), axis=2) / tile
+    return MeshPart(vertices, faces, uv, None, material, name)

@@ -16,12 +16,13 @@ from itertools import pairwise
 
 import numpy as np
 import torch
+import trimesh
 
 from kadv.geometry.camera import Camera
 from kadv.geometry.pose import look_at
 from kadv.scenes.emitters import MISSING_ENVMAP_RADIANCE, Emitters
 from kadv.scenes.materials import textured_materials
-from kadv.scenes.parts import box_parts, facing, hexahedron_parts, overlapped, planar_quad, quad_part
+from kadv.scenes.parts import box_parts, facing, hexahedron_parts, mesh_part, overlapped, planar_quad, quad_part
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 
 __all__ = ["CORRIDOR_SHARE", "HALL_SHARE", "ROOM_FEATURES", "check_shares", "procedural_room"]
@@ -35,7 +36,7 @@ CORRIDOR_SHARE = 0.15
 """The default share of generated footprints that are corridors."""
 HALL_SHARE = 0.15
 """The default share of generated footprints that are halls."""
-ROOM_FEATURES = ("stairs_share", "sun_share", "glazing_share")
+ROOM_FEATURES = ("stairs_share", "sun_share", "glazing_share", "trim_share", "round_share")
 """``procedural_room``'s shares of what real rooms have and its first rooms lacked (each 0 by default)."""
 
 
@@ -669,6 +670,111 @@ def _add_decor(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height:
         b.quad(corners, -_UP, bulb, f"lamp{index}.bulb")
 
 
+def _free_spans(wall: _Wall, y0: float, y1: float) -> list[tuple[float, float]]:
+    """The stretches (u0, u1) of ``wall`` that no opening interrupts between heights ``y0`` and ``y1``."""
+    spans, u = [], 0.0
+    for o0, o1, v0, v1, _ in sorted(wall.openings):
+        if v0 < y1 and v1 > y0:
+            spans.append((u, o0))
+            u = o1
+    spans.append((u, wall.length))
+    return [(a, c) for a, c in spans if c - a > 0.05]
+
+
+def _add_trims(b: _Builder, walls: list[_Wall], height: float, thickness: float) -> None:
+    """Skirting boards, a cornice, often a dado rail, frames round the doors and windows and sills
+    under the windows: the mouldings that edge most real rooms."""
+    rng = b.rng
+    trim = b.material("wood" if rng.random() < 0.3 else "wall")  # painted like the walls, or wood
+    depth, frame = rng.uniform(0.012, 0.03), rng.uniform(0.05, 0.12)
+    bands = [(0.0, rng.uniform(0.06, 0.2), "skirting"), (height - rng.uniform(0.04, 0.15), height, "cornice")]
+    if rng.random() < 0.3:
+        rail = rng.uniform(0.8, 1.1)
+        bands.append((rail, rail + rng.uniform(0.03, 0.07), "dado"))
+    for index, wall in enumerate(walls):
+        for y0, y1, what in bands:
+            for piece, (u0, u1) in enumerate(_free_spans(wall, y0, y1)):
+                b.box(wall.point(u0, y0, 0.0), wall.point(u1, y1, depth), trim, f"wall{index}.{what}{piece}")
+        for number, (u0, u1, v0, v1, kind) in enumerate(wall.openings):
+            top = min(v1 + frame, height - 0.01)
+            name = f"wall{index}.{kind}{number}"
+            for u in (max(0.0, u0 - frame), min(wall.length, u1 + frame) - frame):
+                b.box(wall.point(u, v0, 0.0), wall.point(u + frame, top, depth), trim, f"{name}.jamb")
+            b.box(wall.point(u0, v1, 0.0), wall.point(u1, top, depth), trim, f"{name}.head")
+            if kind == "window" and v0 > 0.2:
+                b.box(
+                    wall.point(u0 - 0.05, v0 - 0.04, -thickness), wall.point(u1 + 0.05, v0, 0.06), trim, f"{name}.sill"
+                )
+
+
+def _cylinder(b: _Builder, bottom: np.ndarray, top: float, radius: float, material: int, name: str) -> None:
+    """A closed upright cylinder from ``bottom`` (3,) up to the height ``top``."""
+    mesh = trimesh.creation.cylinder(radius=radius, segment=[bottom, [bottom[0], top, bottom[2]]], sections=20)
+    b.parts.append(mesh_part(mesh.vertices, mesh.faces, material, name, b.tile))
+
+
+def _sphere(b: _Builder, centre: np.ndarray, radius: float, material: int, name: str) -> None:
+    mesh = trimesh.creation.icosphere(subdivisions=2, radius=radius)
+    b.parts.append(mesh_part(mesh.vertices + centre, mesh.faces, material, name, b.tile))
+
+
+def _add_round_things(
+    b: _Builder, rects: list[np.ndarray], height: float, occupied: list[np.ndarray], eye: np.ndarray
+) -> None:
+    """Round tables, floor lamps, potted plants and pendant globes: furniture that is not a box."""
+    rng = b.rng
+    area = sum((r[2] - r[0]) * (r[3] - r[1]) for r in rects)
+    for index in range(int(rng.integers(1, 3 + int(area / 10)))):
+        kind = str(rng.choice(["table", "lamp", "plant", "globe"]))
+        reach = {"table": rng.uniform(0.35, 0.7), "lamp": 0.2, "plant": rng.uniform(0.25, 0.45), "globe": 0.3}[kind]
+        for _ in range(20):
+            rect = rects[int(rng.integers(len(rects)))]
+            if np.any(rect[2:] - rect[:2] < 2 * reach + 0.2):
+                continue
+            x, z = rng.uniform(rect[:2] + reach + 0.05, rect[2:] - reach - 0.05)
+            spot = np.array([x - reach, z - reach, x + reach, z + reach])
+            # a globe hangs from the ceiling, clear of the file camera; the rest stand on free floor
+            if (
+                (np.hypot(x - eye[0], z - eye[2]) < 1.5)
+                if kind == "globe"
+                else any(_rects_overlap(spot, o, _GAP) for o in occupied)
+            ):
+                continue
+            break
+        else:
+            continue
+        name = f"{kind}{index}"
+        if kind == "globe":
+            radius, drop = rng.uniform(0.12, 0.3), rng.uniform(0.3, max(0.35, height - 2.3))
+            _cylinder(b, np.array([x, height - drop, z]), height, 0.005, b.material("plain"), f"{name}.cord")
+            _sphere(b, np.array([x, height - drop - radius, z]), radius, b.material("wall"), f"{name}.shade")
+            continue
+        occupied.append(spot)
+        if kind == "table":
+            top, slab = rng.uniform(0.72, 0.76), rng.uniform(0.03, 0.05)
+            wood = b.material("wood")
+            _cylinder(b, np.array([x, top - slab, z]), top, reach, wood, f"{name}.top")
+            _cylinder(b, np.array([x, 0.03, z]), top - slab, rng.uniform(0.03, 0.07), wood, f"{name}.pedestal")
+            _cylinder(b, np.array([x, 0.0, z]), 0.03, rng.uniform(0.2, 0.3), wood, f"{name}.base")
+        elif kind == "lamp":
+            pole, shade = rng.uniform(1.3, 1.7), rng.uniform(0.2, 0.35)
+            metal = b.material("plain")
+            _cylinder(b, np.array([x, 0.0, z]), 0.03, rng.uniform(0.12, 0.18), metal, f"{name}.base")
+            _cylinder(b, np.array([x, 0.03, z]), pole, rng.uniform(0.01, 0.02), metal, f"{name}.pole")
+            _cylinder(
+                b, np.array([x, pole, z]), pole + shade, rng.uniform(0.13, 0.2), b.material("wall"), f"{name}.shade"
+            )
+        else:
+            pot = rng.uniform(0.2, 0.5)
+            _cylinder(b, np.array([x, 0.0, z]), pot, reach * rng.uniform(0.4, 0.6), b.material("plain"), f"{name}.pot")
+            leaves = b.material("foliage")
+            for leaf in range(int(rng.integers(1, 4))):
+                radius = reach * rng.uniform(0.5, 0.9)
+                offset = rng.uniform(-0.3, 0.3, size=2) * reach
+                centre = np.array([x + offset[0], pot + radius * rng.uniform(0.6, 1.2), z + offset[1]])
+                _sphere(b, centre, radius, leaves, f"{name}.leaves{leaf}")
+
+
 def _floors_and_ceilings(
     b: _Builder, rects: list[np.ndarray], height: float, floor: int, ceiling: int, hole: np.ndarray | None
 ) -> list[MeshPart]:
@@ -738,6 +844,8 @@ def procedural_room(
     stairs_share: float = 0.0,
     sun_share: float = 0.0,
     glazing_share: float = 0.0,
+    trim_share: float = 0.0,
+    round_share: float = 0.0,
 ) -> Scene:
     """A furnished room, the same for the same seed, bit for bit.
 
@@ -761,14 +869,23 @@ def procedural_room(
             with the share > 0 the sky's radiance also varies from room to room).
         glazing_share: the chance of each window being a glazed wall (wide, near floor or sill to
             near the ceiling, divided by glazing bars).
-        With the last three 0 (the default) the rooms are those drawn before they existed, bit for bit.
+        trim_share: the chance of mouldings: skirting boards, a cornice, often a dado rail, frames
+            round the doors and windows, window sills.
+        round_share: the chance of round things: round tables, floor lamps, potted plants and
+            pendant globes.
+        With the last five 0 (the default) the rooms are those drawn before they existed, bit for bit.
 
     Raises:
         ValueError: a share outside [0, 1], or corridor and hall shares summing over 1.
     """
-    check_shares(
-        corridor_share, hall_share, stairs_share=stairs_share, sun_share=sun_share, glazing_share=glazing_share
-    )
+    features = {
+        "stairs_share": stairs_share,
+        "sun_share": sun_share,
+        "glazing_share": glazing_share,
+        "trim_share": trim_share,
+        "round_share": round_share,
+    }
+    check_shares(corridor_share, hall_share, **features)
     rng = np.random.default_rng(seed)
     b = _Builder(rng, tile)
     rects, walls = _footprint(rng, corridor_share, hall_share)
@@ -788,6 +905,10 @@ def procedural_room(
     b.parts[floors_at:floors_at] = _floors_and_ceilings(b, rects, height, floor, ceiling, hole)
     _add_furniture(b, walls, rects, height, occupied)
     _add_decor(b, walls, rects, height, eye)
+    if trim_share > 0 and rng.random() < trim_share:
+        _add_trims(b, walls, height, thickness)
+    if round_share > 0 and rng.random() < round_share:
+        _add_round_things(b, rects, height, occupied, eye)
     emitters = _daylight(rng, walls, sun_share)
     centre = np.mean([(r[:2] + r[2:]) / 2 for r in rects], axis=0)
     target = np.array([centre[0], 1.0, centre[1]])

@@ -9,7 +9,7 @@ from kadv.render import ExactRenderer
 from kadv.scenes import procedural_room, scene_from_node
 
 SEEDS = range(12)  # rooms, an L, a hall (2) and corridors along x (3) and z (11)
-FEATURES = {"stairs_share": 1.0, "sun_share": 1.0, "glazing_share": 1.0}
+FEATURES = {"stairs_share": 1.0, "sun_share": 1.0, "glazing_share": 1.0, "trim_share": 1.0, "round_share": 1.0}
 UP = np.array([0.0, 1.0, 0.0])
 
 
@@ -36,7 +36,7 @@ def _floor_grid(room, y: float, step: float = 0.1) -> np.ndarray:
     return np.stack([x.ravel(), np.full(x.size, y), z.ravel()], axis=1)
 
 
-@pytest.mark.parametrize("features", [{}, FEATURES], ids=["plain", "stairs-sun-glazing"])
+@pytest.mark.parametrize("features", [{}, FEATURES], ids=["plain", "every-feature"])
 @pytest.mark.parametrize("seed", SEEDS)
 def test_rooms_are_closed_but_for_their_windows_and_their_cameras_valid(seed: int, features: dict) -> None:
     scene = procedural_room(seed=seed, **features)
@@ -156,3 +156,25 @@ def test_a_scene_node_passes_the_feature_shares() -> None:
     assert np.array_equal(plain.vertices, procedural_room(4).vertices)
     assert np.array_equal(featured.vertices, procedural_room(4, stairs_share=1.0, sun_share=1.0).vertices)
     assert len(featured.emitters.sun_directions) == 1
+
+
+def test_mouldings_edge_the_walls_at_the_floor() -> None:
+    shortened = []
+    for seed in SEEDS[:6]:
+        plain, trimmed = procedural_room(seed), procedural_room(seed, trim_share=1.0)
+        centre = plain.interior.mean(axis=0) * [1.0, 0.0, 1.0] + [0.0, 0.03, 0.0]  # 3 cm up: skirting height
+        angles = np.linspace(0, 2 * np.pi, 720, endpoint=False)
+        directions = np.stack([np.cos(angles), np.zeros_like(angles), np.sin(angles)], axis=1)
+        origins = np.broadcast_to(centre, directions.shape)
+        before, after = (ExactRenderer(room).cast(origins, directions).t for room in (plain, trimmed))
+        assert (after <= before + 1e-6).all()
+        shortened.append(np.mean((before - after > 0.01) & (before - after < 0.05)))  # by the skirting's depth
+    assert np.mean(shortened) > 0.3, shortened
+
+
+def test_round_things_bring_surfaces_that_are_not_axis_aligned() -> None:
+    def slanted(room) -> int:
+        return int((np.abs(room.face_normals).max(axis=1) < 0.99).sum())
+
+    assert all(slanted(procedural_room(seed)) == 0 for seed in SEEDS[:4])
+    assert all(slanted(procedural_room(seed, round_share=1.0)) > 100 for seed in SEEDS[:4])
