@@ -31,6 +31,7 @@ from kadv.attack import (
     select_top_views,
     separated,
 )
+from kadv.geometry import intrinsics_from_fov
 from kadv.render import DiffRenderConfig
 from kadv.report.run import _write_csv, read_trajectory, trajectory_rows
 
@@ -220,13 +221,25 @@ def test_the_warp_backend_gives_one_trajectory_per_seed_and_the_open3d_one(tiny_
         method="hybrid",
         budget_evaluations=20,
     )
-    pairs = [
-        (ours.l_depth, theirs.l_depth)
+    shared = [
+        (ours, theirs)
         for ours, theirs in zip(runs[0].views[0].records, reference.views[0].records)
         if ours.params == theirs.params
     ]
-    assert len(pairs) >= 8
-    np.testing.assert_allclose(*zip(*pairs), atol=2e-3)
+    full_size = [(ours.l_depth, theirs.l_depth) for ours, theirs in shared if ours.scale == 1.0]
+    assert len(full_size) >= 8
+    np.testing.assert_allclose(*zip(*full_size), atol=2e-3)
+    # a view screened at half size is 24 x 32: the two edge pixels its casts break differently are
+    # 0.3% of it, which moves a model's L_depth more than that tolerance, so its renders are compared
+    screened = [ours for ours, _ in shared if ours.scale != 1.0]
+    assert screened
+    for view in screened:
+        size = (int(H * view.scale), int(W * view.scale))
+        pose = view.world_T_cam(file_view.world_T_cam)[None]
+        K = intrinsics_from_fov(file_view.fov_x_deg, *size)
+        ours, theirs = (caster.render(pose, K, *size, supersample=2) for caster in (warp, tiny_objective.renderer))
+        assert torch.equal(ours.mask, theirs.mask) and (ours.depth - theirs.depth).abs().max() < 1e-4
+        assert ((ours.rgb - theirs.rgb).abs() > 1e-3).any(1).float().mean() < 0.01
 
 
 def test_a_method_added_through_the_documented_route_runs(tiny_objective, differentiable, file_view) -> None:
