@@ -20,10 +20,15 @@ from kadv.geometry import intrinsics_from_fov, matrix_to_axis_angle, perturb_wor
 from kadv.penalties import step_guard, view_validity
 from kadv.render import DifferentiableRenderer, RenderOutput
 
-__all__ = ["DEFAULT_METHOD", "AttackConfig", "Clock", "SearchContext", "check_settings"]
+__all__ = ["DEFAULT_METHOD", "AttackConfig", "Clock", "SearchContext", "check_settings", "scaled_size"]
 
 # The method that led the anytime benchmark at its full budget (benchmarks/search_anytime.py).
 DEFAULT_METHOD = "hybrid"
+
+
+def scaled_size(height: int, width: int, scale: float) -> tuple[int, int]:
+    """The height and width of renders at ``scale`` times ``height`` x ``width`` (at least 8 pixels each)."""
+    return max(8, round(scale * height)), max(8, round(scale * width))
 
 
 def check_settings(settings: Any, node: str) -> None:
@@ -281,7 +286,7 @@ class SearchContext:
         """Intrinsics (3, 3), height and width of renders at ``scale`` times the run's size."""
         if scale == 1.0:
             return self.K, self.height, self.width
-        height, width = max(8, round(scale * self.height)), max(8, round(scale * self.width))
+        height, width = scaled_size(self.height, self.width, scale)
         return intrinsics_from_fov(self.init.fov_x_deg, height, width), height, width
 
     def evaluate(

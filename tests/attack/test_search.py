@@ -31,6 +31,7 @@ from kadv.attack import (
     select_top_views,
     separated,
 )
+from kadv.attack.search import scaled_size
 from kadv.geometry import intrinsics_from_fov
 from kadv.render import DiffRenderConfig
 from kadv.report.run import _write_csv, read_trajectory, trajectory_rows
@@ -234,7 +235,7 @@ def test_the_warp_backend_gives_one_trajectory_per_seed_and_the_open3d_one(tiny_
     screened = [ours for ours, _ in shared if ours.scale != 1.0]
     assert screened
     for view in screened:
-        size = (int(H * view.scale), int(W * view.scale))
+        size = scaled_size(H, W, view.scale)
         pose = view.world_T_cam(file_view.world_T_cam)[None]
         K = intrinsics_from_fov(file_view.fov_x_deg, *size)
         ours, theirs = (caster.render(pose, K, *size, supersample=2) for caster in (warp, tiny_objective.renderer))
