@@ -41,8 +41,9 @@ from kadv.report.sweep import Table
 from kadv.scenes import load_scene
 
 _METRICS = ["psnr", "ssim", "pred_delta1"]
-# the demo's attack (experiment=demo) on another scene: kadv-tiny, SSIM loss, 2 init views of 123 views
-_ATTACK = ["model=kadv_tiny", "loss=ssim", "render.height=120", "render.width=160", "init.count=2"]
+# a default attack (the demo's loss and search) on another scene, made small: kadv-tiny, 2 init views
+# of 123 views at 120x160
+_ATTACK = ["model=kadv_tiny", "render.height=120", "render.width=160", "init.count=2"]
 _ATTACK += ["attack.budget_evaluations=123", "video=false"]
 
 
