@@ -4,6 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.kadv-installed
+TEST_STAMP := $(VENV)/.kadv-test-installed
 DEMO_PACKAGES := $(shell sed -n 's/^demo://p' system-packages.txt)
 TEST_PACKAGES := $(DEMO_PACKAGES) $(shell sed -n 's/^test://p' system-packages.txt)
 
@@ -29,15 +30,26 @@ demo-packages:
 test-packages:
 	$(call require_packages,$(TEST_PACKAGES))
 
+# The demo needs the core only, and --no-compile skips pip's byte-compiling of every module of
+# torch, transformers, Open3D and the rest (one process imports a fraction of them, compiled on
+# first use). The tests add their tools and the reference path tracer, and compile everything on
+# both cores: they start dozens of Python processes, each of which would otherwise compile its
+# imports from source where bytecode is not written (PYTHONDONTWRITEBYTECODE). As in pip's own
+# compiling, a file that does not compile is left alone (torch ships one for Python 3.12 only).
 $(STAMP): pyproject.toml | demo-packages
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet torch==2.13.0 -e ".[test,reference]"
+	$(BIN)/pip install --quiet --no-compile torch==2.13.0 -e .
+	touch $@
+
+$(TEST_STAMP): $(STAMP)
+	$(BIN)/pip install --quiet --no-compile -e ".[test,reference]"
+	$(BIN)/python -m compileall -q -j 0 $(VENV)/lib >/dev/null || true
 	touch $@
 
 demo: demo-packages $(STAMP)
 	$(BIN)/kadv-attack
 
-test: test-packages $(STAMP)
+test: test-packages $(TEST_STAMP)
 	$(BIN)/python -m pytest -q
 
 $(DOCS_STAMP): pyproject.toml | $(STAMP)
@@ -49,11 +61,11 @@ docs: $(DOCS_STAMP)
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 	$(BIN)/python tools/check_api_reference.py site
 
-lint: $(STAMP)
+lint: $(TEST_STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 
-bench: demo-packages $(STAMP)
+bench: demo-packages $(TEST_STAMP)
 	cd benchmarks && for b in render bake penalty gradcheck tiny_accuracy attack_step search_anytime reference_render; do ../$(BIN)/python $$b.py || exit 1; done
 
 clean:
