@@ -48,7 +48,7 @@ _ATTACK += ["attack.budget_evaluations=123", "video=false"]
 
 
 def _attack(path: Path, lighting: str, out: Path) -> RunSummary:
-    """Run the demo's attack on a scene file under a lighting; its summary."""
+    """Run the default attack, made small (_ATTACK), on a scene file under a lighting; its summary."""
     command = [str(Path(sys.executable).parent / "kadv-attack"), "scene=file", f"scene.path={path}", *_ATTACK]
     command += [f"render.lighting={lighting}", f"hydra.run.dir={out}"]
     subprocess.run(command, check=True, capture_output=True)
