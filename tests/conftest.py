@@ -12,6 +12,9 @@ import pytest
 
 from kadv.scenes import Scene, box_room, load_scene
 
+# pytest's own pytester runs generated test files against kadv's plugin (tests/testing)
+pytest_plugins = ["pytester"]
+
 REAL_SCENES = ("grey_white_room", "modern_hall", "japanese_classroom")
 
 

@@ -253,7 +253,7 @@ def loss_from_config(cfg: DictConfig) -> Callable | AlignedLoss:
 def scene_from_config(cfg: DictConfig) -> Scene:
     """Build the scene a ``scene/`` config node describes (``kind``: box_room, procedural or file),
     its numbers checked first so that a wrong one is named."""
-    if cfg.kind in ("box_room", "procedural"):
+    if cfg.kind in ("box_room", "procedural", "probe"):
         config_int(cfg.seed, "scene.seed")
     if cfg.kind == "box_room":
         config_int(cfg.num_boxes, "scene.num_boxes", 0)

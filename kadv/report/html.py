@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from kadv.io import atomic_write
+from kadv.report.figures import loss_label
 from kadv.report.summary import ViewMetrics
 from kadv.report.sweep import RunRecord, Table
 
@@ -19,30 +20,31 @@ __all__ = ["save_mean_curves", "write_html"]
 
 
 def _anytime_gains(run: RunRecord, seconds: np.ndarray) -> list[np.ndarray]:
-    """Per init view: the best valid L_depth found by each time on ``seconds``, less the init view's."""
+    """Per init view: the attacked loss of the best valid view found by each time on ``seconds``,
+    less the init view's. The best view is the one of highest attacked loss, so this never falls."""
     gains = []
     for view in run.summary.init_views:
         times = np.array([p.seconds for p in view.anytime])
-        values = np.array([p.l_depth for p in view.anytime]) - view.init.l_depth
+        values = np.array([p.loss for p in view.anytime]) - view.anytime[0].loss
         gains.append(values[np.clip(np.searchsorted(times, seconds, side="right") - 1, 0, None)])
     return gains
 
 
 def save_mean_curves(path: Path, runs: list[RunRecord]) -> Path:
-    """Anytime curves: the mean gain in L_depth of the best valid view found so far against seconds,
-    per model and method, with the 25-75% band across runs and init views."""
+    """Anytime curves: the mean gain in the attacked loss of the best valid view found so far against
+    seconds, per model, method and loss, with the 25-75% band across runs and init views."""
     longest = max(view.budget.seconds for run in runs for view in run.summary.init_views)
     seconds = np.linspace(0.0, longest, 101)
     groups: dict[str, list[np.ndarray]] = defaultdict(list)
     for run in runs:
-        groups[f"{run.model}, {run.method}"] += _anytime_gains(run, seconds)
+        groups[f"{run.model}, {run.method}, {loss_label(run.summary.loss)}"] += _anytime_gains(run, seconds)
     figure, axis = plt.subplots(figsize=(6.4, 4.0))
     for label, curves in sorted(groups.items()):
         stack = np.stack(curves)
         axis.plot(seconds, stack.mean(axis=0), label=f"{label} ({len(curves)} init views)")
         axis.fill_between(seconds, *np.percentile(stack, [25, 75], axis=0), alpha=0.25)
     axis.set_xlabel("seconds per init view")
-    axis.set_ylabel("L_depth gain of the best view so far")
+    axis.set_ylabel("attacked loss of the best view so far,\nless the init view's")
     axis.set_title("Anytime search: mean gain, 25-75% band")
     axis.legend(fontsize=8)
     try:

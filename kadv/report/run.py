@@ -51,10 +51,12 @@ from kadv.report.summary import (
 __all__ = [
     "SUMMARY",
     "TRAJECTORY",
+    "ViewRenderer",
     "is_complete",
     "load_partial_results",
     "read_trajectory",
     "save_partial_result",
+    "save_view_picture",
     "trajectory_rows",
     "write_run",
 ]
@@ -154,7 +156,7 @@ def _write_csv(path: Path, rows: list[dict]) -> Path:
     return atomic_write(path, lambda tmp: tmp.write_text(text))
 
 
-class _ViewRenderer:
+class ViewRenderer:
     """Re-renders recorded views exactly and predicts on them, for pictures."""
 
     def __init__(self, objective: Objective, height: int, width: int, supersample: int) -> None:
@@ -185,26 +187,29 @@ def _title(label: str, record: ViewRecord) -> str:
     )
 
 
-def _save_views(views_dir: Path, index: int, view: InitViewResult, render: _ViewRenderer) -> list[str]:
+def _four_panel(path: Path, maps: dict[str, np.ndarray], b: int, title: str) -> Path:
+    """View ``b`` of a :class:`ViewRenderer`'s maps as a four-panel PNG."""
+    return save_four_panel(path, maps["rgb"][b], maps["depth"][b], maps["aligned"][b], maps["mask"][b], title)
+
+
+def save_view_picture(path: str | Path, render: ViewRenderer, init: InitView, record: ViewRecord, label: str) -> Path:
+    """The recorded view ``record`` from ``init`` as a four-panel PNG at ``path``, titled with its metrics."""
+    return _four_panel(Path(path), render(init, [record]), 0, _title(label, record))
+
+
+def _save_views(views_dir: Path, index: int, view: InitViewResult, render: ViewRenderer) -> list[str]:
     records = [view.init_record, *view.top]
     names = [f"init{index}"] + [f"init{index}_adv{rank}" for rank in range(len(view.top))]
     maps = render(view.init, records)
     for b, (name, record) in enumerate(zip(names, records)):
         label = "init view" if b == 0 else f"adversarial view {b}"
-        save_four_panel(
-            views_dir / f"{name}.png",
-            maps["rgb"][b],
-            maps["depth"][b],
-            maps["aligned"][b],
-            maps["mask"][b],
-            _title(label, record),
-        )
+        _four_panel(views_dir / f"{name}.png", maps, b, _title(label, record))
         arrays = {k: v[b] for k, v in maps.items() if k != "K"} | {"K": maps["K"]}
         atomic_write(views_dir / f"{name}.npz", lambda tmp, a=arrays: np.savez_compressed(str(tmp), **a))
     return [f"views/{name}.png" for name in names]
 
 
-def _video_frames(view: InitViewResult, render: _ViewRenderer, plan: PlanRaster) -> list[np.ndarray]:
+def _video_frames(view: InitViewResult, render: ViewRenderer, plan: PlanRaster) -> list[np.ndarray]:
     """The search in evaluation order, one frame per full-size evaluated view (evenly thinned to
     at most :data:`_MAX_VIDEO_FRAMES`): image | depth | prediction | error and the plan with the
     camera and the path of the best views so far, with the step, L_depth and delta1 written above."""
@@ -260,7 +265,7 @@ def write_run(
         video: also write ``trajectory.mp4`` of the run with the largest gain.
     """
     run_dir = Path(run_dir)
-    render = _ViewRenderer(objective, info.height, info.width, supersample)
+    render = ViewRenderer(objective, info.height, info.width, supersample)
     _write_csv(run_dir / TRAJECTORY, trajectory_rows(result))
     per_view = [
         _init_view_summary(index, view, _save_views(run_dir / "views", index, view, render))

@@ -8,7 +8,7 @@ import torch
 from kadv.geometry.camera import Camera
 from kadv.geometry.pose import look_at
 from kadv.scenes.materials import textured_materials
-from kadv.scenes.parts import box_parts, overlapped, quad_part
+from kadv.scenes.parts import box_parts, room_shell_parts
 from kadv.scenes.scene import Scene, assemble_scene
 
 __all__ = ["box_room"]
@@ -47,19 +47,7 @@ def box_room(
     walls_paint = [paint[int(rng.random() < 0.25)] for _ in range(4)]
     materials = [floor, ceiling, *walls_paint, *textured_materials(rng, "furniture", num_boxes)]
     W, H, D = width, height, depth
-    walls = {
-        "floor": [[0, 0, 0], [W, 0, 0], [W, 0, D], [0, 0, D]],
-        "ceiling": [[0, H, D], [W, H, D], [W, H, 0], [0, H, 0]],
-        "wall_z0": [[W, 0, 0], [0, 0, 0], [0, H, 0], [W, H, 0]],
-        "wall_z1": [[0, 0, D], [W, 0, D], [W, H, D], [0, H, D]],
-        "wall_x0": [[0, 0, 0], [0, 0, D], [0, H, D], [0, H, 0]],
-        "wall_x1": [[W, 0, D], [W, 0, 0], [W, H, 0], [W, H, D]],
-    }
-    parts = []
-    for index, (name, corners) in enumerate(walls.items()):
-        corners = overlapped(np.array(corners, np.float64))
-        extent = (np.linalg.norm(corners[1] - corners[0]) / tile, np.linalg.norm(corners[3] - corners[0]) / tile)
-        parts.append(quad_part(corners, index, name, extent))
+    parts = room_shell_parts((W, H, D), list(range(6)), tile)
     eye = np.array([min(1.0, W / 4), 1.5, min(1.0, D / 4)])
     target = np.array([W * 0.65, 1.0, D * 0.65])
     placed: list[tuple[np.ndarray, np.ndarray]] = []

@@ -16,11 +16,11 @@ __all__ = ["scene_from_node"]
 
 
 def scene_from_node(node: Mapping[str, Any], path: str | Path | None = None) -> Scene:
-    """Build the scene of a ``scene/`` node (``kind``: box_room, procedural or file).
+    """Build the scene of a ``scene/`` node (``kind``: box_room, procedural, probe or file).
 
     Args:
         node: the node's keys (``kind``, ``seed``, ``num_boxes``, a procedural room's feature shares,
-            ``path``, ``options``).
+            a probe's ``name``, ``path``, ``options``).
         path: for a file scene, read this file instead of the node's ``path`` (a moved scene).
 
     Raises:
@@ -32,6 +32,10 @@ def scene_from_node(node: Mapping[str, Any], path: str | Path | None = None) -> 
         return box_room(seed=node.get("seed", 0), num_boxes=node.get("num_boxes", 4))
     if kind == "procedural":
         return procedural_room(seed=node.get("seed", 0), **{name: node[name] for name in ROOM_FEATURES if name in node})
+    if kind == "probe":
+        from kadv.scenes.probes import probe_scene
+
+        return probe_scene(node.get("name", ""), seed=node.get("seed", 0))
     if kind == "file":
         return load_scene(Path(path if path is not None else node["path"]).expanduser(), **(node.get("options") or {}))
-    raise ValueError(f"scene.kind must be 'box_room', 'procedural' or 'file', got {kind!r}")
+    raise ValueError(f"scene.kind must be 'box_room', 'procedural', 'probe' or 'file', got {kind!r}")

@@ -6,7 +6,16 @@ import numpy as np
 
 from kadv.scenes.scene import MeshPart
 
-__all__ = ["box_parts", "facing", "hexahedron_parts", "mesh_part", "overlapped", "planar_quad", "quad_part"]
+__all__ = [
+    "box_parts",
+    "facing",
+    "hexahedron_parts",
+    "mesh_part",
+    "overlapped",
+    "planar_quad",
+    "quad_part",
+    "room_shell_parts",
+]
 
 _QUAD_FACES = np.array([[0, 2, 1], [0, 3, 2]])
 
@@ -103,3 +112,24 @@ def mesh_part(vertices: np.ndarray, faces: np.ndarray, material: int, name: str,
     others = np.array([[1, 2], [0, 2], [0, 1]])[dominant]
     uv = np.take_along_axis(corners, np.repeat(others[:, None, :], 3, axis=1), axis=2) / tile
     return MeshPart(vertices, faces, uv, None, material, name)
+
+
+def room_shell_parts(size: tuple[float, float, float], materials: list[int], tile: float) -> list[MeshPart]:
+    """The floor, ceiling and four walls of the room x in [0, W], y in [0, H], z in [0, D], facing
+    into it, one texture repeat per ``tile`` metres; ``materials`` (6,) in the order floor, ceiling,
+    walls at z = 0, z = D, x = 0 and x = W."""
+    W, H, D = size
+    walls = {
+        "floor": [[0, 0, 0], [W, 0, 0], [W, 0, D], [0, 0, D]],
+        "ceiling": [[0, H, D], [W, H, D], [W, H, 0], [0, H, 0]],
+        "wall_z0": [[W, 0, 0], [0, 0, 0], [0, H, 0], [W, H, 0]],
+        "wall_z1": [[0, 0, D], [W, 0, D], [W, H, D], [0, H, D]],
+        "wall_x0": [[0, 0, 0], [0, 0, D], [0, H, D], [0, H, 0]],
+        "wall_x1": [[W, 0, D], [W, 0, 0], [W, H, 0], [W, H, D]],
+    }
+    parts = []
+    for material, (name, corners) in zip(materials, walls.items()):
+        corners = overlapped(np.array(corners, np.float64))
+        extent = (np.linalg.norm(corners[1] - corners[0]) / tile, np.linalg.norm(corners[3] - corners[0]) / tile)
+        parts.append(quad_part(corners, material, name, extent))
+    return parts

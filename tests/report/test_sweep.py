@@ -113,3 +113,33 @@ def test_the_page_embeds_the_video_of_the_run_that_lost_the_most_delta1(tmp_path
     (tmp_path / "sweep" / "b" / "trajectory.mp4").unlink()
     write_report([tmp_path / "sweep"], tmp_path / "out", progress=False)
     assert base64.b64encode(b"video of a").decode("ascii") in (tmp_path / "out" / "report.html").read_text()
+
+
+def test_the_anytime_curve_follows_the_attacked_loss_which_never_falls(tmp_path: Path) -> None:
+    from kadv.report.html import _anytime_gains
+    from kadv.report.sweep import RunRecord
+
+    _run(tmp_path / "run", "hybrid", 0.2, 0.16, (0.9, 0.1))
+    summary = RunSummary.read(tmp_path / "run" / "summary.json")
+    view = summary.init_views[0]
+    # the incumbent by the attacked loss (delta1's error share) has a lower L_depth than the first:
+    # the L_depth curve would fall, the loss's does not
+    view.anytime = [
+        AnytimePoint(1, 0.1, 0.20, 0.9, 0.1, 0.05),
+        AnytimePoint(5, 1.0, 0.24, 0.5, 0.3, 0.40),
+        AnytimePoint(9, 2.0, 0.16, 0.1, 0.6, 0.80),
+    ]
+    seconds = np.linspace(0.0, 3.0, 31)
+    (gain,) = _anytime_gains(RunRecord(tmp_path / "run", summary, {}), seconds)
+    assert np.all(np.diff(gain) >= 0.0)
+    assert gain[0] == 0.0 and gain[-1] == pytest.approx(0.75)
+
+
+def test_the_video_fits_the_page_width(tmp_path: Path) -> None:
+    for name, delta1 in (("a", (0.9, 0.1)),):
+        _run(tmp_path / "sweep" / name, "random", 0.1, 0.3, delta1)
+        (tmp_path / "sweep" / name / "trajectory.mp4").write_bytes(b"video")
+    write_report([tmp_path / "sweep"], tmp_path / "out", progress=False)
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "figure video, body > img { display: block; max-width: 100%; height: auto; }" in html
+    assert '<figure class="video">' in html

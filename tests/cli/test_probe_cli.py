@@ -1,0 +1,38 @@
+"""kadv-probe: the scorecard from the command line, and its bad input in one line with exit status 2."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from kadv.cli.probe import main
+
+
+def test_the_scorecard_prints_its_table_and_writes_its_files(tmp_path: Path, capsys) -> None:
+    main(["model=kadv_tiny", "probes=window,stairs", "budget=4", "lighting=direct", f"out={tmp_path}"])
+    printed = capsys.readouterr().out
+    assert "| probe | kadv_tiny: delta1 init -> worst |" in printed
+    assert "| window | " in printed and "| stairs | " in printed
+    assert (tmp_path / "scorecard.md").read_text().strip() in printed
+    assert (tmp_path / "scorecard.png").stat().st_size > 10_000
+    assert len(list((tmp_path / "views").glob("*-worst.png"))) == 4  # two probes x two init views
+
+
+@pytest.mark.parametrize(
+    ("argument", "message"),
+    [
+        ("probes=nope", "no probe scene 'nope'; the probes are: photo_wall, grazing_floor, thin_structures"),
+        ("model=", "scorecard needs at least one model"),
+        ("budget=1", "budget must be an integer >= 2, got 1"),
+        ("seed=x", "seed must be an integer >= 0, got 'x'"),
+        ("lighting=sun", "lighting must be 'baked' or 'direct', got 'sun'"),
+        ("colour=red", "'colour=red': expected key=value with a key of model, probes"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_status_2(argument: str, message: str, capsys) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main([argument])
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err
+    assert error.startswith("kadv-probe: error: ") and message in error and error.count("\n") == 1

@@ -1,0 +1,123 @@
+"""kadv's pytest plugin, driven by pytest's own pytester on generated test files."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+# imported here, before pytester's in-process runs: each run drops the modules it imported first,
+# and matplotlib imported again beside its own leftovers refuses its own layouts
+import kadv.report.run
+import kadv.testing.card  # noqa: F401
+
+# a user's test file, as the README's section writes one (smaller, for speed)
+USER_TESTS = """
+from kadv.testing import assert_viewpoint_robust
+
+SMALL = dict(budget_evaluations=8, init_count=1, size=(48, 64), lighting="direct")
+
+def test_lenient(kadv_scene):
+    assert_viewpoint_robust("kadv_tiny", kadv_scene("box_room", seed=3), min_delta1=0.0, **SMALL)
+
+def test_strict(kadv_scene):
+    assert_viewpoint_robust("kadv_tiny", kadv_scene("box_room", seed=3), min_delta1=1.0, **SMALL)
+
+def test_without_kadv():
+    assert True
+"""
+
+
+def _run(pytester: pytest.Pytester, *args: str) -> pytest.RunResult:
+    pytester.makepyfile(test_user=USER_TESTS)
+    return pytester.runpytest("-p", "no:cacheprovider", *args)
+
+
+def test_a_user_file_passes_leniently_and_fails_strictly_naming_the_view_and_its_picture(
+    pytester: pytest.Pytester,
+) -> None:
+    result = _run(pytester, "--kadv-keep", str(pytester.path / "kept"))
+    result.assert_outcomes(passed=2, failed=1)
+    output = result.stdout.str()
+    failure = re.search(r"file0: delta1 (\d\.\d{3}) -> (\d\.\d{3}) at centre \(.*? deg; picture: (\S+\.png)", output)
+    assert failure is not None, output
+    picture = Path(failure.group(3))
+    assert picture.is_file() and picture.is_relative_to(pytester.path / "kept")
+    assert "kadv_tiny is not viewpoint-robust on box_room_3 (wanted delta1 >= 1.0)" in output
+    # the session's summary: one line per model x scene checked, with its verdict
+    summary = output.split("kadv viewpoint robustness", 1)[1]
+    lines = [line for line in summary.splitlines() if line.startswith("kadv_tiny x box_room_3")]
+    assert len(lines) == 2 and lines[0].endswith(": pass") and lines[1].endswith(": FAIL")
+    assert f"delta1 {failure.group(1)} -> {failure.group(2)}" in lines[1]
+
+
+def test_the_kadv_marker_lets_a_run_skip_the_checks(pytester: pytest.Pytester) -> None:
+    result = _run(pytester, "-m", "not kadv")
+    result.assert_outcomes(passed=1, deselected=2)
+
+
+def test_the_budget_option_scales_the_evaluations_and_one_seed_gives_one_verdict(pytester: pytest.Pytester) -> None:
+    pytester.makepyfile(
+        test_budget="""
+import json
+from kadv.testing import viewpoint_robustness
+
+def test_budget(kadv_scene, kadv_artifacts, request):
+    result = viewpoint_robustness("kadv_tiny", kadv_scene("box_room", seed=3), budget_evaluations=8,
+                                  init_count=1, size=(48, 64), lighting="direct")
+    out = request.config.rootpath / f"budget-{request.config.getoption('kadv_budget')}.json"
+    out.write_text(json.dumps([result.budget_evaluations, result.views[0].evaluations, result.views[0].delta1_worst]))
+    assert result.views[0].picture.parent == kadv_artifacts
+"""
+    )
+    runs = {}
+    for factor in ("1", "2", "2"):
+        pytester.runpytest("-p", "no:cacheprovider", "--kadv-budget", factor).assert_outcomes(passed=1)
+        runs.setdefault(factor, []).append(json.loads((pytester.path / f"budget-{factor}.json").read_text()))
+    assert runs["1"][0][:2] == [8, 8]
+    assert runs["2"][0][:2] == [16, 16]
+    assert runs["2"][0] == runs["2"][1], "the same seed gives the same delta1 twice"
+
+
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        ('kadv_scene("probe/nope")', "UsageError: no probe scene 'nope'; the probes are: photo_wall, grazing_floor"),
+        (
+            'assert_viewpoint_robust((WrongShape(), "depth"), kadv_scene("box_room"), min_delta1=0.5)',
+            "UsageError: model 'WrongShape' must map rgb (B, 3, H, W) to (B, 1, H, W)",
+        ),
+        (
+            'assert_viewpoint_robust("kadv_tiny", kadv_scene("box_room"))',
+            "UsageError: assert_viewpoint_robust needs min_delta1 or max_delta1_drop (both are unset)",
+        ),
+    ],
+)
+def test_bad_input_is_a_one_line_usage_error(pytester: pytest.Pytester, body: str, message: str) -> None:
+    pytester.makepyfile(
+        test_bad=f"""
+import torch
+from kadv.testing import assert_viewpoint_robust
+
+class WrongShape(torch.nn.Module):
+    def forward(self, rgb):
+        return rgb
+
+def test_bad(kadv_scene):
+    {body}
+"""
+    )
+    result = pytester.runpytest("-p", "no:cacheprovider")
+    result.assert_outcomes(failed=1)
+    output = result.stdout.str()
+    assert message in output
+    assert "Traceback" not in output and "def test_bad" not in output
+
+
+def test_a_bad_budget_factor_is_refused_at_start(pytester: pytest.Pytester) -> None:
+    pytester.makepyfile(test_nothing="def test_nothing():\n    pass\n")
+    result = pytester.runpytest("-p", "no:cacheprovider", "--kadv-budget", "zero")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    assert "--kadv-budget must be a positive number, got 'zero'" in result.stderr.str()

@@ -1,0 +1,112 @@
+"""kadv.testing: viewpoint robustness as a value and as an assertion, and the probe scorecard."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+
+from kadv.testing import (
+    DEFAULT_BUDGET,
+    RobustnessInputError,
+    assert_viewpoint_robust,
+    scene,
+    scorecard,
+    settings,
+    viewpoint_robustness,
+)
+
+# small and quick: the checks' arithmetic is the same at any budget
+QUICK = {"budget_evaluations": 8, "init_count": 1, "size": (48, 64), "lighting": "direct"}
+
+
+class Constant(torch.nn.Module):
+    """A model that sees nothing: the same depth everywhere (a gradient reaches the image, as kadv
+    asks of every model, but the values never change)."""
+
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        return torch.ones_like(rgb[:, :1]) + (rgb - rgb.detach()).mean(dim=1, keepdim=True)
+
+
+class WrongShape(torch.nn.Module):
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        return rgb
+
+
+def test_the_same_seed_gives_the_same_result_twice(tmp_path: Path) -> None:
+    room = scene("box_room", seed=3)
+    first = viewpoint_robustness("kadv_tiny", room, seed=5, artifacts=tmp_path / "a", **QUICK)
+    again = viewpoint_robustness("kadv_tiny", room, seed=5, artifacts=tmp_path / "b", **QUICK)
+    assert [replace(v, picture=None) for v in first.views] == [replace(v, picture=None) for v in again.views]
+    view = first.views[0]
+    assert view.delta1_worst <= view.delta1_init
+    assert view.evaluations == 8
+    assert view.picture.is_file() and view.picture.parent == tmp_path / "a"
+    assert "kadv_tiny on box_room_3" in first.summary() and f"{view.delta1_worst:.3f}" in first.summary()
+
+
+def test_a_failing_assertion_names_each_failing_view_its_pose_and_picture(tmp_path: Path) -> None:
+    with pytest.raises(AssertionError) as failure:
+        assert_viewpoint_robust("kadv_tiny", "box_room", min_delta1=1.0, artifacts=tmp_path, **QUICK)
+    message = str(failure.value)
+    assert message.startswith("kadv_tiny is not viewpoint-robust on box_room_0 (wanted delta1 >= 1.0):")
+    assert "file0: delta1 " in message and " -> " in message and "centre (" in message and "yaw " in message
+    picture = Path(message.rsplit("picture: ", 1)[1].strip())
+    assert picture.is_file() and picture.parent == tmp_path
+    passed = assert_viewpoint_robust("kadv_tiny", "box_room", max_delta1_drop=1.0, artifacts=tmp_path, **QUICK)
+    assert passed.views[0].delta1_drop <= 1.0
+
+
+@pytest.mark.parametrize(
+    "probe", ["photo_wall", "grazing_floor", "thin_structures", "window", "textureless_close", "dim_lamp", "stairs"]
+)
+def test_a_model_that_outputs_a_constant_map_fails_every_probe(probe: str, tmp_path: Path) -> None:
+    # at the default budget from both init views: a constant map's best chance of passing
+    options = {**QUICK, "budget_evaluations": DEFAULT_BUDGET, "init_count": 2}
+    with pytest.raises(AssertionError, match="is not viewpoint-robust"):
+        assert_viewpoint_robust((Constant(), "depth"), f"probe/{probe}", min_delta1=0.5, artifacts=tmp_path, **options)
+
+
+def test_the_budget_factor_in_force_scales_the_evaluations(tmp_path: Path) -> None:
+    with settings(budget_factor=0.5):
+        result = viewpoint_robustness(
+            "kadv_tiny", "box_room", artifacts=tmp_path, **{**QUICK, "budget_evaluations": 16}
+        )
+    assert result.budget_evaluations == 8 and result.views[0].evaluations == 8
+
+
+@pytest.mark.parametrize(
+    ("call", "message"),
+    [
+        (lambda: assert_viewpoint_robust("kadv_tiny", "box_room"), "needs min_delta1 or max_delta1_drop"),
+        (lambda: viewpoint_robustness("kadv_tiny", "probe/nope"), "no probe scene 'nope'; the probes are: photo_wall"),
+        (lambda: viewpoint_robustness((WrongShape(), "depth"), "box_room"), r"must map rgb \(B, 3, H, W\) to \(B, 1"),
+        (lambda: viewpoint_robustness(Constant(), "box_room"), "needs its output kind"),
+        (lambda: viewpoint_robustness("kadv_tiny", "attic"), "no scene 'attic'"),
+        (lambda: scorecard(["kadv_tiny"], ["nope"]), "no probe scene 'nope'; the probes are"),
+        (
+            lambda: assert_viewpoint_robust("kadv_tiny", "box_room", min_delta1=2.0),
+            r"min_delta1 must be a number in \[0, 1\]",
+        ),
+    ],
+)
+def test_bad_input_is_one_line_naming_it(call, message: str) -> None:
+    with pytest.raises(RobustnessInputError, match=message) as error:
+        call()
+    assert "\n" not in str(error.value)
+
+
+def test_the_scorecard_has_a_column_per_model_and_a_thumbnail_per_probe(tmp_path: Path) -> None:
+    card = scorecard(["kadv_tiny", (Constant(), "depth")], ["window", "stairs"], artifacts=tmp_path, **QUICK)
+    table = card.markdown().splitlines()
+    assert table[0] == "| probe | kadv_tiny: delta1 init -> worst | Constant: delta1 init -> worst |"
+    assert [row.split(" | ")[0] for row in table[2:]] == ["| window", "| stairs", "| **mean worst**"]
+    worst = card.results["window"]["Constant"].worst
+    assert f"{worst.delta1_init:.3f} -> {worst.delta1_worst:.3f}" in table[2]
+    png = card.save_png(tmp_path / "card.png")
+    from PIL import Image
+
+    with Image.open(png) as image:
+        assert image.width > 2 * 200 and image.height > 2 * 150
