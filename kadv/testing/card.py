@@ -53,7 +53,8 @@ class Scorecard:
         from kadv.report.figures import save_figure
 
         rows, columns = len(self.probes), len(self.models)
-        figure, axes = plt.subplots(rows, columns, figsize=(3.4 * columns, 2.9 * rows), squeeze=False)
+        # the pictures are four panels wide: tiles of their shape, titled above
+        figure, axes = plt.subplots(rows, columns, figsize=(6.4 * columns, 2.3 * rows), squeeze=False)
         for r, probe in enumerate(self.probes):
             for c, model in enumerate(self.models):
                 worst = self.results[probe][model].worst

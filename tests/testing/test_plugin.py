@@ -121,3 +121,15 @@ def test_a_bad_budget_factor_is_refused_at_start(pytester: pytest.Pytester) -> N
     result = pytester.runpytest("-p", "no:cacheprovider", "--kadv-budget", "zero")
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     assert "--kadv-budget must be a positive number, got 'zero'" in result.stderr.str()
+
+
+def test_the_readme_test_file_runs_as_written(pytester: pytest.Pytester) -> None:
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    section = readme.split("## Test your model's viewpoint robustness in CI", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    pytester.makepyfile(test_viewpoint=code)
+    result = pytester.runpytest("-p", "no:cacheprovider", "--kadv-budget", "0.25")
+    outcomes = result.parseoutcomes()
+    assert outcomes.get("passed", 0) + outcomes.get("failed", 0) == 2 and "error" not in outcomes
+    summary = result.stdout.str().split("kadv viewpoint robustness", 1)[1]
+    assert "kadv_tiny x box_room_3: delta1" in summary and "kadv_tiny x probe_thin_structures_0: delta1" in summary
