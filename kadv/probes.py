@@ -1,29 +1,9 @@
-"""Probe scenes, each aimed at one known failure of depth models (:mod:`kadv.scenes.probes`)."""
+"""Probe scenes, each aimed at one known failure of depth models: the names of
+:mod:`kadv.scenes.probes`, where they are built."""
 
 from __future__ import annotations
 
-from kadv.scenes.probes import (
-    PROBES,
-    dim_lamp,
-    grazing_floor,
-    photo_wall,
-    probe_names,
-    probe_scene,
-    stairs,
-    textureless_close,
-    thin_structures,
-    window,
-)
+from kadv.scenes import probes as _probes
+from kadv.scenes.probes import *  # noqa: F403
 
-__all__ = [
-    "PROBES",
-    "dim_lamp",
-    "grazing_floor",
-    "photo_wall",
-    "probe_names",
-    "probe_scene",
-    "stairs",
-    "textureless_close",
-    "thin_structures",
-    "window",
-]
+__all__ = _probes.__all__
