@@ -18,6 +18,8 @@ from kadv.scenes import box_room, procedural_room
 from tests.conftest import REAL_SCENES, cached_real_scene
 
 HEIGHT, WIDTH = 48, 64
+# Warp's caster on every device this machine has: its CPU device, and CUDA where present
+WARP_DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 
 
 def _scene(name: str):
@@ -28,11 +30,12 @@ def _scene(name: str):
     return cached_real_scene(name)
 
 
+@pytest.mark.parametrize("device", WARP_DEVICES)
 @pytest.mark.parametrize("name", ["box_room", "procedural", *REAL_SCENES])
-def test_warp_renders_and_distances_equal_open3d(name: str) -> None:
+def test_warp_renders_and_distances_equal_open3d(name: str, device: str) -> None:
     scene = _scene(name)
     open3d = ExactRenderer(scene, Shading(), backend="open3d")
-    warp = ExactRenderer(scene, Shading(), backend="warp")
+    warp = ExactRenderer(scene, Shading(), backend="warp", device=device)
     camera = scene.cameras[0]
     poses = torch.cat([camera.world_T_cam[None], random_valid_poses(open3d, 3, np.random.default_rng(0), 70.0)])
     K = intrinsics_from_fov(70.0, HEIGHT, WIDTH)
@@ -53,7 +56,7 @@ def test_warp_renders_and_distances_equal_open3d(name: str) -> None:
     close = ((a.rgb - b.rgb).abs() <= 2 / 255).all(dim=1)
     assert close.float().mean() >= 0.99
     centres = poses[:, :3, 3]
-    assert torch.allclose(distance_to_surface(open3d, centres), distance_to_surface(warp, centres), atol=1e-5)
+    assert torch.allclose(distance_to_surface(open3d, centres), distance_to_surface(warp, centres).cpu(), atol=1e-5)
 
 
 def test_warp_lists_every_hit_along_a_ray_through_a_closed_box() -> None:

@@ -1,0 +1,166 @@
+"""The device check: kadv's CUDA tests, the attack step's figures and a short attack, in one run.
+
+1. the CUDA tests: ``tests/test_device.py`` (render, objective and training on the device against
+   the CPU) and the Warp/Open3D equivalence of ``tests/render/test_casting.py`` on the device's
+   Warp caster against Open3D's CPU renders (box room, a generated room, grey_white_room);
+2. ``benchmarks/attack_step.py --device <device> --backend warp``;
+3. a short ``kadv-attack device=<device> render.backend=warp`` on grey_white_room that writes its
+   run directory, pictures included;
+4. the peak memory: of the GPU (sampled with nvidia-smi) on CUDA, of the largest process on the CPU.
+
+Its last line: ``device_check overhead= overhead_tiny= evals_per_s= equivalence=ok|fail peak_gib=
+device=<name>``. ``--device cuda`` on a machine without CUDA is refused in one line (exit status 2);
+``--device cpu`` runs the same path on the CPU (Warp's CPU device).
+
+Run: benchmarks/device_check.sh --device cuda|cpu [--out DIR]   (the .sh installs carried wheels first)
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import resource
+import shutil
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+# the shared scenes a device check carries: grey_white_room alone (benchmarks/device_pack.sh)
+CARRIED = "not modern_hall and not japanese_classroom"
+
+
+class GpuMemory:
+    """The most memory nvidia-smi reports in use on the GPU while the block runs, in GiB."""
+
+    def __enter__(self) -> GpuMemory:
+        self.peak_mib, self._stop = 0.0, threading.Event()
+        self._thread = threading.Thread(target=self._sample, daemon=True)
+        self._thread.start()
+        return self
+
+    def _sample(self) -> None:
+        while not self._stop.is_set():
+            out = subprocess.run(
+                ["nvidia-smi", "--query-gpu=memory.used", "--format=csv,noheader,nounits"],
+                capture_output=True,
+                text=True,
+                check=False,
+            ).stdout.split()
+            if out:
+                self.peak_mib = max(self.peak_mib, float(out[0]))
+            self._stop.wait(0.25)
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    @property
+    def gib(self) -> float:
+        return self.peak_mib / 1024
+
+
+def _run(label: str, command: list[str], env: dict[str, str], log: Path) -> subprocess.CompletedProcess:
+    """Run ``command``, echo its output to the log and the console's tail, and time it."""
+    start = time.perf_counter()
+    result = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - start
+    with log.open("a") as handle:
+        handle.write(f"\n$ {' '.join(command)}\n{result.stdout}{result.stderr}\n")
+        handle.write(f"[exit {result.returncode}, {seconds:.0f} s]\n")
+    tail = (result.stdout + result.stderr).strip().splitlines()[-3:]
+    print(f"{label}: exit {result.returncode} in {seconds:.0f} s", *(f"  {line}" for line in tail), sep="\n")
+    sys.stdout.flush()
+    return result
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default="cuda", choices=["cuda", "cpu"])
+    parser.add_argument("--out", default=str(ROOT / "outputs" / "device_check"), help="folder for the log and the run")
+    args = parser.parse_args()
+    import torch
+
+    if args.device == "cuda" and not torch.cuda.is_available():
+        parser.exit(2, f"{parser.prog}: error: --device cuda, but this machine has no CUDA device (use --device cpu)\n")
+    name = torch.cuda.get_device_name(0) if args.device == "cuda" else "cpu"
+    out = Path(args.out)
+    shutil.rmtree(out, ignore_errors=True)
+    out.mkdir(parents=True)
+    log = out / "device_check.log"
+    # the scripts import kadv from this checkout wherever it is installed
+    paths = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
+    env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=paths)
+    python = sys.executable
+    scene = Path(env.get("KADV_TEST_SCENES", ROOT.parent / "shared" / "scenes")) / "grey_white_room" / "scene.xml"
+    with GpuMemory() if args.device == "cuda" and shutil.which("nvidia-smi") else _NoMemory() as memory:
+        tests = _run(
+            "CUDA tests" if args.device == "cuda" else "device tests on the CPU",
+            [
+                python,
+                "-m",
+                "pytest",
+                "-q",
+                "-p",
+                "no:cacheprovider",
+                "-o",
+                "addopts=",
+                "tests/test_device.py",
+                "tests/render/test_casting.py",
+                "-k",
+                CARRIED,
+            ],
+            env,
+            log,
+        )
+        step = _run(
+            "attack_step",
+            [python, "benchmarks/attack_step.py", "--device", args.device, "--backend", "warp"],
+            env,
+            log,
+        )
+        attack = _run(
+            "kadv-attack",
+            [
+                python,
+                "-m",
+                "kadv.cli.attack",
+                f"device={args.device}",
+                "render.backend=warp",
+                "scene=file",
+                f"scene.path={scene}",
+                "init.count=1",
+                "attack.budget_evaluations=24",
+                "video=false",
+                "progress=false",
+                f"hydra.run.dir={out / 'attack'}",
+            ],
+            env,
+            log,
+        )
+    peak = memory.gib if args.device == "cuda" else resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20
+    figures = dict(re.findall(r"(\w+)=(\S+)", (step.stdout.strip().splitlines() or [""])[-1]))
+    pictures = sorted((out / "attack" / "views").glob("*.png")) if attack.returncode == 0 else []
+    print(f"tests {'passed' if tests.returncode == 0 else 'FAILED'}; attack pictures: {len(pictures)}; log: {log}")
+    print(
+        f"device_check overhead={figures.get('overhead', 'nan')} overhead_tiny={figures.get('overhead_tiny', 'nan')} "
+        f"evals_per_s={figures.get('evals_per_s', 'nan')} equivalence={'ok' if tests.returncode == 0 else 'fail'} "
+        f"peak_gib={peak:.1f} device={name.replace(' ', '_')}"
+    )
+
+
+class _NoMemory:
+    gib = 0.0
+
+    def __enter__(self) -> _NoMemory:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+
+if __name__ == "__main__":
+    main()
