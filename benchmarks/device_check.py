@@ -63,10 +63,12 @@ class GpuMemory:
         return self.peak_mib / 1024
 
 
-def _run(label: str, command: list[str], env: dict[str, str], log: Path) -> subprocess.CompletedProcess:
+def _run(
+    label: str, command: list[str], env: dict[str, str], log: Path, cwd: Path = ROOT
+) -> subprocess.CompletedProcess:
     """Run ``command``, echo its output to the log and the console's tail, and time it."""
     start = time.perf_counter()
-    result = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True, check=False)
+    result = subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, check=False)
     seconds = time.perf_counter() - start
     with log.open("a") as handle:
         handle.write(f"\n$ {' '.join(command)}\n{result.stdout}{result.stderr}\n")
@@ -91,9 +93,7 @@ def main() -> None:
     shutil.rmtree(out, ignore_errors=True)
     out.mkdir(parents=True)
     log = out / "device_check.log"
-    # the scripts import kadv from this checkout wherever it is installed
-    paths = os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))
-    env = dict(os.environ, PYTHONUNBUFFERED="1", PYTHONPATH=paths)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
     python = sys.executable
     scene = Path(env.get("KADV_TEST_SCENES", ROOT.parent / "shared" / "scenes")) / "grey_white_room" / "scene.xml"
     with GpuMemory() if args.device == "cuda" and shutil.which("nvidia-smi") else _NoMemory() as memory:
