@@ -122,24 +122,20 @@ def main() -> None:
             env,
             log,
         )
+        # kadv-attack as installed (its configs ship as kadv.conf), run outside the checkout
+        overrides = [
+            f"device={args.device}",
+            "render.backend=warp",
+            "scene=file",
+            f"scene.path={scene}",
+            "init.count=1",
+            "attack.budget_evaluations=24",
+            "video=false",
+            "progress=false",
+            f"hydra.run.dir={out / 'attack'}",
+        ]
         attack = _run(
-            "kadv-attack",
-            [
-                python,
-                "-m",
-                "kadv.cli.attack",
-                f"device={args.device}",
-                "render.backend=warp",
-                "scene=file",
-                f"scene.path={scene}",
-                "init.count=1",
-                "attack.budget_evaluations=24",
-                "video=false",
-                "progress=false",
-                f"hydra.run.dir={out / 'attack'}",
-            ],
-            env,
-            log,
+            "kadv-attack", [python, "-c", "from kadv.cli.attack import main; main()", *overrides], env, log, cwd=out
         )
     peak = memory.gib if args.device == "cuda" else resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20
     figures = dict(re.findall(r"(\w+)=(\S+)", (step.stdout.strip().splitlines() or [""])[-1]))

@@ -17,14 +17,16 @@ else
       [ -f "$STAGED/$part" ] || { echo "device_check: $STAGED/$part has not been carried yet" >&2; exit 2; }
     done
     (cd "$STAGED" && cat $(cat parts.txt) | tar xf - && tar xf wheels.tar)
-    $PYTHON -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --target /tmp/site "$STAGED"/*.whl
+    # the wheels, and kadv itself: its configs (kadv.conf) and its pytest plugin are then found as
+    # when installed
+    $PYTHON -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --no-build-isolation \
+      --target /tmp/site "$STAGED"/*.whl .
     # Open3D's Plotly viewer needs dash, which the image lacks and kadv never calls
     sed -i 's/^from .draw_plotly import/# &/' /tmp/site/open3d/visualization/__init__.py
-    # kadv itself, so that its configs (kadv.conf) and its pytest plugin are found as when installed
-    PYTHONPATH=/tmp/site $PYTHON -m pip install -q --no-index --no-deps --no-build-isolation --target /tmp/site .
     touch "$STAGED/installed"
   fi
   export PYTHONPATH=/tmp/site${PYTHONPATH:+:$PYTHONPATH}
+  [ -d "$STAGED/syslibs" ] && export LD_LIBRARY_PATH="$STAGED/syslibs${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
   [ -d "$STAGED/scene" ] && export KADV_TEST_SCENES="$STAGED/scene"
 fi
 exec $PYTHON benchmarks/device_check.py "$@"

@@ -30,8 +30,18 @@ $PYTHON -m pip wheel --quiet --no-deps -w .device/wheels "$antlr" 2>/dev/null
 mkdir -p .device/stage/scene/grey_white_room
 cp -r "$SCENES/grey_white_room/scene.xml" "$SCENES/grey_white_room/models" "$SCENES/grey_white_room/textures" \
   .device/stage/scene/grey_white_room/
+# the system libraries Open3D's CPU build links (EGL, GL, X11, udev, usb: the GPU image lacks
+# libEGL), all of them built for glibc 2.34 or older
+mkdir -p .device/stage/syslibs
+open3d=$($PYTHON -c "import os, open3d; print(os.path.dirname(open3d.__file__))")
+for lib in $(ldd "$open3d"/pybind*.so | awk '$3 ~ /^\/(usr\/)?lib/ {print $3}'); do
+  case $(basename "$lib") in
+    libc.so*|libm.so*|libstdc++*|libgcc_s*|ld-linux*|libpthread*|libdl.so*|librt.so*) ;;
+    *) cp -L "$lib" .device/stage/syslibs/ ;;
+  esac
+done
 (cd .device/wheels && tar cf ../stage/wheels.tar ./*.whl)
-(cd .device/stage && tar cf - wheels.tar scene | split -b "${PART_MIB}m" -d -a 2 - ../part.)
+(cd .device/stage && tar cf - wheels.tar scene syslibs | split -b "${PART_MIB}m" -d -a 2 - ../part.)
 count=0
 for part in .device/part.*; do
   count=$((count + 1))

@@ -74,7 +74,13 @@ def test_render_and_objective_run_on_the_device_and_agree_with_the_cpu(renderer:
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_training_runs_on_the_device_and_hands_back_a_cpu_model_that_agrees_with_the_cpu(device: str) -> None:
+def test_training_runs_on_the_device_and_hands_back_a_cpu_model_that_agrees_with_the_cpu(
+    device: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # full float32 convolutions on the GPU: with TF32 ones (cuDNN's default on Ampere and later) the
+    # losses of a run of three steps part from the CPU's by 2% (H200, 2026-11-26); matrix products
+    # are full float32 by default
+    monkeypatch.setattr(torch.backends.cudnn, "allow_tf32", False)
     views = render_procedural_views(4, seed=3, height=32, width=40, progress=False)
     config = TinyTrainConfig(steps=3, batch_size=2, channels=(8, 8, 8, 8, 8))
     runs = []

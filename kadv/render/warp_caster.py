@@ -88,6 +88,8 @@ class WarpCaster(RayCaster):
     """Ray queries against a ``wp.Mesh`` BVH on ``device`` (the CPU or a CUDA device)."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, device: torch.device) -> None:
+        if device.type == "cuda" and device.index is None:  # Warp names CUDA devices by index only
+            device = torch.device("cuda", torch.cuda.current_device())
         self.device = device
         self._wp_device = wp.device_from_torch(device)
         self._empty = len(faces) == 0
