@@ -7,7 +7,10 @@ from kadv.runtime import configure_runtime
 
 configure_runtime()
 
+import contextlib
 import logging
+import os
+import sys
 from pathlib import Path
 
 import hydra
@@ -41,7 +44,7 @@ from kadv.cli.common import (
     settings_from_node,
 )
 from kadv.device import resolve_device
-from kadv.io import atomic_write
+from kadv.io import atomic_write, remove_temporaries
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
 from kadv.report.run import (
     SUMMARY,
@@ -51,6 +54,7 @@ from kadv.report.run import (
     write_run,
 )
 from kadv.report.summary import RunInfo, RunSummary
+from kadv.runs import Interrupted, interruptible, run_lock
 
 log = logging.getLogger(__name__)
 
@@ -109,8 +113,33 @@ def _table(summary: RunSummary) -> str:
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_attack")
 @reports_user_errors("kadv-attack")
 def main(cfg: DictConfig) -> float:
-    """Run the configured attack; returns the mean adversarial L_depth (for Hydra sweepers)."""
+    """Run the configured attack; returns the mean adversarial L_depth (for Hydra sweepers).
+
+    One run holds its run directory at a time. SIGINT and SIGTERM end the run between files, with
+    one line saying what was kept, and exit status 130 or 143; in a sweep they end the sweep so (its
+    finished jobs are kept, the rest resume when it is run again), except in a job that submitit
+    runs: submitit's own handlers checkpoint and requeue it.
+    """
     run_dir = Path(HydraConfig.get().runtime.output_dir)
+    progress = {"done": 0, "total": cfg.init.get("count")}
+    under_submitit = bool(os.environ.get("SUBMITIT_EXECUTOR"))
+    try:
+        with run_lock(run_dir), contextlib.nullcontext() if under_submitit else interruptible():
+            return _attack(cfg, run_dir, progress)
+    except Interrupted as interruption:
+        print(
+            f"interrupted: {progress['done']} of {progress['total']} init views done, kept in {run_dir}; "
+            "run the same command to resume",
+            file=sys.stderr,
+        )
+        sys.exit(interruption.exit_status)
+
+
+def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
+    """The run itself; ``progress`` counts the init views done (for the line an interruption prints)."""
+    # a run killed mid-write (SIGKILL, a lost node) leaves the file it was writing as a temporary
+    for path in remove_temporaries(run_dir):
+        log.info("removed %s, left by a run killed while writing it", path)
     if is_complete(run_dir):
         summary = RunSummary.read(run_dir / SUMMARY)
         print(f"already complete, skipped: {run_dir}\n{_table(summary)}")
@@ -133,8 +162,14 @@ def main(cfg: DictConfig) -> float:
     atomic_write(run_dir / "config.yaml", lambda tmp: tmp.write_text(config_text))
     views = _init_views(seed, run_dir, renderer, model, penalty, init_config, height, width)
     completed = load_partial_results(run_dir)
+    progress.update(done=len(completed), total=len(views))
     if completed:
         log.info("resuming: %d of %d init views already done", len(completed), len(views))
+
+    def on_result(index: int, view) -> None:
+        save_partial_result(run_dir, index, view)
+        progress["done"] += 1
+
     result = attack(
         objective,
         DifferentiableRenderer(renderer, diff_config, device),
@@ -144,7 +179,7 @@ def main(cfg: DictConfig) -> float:
         attack_config,
         seed,
         completed=completed,
-        on_result=lambda index, view: save_partial_result(run_dir, index, view),
+        on_result=on_result,
         progress=cfg.progress,
     )
     info = RunInfo(scene.name, model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed))

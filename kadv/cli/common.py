@@ -27,12 +27,13 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
 
-from kadv.errors import WeightsUnavailable
+from kadv.errors import WeightsUnavailable, WriteError
 from kadv.geometry import look_at
 from kadv.io import write_json
 from kadv.losses import DELTA1_TEMPERATURE, AlignedLoss, depth_loss
 from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
 from kadv.render import BakeConfig, ExactRenderer, Shading
+from kadv.runs import RunDirectoryBusy
 from kadv.scenes import Scene, scene_from_node
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, ROOM_FEATURES, check_shares
 
@@ -51,9 +52,18 @@ __all__ = [
     "shading_from_config",
 ]
 
-# A user's mistake (a bad value, a missing file, unavailable weights) is reported in one line;
-# anything else is a bug and keeps its traceback.
-USER_ERRORS = (ValueError, FileNotFoundError, NotADirectoryError, WeightsUnavailable, OmegaConfBaseException)
+# A user's mistake (a bad value, a missing file, unavailable weights, a run directory another run
+# holds) is reported in one line with exit status 2, a fault of the environment (a file that
+# cannot be written) in one line with status 1; anything else is a bug and keeps its traceback.
+USER_ERRORS = (
+    ValueError,
+    FileNotFoundError,
+    NotADirectoryError,
+    WeightsUnavailable,
+    OmegaConfBaseException,
+    RunDirectoryBusy,
+)
+ENVIRONMENT_ERRORS = (WriteError,)
 
 
 FAILURE = "failure.json"
@@ -64,7 +74,8 @@ def _one_line(error: BaseException) -> str:
 
 
 def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]], Callable[[DictConfig], Any]]:
-    """Decorate a Hydra task so that a user error prints ``<command>: error: <message>`` and exits 2.
+    """Decorate a Hydra task so that a user error prints ``<command>: error: <message>`` and exits 2,
+    and a file it cannot write (a full disk, a read-only folder) prints the same and exits 1.
 
     In a multirun, a failing job must not stop the others: any error is logged with its traceback,
     written to the job's ``failure.json`` (the sweep's callback gathers them into ``failures.json``)
@@ -81,12 +92,13 @@ def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]],
             try:
                 return task(cfg)
             except Exception as error:
-                if os.environ.get("HYDRA_FULL_ERROR") == "1" or not (multirun or isinstance(error, USER_ERRORS)):
+                known = isinstance(error, USER_ERRORS + ENVIRONMENT_ERRORS)
+                if os.environ.get("HYDRA_FULL_ERROR") == "1" or not (multirun or known):
                     raise
                 message = f"{command}: error: {_one_line(error)}"
                 print(message, file=sys.stderr)
                 if not multirun:
-                    sys.exit(2)
+                    sys.exit(1 if isinstance(error, ENVIRONMENT_ERRORS) else 2)
                 logging.getLogger(command).error("job failed", exc_info=error)
                 write_json(
                     failure,

@@ -24,6 +24,9 @@ the views (select one, or click its frustum, for its four-panel image and metric
 steps through a search's trajectory and, for a sweep, chooses the run. Ctrl-C ends it."""
 
 
+_ALL_INTERFACES = ("0.0.0.0", "::", "")
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="kadv-view", description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -38,6 +41,12 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> None:
     """Serve the viewer until Ctrl-C."""
     args = _parser().parse_args(argv)
+    if args.host in _ALL_INTERFACES:
+        print(
+            f"kadv-view: warning: --host {args.host} serves the viewer to every machine that can reach this one "
+            "(the run's pictures and scene included); --host 127.0.0.1 keeps it to this machine",
+            file=sys.stderr,
+        )
     try:
         viewer = view(args.path, args.host, args.port, args.scene)
     except USER_ERRORS as error:

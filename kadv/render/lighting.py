@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
+from filelock import FileLock
 from kornia.color import linear_rgb_to_rgb, rgb_to_linear_rgb
 from scipy.spatial import cKDTree
 from tqdm import tqdm
@@ -638,10 +639,20 @@ def load_or_bake(renderer: ExactRenderer, config: BakeConfig | None = None, prog
     """The scene's baked lighting from the cache, else baked now and cached (written atomically).
 
     A cache file that cannot be read, or does not fit, is moved aside with a warning and baked again.
+    Each cache entry is locked while it is read or baked: a second process that needs the same bake
+    (a sweep's jobs on one scene) waits for the first and reads its result instead of baking again.
     """
     config = config or BakeConfig()
     digest = _scene_digest(renderer.scene, config)
     path = config.cache_dir() / f"{renderer.scene.name}-{digest[:24]}.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with FileLock(path.with_name(path.name + ".lock")):
+        return _load_or_bake(renderer, config, progress, path, digest)
+
+
+def _load_or_bake(
+    renderer: ExactRenderer, config: BakeConfig, progress: bool, path: Path, digest: str
+) -> BakedLighting:
     if path.exists():
         try:
             return _read(path, digest, renderer.scene.num_triangles)

@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -57,3 +58,34 @@ def test_a_job_that_fails_on_slurm_is_reported(cluster, tmp_path: Path) -> None:
     failures = json.loads((tmp_path / "sweep" / "failures.json").read_text())
     assert len(failures) == 1 and "attack.budget_evaluations=-1" in failures[0]["overrides"]
     assert len(list((tmp_path / "sweep").glob("*/summary.json"))) == 1
+
+
+def test_a_job_signalled_as_at_its_time_limit_is_requeued_and_resumes(cluster, tmp_path: Path) -> None:
+    """Slurm sends USR2 ahead of a job's time limit (and on preemption); submitit then requeues the
+    job, which resumes from the init views it finished. The signal is sent by hand, at once, rather
+    than waiting minutes for a real limit."""
+    slow = ["attack=gradient", "attack.gradient.steps=30", "attack.gradient.restarts=1", "init.count=3"]
+    command = [str(BIN / "kadv-attack"), "-m", "hydra.sweep.dir=sweep", *LAUNCHER, *TINY, *slow]
+    command += ["render.lighting=direct", "hydra.launcher.max_num_timeout=3"]
+    sweep = subprocess.Popen(command, cwd=tmp_path, env=cluster, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 240
+    while not list((tmp_path / "sweep").glob("*/partial/init0.json")) and time.monotonic() < deadline:
+        assert sweep.poll() is None, sweep.communicate()[1][-3000:]
+        time.sleep(0.1)
+    (job,) = subprocess.run(["squeue", "-h", "-o", "%i"], env=cluster, capture_output=True, text=True).stdout.split()
+    subprocess.run(["scancel", "--signal=USR2", job], env=cluster, check=True)
+    # Slurm holds a requeued job back for a while (its BeginTime); a test need not wait for it
+    while sweep.poll() is None and time.monotonic() < deadline + 120:
+        state = subprocess.run(["squeue", "-h", "-j", job, "-o", "%T %r"], env=cluster, capture_output=True, text=True)
+        if state.stdout.split()[:2] == ["PENDING", "BeginTime"]:
+            subprocess.run(["scontrol", "update", f"JobId={job}", "StartTime=now"], env=cluster, check=True)
+            break
+        time.sleep(0.2)
+    _, stderr = sweep.communicate(timeout=300)
+    assert sweep.returncode == 0, stderr[-3000:]
+    (summary,) = [json.loads(p.read_text()) for p in (tmp_path / "sweep").glob("*/summary.json")]
+    done = summary["resumed_init_views"]
+    # the requeued job read what the first run finished, and computed the rest, each init view once
+    assert done and done == list(range(len(done))) and len(summary["init_views"]) == 3
+    restarts = subprocess.run(["scontrol", "show", "job", job], env=cluster, capture_output=True, text=True).stdout
+    assert "Restarts=1" in restarts

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import hashlib
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -336,3 +338,23 @@ def test_a_sun_through_a_window_is_shaded_per_hit_with_a_sharp_shadow(tmp_path) 
     out = renderer.render(world_T_cam, intrinsics_from_fov(90.0, 31, 31), 31, 31)
     centre, outside = out.rgb[0, :, 15, 15], out.rgb[0, :, 15, 3]  # floor at x, z = (2, 1.5) and (0.84, 1.5)
     assert (centre > 0.2).all() and (outside == 0).all()
+
+
+_BAKE_IN_A_PROCESS = """
+import sys
+from kadv import ExactRenderer, box_room
+from kadv.render import BakeConfig, load_or_bake
+renderer = ExactRenderer(box_room(seed=0))
+baked = load_or_bake(renderer, BakeConfig(texel=0.2, rays=16, cache=sys.argv[1]), False)
+print(baked.seconds > 0)
+"""
+
+
+def test_two_processes_that_need_one_bake_bake_it_once(tmp_path) -> None:
+    processes = [
+        subprocess.Popen([sys.executable, "-c", _BAKE_IN_A_PROCESS, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+        for _ in range(2)
+    ]
+    baked = sorted(process.communicate(timeout=300)[0].strip() for process in processes)
+    assert baked == ["False", "True"], "one bakes, the other waits and reads its result"
+    assert len(list(tmp_path.glob("*.npz"))) == 1

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import json
 from pathlib import Path
 
 import numpy as np
@@ -143,3 +144,16 @@ def test_the_video_fits_the_page_width(tmp_path: Path) -> None:
     html = (tmp_path / "out" / "report.html").read_text()
     assert "figure video, body > img { display: block; max-width: 100%; height: auto; }" in html
     assert '<figure class="video">' in html
+
+
+def test_a_scene_or_run_named_like_markup_is_escaped_in_the_page(tmp_path: Path) -> None:
+    hostile = "<script>alert(1)</script>"
+    folder = tmp_path / "sweep" / "<script>run"
+    _run(folder, "random", 0.1, 0.3, (0.9, 0.2))
+    summary = (folder / "summary.json").read_text().replace('"box_room_0"', json.dumps(hostile))
+    (folder / "summary.json").write_text(summary)
+    write_report([tmp_path / "sweep"], tmp_path / "out", progress=False)
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "&lt;script&gt;alert(1)&lt;/script&gt;" in html and "&lt;script&gt;run" in html
+    assert hostile not in html and "<script>run" not in html
+    assert html.count("<script>") == 1  # the page's own: sorting the tables

@@ -180,3 +180,12 @@ def test_the_scene_keeps_its_colours_and_large_scenes_are_decimated() -> None:
     budget = scene.num_triangles // 4
     small = _display_mesh(scene, budget)
     assert len(small.faces) <= budget and len(np.unique(small.visual.vertex_colors[:, :3], axis=0)) > 20
+
+
+def test_listening_on_every_interface_is_warned_of_in_one_line(tmp_path: Path) -> None:
+    code, text = _view_command(str(tmp_path), "--host", "0.0.0.0")
+    warning, error = text.splitlines()
+    assert warning.startswith("kadv-view: warning: --host 0.0.0.0 serves the viewer to every machine")
+    assert code == 2 and error.startswith("kadv-view: error: no complete run")
+    code, text = _view_command(str(tmp_path))
+    assert "warning" not in text, "the default, 127.0.0.1, keeps it to this machine"

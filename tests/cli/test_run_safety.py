@@ -1,0 +1,130 @@
+"""kadv-attack under what clusters and people do to runs: a second process on the run directory,
+Ctrl-C and SIGTERM, a full disk and a read-only folder. Each ends in one line and its exit status,
+and a rerun resumes."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from unittest import mock
+
+import pytest
+
+from tests.cli.test_attack_cli import _command, _run_in_process
+
+# slow enough per init view to be caught between two, with direct light (no bake)
+RUN = [
+    "render.height=48",
+    "render.width=64",
+    "render.lighting=direct",
+    "attack=gradient",
+    "attack.gradient.steps=40",
+    "attack.gradient.restarts=1",
+    "init.count=3",
+    "init.candidates=8",
+    "progress=false",
+    "video=false",
+]
+
+
+def _with(overrides: list[str], *changes: str) -> list[str]:
+    """``overrides`` with the keys of ``changes`` set to their values."""
+    keys = {change.partition("=")[0] for change in changes}
+    return [o for o in overrides if o.partition("=")[0] not in keys] + list(changes)
+
+
+def _start(run_dir: Path) -> subprocess.Popen:
+    process = subprocess.Popen(
+        _command("kadv-attack", run_dir, *RUN), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    part = run_dir / "partial" / "init0.json"
+    deadline = time.monotonic() + 300
+    while not part.exists() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    assert part.exists(), process.communicate()[1]
+    return process
+
+
+@pytest.mark.parametrize(("signum", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_second_run_is_refused_and_an_interrupted_run_says_what_it_kept(
+    tmp_path: Path, signum: int, status: int
+) -> None:
+    run_dir = tmp_path / "run"
+    process = _start(run_dir)
+    second = _run_in_process("kadv-attack", run_dir, *RUN)
+    assert second.returncode == 2
+    assert second.stderr == (
+        f"kadv-attack: error: run directory {run_dir} is in use by another kadv run (PID {process.pid} on "
+        f"{socket.gethostname()} since {json.loads((run_dir / '.kadv.lock.json').read_text())['started']}); "
+        "wait for it to finish, or stop it first\n"
+    )
+    process.send_signal(signum)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == status
+    done = len(list((run_dir / "partial").glob("init*.json")))
+    assert stderr.splitlines()[-1] == (
+        f"interrupted: {done} of 3 init views done, kept in {run_dir}; run the same command to resume"
+    )
+    assert "Traceback" not in stderr and 1 <= done < 3
+    assert not [p.name for p in run_dir.rglob(".*") if p.name.startswith((".init", ".trajectory", ".summary"))]
+    resumed = subprocess.run(_command("kadv-attack", run_dir, *RUN), capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    assert json.loads((run_dir / "summary.json").read_text())["resumed_init_views"] == list(range(done))
+
+
+def _full_disk(path: Path):
+    """os.replace as a full disk answers it, for the summary only: everything before is written."""
+    real = os.replace
+
+    def replace(source, destination):
+        if str(destination).endswith("summary.json"):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real(source, destination)
+
+    return mock.patch("kadv.io.os.replace", replace)
+
+
+def test_a_full_disk_is_one_line_exit_status_1_and_the_rerun_resumes(tmp_path: Path) -> None:
+    run_dir = tmp_path / "run"
+    small = _with(RUN, "attack.gradient.steps=3")
+    with _full_disk(run_dir):
+        result = _run_in_process("kadv-attack", run_dir, *small)
+    assert result.returncode == 1
+    assert result.stderr == f"kadv-attack: error: cannot write {run_dir / 'summary.json'}: No space left on device\n"
+    assert len(list((run_dir / "partial").glob("init*.json"))) == 3 and (run_dir / "trajectory.csv").is_file()
+    assert not list(run_dir.glob(".summary*")), "no temporary file is left"
+    again = _run_in_process("kadv-attack", run_dir, *small)
+    assert again.returncode == 0, again.stderr
+    assert json.loads((run_dir / "summary.json").read_text())["resumed_init_views"] == [0, 1, 2]
+
+
+def _mount_tmpfs(folder: Path, *options: str) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    command = ["mount", "-t", "tmpfs", "-o", ",".join(["size=200k", *options]), "tmpfs", str(folder)]
+    mounted = subprocess.run(command, capture_output=True, text=True)
+    if mounted.returncode != 0:
+        pytest.fail(f"this test mounts a small tmpfs and needs root with mount(8): {mounted.stderr.strip()}")
+
+
+@pytest.mark.parametrize("options", [(), ("ro",)], ids=["full", "read-only"])
+def test_a_small_or_read_only_filesystem_ends_the_run_in_one_line(tmp_path: Path, options: tuple) -> None:
+    # the run's pictures go to a 200 KiB tmpfs, or to a read-only one (Hydra's own files, written
+    # before kadv runs, go to the run directory)
+    run_dir = tmp_path / "run"
+    _mount_tmpfs(run_dir / "views", *options)
+    try:
+        result = _run_in_process("kadv-attack", run_dir, *_with(RUN, "init.count=1", "attack.gradient.steps=2"))
+    finally:
+        subprocess.run(["umount", "-l", str(run_dir / "views")], check=True)
+    reason = "Read-only file system" if options else "No space left on device"
+    assert result.returncode == 1, result.stderr
+    line = result.stderr.splitlines()[-1]
+    assert line.startswith(f"kadv-attack: error: cannot write {run_dir / 'views'}/init0") and line.endswith(reason)
+    assert "Traceback" not in result.stderr and (run_dir / "partial" / "init0.json").is_file()
