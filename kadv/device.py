@@ -11,9 +11,26 @@ networks and the reprojection's per-sample arithmetic float32 (``benchmarks/grad
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import torch
 
-__all__ = ["resolve_device"]
+__all__ = ["free_memory", "resolve_device"]
+
+
+def free_memory(device: torch.device | str = "cpu") -> int:
+    """Bytes free on ``device``: a CUDA device's free memory, or the memory the machine can give a
+    new allocation without swapping (``MemAvailable``: free pages and the reclaimable cache)."""
+    device = torch.device(device)
+    if device.type == "cuda":
+        return torch.cuda.mem_get_info(device)[0]
+    meminfo = Path("/proc/meminfo")
+    if meminfo.is_file():
+        for line in meminfo.read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
 
 
 def resolve_device(name: str | torch.device) -> torch.device:

@@ -15,7 +15,12 @@ import pytest
 from kadv.io import atomic_write
 from kadv.runs import Interrupted, RunDirectoryBusy, interruptible, run_lock
 
-HOLD = "import sys; from kadv.runs import run_lock\nwith run_lock(sys.argv[1]):\n    print('held', flush=True)\n    sys.stdin.read()\n"
+HOLD = """import sys
+from kadv.runs import run_lock
+with run_lock(sys.argv[1]):
+    print("held", flush=True)
+    sys.stdin.read()
+"""
 
 
 def _holder(run_dir: Path) -> subprocess.Popen:

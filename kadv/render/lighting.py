@@ -25,6 +25,7 @@ import math
 import os
 import time
 import warnings
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -36,6 +37,7 @@ from kornia.color import linear_rgb_to_rgb, rgb_to_linear_rgb
 from scipy.spatial import cKDTree
 from tqdm import tqdm
 
+from kadv.device import free_memory
 from kadv.io import atomic_write
 from kadv.scenes.emitters import DEFAULT_CEILING_LIGHT_SIZE, DEFAULT_LAMP_RADIANCE, MISSING_ENVMAP_RADIANCE, Emitters
 from kadv.scenes.scene import Scene
@@ -46,6 +48,7 @@ if TYPE_CHECKING:
 __all__ = [
     "BakeConfig",
     "BakedLighting",
+    "bake_bytes",
     "bake_lighting",
     "coat_table",
     "coated_albedo",
@@ -69,6 +72,8 @@ _CLOSED_ESCAPE_SHARE = 1e-3  # a room whose meter rays escape less than this see
 # a lattice point whose gather rays meet the back of surfaces this often lies inside geometry or
 # beyond a seam (an overlapping wall's rim): its own estimate is discarded and filled from neighbours
 _BURIED_SHARE = 0.25
+# bytes of one block of the bake's per-point work (its (points, neighbours or rays, 3) intermediates)
+_BLOCK_BYTES = 256 * 2**20
 
 
 @dataclass(frozen=True)
@@ -481,23 +486,57 @@ def _nearest(lattice: _Lattice, renderer: ExactRenderer, hits, directions: np.nd
     return np.where(hits.hit, nearest, -1)
 
 
+def _blocks(count: int, width: int) -> Iterator[slice]:
+    """Row blocks of (count, width, 3) float64 intermediates of about _BLOCK_BYTES each: the bake's
+    per-point work in blocks, so that its memory does not grow with points x neighbours or rays."""
+    step = max(1, _BLOCK_BYTES // (24 * max(width, 1)))
+    for start in range(0, count, step):
+        yield slice(start, start + step)
+
+
 def _filter_weights(lattice: _Lattice, neighbours: int, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Neighbour indices and normalised weights (N, k) of the noise filter: nearby ``valid`` points
     facing the same way on the same plane (within a few millimetres), by a Gaussian of their
     distance in units of the lattice spacing. A point with no valid neighbour (a small part
     buried whole, as an ornament against a wall) averages its neighbours' own estimates instead."""
     # twice the neighbours: each point's twin on the other side shares its position
-    k = min(2 * neighbours, len(lattice.points))
-    distance, index = cKDTree(lattice.points).query(lattice.points, k=k, workers=-1)
-    index = index.reshape(len(lattice.points), k)
-    distance = distance.reshape(len(lattice.points), k)
-    facing = np.einsum("nd,nkd->nk", lattice.face_normals, lattice.face_normals[index]) > 0.9
-    plane = np.abs(np.einsum("nd,nkd->nk", lattice.face_normals, lattice.points[index] - lattice.points[:, None]))
-    near = np.exp(-((distance / lattice.spacing[:, None]) ** 2)) * facing * (plane < 4 * _OFFSET)
-    weights = near * valid[index]
-    weights = np.where(weights.sum(axis=1, keepdims=True) > 0, weights, near)
-    total = weights.sum(axis=1, keepdims=True)
-    return index, (weights / np.where(total > 0, total, 1.0)).astype(np.float32)
+    count = len(lattice.points)
+    k = min(2 * neighbours, count)
+    tree = cKDTree(lattice.points)
+    index = np.empty((count, k), np.int64)
+    weights = np.empty((count, k), np.float32)
+    for rows in _blocks(count, k):
+        points = lattice.points[rows]
+        distance, near_index = tree.query(points, k=k, workers=-1)
+        near_index = near_index.reshape(len(points), k)
+        distance = distance.reshape(len(points), k)
+        normals = lattice.face_normals[rows]
+        facing = np.einsum("nd,nkd->nk", normals, lattice.face_normals[near_index]) > 0.9
+        plane = np.abs(np.einsum("nd,nkd->nk", normals, lattice.points[near_index] - points[:, None]))
+        near = np.exp(-((distance / lattice.spacing[rows, None]) ** 2)) * facing * (plane < 4 * _OFFSET)
+        block = near * valid[near_index]
+        block = np.where(block.sum(axis=1, keepdims=True) > 0, block, near)
+        total = block.sum(axis=1, keepdims=True)
+        index[rows], weights[rows] = near_index, block / np.where(total > 0, total, 1.0)
+    return index, weights
+
+
+def _smooth(index: np.ndarray, weights: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """(N, 3) each point's filtered ``values`` (N, 3): the weighted mean over its neighbours."""
+    out = np.empty((len(index), values.shape[1]))
+    for rows in _blocks(len(index), index.shape[1]):
+        out[rows] = np.einsum("nk,nkc->nc", weights[rows], values[index[rows]])
+    return out
+
+
+def _gather(leaving: np.ndarray, hit_point: np.ndarray) -> np.ndarray:
+    """(N, 3) the mean over each point's gather rays (``hit_point`` (N, rays), -1 on a miss) of
+    ``leaving`` (N + 1, 3) at the lattice point each met (its last row, zero, for a miss)."""
+    out = np.empty((len(hit_point), 3))
+    for rows in _blocks(len(hit_point), hit_point.shape[1]):
+        met = hit_point[rows]
+        out[rows] = leaving[np.where(met < 0, len(leaving) - 1, met)].mean(axis=1)
+    return out
 
 
 def _buried(lattice: _Lattice, hit_point: np.ndarray) -> np.ndarray:
@@ -510,14 +549,20 @@ def _buried(lattice: _Lattice, hit_point: np.ndarray) -> np.ndarray:
     room), while from a point inside an object or past an overlapping wall's rim most rays meet
     surfaces from behind."""
     per_side = len(lattice.points) // 2
-    met = hit_point[hit_point >= 0]
     triangles = len(lattice.resolution)
     # the lattice point a ray met lies on the side the ray arrived from: its index says which
-    from_front = np.bincount(lattice.triangle_ids[met[met < per_side]], minlength=triangles)
-    from_back = np.bincount(lattice.triangle_ids[met[met >= per_side]], minlength=triangles)
+    from_front, from_back = np.zeros(triangles, np.int64), np.zeros(triangles, np.int64)
+    for rows in _blocks(len(hit_point), hit_point.shape[1]):
+        met = hit_point[rows][hit_point[rows] >= 0]
+        from_front += np.bincount(lattice.triangle_ids[met[met < per_side]], minlength=triangles)
+        from_back += np.bincount(lattice.triangle_ids[met[met >= per_side]], minlength=triangles)
     back_hidden = from_back <= from_front  # a tie: the winding's front is the visible side
-    met_hidden = (hit_point >= 0) & ((hit_point >= per_side) == back_hidden[lattice.triangle_ids[hit_point]])
-    return met_hidden.mean(axis=1) > _BURIED_SHARE
+    buried = np.empty(len(hit_point), bool)
+    for rows in _blocks(len(hit_point), hit_point.shape[1]):
+        block = hit_point[rows]
+        met_hidden = (block >= 0) & ((block >= per_side) == back_hidden[lattice.triangle_ids[block]])
+        buried[rows] = met_hidden.mean(axis=1) > _BURIED_SHARE
+    return buried
 
 
 def _albedo(renderer: ExactRenderer, lattice: _Lattice) -> np.ndarray:
@@ -529,6 +574,25 @@ def _albedo(renderer: ExactRenderer, lattice: _Lattice) -> np.ndarray:
     footprint = torch.full((len(ids),), float(lattice.texel), dtype=torch.float32)
     base = albedo(renderer.scene, ids, uv, footprint, renderer._pyramids, renderer._uv_density)
     return renderer.reflectance(ids, base).double().numpy()
+
+
+def bake_bytes(points: int, config: BakeConfig) -> int:
+    """About the most memory a bake of ``points`` lattice points takes: per point its arrays (position,
+    normals, sums of light: about 400 bytes), its gather rays' hits (4 bytes a ray) and its filter's
+    neighbours (12 bytes each), then the blocks of per-point work and the renderer beside them."""
+    per_point = 400 + 4 * config.rays + 12 * 2 * config.neighbours
+    return points * per_point + 3 * _BLOCK_BYTES + 2**30
+
+
+def _check_fits(name: str, points: int, config: BakeConfig) -> None:
+    """Refuse, in one line with the figures, a bake that cannot fit in the memory available."""
+    needed, free = bake_bytes(points, config), free_memory()
+    if needed > free:
+        raise ValueError(
+            f"scene {name!r}: baking its light needs about {needed / 2**30:.1f} GiB of memory ({points} "
+            f"irradiance points) and {free / 2**30:.1f} GiB are available: lower render.bake.rays or "
+            "render.bake.neighbours, or render with render.lighting=direct"
+        )
 
 
 def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, progress: bool = True) -> BakedLighting:
@@ -544,6 +608,7 @@ def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, pro
         emitters = default_emitters(scene, escape_share)
     lattice = _build_lattice(scene, config)
     count = len(lattice.points)
+    _check_fits(scene.name, count, config)
     albedo = _albedo(renderer, lattice)
     direct = np.zeros((count, 3))
     delta = np.zeros((count, 3))
@@ -565,17 +630,14 @@ def bake_lighting(renderer: ExactRenderer, config: BakeConfig | None = None, pro
         nearest = _nearest(lattice, renderer, hits, directions)
         hit_point[begin:end] = nearest.reshape(end - begin, config.rays)
     index, weights = _filter_weights(lattice, config.neighbours, ~_buried(lattice, hit_point))
-    smooth = lambda values: np.einsum("nk,nkc->nc", weights, values[index])
+    smooth = lambda values: _smooth(index, weights, values)
     # the delta lights' own term is shaded per hit, with sharp shadows (a lattice point may stand
     # metres apart on a large floor); the light they bounce is baked
     delta = smooth(delta)
     baked = smooth(direct + sky)
-    missed = hit_point < 0
-    safe = np.where(missed, 0, hit_point)
     for _ in range(config.bounces):
         leaving = np.concatenate([albedo * (baked + delta), np.zeros((1, 3))])  # pi x outgoing radiance
-        gathered = leaving[np.where(missed, count, safe)].mean(axis=1)
-        baked = smooth(direct + sky + gathered)
+        baked = smooth(direct + sky + _gather(leaving, hit_point))
     irradiance = baked + delta
     # exposure: the median radiance the scene's cameras see, mapped to the key grey
     meter = renderer.cast(eyes, meter_directions)

@@ -9,12 +9,12 @@ imports it only when a Warp caster is built. Kernels compile on first use and ar
 from __future__ import annotations
 
 import contextlib
-import os
 
 import numpy as np
 import torch
 import warp as wp
 
+from kadv.device import free_memory
 from kadv.render.casting import RayCaster
 
 __all__ = ["WarpCaster"]
@@ -151,19 +151,12 @@ class WarpCaster(RayCaster):
         return closest
 
 
-def _free_bytes(device: torch.device) -> int:
-    """Bytes free on ``device``: the CUDA device's free memory, or the machine's available memory."""
-    if device.type == "cuda":
-        return torch.cuda.mem_get_info(device)[0]
-    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-
-
 def _check_fits(vertices: int, faces: int, device: torch.device) -> None:
     """Raise a ValueError with the figures when a scene's mesh and BVH would not fit on ``device``."""
     # float32 points, int32 indices, and a BVH of 2F - 1 nodes of two 16-byte halves plus
     # per-primitive bounds and indices, built with the same again in scratch
     needed = 12 * vertices + 12 * faces + 2 * (64 * faces + 28 * faces)
-    free = _free_bytes(device)
+    free = free_memory(device)
     if needed > free:
         raise ValueError(
             f"scene: {faces} triangles need about {needed / 2**20:.0f} MiB of {device} memory for Warp's "

@@ -93,6 +93,6 @@ def test_a_scene_too_large_for_the_device_is_refused_with_the_figures(monkeypatc
     from kadv.render import warp_caster
 
     room = box_room(seed=0)
-    monkeypatch.setattr(warp_caster, "_free_bytes", lambda device: 1024)
+    monkeypatch.setattr(warp_caster, "free_memory", lambda device: 1024)
     with pytest.raises(ValueError, match=rf"scene: {room.num_triangles} triangles need about .* MiB of cpu memory"):
         make_caster(room.vertices, room.faces, "warp")

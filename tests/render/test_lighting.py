@@ -358,3 +358,28 @@ def test_two_processes_that_need_one_bake_bake_it_once(tmp_path) -> None:
     baked = sorted(process.communicate(timeout=300)[0].strip() for process in processes)
     assert baked == ["False", "True"], "one bakes, the other waits and reads its result"
     assert len(list(tmp_path.glob("*.npz"))) == 1
+
+
+def test_the_bake_in_small_blocks_is_the_bake_bit_for_bit(monkeypatch) -> None:
+    """The per-point work runs in blocks of bounded memory; their size changes nothing."""
+    renderer = ExactRenderer(box_room(seed=0))
+    config = BakeConfig(texel=0.2, rays=16)
+    whole = bake_lighting(renderer, config, False)
+    monkeypatch.setattr(lighting, "_BLOCK_BYTES", 4096)  # blocks of a few points
+    blocked = bake_lighting(renderer, config, False)
+    assert np.array_equal(blocked.irradiance, whole.irradiance) and blocked.exposure == whole.exposure
+
+
+def test_a_bake_that_cannot_fit_is_refused_before_it_starts_with_the_figures(monkeypatch, tmp_path) -> None:
+    monkeypatch.setattr(lighting, "free_memory", lambda device="cpu": 512 * 2**20)
+
+    def no_gather(*args, **kwargs):
+        raise AssertionError("the bake started")
+
+    monkeypatch.setattr(lighting, "_albedo", no_gather)
+    with pytest.raises(
+        ValueError,
+        match=r"scene 'box_room_0': baking its light needs about 1\.\d GiB of memory "
+        r"\(\d+ irradiance points\) and 0\.5 GiB are available",
+    ):
+        bake_lighting(ExactRenderer(box_room(seed=0)), BakeConfig(texel=0.2, rays=16, cache=str(tmp_path)), False)
