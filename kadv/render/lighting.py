@@ -73,7 +73,7 @@ _CLOSED_ESCAPE_SHARE = 1e-3  # a room whose meter rays escape less than this see
 # beyond a seam (an overlapping wall's rim): its own estimate is discarded and filled from neighbours
 _BURIED_SHARE = 0.25
 # bytes of one block of the bake's per-point work (its (points, neighbours or rays, 3) intermediates)
-_BLOCK_BYTES = 256 * 2**20
+_BLOCK_BYTES = 64 * 2**20
 
 
 @dataclass(frozen=True)
@@ -503,7 +503,7 @@ def _filter_weights(lattice: _Lattice, neighbours: int, valid: np.ndarray) -> tu
     count = len(lattice.points)
     k = min(2 * neighbours, count)
     tree = cKDTree(lattice.points)
-    index = np.empty((count, k), np.int64)
+    index = np.empty((count, k), np.int32)  # lattices hold far fewer than 2**31 points
     weights = np.empty((count, k), np.float32)
     for rows in _blocks(count, k):
         points = lattice.points[rows]
@@ -579,8 +579,8 @@ def _albedo(renderer: ExactRenderer, lattice: _Lattice) -> np.ndarray:
 def bake_bytes(points: int, config: BakeConfig) -> int:
     """About the most memory a bake of ``points`` lattice points takes: per point its arrays (position,
     normals, sums of light: about 400 bytes), its gather rays' hits (4 bytes a ray) and its filter's
-    neighbours (12 bytes each), then the blocks of per-point work and the renderer beside them."""
-    per_point = 400 + 4 * config.rays + 12 * 2 * config.neighbours
+    neighbours (8 bytes each), then the blocks of per-point work and the renderer beside them."""
+    per_point = 400 + 4 * config.rays + 8 * 2 * config.neighbours
     return points * per_point + 3 * _BLOCK_BYTES + 2**30
 
 
