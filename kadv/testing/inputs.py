@@ -20,23 +20,21 @@ def scene(name: str | Path, seed: int = 0):
     Raises:
         RobustnessInputError: an unknown name, listing what there is, or a file that cannot load.
     """
-    from kadv.scenes import box_room, load_scene, procedural_room
-    from kadv.scenes.probes import probe_scene
+    from kadv.scenes import scene_from_node
 
     text = str(name)
+    if text in ("box_room", "procedural"):
+        node = {"kind": text, "seed": seed}
+    elif text.startswith("probe/"):
+        node = {"kind": "probe", "name": text.removeprefix("probe/"), "seed": seed}
+    elif Path(text).suffix:
+        node = {"kind": "file", "path": text}
+    else:
+        raise RobustnessInputError(f"no scene {text!r}: give one of {', '.join(SCENE_KINDS)}")
     try:
-        if text == "box_room":
-            return box_room(seed=seed)
-        if text == "procedural":
-            return procedural_room(seed=seed)
-        if text.startswith("probe/"):
-            return probe_scene(text.removeprefix("probe/"), seed)
-        path = Path(text).expanduser()
-        if path.suffix:
-            return load_scene(path)
+        return scene_from_node(node)
     except (ValueError, FileNotFoundError) as error:
         raise RobustnessInputError(str(error)) from error
-    raise RobustnessInputError(f"no scene {text!r}: give one of {', '.join(SCENE_KINDS)}")
 
 
 def resolve_scene(value):
