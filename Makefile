@@ -49,8 +49,10 @@ $(TEST_STAMP): $(STAMP)
 demo: demo-packages $(STAMP)
 	$(BIN)/kadv-attack
 
+# two workers (pytest-xdist), each test file on one of them, so that a module's shared runs are made
+# once; a worker that dies ends the run rather than leaving its file's tests waiting
 test: test-packages $(TEST_STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile --max-worker-restart 0
 
 $(DOCS_STAMP): pyproject.toml | $(STAMP)
 	$(BIN)/pip install --quiet -e ".[docs]"

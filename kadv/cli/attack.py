@@ -50,6 +50,7 @@ from kadv.report.run import (
     SUMMARY,
     is_complete,
     load_partial_results,
+    remove_partial_results,
     save_partial_result,
     write_run,
 )
@@ -141,6 +142,7 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     for path in remove_temporaries(run_dir):
         log.info("removed %s, left by a run killed while writing it", path)
     if is_complete(run_dir):
+        remove_partial_results(run_dir)  # left by a run killed between its summary and their removal
         summary = RunSummary.read(run_dir / SUMMARY)
         print(f"already complete, skipped: {run_dir}\n{_table(summary)}")
         return summary.adversarial_l_depth

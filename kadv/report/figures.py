@@ -45,6 +45,14 @@ def colourise(values: np.ndarray, mask: np.ndarray, low: float, high: float) -> 
     return (rgb * 255 + 0.5).astype(np.uint8)
 
 
+# the four-panel figure's layout, in inches: fixed, so that no layout engine runs per picture (the
+# constrained layout and a tight bounding box took 0.15 s of its 0.38 s)
+_PANEL_WIDTH = 3.0
+_PANEL_GAP = 0.08
+_BAR_PAD, _BAR_WIDTH, _BAR_LABELS = 0.08, 0.12, 0.75  # a colour bar, and room for its ticks and label
+_TITLE_BAND, _BOTTOM = 0.6, 0.1
+
+
 def save_four_panel(
     path: str | Path, rgb: np.ndarray, depth: np.ndarray, prediction: np.ndarray, mask: np.ndarray, title: str
 ) -> Path:
@@ -57,21 +65,37 @@ def save_four_panel(
     """
     low, high = depth_range(depth, mask)
     error = np.where(mask, np.abs(prediction - depth) / np.maximum(depth, 1e-6), np.nan)
-    figure, axes = plt.subplots(1, 4, figsize=(4 * 3.4, 3.4 * rgb.shape[0] / rgb.shape[1] + 1.0), layout="constrained")
+    panel_height = _PANEL_WIDTH * rgb.shape[0] / rgb.shape[1]
+    bar = _BAR_PAD + _BAR_WIDTH + _BAR_LABELS
+    width = 4 * _PANEL_WIDTH + 2 * _PANEL_GAP + 2 * bar
+    height = panel_height + _TITLE_BAND + _BOTTOM
+    figure = plt.figure(figsize=(width, height))
+
+    def axes_at(left: float, axes_width: float) -> plt.Axes:
+        return figure.add_axes((left / width, _BOTTOM / height, axes_width / width, panel_height / height))
+
+    # three panels, the depth colour bar, the error panel and its colour bar, left to right
+    lefts = [i * (_PANEL_WIDTH + _PANEL_GAP) for i in range(3)]
+    depth_bar = lefts[2] + _PANEL_WIDTH + _BAR_PAD
+    lefts.append(depth_bar + _BAR_WIDTH + _BAR_LABELS)
+    axes = [axes_at(left, _PANEL_WIDTH) for left in lefts]
     axes[0].imshow(np.clip(rgb, 0, 1))
     axes[0].set_title("rendered image")
     shown = [np.ma.masked_where(~mask, depth), np.ma.masked_where(~mask, prediction)]
     for axis, values, name in zip(axes[1:3], shown, ("ground-truth depth", "prediction (aligned)")):
         image = axis.imshow(values, cmap=depth_colour_map(), vmin=low, vmax=high, interpolation="nearest")
         axis.set_title(name)
-    figure.colorbar(image, ax=axes[1:3].tolist(), fraction=0.03, pad=0.02, label="depth [m], grey: no surface")
+    figure.colorbar(image, cax=axes_at(depth_bar, _BAR_WIDTH), label="depth [m], grey: no surface")
     errors = axes[3].imshow(np.ma.masked_invalid(error), cmap="magma", vmin=0.0, vmax=0.5, interpolation="nearest")
     axes[3].set_title("|pred - gt| / gt")
-    figure.colorbar(errors, ax=axes[3], fraction=0.046, pad=0.02, extend="max")
+    figure.colorbar(errors, cax=axes_at(lefts[3] + _PANEL_WIDTH + _BAR_PAD, _BAR_WIDTH), extend="max")
     for axis in axes:
         axis.set_axis_off()
-    figure.suptitle(title, fontsize=10)
-    return save_figure(Path(path), figure)
+    figure.suptitle(title, fontsize=10, y=1 - 0.12 / height, va="top")
+    try:
+        return atomic_write(Path(path), lambda tmp: figure.savefig(tmp, format="png", dpi=100))
+    finally:
+        plt.close(figure)
 
 
 # the video's plan shows at least this many metres on each side of the search's centre

@@ -55,6 +55,7 @@ __all__ = [
     "is_complete",
     "load_partial_results",
     "read_trajectory",
+    "remove_partial_results",
     "save_partial_result",
     "save_view_picture",
     "trajectory_rows",
@@ -101,6 +102,15 @@ def load_partial_results(run_dir: str | Path) -> dict[int, InitViewResult]:
                 aside.name,
             )
     return results
+
+
+def remove_partial_results(run_dir: str | Path) -> None:
+    """Remove the partial results of a run whose summary is written (files set aside as unreadable
+    stay for the user to look at)."""
+    for path in (Path(run_dir) / _PARTIAL).glob("init*.json"):
+        path.unlink()
+    with contextlib.suppress(OSError):
+        (Path(run_dir) / _PARTIAL).rmdir()
 
 
 def trajectory_rows(result: AttackResult) -> list[dict]:
@@ -293,12 +303,8 @@ def write_run(
         init_views=per_view,
     )
     summary.write(run_dir / SUMMARY)
-    # after the summary: a run cut short before it still finds every finished init view there. Files
-    # set aside as unreadable stay for the user to look at.
-    for path in (run_dir / _PARTIAL).glob("init*.json"):
-        path.unlink()
-    with contextlib.suppress(OSError):
-        (run_dir / _PARTIAL).rmdir()
+    # after the summary: a run cut short before it still finds every finished init view there
+    remove_partial_results(run_dir)
     return summary
 
 

@@ -1,16 +1,11 @@
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import os
 import shutil
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
-from unittest import mock
 
 import imageio_ffmpeg
 import numpy as np
@@ -24,6 +19,7 @@ from kadv.cli.attack import main as attack_main
 from kadv.cli.render import main as render_main
 from kadv.cli.train_tiny import main as train_tiny_main
 from kadv.report.summary import SCHEMA_VERSION
+from tests.cli.in_process import call_main
 
 BIN = Path(sys.executable).parent
 SMALL = [
@@ -53,13 +49,23 @@ def _run(tool: str, cwd: Path, run_dir: str, *overrides: str, env: dict | None =
     )
 
 
+_MAINS = {"kadv-attack": attack_main, "kadv-render": render_main, "kadv-train-tiny": train_tiny_main}
+
+
+def _run_in_process(tool: str, run_dir: Path | None, *overrides: str) -> subprocess.CompletedProcess:
+    """``tool`` called as its console script would call it (in ``run_dir``), in this process."""
+    return call_main(_MAINS[tool], [tool, *([f"hydra.run.dir={run_dir}"] if run_dir is not None else []), *overrides])
+
+
 @pytest.fixture(scope="module")
 def demo_runs(tmp_path_factory) -> Path:
-    """Two runs of one config (one with its video), to compare."""
+    """Two runs of one config to compare: one through the installed script with its video, one in
+    this process without."""
     root = tmp_path_factory.mktemp("attack")
-    for name, video in (("first", "video=true"), ("second", "video=false")):
-        result = _run("kadv-attack", root, name, *SMALL, video)
-        assert result.returncode == 0, result.stderr
+    result = _run("kadv-attack", root, "first", *SMALL, "video=true")
+    assert result.returncode == 0, result.stderr
+    result = _run_in_process("kadv-attack", root / "second", *SMALL, "video=false")
+    assert result.returncode == 0, result.stderr
     return root
 
 
@@ -133,34 +139,21 @@ def test_the_video_is_h264_yuv420p_with_four_tall_panels_and_the_plan_per_step(d
 def test_a_complete_run_is_skipped(demo_runs: Path) -> None:
     run = demo_runs / "second"
     before = {p: p.stat().st_mtime_ns for p in run.rglob("*") if p.is_file() and ".hydra" not in p.parts}
-    result = _run("kadv-attack", demo_runs, "second", *SMALL, "video=false")
+    result = _run_in_process("kadv-attack", run, *SMALL, "video=false")
     assert result.returncode == 0 and "already complete" in result.stdout
     assert before == {p: p.stat().st_mtime_ns for p in run.rglob("*") if p.is_file() and ".hydra" not in p.parts}
 
 
-def test_a_killed_run_resumes_without_redoing_finished_init_views(demo_runs: Path, tmp_path: Path) -> None:
-    overrides = [*SMALL, "video=false"]
-    process = subprocess.Popen(
-        _command("kadv-attack", tmp_path / "run", *overrides),
-        cwd=tmp_path,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    part = tmp_path / "run" / "partial" / "init0.json"
-    deadline = time.monotonic() + 300
-    while not part.exists() and process.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.02)
-    process.send_signal(signal.SIGKILL)
-    process.wait()
-    assert part.exists() and not (tmp_path / "run" / "summary.json").exists()
-    written = part.stat().st_mtime_ns
-    result = _run("kadv-attack", tmp_path, "run", *overrides)
-    assert result.returncode == 0, result.stderr
-    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    assert summary["resumed_init_views"] == [0]
-    # the finished run needs no partial results any more; the run it resumed used the one written
-    assert written and not (tmp_path / "run" / "partial").exists()
-    assert (tmp_path / "run" / "trajectory.csv").read_bytes() == (demo_runs / "first" / "trajectory.csv").read_bytes()
+def test_a_complete_run_removes_the_partial_results_a_kill_left_after_its_summary(
+    demo_runs: Path, tmp_path: Path
+) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(demo_runs / "second", run)
+    (run / "partial").mkdir()
+    (run / "partial" / "init0.json").write_text("{}")  # killed after the summary, before removing this
+    result = _run_in_process("kadv-attack", run, *SMALL, "video=false")
+    assert result.returncode == 0 and "already complete" in result.stdout
+    assert not (run / "partial").exists()
 
 
 def test_a_finished_run_keeps_no_partial_results(demo_runs: Path) -> None:
@@ -176,7 +169,7 @@ def test_unreadable_partial_files_are_set_aside_and_recomputed(demo_runs: Path, 
     cut.write_text(f'{{"schema": {SCHEMA_VERSION}, "init": {{"index": 0')  # cut short mid-write by something else
     older = run / "partial" / "init1.json"
     older.write_text(json.dumps({"schema": SCHEMA_VERSION - 1, "records": []}))  # another kadv's results
-    result = _run("kadv-attack", tmp_path, "run", *SMALL, "video=false")
+    result = _run_in_process("kadv-attack", run, *SMALL, "video=false")
     assert result.returncode == 0, result.stderr
     warnings = [line for line in (result.stdout + result.stderr).splitlines() if "cannot be read" in line]
     assert len(warnings) == 2 and "init0.json" in warnings[0] and "init1.json" in warnings[1], warnings
@@ -187,7 +180,7 @@ def test_unreadable_partial_files_are_set_aside_and_recomputed(demo_runs: Path, 
 
 
 def test_help_says_what_the_command_does_and_writes() -> None:
-    result = subprocess.run([str(BIN / "kadv-attack"), "--help"], capture_output=True, text=True, timeout=120)
+    result = _run_in_process("kadv-attack", None, "--help")
     assert result.returncode == 0
     assert result.stdout.startswith("kadv-attack: finds camera views")
     for name in ("trajectory.csv", "summary.json", "init_params.json", "views/", "map.png"):
@@ -272,22 +265,6 @@ BAD_INPUTS = [
 # small images keep the attack and render cases fast; kadv-train-tiny has no render keys
 _SIZE = {"kadv-attack": SMALL[:2], "kadv-render": SMALL[:2]}
 _DIRECT = {"kadv-attack": ["render.lighting=direct"], "kadv-render": ["render.lighting=direct"]}
-
-
-_MAINS = {"kadv-attack": attack_main, "kadv-render": render_main, "kadv-train-tiny": train_tiny_main}
-
-
-def _run_in_process(tool: str, run_dir: Path, *overrides: str) -> subprocess.CompletedProcess:
-    """``tool`` called as its console script would call it, in this process: its exit status and stderr."""
-    stderr = io.StringIO()
-    with mock.patch.object(sys, "argv", [tool, f"hydra.run.dir={run_dir}", *overrides]):
-        with contextlib.redirect_stderr(stderr):
-            try:
-                _MAINS[tool]()
-                code = 0
-            except SystemExit as exit_:
-                code = exit_.code
-    return subprocess.CompletedProcess([tool, *overrides], code, "", stderr.getvalue())
 
 
 def _bad_input_case(case: int, root: Path, values: dict, in_process: bool) -> subprocess.CompletedProcess:

@@ -86,6 +86,20 @@ def _run(server, run_dir: Path, kill_at_write: int = 0, kill_after: float | None
     return process.exitcode
 
 
+def _kill_and_resume(server, run_dir: Path, kill: tuple[str, float]) -> tuple[list[int] | None, list[int]]:
+    """Kill a run as ``kill`` says, then resume it to the end: the init views whose partial results
+    the kill left (None where it left a finished run), and those the resumed run read."""
+    if kill[0] == "write":
+        assert _run(server, run_dir, kill_at_write=int(kill[1])) == -signal.SIGKILL
+        assert list(run_dir.rglob(".*.kadv-tmp-*")), "killed between a write and its rename"
+    else:
+        _run(server, run_dir, kill_after=kill[1])
+    left = sorted(int(p.stem.removeprefix("init")) for p in run_dir.glob("partial/init*.json"))
+    left = None if (run_dir / "summary.json").exists() else left
+    assert _run(server, run_dir) == 0, kill
+    return left, json.loads((run_dir / "summary.json").read_text())["resumed_init_views"]
+
+
 def test_a_run_killed_at_ten_instants_resumes_to_the_same_end(server, tmp_path: Path) -> None:
     reference = tmp_path / "reference"
     start = time.monotonic()
@@ -98,14 +112,15 @@ def test_a_run_killed_at_ten_instants_resumes_to_the_same_end(server, tmp_path: 
     at_seconds = sorted(rng.uniform(0.1, 0.9, KILLS - KILLS // 2) * duration)
     trajectory = (reference / "trajectory.csv").read_bytes()
     summary = _comparable(json.loads((reference / "summary.json").read_text()))
-    for kill in [("write", n) for n in at_writes] + [("seconds", s) for s in at_seconds]:
+    kills = [("write", n) for n in at_writes] + [("seconds", s) for s in at_seconds]
+    resumed_any = False
+    for kill in kills:
         run_dir = tmp_path / f"{kill[0]}{kill[1]:.2f}"
-        if kill[0] == "write":
-            assert _run(server, run_dir, kill_at_write=kill[1]) == -signal.SIGKILL
-            assert list(run_dir.rglob(".*.kadv-tmp-*")), "killed between a write and its rename"
-        else:
-            _run(server, run_dir, kill_after=kill[1])
-        assert _run(server, run_dir) == 0, kill
+        left, resumed = _kill_and_resume(server, run_dir, kill)
+        # a resumed run reads every init view a killed one finished, and computes none of them again
+        assert left is None or resumed == left, kill
+        resumed_any |= bool(resumed)
         assert (run_dir / "trajectory.csv").read_bytes() == trajectory, kill
         assert _comparable(json.loads((run_dir / "summary.json").read_text())) == summary, kill
         assert not list(run_dir.rglob(".*.kadv-tmp-*")) and not (run_dir / "partial").exists(), kill
+    assert resumed_any, "no kill came after an init view was finished"

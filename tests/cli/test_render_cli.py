@@ -1,4 +1,5 @@
-"""kadv-render as a subprocess: its files, the README's examples, and views it must refuse."""
+"""kadv-render: its files through the installed script, and the README's examples and the views it
+must refuse through its ``main`` in this process (the script's start proves nothing more there)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from kadv.cli.render import main as render_main
+from tests.cli.in_process import call_main
 from tests.conftest import scenes_root
 
 pytestmark = pytest.mark.real_scenes
@@ -21,16 +24,30 @@ SCRIPT = Path(sys.executable).parent / "kadv-render"
 README = Path(__file__).resolve().parents[2] / "README.md"
 
 
-def _run(cwd: Path, *overrides: str, cache: Path | None = None) -> subprocess.CompletedProcess:
-    env = {**os.environ, "KADV_SCENES": str(scenes_root()), "HYDRA_FULL_ERROR": "0"}
-    env |= {"KADV_CACHE": str(cache)} if cache is not None else {}
+def _environment(cache: Path | None) -> dict[str, str]:
+    env = {"KADV_SCENES": str(scenes_root()), "HYDRA_FULL_ERROR": "0"}
+    return env | ({"KADV_CACHE": str(cache)} if cache is not None else {})
+
+
+def _script(cwd: Path, *overrides: str) -> subprocess.CompletedProcess:
+    """The installed kadv-render in ``cwd``, in its own process."""
     return subprocess.run(
-        [str(SCRIPT), "hydra.run.dir=run", *overrides], cwd=cwd, capture_output=True, text=True, timeout=300, env=env
+        [str(SCRIPT), "hydra.run.dir=run", *overrides],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, **_environment(None)},
     )
 
 
+def _run(cwd: Path, *overrides: str, cache: Path | None = None) -> subprocess.CompletedProcess:
+    """kadv-render as its script would call it, in ``cwd`` but in this process."""
+    return call_main(render_main, ["kadv-render", "hydra.run.dir=run", *overrides], cwd, _environment(cache))
+
+
 def test_installed_script_writes_aligned_images_raw_depth_and_a_summary(tmp_path: Path) -> None:
-    result = _run(tmp_path, "render.height=60", "render.width=80")
+    result = _script(tmp_path, "render.height=60", "render.width=80")
     assert result.returncode == 0, result.stderr
     run = tmp_path / "run"
     with Image.open(run / "rgb.png") as rgb, Image.open(run / "mask.png") as mask:

@@ -88,7 +88,7 @@ def test_a_second_run_is_refused_and_interrupted_runs_say_what_they_kept_and_res
     while resumed.poll() is None and time.monotonic() < deadline and "resuming" not in _text(log):
         time.sleep(0.02)
     assert _interrupt(resumed, signal.SIGTERM, run_dir) == done  # status 143
-    finished = subprocess.run(_command("kadv-attack", run_dir, *RUN), capture_output=True, text=True, timeout=600)
+    finished = _run_in_process("kadv-attack", run_dir, *RUN)
     assert finished.returncode == 0, finished.stderr
     assert json.loads((run_dir / "summary.json").read_text())["resumed_init_views"] == list(range(done))
 

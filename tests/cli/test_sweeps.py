@@ -13,6 +13,9 @@ from pathlib import Path
 
 import pytest
 
+from kadv.cli.report import main as report_main
+from tests.cli.in_process import call_main
+
 BIN = Path(sys.executable).parent
 TINY = [
     "render.height=24",
@@ -60,21 +63,30 @@ def test_a_2x2_sweep_through_a_launcher(launcher: str, tmp_path: Path) -> None:
     _check_grid(tmp_path)
 
 
-def test_a_killed_sweep_finishes_on_a_rerun_without_redoing_jobs(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def killed_sweep(tmp_path_factory) -> tuple[Path, dict[Path, int], subprocess.CompletedProcess]:
+    """The 2x2 grid killed once a job has finished, then run again to the end: the sweep's folder,
+    the jobs finished before the kill (with their summaries' mtimes), and the rerun. The report's
+    test reads the finished sweep too."""
+    cwd = tmp_path_factory.mktemp("killed_sweep")
     command = [str(BIN / "kadv-attack"), "-m", "hydra.sweep.dir=sweep", *TINY, *GRID]
     process = subprocess.Popen(
-        command, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
+        command, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
     )
     deadline = time.monotonic() + 300
-    while not _summaries(tmp_path) and process.poll() is None and time.monotonic() < deadline:
+    while not _summaries(cwd) and process.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
     os.killpg(process.pid, signal.SIGKILL)
     process.wait()
-    finished = {p: p.stat().st_mtime_ns for p in _summaries(tmp_path)}
+    finished = {p: p.stat().st_mtime_ns for p in _summaries(cwd)}
+    return cwd, finished, _sweep(cwd, *GRID)
+
+
+def test_a_killed_sweep_finishes_on_a_rerun_without_redoing_jobs(killed_sweep) -> None:
+    cwd, finished, result = killed_sweep
     assert 1 <= len(finished) < 4
-    result = _sweep(tmp_path, *GRID)
     assert result.returncode == 0, result.stderr[-2000:]
-    _check_grid(tmp_path)
+    _check_grid(cwd)
     assert result.stdout.count("already complete") == len(finished)
     assert all(p.stat().st_mtime_ns == mtime for p, mtime in finished.items())  # none ran twice
 
@@ -93,13 +105,14 @@ def test_a_failing_job_does_not_stop_the_others(tmp_path: Path) -> None:
     assert fixed.returncode == 0 and not (tmp_path / "sweep" / "failures.json").exists()
 
 
-def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(tmp_path: Path) -> None:
-    assert _sweep(tmp_path, *GRID).returncode == 0
+def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(killed_sweep, tmp_path: Path) -> None:
+    cwd, _, rerun = killed_sweep
+    assert rerun.returncode == 0
     result = subprocess.run(
-        [str(BIN / "kadv-report"), "sweep", "--no-progress"], cwd=tmp_path, capture_output=True, text=True, timeout=600
+        [str(BIN / "kadv-report"), "sweep", "--no-progress"], cwd=cwd, capture_output=True, text=True, timeout=600
     )
     assert result.returncode == 0, result.stderr[-2000:]
-    out = tmp_path / "sweep" / "report"
+    out = cwd / "sweep" / "report"
     for method in ("gradient", "random"):  # the study's tables for each method in the sweep
         table2 = (out / f"table2_{method}.md").read_text()
         assert "| kadv_tiny |" in table2 and "box_room_0 L_depth" in table2 and "Avg delta1" in table2
@@ -138,7 +151,5 @@ def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(tmp_path: Pat
 
 
 def test_kadv_report_names_a_missing_directory(tmp_path: Path) -> None:
-    result = subprocess.run(
-        [str(BIN / "kadv-report"), str(tmp_path / "nothing")], capture_output=True, text=True, timeout=120
-    )
+    result = call_main(report_main, ["kadv-report", str(tmp_path / "nothing")])
     assert result.returncode == 2 and result.stderr.strip().count("\n") == 0 and "nothing" in result.stderr

@@ -2,20 +2,19 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 import torch
 
 from kadv.attack import file_init_views
+from kadv.cli.attack import main as attack_main
+from kadv.cli.report import main as report_main
 from kadv.diagnostics.reference import compare_view, load_mitsuba_scene, mitsuba_depth, save_comparison
 from kadv.geometry import intrinsics_from_fov, look_at
 from kadv.models import load_model
 from kadv.render import ExactRenderer
 from kadv.scenes import load_scene
+from tests.cli.in_process import call_main
 from tests.conftest import cached_real_scene, scenes_root
 
 pytestmark = pytest.mark.reference
@@ -93,15 +92,15 @@ def test_kadv_report_reference_scores_each_adversarial_view_on_both_renderers(tm
     on a run in a generated room (no XML to give Mitsuba) one line and exit status 2."""
     from kadv.report.summary import RunSummary
 
-    binaries = Path(sys.executable).parent
     path = scenes_root() / "modern_hall" / "scene.xml"
     small = ["render.height=24", "render.width=32", "init.count=1", "init.candidates=8", "attack=random"]
     small += ["attack.budget_evaluations=12", "video=false", "progress=false", "render.lighting=direct"]
+    # the commands' mains in this process: their scripts' own processes are tested in tests/cli
     for name, scene in (("xml", ["scene=file", f"scene.path={path}"]), ("box", ["scene=box_room"])):
-        command = [str(binaries / "kadv-attack"), f"hydra.run.dir={tmp_path / name}", *scene, *small]
-        subprocess.run(command, check=True, capture_output=True, cwd=tmp_path)
-    report = [str(binaries / "kadv-report"), "--reference", "--reference-spp", "4", "--no-transfer", "--no-progress"]
-    result = subprocess.run([*report, str(tmp_path / "xml")], capture_output=True, text=True)
+        ran = call_main(attack_main, ["kadv-attack", f"hydra.run.dir={tmp_path / name}", *scene, *small], tmp_path)
+        assert ran.returncode == 0, ran.stderr
+    report = ["kadv-report", "--reference", "--reference-spp", "4", "--no-transfer", "--no-progress"]
+    result = call_main(report_main, [*report, str(tmp_path / "xml")])
     assert result.returncode == 0, result.stderr
     summary = RunSummary.read(tmp_path / "xml" / "summary.json")
     lines = (tmp_path / "xml" / "report" / "reference_xml.csv").read_text().strip().splitlines()
@@ -110,9 +109,9 @@ def test_kadv_report_reference_scores_each_adversarial_view_on_both_renderers(tm
     first = lines[1].split(",")
     assert abs(float(first[2]) - summary.init_views[0].init.delta1) < 1e-3  # kadv's init delta1, as the run scored it
     assert all(0.0 <= float(v) <= 1.0 for line in lines[1:-1] for v in line.split(",")[2:])
-    refused = subprocess.run([*report, str(tmp_path / "box")], capture_output=True, text=True)
+    refused = call_main(report_main, [*report, str(tmp_path / "box")])
     assert refused.returncode == 2 and "no run's scene is a Mitsuba XML file" in refused.stderr
     assert len(refused.stderr.strip().splitlines()) == 2  # the skipped run's line, then the error
     no_samples = [*report[:2], "--reference-spp", "0", *report[4:], str(tmp_path / "xml")]
-    refused = subprocess.run(no_samples, capture_output=True, text=True)
+    refused = call_main(report_main, no_samples)
     assert refused.returncode == 2 and "--reference-spp must be >= 1, got 0" in refused.stderr

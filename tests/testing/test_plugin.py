@@ -8,10 +8,7 @@ from pathlib import Path
 
 import pytest
 
-# imported here, before pytester's in-process runs: each run drops the modules it imported first,
-# and matplotlib imported again beside its own leftovers refuses its own layouts
-import kadv.report.run
-import kadv.testing.card  # noqa: F401
+from kadv.testing import scene, viewpoint_robustness
 
 # a user's test file, as the README's section writes one (smaller, for speed)
 USER_TESTS = """
@@ -28,6 +25,16 @@ def test_strict(kadv_scene):
 def test_without_kadv():
     assert True
 """
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _imported_before_pytester() -> None:
+    """One small check in this process before pytester's in-process runs, which import what it does.
+
+    Each of those runs drops the modules it imported first; importing some of them again beside
+    what they left behind fails (matplotlib refuses its own layouts) or crashes the process (a
+    segmentation fault after the lighting tests had run in it)."""
+    viewpoint_robustness("kadv_tiny", scene("probe/thin_structures"), init_count=1, budget_evaluations=2, size=(24, 32))
 
 
 def _run(pytester: pytest.Pytester, *args: str) -> pytest.RunResult:
