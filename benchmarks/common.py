@@ -17,7 +17,7 @@ from pathlib import Path
 import torch
 import yaml
 
-from kadv.render.casting import resolve_backend
+from kadv.render.backends import resolve_backend
 from kadv.scenes import Scene, box_room, load_scene
 
 REAL_SCENES = ("grey_white_room", "modern_hall", "japanese_classroom")

@@ -29,7 +29,7 @@ from kadv.geometry import axis_angle_to_matrix, intrinsics_from_fov
 from kadv.losses import aligned_depth, depth_metrics
 from kadv.models import DepthModel
 from kadv.render import ExactRenderer, RenderOutput
-from kadv.render.lighting import exposed, tone_map
+from kadv.render.colour import exposed, tone_map
 from kadv.report.figures import depth_colour_map, depth_range, save_figure
 from kadv.report.sweep import Table
 from kadv.scenes.mitsuba_sanitiser import sanitised_scene_root
@@ -130,7 +130,7 @@ def mitsuba_depth(scene, sensor: int, height: int, width: int) -> np.ndarray:
 
 def _exposure(linear: np.ndarray, target_srgb: np.ndarray) -> float:
     """One scale on linear radiance so that, tone-mapped as kadv tone-maps its baked renders
-    (:func:`kadv.render.lighting.tone_map`), its median brightness matches the target's.
+    (:func:`kadv.render.colour.tone_map`), its median brightness matches the target's.
 
     The median, not the mean: a window onto the sky is orders of magnitude brighter than the room and
     would otherwise set the exposure for the whole image.

@@ -1,14 +1,26 @@
-"""Rendering: the exact ray-cast renderer, anchor layers, reprojection and the differentiable façade."""
+"""Rendering: the exact ray-cast renderer, anchor layers, reprojection and the differentiable façade.
+
+The exact renderer's stages, each in its own module: cast (:mod:`~kadv.render.casting`, behind
+:mod:`~kadv.render.backends`) -> surface (:mod:`~kadv.render.surface`: what was hit, with
+:mod:`~kadv.render.textures`) -> shade (:mod:`~kadv.render.shading`, reading
+:mod:`~kadv.render.irradiance` and :mod:`~kadv.render.lights`) -> output
+(:mod:`~kadv.render.raycast`). The bake (:mod:`~kadv.render.bake`) estimates the irradiance once
+per scene with the same surfaces.
+"""
 
 from __future__ import annotations
 
+from kadv.render.bake import BakeConfig, bake_lighting, load_or_bake
 from kadv.render.dibr import Reprojection, reproject
 from kadv.render.differentiable import DifferentiableRenderer, DiffRenderConfig, DiffRenderOutput
+from kadv.render.irradiance import BakedLighting
 from kadv.render.layers import AnchorLayers, render_anchor
-from kadv.render.lighting import BakeConfig, BakedLighting, bake_lighting, load_or_bake
+from kadv.render.lights import scene_lights
 from kadv.render.raycast import ExactRenderer, RayHits, RenderOutput
-from kadv.render.shading import Shading, sample_texture, scene_lights
+from kadv.render.shading import Shading
 from kadv.render.silhouette import EdgePairs, find_edge_pairs, silhouette_term
+from kadv.render.surface import Surfaces
+from kadv.render.textures import sample_texture
 
 __all__ = [
     "AnchorLayers",
@@ -23,6 +35,7 @@ __all__ = [
     "RenderOutput",
     "Reprojection",
     "Shading",
+    "Surfaces",
     "bake_lighting",
     "find_edge_pairs",
     "load_or_bake",

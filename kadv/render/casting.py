@@ -1,9 +1,10 @@
 """Ray casting behind one small interface, so the renderer, the layers, the silhouette term, the
 validity checks, the bake and the penalty are written once for every backend.
 
-Two backends implement :class:`RayCaster`: Open3D's Embree ``RaycastingScene`` (the CPU default)
-and NVIDIA Warp's BVH (:mod:`kadv.render.warp_caster`, on CUDA or Warp's CPU device; imported only
-when a Warp caster is built). Rays and results are torch tensors on the caster's device.
+Two backends implement :class:`RayCaster`: Open3D's Embree ``RaycastingScene`` (here, the CPU
+default) and NVIDIA Warp's BVH (:mod:`kadv.render.warp_caster`, on CUDA or Warp's CPU device).
+:func:`kadv.render.backends.make_caster` picks one. Rays and results are torch tensors on the
+caster's device.
 """
 
 from __future__ import annotations
@@ -14,11 +15,7 @@ import numpy as np
 import open3d as o3d
 import torch
 
-from kadv.device import resolve_device
-
-__all__ = ["BACKENDS", "Open3DCaster", "RayCaster", "make_caster", "resolve_backend"]
-
-BACKENDS = ("auto", "open3d", "warp")
+__all__ = ["Open3DCaster", "RayCaster"]
 
 
 class RayCaster(ABC):
@@ -81,30 +78,3 @@ class Open3DCaster(RayCaster):
     def closest_points(self, points: torch.Tensor) -> torch.Tensor:
         query = o3d.core.Tensor.from_numpy(np.ascontiguousarray(points.numpy()))
         return torch.from_numpy(self.scene.compute_closest_points(query)["points"].numpy())
-
-
-def resolve_backend(backend: str, device: torch.device | str = "cpu") -> str:
-    """The backend that ``backend`` names on ``device``: "auto" is Warp on CUDA and Open3D on the CPU.
-
-    Raises:
-        ValueError: naming ``render.backend`` when it is none of :data:`BACKENDS`, or Open3D on CUDA.
-    """
-    if backend not in BACKENDS:
-        raise ValueError(f"render.backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-    device = resolve_device(device)
-    if backend == "auto":
-        return "warp" if device.type == "cuda" else "open3d"
-    if backend == "open3d" and device.type != "cpu":
-        raise ValueError(f"render.backend=open3d casts on the CPU only, not on {device}: use render.backend=warp")
-    return backend
-
-
-def make_caster(
-    vertices: np.ndarray, faces: np.ndarray, backend: str = "auto", device: torch.device | str = "cpu"
-) -> RayCaster:
-    """A :class:`RayCaster` of triangles ``faces`` (F, 3) of ``vertices`` (V, 3) on ``device``."""
-    if resolve_backend(backend, device) == "warp":
-        from kadv.render.warp_caster import WarpCaster  # Warp loads only when a Warp caster is built
-
-        return WarpCaster(vertices, faces, resolve_device(device))
-    return Open3DCaster(vertices, faces)

@@ -1,8 +1,11 @@
-"""View-independent shading: base colour (texture or constant) x (ambient + Lambertian world lights),
-or x baked global illumination (:mod:`kadv.render.lighting`).
+"""Shading, the stage after :mod:`kadv.render.surface`: a hit's colour from its albedo and the
+light it receives, view-independent (no head-light, no specular term; the differentiable
+reprojection relies on it).
 
-A surface point keeps its colour when the camera moves (no head-light, no specular term): the
-differentiable reprojection relies on it.
+Direct lighting is albedo x (ambient + Lambertian world lights). Baked lighting is albedo x baked
+irradiance (:mod:`kadv.render.irradiance`) plus the point, spot and sun lights' sharp shadows,
+tone-mapped; a ray that leaves the scene sees the sky the bake was lit by, and one that meets an
+area emitter first sees its glow.
 
 The per-sample arithmetic runs in torch, float32 for colours, normals and lights (8-bit textures
 need no more) and float64 for texture coordinates, whose tiling can reach hundreds of repeats.
@@ -10,6 +13,7 @@ need no more) and float64 for texture coordinates, whose tiling can reach hundre
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,19 +21,13 @@ import torch
 from torch.nn import functional as F
 
 from kadv.geometry.vector import dot
-from kadv.render.lighting import BakeConfig
-from kadv.scenes.scene import Scene
+from kadv.render.bake import BakeConfig
+from kadv.render.colour import tone_map
+from kadv.render.irradiance import BakedLighting
+from kadv.render.lights import delta_irradiance, scene_lights, sky_emitters, sky_radiance
+from kadv.render.surface import RayHits, Surfaces, first_hits
 
-__all__ = [
-    "Shading",
-    "albedo",
-    "mip_pyramid",
-    "sample_texture",
-    "sample_texture_filtered",
-    "scene_lights",
-    "shade",
-    "uv_density",
-]
+__all__ = ["Shader", "Shading", "shade"]
 
 
 @dataclass(frozen=True)
@@ -61,117 +59,6 @@ class Shading:
             raise ValueError(f"render.lighting must be 'direct' or 'baked', got {self.lighting!r}")
 
 
-def scene_lights(scene: Scene, shading: Shading) -> np.ndarray:
-    """Light positions (L, 3): configured, else the file's emitters, else above the bounds centre."""
-    if shading.lights is not None:
-        return np.asarray(shading.lights, np.float64).reshape(-1, 3)
-    if len(scene.lights):
-        return scene.lights
-    lo, hi = scene.bounds
-    return np.array([[(lo[0] + hi[0]) / 2, lo[1] + 0.9 * (hi[1] - lo[1]), (lo[2] + hi[2]) / 2]])
-
-
-def sample_texture(texture: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
-    """Bilinear lookup with wrap-around (N, C) of ``texture`` (H, W, C) at ``uv`` (N, 2).
-
-    v = 1 is the first image row (the OBJ / Mitsuba convention, which trimesh also gives glTF).
-    """
-    height, width, channels = texture.shape
-    x = torch.remainder(uv[:, 0], 1.0) * width - 0.5
-    y = torch.remainder(1.0 - uv[:, 1], 1.0) * height - 0.5
-    x0, y0 = torch.floor(x), torch.floor(y)
-    fx, fy = (x - x0).to(texture.dtype)[:, None], (y - y0).to(texture.dtype)[:, None]
-    x0, y0 = x0.long() % width, y0.long() % height
-    x1, y1 = (x0 + 1) % width, (y0 + 1) % height
-    # the four taps in one index_select (several times faster than indexing with [ ] on the CPU)
-    rows, columns = torch.cat([y0, y0, y1, y1]) * width, torch.cat([x0, x1, x0, x1])
-    taps = texture.reshape(-1, channels).index_select(0, rows + columns)
-    top_left, top_right, bottom_left, bottom_right = taps.split(len(uv))
-    top = torch.lerp(top_left, top_right, fx)
-    bottom = torch.lerp(bottom_left, bottom_right, fx)
-    return torch.lerp(top, bottom, fy)
-
-
-def mip_pyramid(texture: np.ndarray) -> list[torch.Tensor]:
-    """Box-filtered float32 levels (h, w, C) of a texture (H, W, C): level k is 2**k times coarser, down to 1 x 1."""
-    current = torch.from_numpy(np.ascontiguousarray(texture, np.float32)).permute(2, 0, 1)[None]
-    levels = [current[0].permute(1, 2, 0).contiguous()]
-    while max(current.shape[-2:]) > 1:
-        size = (max(1, current.shape[-2] // 2), max(1, current.shape[-1] // 2))
-        current = F.interpolate(current, size=size, mode="area")
-        levels.append(current[0].permute(1, 2, 0).contiguous())
-    return levels
-
-
-def sample_texture_filtered(levels: list[torch.Tensor], uv: torch.Tensor, level: torch.Tensor) -> torch.Tensor:
-    """Trilinear lookup (N, C): bilinear at the two mip levels around ``level`` (N,), blended."""
-    level = level.clamp(0.0, len(levels) - 1)
-    low = torch.floor(level).long()
-    frac = (level - low).to(levels[0].dtype)[:, None]
-    out = torch.empty(len(uv), levels[0].shape[2], dtype=levels[0].dtype)
-    for index in torch.unique(low).tolist():
-        selected = torch.nonzero(low == index)[:, 0]
-        uv_selected = uv.index_select(0, selected)
-        below = sample_texture(levels[index], uv_selected)
-        above = sample_texture(levels[min(index + 1, len(levels) - 1)], uv_selected)
-        out.index_copy_(0, selected, torch.lerp(below, above, frac.index_select(0, selected)))
-    return out
-
-
-def uv_density(scene: Scene) -> np.ndarray:
-    """(F,) texture-coordinate units per metre of each triangle (sqrt of UV area over world area)."""
-    corners = scene.vertices[scene.faces]
-    world = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    uv = scene.uvs.astype(np.float64)
-    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    uv_area = np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    return np.sqrt(uv_area / np.maximum(world, 1e-20))
-
-
-def albedo(
-    scene: Scene,
-    triangle_ids: torch.Tensor,
-    uv: torch.Tensor,
-    footprint: torch.Tensor,
-    pyramids: dict[int, list[torch.Tensor]],
-    density: torch.Tensor,
-) -> torch.Tensor:
-    """Base colour (N, 3) float32 of surface points given their triangles (N,) and texture coordinates (N, 2).
-
-    Textures are prefiltered (mip-mapped, from ``pyramids`` per material index) to each sample's
-    ``footprint`` (N,) (metres of surface one sample covers) using the per-triangle UV ``density``
-    (F,), so renders are band-limited and smooth in the camera pose.
-    """
-    material_ids = scene.material_ids[triangle_ids.numpy()]
-    # samples grouped by material: one sort instead of a full-length mask per material (numpy's
-    # stable sort is several times faster than torch's on the CPU here, and a radix sort on ids
-    # of 16 bits or fewer)
-    narrow = material_ids.astype(np.min_scalar_type(max(len(scene.materials) - 1, 0)))
-    order = torch.from_numpy(np.argsort(narrow, kind="stable"))
-    counts = np.bincount(material_ids, minlength=len(scene.materials)).tolist()
-    colour = torch.empty(len(triangle_ids), 3, dtype=torch.float32)
-    start = 0
-    for index, count in enumerate(counts):
-        if not count:
-            continue
-        selected = order[start : start + count]
-        start += count
-        material = scene.materials[index]
-        base = torch.as_tensor(material.base_color, dtype=torch.float32).expand(count, 3)
-        if material.texture is None:
-            colour.index_copy_(0, selected, base)
-            continue
-        texels = np.sqrt(material.texture.shape[0] * material.texture.shape[1])
-        scale = float(np.sqrt(np.prod(material.uv_scale)))
-        density_selected = density.index_select(0, triangle_ids.index_select(0, selected))
-        texel_footprint = footprint.index_select(0, selected) * density_selected * (scale * texels)
-        level = torch.log2(texel_footprint.clamp_min(1.0))
-        uv_scale = torch.as_tensor(material.uv_scale, dtype=uv.dtype)
-        filtered = sample_texture_filtered(pyramids[index], uv.index_select(0, selected) * uv_scale, level)
-        colour.index_copy_(0, selected, base * filtered)
-    return colour
-
-
 def shade(
     shading: Shading, lights: torch.Tensor, points: torch.Tensor, normals: torch.Tensor, base_colour: torch.Tensor
 ) -> torch.Tensor:
@@ -181,3 +68,117 @@ def shade(
     lambert = dot(to_lights, normals[:, None, :]).clamp_min(0.0).mean(dim=1)
     light = shading.ambient + shading.diffuse * lambert
     return (base_colour * light[:, None]).clamp(0.0, 1.0)
+
+
+class Shader:
+    """Colours of hits on ``surfaces`` under ``shading``, with the scene's ``baked`` lighting (None:
+    direct lighting).
+
+    Scene data the shading reads (lights, emitters, their colours) are tensors made once, here.
+    """
+
+    def __init__(self, surfaces: Surfaces, shading: Shading, baked: BakedLighting | None = None) -> None:
+        scene = surfaces.scene
+        self.surfaces, self.shading, self.baked = surfaces, shading, baked
+        self.lights = scene_lights(scene, shading.lights)
+        self._lights = torch.from_numpy(self.lights.astype(np.float32))
+        self._emitter_caster = None
+        if baked is not None:
+            self._delta_lights = bool(len(scene.emitters.point_positions) or len(scene.emitters.sun_directions))
+            self._sky = sky_emitters(scene)
+            emitters = scene.emitters.area_triangles
+            if len(emitters):  # the file's lamps and glowing panels, seen as a camera sees them
+                self._emitter_caster = surfaces.caster_of(
+                    emitters.reshape(-1, 3), np.arange(3 * len(emitters)).reshape(-1, 3)
+                )
+                cross = np.cross(emitters[:, 1] - emitters[:, 0], emitters[:, 2] - emitters[:, 0])
+                self._emitter_normals = torch.from_numpy(cross)
+                self._emitter_colour = tone_map(torch.from_numpy(scene.emitters.area_radiance * baked.exposure)).float()
+
+    def shade(
+        self,
+        hits: RayHits,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        pixel_angle: float,
+        colour: bool = True,
+        geometry: bool = True,
+    ) -> dict[str, np.ndarray]:
+        """Shade hits; ``pixel_angle`` (radians per sample) selects the texture mip level.
+
+        Returns "rgb" (N, 3) float32 and, with ``geometry``, the masked "points", "normals" (N, 3)
+        and "back_face" (N,). With ``colour`` False "rgb" is the background: the caller takes
+        colour from other rays.
+        """
+        # Every ray is shaded (a miss as a point on triangle 0 at the eye) and misses are masked at
+        # the end: indoors nearly every ray hits, and compacting the hits would cost more.
+        hit = torch.from_numpy(hits.hit)
+        ids = torch.from_numpy(np.maximum(hits.triangle_ids, 0))
+        bary = torch.from_numpy(hits.barycentrics)
+        t = torch.from_numpy(np.where(hits.hit, hits.t, 0.0))
+        dirs = torch.from_numpy(directions.reshape(-1, 3))
+        points = (torch.from_numpy(origins.reshape(-1, 3)) + dirs * t[:, None]).float()
+        facing = self.surfaces.facing(ids, dirs)
+        back = hit & (facing > 0)
+        normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
+        normals = torch.where(back[:, None], -normals, normals)
+        background = torch.tensor(self.shading.background, dtype=torch.float32)
+        rgb = background.expand(len(t), 3)
+        if colour:
+            uv = self.surfaces.interpolate(self.surfaces.uvs, ids, bary)
+            length = dirs.norm(dim=1)
+            incidence = facing.abs() / length
+            # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
+            footprint = t * length * pixel_angle / incidence.clamp_min(0.05).sqrt()
+            base = self.surfaces.albedo(ids, uv, footprint.float())
+            if self.baked is None:
+                shaded = shade(self.shading, self._lights, points, normals, base)
+            else:
+                irradiance = self.baked.irradiance_at(ids, bary, back)
+                if self._delta_lights:
+                    irradiance = irradiance + self._delta_irradiance(hits, origins, directions, normals)
+                shaded = tone_map(self.surfaces.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi))
+                # a ray that leaves the scene sees the sky the bake was lit by
+                sky = sky_radiance(self._sky, F.normalize(dirs, dim=1).numpy())
+                background = tone_map(torch.from_numpy(sky * self.baked.exposure).float())
+            rgb = torch.where(hit[:, None], shaded, background)
+            if self._emitter_caster is not None:
+                rgb = self._emitters_seen(rgb, hits, origins, directions)
+        maps = {"rgb": np.ascontiguousarray(rgb.numpy())}
+        if geometry:
+            maps.update(
+                points=torch.where(hit[:, None], points, 0.0).numpy(),
+                normals=torch.where(hit[:, None], normals, 0.0).numpy(),
+                back_face=back.numpy(),
+            )
+        return maps
+
+    def _delta_irradiance(
+        self, hits: RayHits, origins: np.ndarray, directions: np.ndarray, normals: torch.Tensor
+    ) -> torch.Tensor:
+        """(N, 3) irradiance at the hits from the scene's point, spot and sun lights, with one
+        shadow ray each (zero on misses)."""
+        hit = hits.hit
+        dirs = directions.reshape(-1, 3)[hit]
+        points = origins.reshape(-1, 3)[hit] + dirs * hits.t[hit, None]
+        facing = normals.numpy()[hit].astype(np.float64)
+        # the side the ray arrived from, whatever the file's normals say
+        facing *= np.where(np.einsum("nd,nd->n", facing, dirs) > 0, -1.0, 1.0)[:, None]
+        irradiance = torch.zeros(len(hit), 3)
+        irradiance[torch.from_numpy(hit)] = torch.from_numpy(
+            delta_irradiance(self.surfaces, self.surfaces.scene.emitters, points, facing)
+        ).float()
+        return irradiance
+
+    def _emitters_seen(
+        self, rgb: torch.Tensor, hits: RayHits, origins: np.ndarray, directions: np.ndarray
+    ) -> torch.Tensor:
+        """``rgb`` (N, 3) with the colour of an area emitter wherever a ray meets one before any
+        surface: its radiance on its emitting side, black behind. Emitters are no geometry (they
+        carry no depth): only the colour shows them."""
+        t, ids, _ = first_hits(self._emitter_caster, origins.reshape(-1, 3), directions.reshape(-1, 3))
+        seen = torch.from_numpy((ids >= 0) & (t < np.where(hits.hit, hits.t, np.inf)))
+        ids = torch.from_numpy(np.maximum(ids, 0))
+        facing = dot(self._emitter_normals.index_select(0, ids), torch.from_numpy(directions.reshape(-1, 3))) < 0
+        glow = self._emitter_colour.index_select(0, ids) * facing[:, None]
+        return torch.where(seen[:, None], glow, rgb)

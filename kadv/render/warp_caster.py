@@ -1,7 +1,7 @@
 """The Warp ray-casting backend: one ``wp.Mesh`` BVH per scene, queried by kernels on CUDA or on
 Warp's CPU device, with torch tensors shared in and out without copies (``wp.from_torch``).
 
-Importing this module imports Warp and initialises it; :func:`kadv.render.casting.make_caster`
+Importing this module imports Warp and initialises it; :func:`kadv.render.backends.make_caster`
 imports it only when a Warp caster is built. Kernels compile on first use and are cached by Warp
 (``wp.config.kernel_cache_dir``, by default ``~/.cache/warp/<version>``).
 """

@@ -21,7 +21,7 @@ import torch
 import trimesh
 
 from kadv.attack.records import ViewRecord, incumbent_path
-from kadv.render.shading import albedo, mip_pyramid, uv_density
+from kadv.render.textures import albedo, mip_pyramid, uv_density
 from kadv.report.run import TRAJECTORY, read_trajectory
 from kadv.report.sweep import RunRecord, collect_runs
 from kadv.scenes import Scene, scene_from_node

@@ -13,7 +13,7 @@ import torch
 from kadv.geometry import intrinsics_from_fov
 from kadv.penalties import distance_to_surface, random_valid_poses
 from kadv.render import ExactRenderer, Shading
-from kadv.render.casting import make_caster, resolve_backend
+from kadv.render.backends import make_caster, resolve_backend
 from kadv.scenes import box_room, procedural_room
 from tests.conftest import REAL_SCENES, cached_real_scene
 

@@ -1,4 +1,5 @@
-"""kadv.render.lighting: the bake against closed forms, shadows, openings, determinism and its cache."""
+"""kadv.render.bake and the lookup, colours and lights it uses: the bake against closed forms,
+shadows, openings, determinism and its cache."""
 
 from __future__ import annotations
 
@@ -13,8 +14,18 @@ import torch
 
 from kadv.diagnostics import FUNCTIONALS, gradient_check_poses
 from kadv.geometry import intrinsics_from_fov
-from kadv.render import BakeConfig, DiffRenderConfig, ExactRenderer, Shading, bake_lighting, lighting, load_or_bake
-from kadv.render.lighting import lattice_taps
+from kadv.render import (
+    BakeConfig,
+    DiffRenderConfig,
+    ExactRenderer,
+    Shading,
+    bake,
+    bake_lighting,
+    colour,
+    lights,
+    load_or_bake,
+)
+from kadv.render.irradiance import lattice_ij, lattice_taps
 from kadv.scenes import Emitters, Material, assemble_scene, box_room, procedural_room
 from kadv.scenes.emitters import DEFAULT_CEILING_LIGHT_SIZE, DEFAULT_LAMP_RADIANCE
 from kadv.scenes.parts import facing, quad_part
@@ -180,8 +191,8 @@ def test_the_training_bake_is_less_noisy_than_its_earlier_settings(tmp_path) -> 
 
 
 def test_rooms_without_emitters_get_the_documented_defaults(tmp_path) -> None:
-    closed = lighting.default_emitters(_room(albedo=0.5), escape_share=0.0)
-    opened = lighting.default_emitters(_room(albedo=0.5, window=True), escape_share=0.05)
+    closed = bake.default_emitters(_room(albedo=0.5), escape_share=0.0)
+    opened = bake.default_emitters(_room(albedo=0.5, window=True), escape_share=0.05)
     assert (
         closed.defaulted and len(closed.area_triangles) == 2 and (closed.area_radiance == DEFAULT_LAMP_RADIANCE).all()
     )
@@ -197,18 +208,18 @@ def test_the_bake_is_deterministic_for_a_seed_and_cached(tmp_path, monkeypatch) 
     scene = box_room(seed=0)
     renderer = ExactRenderer(scene)
     config = BakeConfig(texel=0.2, rays=16, cache=str(tmp_path))
-    first, second = bake_lighting(renderer, config, False), bake_lighting(renderer, config, False)
+    first, second = bake_lighting(renderer.surfaces, config, False), bake_lighting(renderer.surfaces, config, False)
     assert np.array_equal(first.irradiance, second.irradiance) and first.exposure == second.exposure
-    other = bake_lighting(renderer, BakeConfig(texel=0.2, rays=16, seed=1), False)
+    other = bake_lighting(renderer.surfaces, BakeConfig(texel=0.2, rays=16, seed=1), False)
     assert not np.array_equal(first.irradiance, other.irradiance)
-    baked = load_or_bake(renderer, config, False)
+    baked = load_or_bake(renderer.surfaces, config, False)
     assert len(list(tmp_path.glob("*.npz"))) == 1
 
     def no_bake(*args, **kwargs):
         raise AssertionError("the second load baked again")
 
-    monkeypatch.setattr(lighting, "bake_lighting", no_bake)
-    again = load_or_bake(renderer, config, False)
+    monkeypatch.setattr(bake, "bake_lighting", no_bake)
+    again = load_or_bake(renderer.surfaces, config, False)
     assert np.array_equal(again.irradiance, baked.irradiance) and again.exposure == baked.exposure
     assert np.array_equal(baked.irradiance, first.irradiance)
 
@@ -216,11 +227,11 @@ def test_the_bake_is_deterministic_for_a_seed_and_cached(tmp_path, monkeypatch) 
 def test_a_corrupt_cache_file_is_moved_aside_and_baked_again(tmp_path) -> None:
     renderer = ExactRenderer(box_room(seed=0))
     config = BakeConfig(texel=0.2, rays=16, cache=str(tmp_path))
-    fresh = load_or_bake(renderer, config, False)
+    fresh = load_or_bake(renderer.surfaces, config, False)
     (path,) = tmp_path.glob("*.npz")
     path.write_bytes(b"not a bake")
     with pytest.warns(UserWarning, match="unreadable.*moved to"):
-        again = load_or_bake(renderer, config, False)
+        again = load_or_bake(renderer.surfaces, config, False)
     assert (tmp_path / (path.name + ".corrupt")).read_bytes() == b"not a bake"
     assert np.array_equal(again.irradiance, fresh.irradiance)
     assert np.array_equal(np.load(path)["irradiance"], fresh.irradiance)  # the cache holds the new bake
@@ -236,7 +247,7 @@ def test_lattice_taps_reproduce_a_linear_function_inside_each_triangle() -> None
         if r == 0:
             values[starts[face]] = values[starts[face] + counts.sum()] = 1 + 5 / 3
             continue
-        i, j = lighting._lattice_ij(r)
+        i, j = lattice_ij(r)
         f = torch.from_numpy(1 + 2 * i / r + 3 * j / r)
         values[starts[face] : starts[face] + counts[face]] = f
         values[starts[face] + counts.sum() : starts[face] + counts.sum() + counts[face]] = f
@@ -282,10 +293,10 @@ def test_gradient_check_keeps_its_thresholds_under_baked_lighting(tmp_path) -> N
 
 
 def test_fresnel_diffuse_reflectance_has_its_known_values() -> None:
-    assert lighting.fresnel_diffuse_reflectance(1.0) == pytest.approx(0.0, abs=1e-9)
+    assert colour.fresnel_diffuse_reflectance(1.0) == pytest.approx(0.0, abs=1e-9)
     # glass-like coats: 9.2 % reflected from outside, 59.6 % trapped inside (d'Eon & Irving's fits)
-    assert lighting.fresnel_diffuse_reflectance(1.5) == pytest.approx(0.0918, abs=5e-4)
-    assert lighting.fresnel_diffuse_reflectance(1 / 1.5) == pytest.approx(0.5963, abs=5e-4)
+    assert colour.fresnel_diffuse_reflectance(1.5) == pytest.approx(0.0918, abs=5e-4)
+    assert colour.fresnel_diffuse_reflectance(1 / 1.5) == pytest.approx(0.5963, abs=5e-4)
 
 
 @pytest.mark.parametrize("kind, tolerance", [("plastic", 0.01), ("roughplastic", 0.04)])
@@ -311,8 +322,8 @@ def test_coated_albedo_matches_mitsubas_plastic(kind: str, tolerance: float) -> 
                 si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
                 total += bsdf.sample(mi.BSDFContext(), si, u[2], mi.Point2f(u[3], u[4]))[1][0]
             scene.materials[0].coat_ior, scene.materials[0].coat_nonlinear = 1.5, nonlinear
-            coats = torch.from_numpy(lighting.coat_table(scene)[:1])
-            ours = lighting.coated_albedo(torch.full((1, 3), rho, dtype=torch.float64), coats)
+            coats = torch.from_numpy(colour.coat_table(scene)[:1])
+            ours = colour.coated_albedo(torch.full((1, 3), rho, dtype=torch.float64), coats)
             assert float(ours[0, 0]) == pytest.approx(total / samples, abs=tolerance), (rho, nonlinear)
 
 
@@ -326,7 +337,7 @@ def test_a_sun_through_a_window_is_shaded_per_hit_with_a_sharp_shadow(tmp_path) 
     renderer = _baked(_room(albedo=0.5, window=True, emitters=sun), BakeConfig(texel=1.0, rays=8, bounces=0), tmp_path)
     points = np.array([[2.0, 0.0, 1.02], [2.0, 0.0, 0.98], [1.52, 0.0, 1.5], [1.48, 0.0, 1.5], [2.0, 0.0, 1.5]])
     up = np.tile([0.0, 1.0, 0.0], (len(points), 1))
-    irradiance = lighting.delta_irradiance(renderer, renderer.scene.emitters, points, up)
+    irradiance = lights.delta_irradiance(renderer.surfaces, renderer.scene.emitters, points, up)
     lit = 5.0 * toward_sun[1]
     np.testing.assert_allclose(irradiance[:, 0], [lit, 0.0, lit, 0.0, lit], atol=1e-9)
     # the lattice holds no direct sun (with no bounce, nothing) ...
@@ -345,7 +356,7 @@ import sys
 from kadv import ExactRenderer, box_room
 from kadv.render import BakeConfig, load_or_bake
 renderer = ExactRenderer(box_room(seed=0))
-baked = load_or_bake(renderer, BakeConfig(texel=0.2, rays=16, cache=sys.argv[1]), False)
+baked = load_or_bake(renderer.surfaces, BakeConfig(texel=0.2, rays=16, cache=sys.argv[1]), False)
 print(baked.seconds > 0)
 """
 
@@ -364,22 +375,24 @@ def test_the_bake_in_small_blocks_is_the_bake_bit_for_bit(monkeypatch) -> None:
     """The per-point work runs in blocks of bounded memory; their size changes nothing."""
     renderer = ExactRenderer(box_room(seed=0))
     config = BakeConfig(texel=0.2, rays=16)
-    whole = bake_lighting(renderer, config, False)
-    monkeypatch.setattr(lighting, "_BLOCK_BYTES", 4096)  # blocks of a few points
-    blocked = bake_lighting(renderer, config, False)
+    whole = bake_lighting(renderer.surfaces, config, False)
+    monkeypatch.setattr(bake, "_BLOCK_BYTES", 4096)  # blocks of a few points
+    blocked = bake_lighting(renderer.surfaces, config, False)
     assert np.array_equal(blocked.irradiance, whole.irradiance) and blocked.exposure == whole.exposure
 
 
 def test_a_bake_that_cannot_fit_is_refused_before_it_starts_with_the_figures(monkeypatch, tmp_path) -> None:
-    monkeypatch.setattr(lighting, "free_memory", lambda device="cpu": 512 * 2**20)
+    monkeypatch.setattr(bake, "free_memory", lambda device="cpu": 512 * 2**20)
 
     def no_gather(*args, **kwargs):
         raise AssertionError("the bake started")
 
-    monkeypatch.setattr(lighting, "_albedo", no_gather)
+    monkeypatch.setattr(bake, "_albedo", no_gather)
     with pytest.raises(
         ValueError,
         match=r"scene 'box_room_0': baking its light needs about 1\.\d GiB of memory "
         r"\(\d+ irradiance points\) and 0\.5 GiB are available",
     ):
-        bake_lighting(ExactRenderer(box_room(seed=0)), BakeConfig(texel=0.2, rays=16, cache=str(tmp_path)), False)
+        bake_lighting(
+            ExactRenderer(box_room(seed=0)).surfaces, BakeConfig(texel=0.2, rays=16, cache=str(tmp_path)), False
+        )

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from kadv.render.shading import Shading, mip_pyramid, sample_texture, sample_texture_filtered, shade
+from kadv.render.shading import Shading, shade
+from kadv.render.textures import mip_pyramid, sample_texture, sample_texture_filtered
 
 
 def _texture() -> np.ndarray:

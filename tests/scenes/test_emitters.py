@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from kadv.render.lighting import sky_radiance
+from kadv.render.lights import sky_radiance
 from kadv.scenes import Emitters, load_scene, procedural_room
 from kadv.scenes.emitters import DEFAULT_LAMP_RADIANCE, MISSING_ENVMAP_RADIANCE, SUNSKY_SKY_PER_SCALE
 

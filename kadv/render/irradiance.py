@@ -1,0 +1,84 @@
+"""Baked irradiance as shading reads it per hit: stored at a lattice of barycentric points per
+triangle and side (:mod:`kadv.render.bake` computes it), interpolated between the three lattice
+points around a hit."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+__all__ = ["BakedLighting", "lattice_ij", "lattice_taps"]
+
+
+@dataclass
+class BakedLighting:
+    """Irradiance on each triangle's lattice, both sides.
+
+    Attributes:
+        resolution: (F,) int64 lattice steps per edge (0: one point at the centroid).
+        offsets: (2, F) int64 index of each triangle's first lattice point, front side then back.
+        irradiance: (N, 3) float32 linear irradiance at the lattice points.
+        exposure: the scene's one scale from radiance to display values.
+        seconds: how long the bake took (0 when read from the cache).
+    """
+
+    resolution: np.ndarray
+    offsets: np.ndarray
+    irradiance: np.ndarray
+    exposure: float
+    seconds: float = 0.0
+
+    def irradiance_at(self, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor) -> torch.Tensor:
+        """(N, 3) irradiance at hits: triangle ids (N,), Open3D barycentrics (N, 2) and side (N,) bool."""
+        taps, weights = lattice_taps(
+            torch.from_numpy(self.resolution), torch.from_numpy(self.offsets), triangle_ids, bary, back
+        )
+        irradiance = torch.from_numpy(self.irradiance)
+        values = irradiance.index_select(0, taps.reshape(-1)).reshape(*taps.shape, 3)
+        return (values * weights[..., None].float()).sum(dim=1)
+
+
+def lattice_ij(r: int) -> tuple[np.ndarray, np.ndarray]:
+    """Lattice steps (i, j), i + j <= r, row by row: point k of a triangle of resolution r."""
+    i, j = np.triu_indices(r + 1)
+    j = j - i
+    return i, j
+
+
+def lattice_taps(
+    resolution: torch.Tensor, offsets: torch.Tensor, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The three lattice points (N, 3) around each hit and their weights (N, 3), which sum to 1.
+
+    Args:
+        resolution: (F,) lattice steps per triangle.
+        offsets: (2, F) first lattice point of each triangle's front and back side.
+        triangle_ids: (N,) hit triangles.
+        bary: (N, 2) Open3D barycentrics (u, v): the point is (1 - u - v) p0 + u p1 + v p2.
+        back: (N,) True on the back side.
+    """
+    r = resolution.index_select(0, triangle_ids)
+    start = offsets[back.long(), triangle_ids]
+    rf = r.clamp_min(1).to(bary.dtype)
+    uv = bary.clamp_min(0.0)
+    uv = uv / uv.sum(dim=1, keepdim=True).clamp_min(1.0)
+    a, b = uv[:, 0] * rf, uv[:, 1] * rf
+    i0 = torch.minimum(torch.floor(a).long(), r.clamp_min(1) - 1)
+    j0 = torch.minimum(torch.floor(b).long(), r.clamp_min(1) - 1 - i0).clamp_min(0)
+    fa, fb = a - i0, b - j0
+    upper = fa + fb > 1.0
+    corner_i = torch.stack([i0, i0 + 1, i0], dim=1) + upper[:, None] * torch.tensor([[1, -1, 1]])
+    corner_j = torch.stack([j0, j0, j0 + 1], dim=1) + upper[:, None] * torch.tensor([[1, 1, -1]])
+    weights = torch.where(
+        upper[:, None],
+        torch.stack([fa + fb - 1.0, 1.0 - fa, 1.0 - fb], dim=1),
+        torch.stack([1.0 - fa - fb, fa, fb], dim=1),
+    ).clamp_min(0.0)
+    row_start = corner_i * (r[:, None] + 1) - corner_i * (corner_i - 1) // 2
+    taps = start[:, None] + row_start + corner_j
+    centroid = r == 0  # one point: every tap is it
+    taps = torch.where(centroid[:, None], start[:, None].expand(-1, 3), taps)
+    weights = torch.where(centroid[:, None], torch.tensor([1.0, 0.0, 0.0], dtype=weights.dtype), weights)
+    return taps, weights / weights.sum(dim=1, keepdim=True)
