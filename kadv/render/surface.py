@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from kadv.device import free_memory
 from kadv.geometry.vector import dot
 from kadv.render.backends import make_caster
 from kadv.render.casting import RayCaster
@@ -19,7 +20,7 @@ from kadv.render.colour import coat_table, coated_albedo, srgb_decode
 from kadv.render.textures import albedo, mip_pyramid, sample_texture, uv_density
 from kadv.scenes.scene import Scene
 
-__all__ = ["RayHits", "Surfaces", "first_hits"]
+__all__ = ["RayHits", "Surfaces", "first_hits", "pyramid_bytes"]
 
 _ALPHA_CUTOFF = 0.5
 
@@ -50,6 +51,24 @@ def _rays(caster: RayCaster, *arrays: np.ndarray) -> list[torch.Tensor]:
     return [torch.from_numpy(np.asarray(a, np.float32).reshape(-1, 3)).to(caster.device) for a in arrays]
 
 
+def pyramid_bytes(scene: Scene) -> int:
+    """Bytes of the scene's texture pyramids (float32 levels, each a quarter of the one before:
+    4/3 of the full-size level) and alpha masks."""
+    texels = sum(m.texture.size * 4 // 3 for m in scene.materials if m.texture is not None)
+    return 4 * (texels + sum(m.opacity.size for m in scene.materials if m.opacity is not None))
+
+
+def _check_textures_fit(scene: Scene) -> None:
+    """Refuse, in one line with the figures, a scene whose textures cannot fit in memory, before any
+    pyramid is built (shading samples them on the host)."""
+    needed, free = pyramid_bytes(scene), free_memory("cpu")
+    if needed > free:
+        raise ValueError(
+            f"scene {scene.name!r}: its texture pyramids need about {needed / 2**20:.0f} MiB of memory and "
+            f"{free / 2**20:.0f} MiB are available: downscale its textures"
+        )
+
+
 class Surfaces:
     """The surfaces of a :class:`Scene` behind ray casters built once.
 
@@ -74,6 +93,7 @@ class Surfaces:
             self._opaque_caster = self.caster_of(scene.vertices, scene.faces[self._opaque_faces])
             self._masked_caster = self.caster_of(scene.vertices, scene.faces[self._masked_faces])
         # shading reads these per hit: torch copies made once
+        _check_textures_fit(scene)
         self.pyramids = {i: mip_pyramid(m.texture) for i, m in enumerate(scene.materials) if m.texture is not None}
         self.opacity = {
             i: torch.from_numpy(np.ascontiguousarray(m.opacity[:, :, None], np.float32))

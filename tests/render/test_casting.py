@@ -89,6 +89,22 @@ def test_importing_kadv_does_not_import_warp() -> None:
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout == "False\n"
 
 
+def test_textures_too_large_for_memory_are_refused_with_the_figures(monkeypatch) -> None:
+    from kadv.render import surface
+
+    room = box_room(seed=0)
+    needed = surface.pyramid_bytes(room)
+    texels = sum(m.texture.size for m in room.materials if m.texture is not None)
+    assert needed >= 4 * texels * 4 // 3 > 0  # float32, and the mip levels below the full size
+    monkeypatch.setattr(surface, "free_memory", lambda device: needed - 1)
+    with pytest.raises(
+        ValueError, match=rf"scene 'box_room_0': its texture pyramids need about {needed / 2**20:.0f} MiB"
+    ):
+        ExactRenderer(room)
+    monkeypatch.setattr(surface, "free_memory", lambda device: needed)
+    assert ExactRenderer(room).surfaces.pyramids
+
+
 def test_a_scene_too_large_for_the_device_is_refused_with_the_figures(monkeypatch) -> None:
     from kadv.render import warp_caster
 
