@@ -64,7 +64,7 @@ def supersampled_maps(
     """Box-averaged RGB (B, 3, H, W) and z-depth (B, 1, H, W) (misses count as depth 0) of s x s samples."""
     origins, directions = pixel_rays(world_T_cam, K, height, width, supersample)
     hits = renderer.cast(origins, directions)
-    shaded = renderer.shade_hits(hits, origins, directions, pixel_angle(K) / supersample, geometry=False)
+    shaded = renderer.shader.shade(hits, origins, directions, pixel_angle(K) / supersample, geometry=False)
     batch, s = origins.shape[0], supersample
     rgb = shaded["rgb"].astype(np.float64).reshape(batch, height, s, width, s, 3).mean(axis=(2, 4))
     depth = np.where(hits.hit, hits.t, 0.0).reshape(batch, height, s, width, s).mean(axis=(2, 4))

@@ -142,7 +142,7 @@ def render_anchor(
     )
     maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
     for hits in hits_per_layer:
-        shaded = renderer.shade_hits(hits, origins, directions, pixel_angle(K_anchor), geometry=False)
+        shaded = renderer.shader.shade(hits, origins, directions, pixel_angle(K_anchor), geometry=False)
         ids = torch.from_numpy(hits.triangle_ids).reshape(batch, -1)
         depth = torch.from_numpy(np.where(hits.hit, hits.t, 0.0)).reshape(batch, -1, 1)
         maps["rgb"].append(torch.from_numpy(shaded["rgb"]).reshape(batch, -1, 3))

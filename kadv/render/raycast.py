@@ -106,18 +106,6 @@ class ExactRenderer:
         """(N,) True where a ray hit the back of a triangle (:meth:`Surfaces.back_facing`)."""
         return self.surfaces.back_facing(hits, directions)
 
-    def shade_hits(
-        self,
-        hits: RayHits,
-        origins: np.ndarray,
-        directions: np.ndarray,
-        pixel_angle: float,
-        colour: bool = True,
-        geometry: bool = True,
-    ) -> dict[str, np.ndarray]:
-        """Colours (and geometry) of hits (:meth:`Shader.shade`)."""
-        return self.shader.shade(hits, origins, directions, pixel_angle, colour, geometry)
-
     def render(
         self,
         world_T_cam: torch.Tensor,
@@ -146,7 +134,7 @@ class ExactRenderer:
         batch, s = origins.shape[0], supersample
         hits = self.cast(origins, directions)
         angle = pixel_angle(K)
-        maps = self.shade_hits(hits, origins, directions, angle, colour=s == 1)
+        maps = self.shader.shade(hits, origins, directions, angle, colour=s == 1)
 
         def image(values: np.ndarray, channels: int) -> torch.Tensor:
             return torch.from_numpy(
@@ -159,7 +147,7 @@ class ExactRenderer:
             check_shape(sub_rgb, f"B 3 {s * height} {s * width}", "sub_rgb", {"B": batch})
         elif s > 1:
             sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s)
-            sub = self.shade_hits(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s, geometry=False)[
+            sub = self.shader.shade(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s, geometry=False)[
                 "rgb"
             ]
             sub_rgb = torch.from_numpy(sub).reshape(batch, s * height, s * width, 3).permute(0, 3, 1, 2)
