@@ -8,7 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from kadv.testing import scene, viewpoint_robustness
+# imported here, before pytester's in-process runs: each run drops the modules it imported first,
+# and matplotlib imported again beside its own leftovers refuses its own layouts
+import kadv.report.run
+import kadv.testing.card  # noqa: F401
 
 # a user's test file, as the README's section writes one (smaller, for speed)
 USER_TESTS = """
@@ -25,16 +28,6 @@ def test_strict(kadv_scene):
 def test_without_kadv():
     assert True
 """
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _imported_before_pytester() -> None:
-    """One small check in this process before pytester's in-process runs, which import what it does.
-
-    Each of those runs drops the modules it imported first; importing some of them again beside
-    what they left behind fails (matplotlib refuses its own layouts) or crashes the process (a
-    segmentation fault after the lighting tests had run in it)."""
-    viewpoint_robustness("kadv_tiny", scene("probe/thin_structures"), init_count=1, budget_evaluations=2, size=(24, 32))
 
 
 def _run(pytester: pytest.Pytester, *args: str) -> pytest.RunResult:
@@ -135,7 +128,10 @@ def test_the_readme_test_file_runs_as_written(pytester: pytest.Pytester) -> None
     section = readme.split("## Test your model's viewpoint robustness in CI", 1)[1]
     code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     pytester.makepyfile(test_viewpoint=code)
-    result = pytester.runpytest("-p", "no:cacheprovider", "--kadv-budget", "0.25")
+    # in a process of its own, as a user's pytest: in this one, its checks import again modules that
+    # pytester's earlier runs imported and dropped, and that crashed the process (a segmentation
+    # fault, after the lighting tests in the same worker)
+    result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--kadv-budget", "0.25")
     outcomes = result.parseoutcomes()
     assert outcomes.get("passed", 0) + outcomes.get("failed", 0) == 2 and "error" not in outcomes
     summary = result.stdout.str().split("kadv viewpoint robustness", 1)[1]
