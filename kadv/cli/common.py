@@ -14,6 +14,7 @@ import math
 import os
 import re
 import sys
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -213,11 +214,42 @@ def checks_overrides(command: str) -> Callable[[Callable[[], Any]], Callable[[],
             if message is not None:
                 print(f"{command}: error: {message}", file=sys.stderr)
                 sys.exit(2)
+            if all(a in _RUN_FLAGS or not a.startswith("-") for a in arguments):
+                # before Hydra, which makes the run directory and its log there and would fail with a traceback
+                message = _unwritable(_output_root(command.replace("-", "_"), arguments))
+                if message is not None:
+                    print(f"{command}: error: {message}", file=sys.stderr)
+                    sys.exit(1)
             return entry()
 
         return wrapped
 
     return decorate
+
+
+def _output_root(config_name: str, arguments: list[str]) -> Path:
+    """The folder a run (or, with ``-m``, a sweep) writes under, as far as it is known before Hydra
+    runs: ``hydra.run.dir`` (``hydra.sweep.dir``), given or the config's, up to its first interpolation."""
+    key = "hydra.sweep.dir" if any(a in ("-m", "--multirun") for a in arguments) else "hydra.run.dir"
+    given = [a.partition("=")[2] for a in arguments if a.lstrip("+").partition("=")[0] == key]
+    if given:
+        folder = given[-1]
+    else:
+        with initialize_config_module("kadv.conf", version_base="1.3"):
+            hydra_node = compose(config_name, return_hydra_config=True).hydra
+        folder = OmegaConf.to_container(hydra_node, resolve=False)[key.split(".")[1]]["dir"]
+    return Path(folder.split("${", 1)[0] or ".").absolute()
+
+
+def _unwritable(folder: Path) -> str | None:
+    """Why nothing can be written in ``folder`` (made if missing), in one line; None if it can."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as error:
+        return f"cannot write {error.filename or folder}: {error.strerror}"
+    return None
 
 
 def dirname(overrides: str) -> str:

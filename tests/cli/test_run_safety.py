@@ -16,6 +16,8 @@ from unittest import mock
 
 import pytest
 
+from kadv.cli.attack import main as attack_main
+from tests.cli.in_process import call_main
 from tests.cli.test_attack_cli import _command, _run_in_process
 
 # slow enough per init view to be caught between two, with direct light (no bake)
@@ -142,3 +144,20 @@ def test_a_small_or_read_only_filesystem_ends_the_run_in_one_line(tmp_path: Path
     line = result.stderr.splitlines()[-1]
     assert line.startswith(f"kadv-attack: error: cannot write {run_dir / 'views'}/init0") and line.endswith(reason)
     assert "Traceback" not in result.stderr and (run_dir / "partial" / "init0.json").is_file()
+
+
+@pytest.mark.parametrize("where", ["run", "cwd"], ids=["run directory", "working directory"])
+def test_a_read_only_run_directory_is_one_line_before_hydra_writes_there(tmp_path: Path, where: str) -> None:
+    # Hydra makes the run directory and its log before kadv runs: it is checked before Hydra starts
+    read_only = tmp_path / "read_only"
+    _mount_tmpfs(read_only, "ro")
+    try:
+        if where == "run":
+            result = _run_in_process("kadv-attack", read_only / "run", *RUN)
+        else:  # the default run directory, outputs/attack/..., under a read-only working directory
+            result = call_main(attack_main, ["kadv-attack", *RUN], cwd=read_only)
+    finally:
+        subprocess.run(["umount", "-l", str(read_only)], check=True)
+    folder = read_only / ("run" if where == "run" else "outputs")
+    assert result.returncode == 1
+    assert result.stderr == f"kadv-attack: error: cannot write {folder}: Read-only file system\n"

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -63,11 +65,30 @@ def test_a_2x2_sweep_through_a_launcher(launcher: str, tmp_path: Path) -> None:
     _check_grid(tmp_path)
 
 
+@dataclass
+class KilledSweep:
+    """The 2x2 grid killed (SIGKILL) once a job had finished, run again and interrupted (SIGTERM, as
+    Slurm or a scheduler sends it) once it worked on a job of its own, then run to the end."""
+
+    cwd: Path
+    killed: dict[Path, int]  # the summaries finished before the kill, and their mtimes
+    interrupted: subprocess.CompletedProcess  # the interrupted rerun
+    finished: subprocess.CompletedProcess  # the last rerun
+
+
+def _holds_a_job(cwd: Path, pid: int) -> bool:
+    """Whether process ``pid`` holds a job's run directory (the basic launcher runs jobs in the sweep's process)."""
+    for lock in (cwd / "sweep").glob("*/.kadv.lock.json"):
+        try:
+            if json.loads(lock.read_text())["pid"] == pid:
+                return True
+        except (OSError, ValueError):  # written or removed as it is read
+            pass
+    return False
+
+
 @pytest.fixture(scope="module")
-def killed_sweep(tmp_path_factory) -> tuple[Path, dict[Path, int], subprocess.CompletedProcess]:
-    """The 2x2 grid killed once a job has finished, then run again to the end: the sweep's folder,
-    the jobs finished before the kill (with their summaries' mtimes), and the rerun. The report's
-    test reads the finished sweep too."""
+def killed_sweep(tmp_path_factory) -> KilledSweep:
     cwd = tmp_path_factory.mktemp("killed_sweep")
     command = [str(BIN / "kadv-attack"), "-m", "hydra.sweep.dir=sweep", *TINY, *GRID]
     process = subprocess.Popen(
@@ -78,17 +99,35 @@ def killed_sweep(tmp_path_factory) -> tuple[Path, dict[Path, int], subprocess.Co
         time.sleep(0.05)
     os.killpg(process.pid, signal.SIGKILL)
     process.wait()
-    finished = {p: p.stat().st_mtime_ns for p in _summaries(cwd)}
-    return cwd, finished, _sweep(cwd, *GRID)
+    killed = {p: p.stat().st_mtime_ns for p in _summaries(cwd)}
+    rerun = subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    while not _holds_a_job(cwd, rerun.pid) and rerun.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+    rerun.send_signal(signal.SIGTERM)
+    stdout, stderr = rerun.communicate(timeout=120)
+    interrupted = subprocess.CompletedProcess(command, rerun.returncode, stdout, stderr)
+    return KilledSweep(cwd, killed, interrupted, _sweep(cwd, *GRID))
 
 
-def test_a_killed_sweep_finishes_on_a_rerun_without_redoing_jobs(killed_sweep) -> None:
-    cwd, finished, result = killed_sweep
-    assert 1 <= len(finished) < 4
-    assert result.returncode == 0, result.stderr[-2000:]
-    _check_grid(cwd)
-    assert result.stdout.count("already complete") == len(finished)
-    assert all(p.stat().st_mtime_ns == mtime for p, mtime in finished.items())  # none ran twice
+def test_a_killed_sweep_finishes_on_a_rerun_without_redoing_jobs(killed_sweep: KilledSweep) -> None:
+    assert 1 <= len(killed_sweep.killed) < 4
+    assert killed_sweep.interrupted.stdout.count("already complete") == len(killed_sweep.killed)
+    finished = killed_sweep.finished
+    assert finished.returncode == 0, finished.stderr[-2000:]
+    _check_grid(killed_sweep.cwd)
+    assert all(p.stat().st_mtime_ns == mtime for p, mtime in killed_sweep.killed.items())  # none ran twice
+
+
+def test_an_interrupted_sweep_says_what_it_kept_and_resumes_each_job_once(killed_sweep: KilledSweep) -> None:
+    interrupted, finished = killed_sweep.interrupted, killed_sweep.finished
+    assert interrupted.returncode == 143, interrupted.stderr[-2000:]
+    last = interrupted.stderr.strip().splitlines()[-1]
+    assert re.match(r"interrupted: [01] of 1 init views done, kept in ", last) and "Traceback" not in interrupted.stderr
+    assert last.endswith("; run the same command to resume")
+    # the last rerun skips every finished job and computes each of the others once
+    done = len(killed_sweep.killed)
+    assert finished.stdout.count("already complete") == done
+    assert finished.stdout.count("run directory:") == 4 - done
 
 
 def test_a_failing_job_does_not_stop_the_others(tmp_path: Path) -> None:
@@ -105,9 +144,9 @@ def test_a_failing_job_does_not_stop_the_others(tmp_path: Path) -> None:
     assert fixed.returncode == 0 and not (tmp_path / "sweep" / "failures.json").exists()
 
 
-def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(killed_sweep, tmp_path: Path) -> None:
-    cwd, _, rerun = killed_sweep
-    assert rerun.returncode == 0
+def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(killed_sweep: KilledSweep, tmp_path: Path) -> None:
+    cwd = killed_sweep.cwd
+    assert killed_sweep.finished.returncode == 0
     result = subprocess.run(
         [str(BIN / "kadv-report"), "sweep", "--no-progress"], cwd=cwd, capture_output=True, text=True, timeout=600
     )
