@@ -1,9 +1,4 @@
-"""kadv's pytest plugin, driven by pytest's own pytester on generated test files.
-
-Each generated file runs in a pytest process of its own, as a user's would: pytester's in-process
-runs drop the modules each imported, and later imports of them in the same process (matplotlib's,
-torch's) failed or crashed it with a segmentation fault, in whichever test came next.
-"""
+"""kadv's pytest plugin, driven by pytest's own pytester on generated test files."""
 
 from __future__ import annotations
 
@@ -11,6 +6,7 @@ import json
 import re
 from pathlib import Path
 
+import _pytest.pytester
 import pytest
 
 # a user's test file, as the README's section writes one (smaller, for speed)
@@ -30,9 +26,24 @@ def test_without_kadv():
 """
 
 
+class _KeepingLibraries(_pytest.pytester.SysModulesSnapshot):
+    """pytester's snapshot of ``sys.modules``, restored after each in-process run, that drops only
+    the generated test files and conftests: dropping the libraries a run imported (pytester's
+    default) made later imports of them in this process fail (matplotlib's layouts) or crash it
+    with a segmentation fault (torch's, in whichever test of the worker came next)."""
+
+    def __init__(self, preserve=None) -> None:
+        super().__init__(preserve=lambda name: not name.startswith(("test_", "conftest")))
+
+
+@pytest.fixture(autouse=True)
+def _in_process_runs_keep_libraries(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(_pytest.pytester, "SysModulesSnapshot", _KeepingLibraries)
+
+
 def _run(pytester: pytest.Pytester, *args: str) -> pytest.RunResult:
     pytester.makepyfile(test_user=USER_TESTS)
-    return pytester.runpytest_subprocess("-p", "no:cacheprovider", *args)
+    return pytester.runpytest("-p", "no:cacheprovider", *args)
 
 
 def test_a_user_file_passes_leniently_and_fails_strictly_naming_the_view_and_its_picture(
@@ -78,7 +89,7 @@ def test_budget(kadv_scene, kadv_artifacts, request):
     )
     runs = {}
     for factor in ("1", "2"):
-        pytester.runpytest_subprocess("-p", "no:cacheprovider", "--kadv-budget", factor).assert_outcomes(passed=1)
+        pytester.runpytest("-p", "no:cacheprovider", "--kadv-budget", factor).assert_outcomes(passed=1)
         runs[factor] = json.loads((pytester.path / f"budget-{factor}.json").read_text())
     assert runs["1"][0][:2] == [8, 8]
     assert runs["2"][0][:2] == [16, 16]
@@ -113,7 +124,7 @@ def test_bad(kadv_scene):
     {body}
 """
     )
-    result = pytester.runpytest_subprocess("-p", "no:cacheprovider")
+    result = pytester.runpytest("-p", "no:cacheprovider")
     result.assert_outcomes(failed=1)
     output = result.stdout.str()
     assert message in output
@@ -122,7 +133,7 @@ def test_bad(kadv_scene):
 
 def test_a_bad_budget_factor_is_refused_at_start(pytester: pytest.Pytester) -> None:
     pytester.makepyfile(test_nothing="def test_nothing():\n    pass\n")
-    result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--kadv-budget", "zero")
+    result = pytester.runpytest("-p", "no:cacheprovider", "--kadv-budget", "zero")
     assert result.ret == pytest.ExitCode.USAGE_ERROR
     assert "--kadv-budget must be a positive number, got 'zero'" in result.stderr.str()
 
@@ -132,7 +143,7 @@ def test_the_readme_test_file_runs_as_written(pytester: pytest.Pytester) -> None
     section = readme.split("## Test your model's viewpoint robustness in CI", 1)[1]
     code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     pytester.makepyfile(test_viewpoint=code)
-    result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "--kadv-budget", "0.25")
+    result = pytester.runpytest("-p", "no:cacheprovider", "--kadv-budget", "0.25")
     outcomes = result.parseoutcomes()
     assert outcomes.get("passed", 0) + outcomes.get("failed", 0) == 2 and "error" not in outcomes
     summary = result.stdout.str().split("kadv viewpoint robustness", 1)[1]
