@@ -248,7 +248,7 @@ def _unwritable(folder: Path) -> str | None:
         with tempfile.TemporaryFile(dir=folder):
             pass
     except OSError as error:
-        return f"cannot write {error.filename or folder}: {error.strerror}"
+        return str(WriteError(error.filename or folder, error))
     return None
 
 

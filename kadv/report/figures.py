@@ -29,10 +29,12 @@ __all__ = [
 ]
 
 
-def save_figure(path: Path, figure: plt.Figure) -> Path:
-    """Write ``figure`` as a PNG atomically and close it."""
+def save_figure(path: Path, figure: plt.Figure, tight: bool = True) -> Path:
+    """Write ``figure`` as a PNG atomically and close it; ``tight`` crops it to what it draws (a
+    layout pass of its own: a figure laid out by hand needs none)."""
+    bbox = "tight" if tight else None
     try:
-        return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100, bbox_inches="tight"))
+        return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100, bbox_inches=bbox))
     finally:
         plt.close(figure)
 
@@ -92,10 +94,7 @@ def save_four_panel(
     for axis in axes:
         axis.set_axis_off()
     figure.suptitle(title, fontsize=10, y=1 - 0.12 / height, va="top")
-    try:
-        return atomic_write(Path(path), lambda tmp: figure.savefig(tmp, format="png", dpi=100))
-    finally:
-        plt.close(figure)
+    return save_figure(Path(path), figure, tight=False)
 
 
 # the video's plan shows at least this many metres on each side of the search's centre

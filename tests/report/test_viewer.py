@@ -3,15 +3,11 @@ and its bad inputs."""
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import shutil
 import socket
 import subprocess
-import sys
 from pathlib import Path
-from unittest import mock
 
 import numpy as np
 import pytest
@@ -23,6 +19,7 @@ from kadv.cli.view import main as view_main
 from kadv.report import view
 from kadv.report.viewer import _display_mesh, scene_colours
 from kadv.scenes import procedural_room
+from tests.cli.in_process import call_main
 
 SMALL = [
     "render.height=48",
@@ -39,8 +36,8 @@ SMALL = [
 
 
 def _attack(run_dir: Path, *overrides: str) -> Path:
-    with mock.patch.object(sys, "argv", ["kadv-attack", f"hydra.run.dir={run_dir}", *SMALL, *overrides]):
-        attack_main()
+    ran = call_main(attack_main, ["kadv-attack", f"hydra.run.dir={run_dir}", *SMALL, *overrides])
+    assert ran.returncode == 0, ran.stderr
     return run_dir
 
 
@@ -155,11 +152,8 @@ def test_chromium_draws_the_scene(sweep: Path, tmp_path: Path) -> None:
 
 
 def _view_command(*args: str) -> tuple[int, str]:
-    stderr = io.StringIO()
-    with contextlib.redirect_stderr(stderr):
-        with pytest.raises(SystemExit) as exit_:
-            view_main(list(args))
-    return exit_.value.code, stderr.getvalue()
+    result = call_main(view_main, ["kadv-view", *args])
+    return result.returncode, result.stderr
 
 
 def test_bad_input_gives_one_line_and_exit_status_2(sweep: Path, tmp_path: Path) -> None:
