@@ -74,11 +74,13 @@ def test_a_job_signalled_as_at_its_time_limit_is_requeued_and_resumes(cluster, t
         time.sleep(0.1)
     (job,) = subprocess.run(["squeue", "-h", "-o", "%i"], env=cluster, capture_output=True, text=True).stdout.split()
     subprocess.run(["scancel", "--signal=USR2", job], env=cluster, check=True)
-    # Slurm holds a requeued job back for a while (its BeginTime); a test need not wait for it
+    # Slurm holds a requeued job back for a while (its BeginTime); a test need not wait for all of it.
+    # Not "now": slurmd refuses a credential issued in the second its job's last one was revoked
+    # ("Job credential revoked"), and a start within that second failed the job
     while sweep.poll() is None and time.monotonic() < deadline + 120:
         state = subprocess.run(["squeue", "-h", "-j", job, "-o", "%T %r"], env=cluster, capture_output=True, text=True)
         if state.stdout.split()[:2] == ["PENDING", "BeginTime"]:
-            subprocess.run(["scontrol", "update", f"JobId={job}", "StartTime=now"], env=cluster, check=True)
+            subprocess.run(["scontrol", "update", f"JobId={job}", "StartTime=now+2"], env=cluster, check=True)
             break
         time.sleep(0.2)
     _, stderr = sweep.communicate(timeout=300)
