@@ -110,6 +110,7 @@ def main() -> None:
                 "addopts=",
                 "tests/test_device.py",
                 "tests/render/test_casting.py",
+                "tests/render/test_host_round_trips.py",
                 "-k",
                 CARRIED,
             ],

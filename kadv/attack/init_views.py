@@ -234,7 +234,7 @@ def score_views(
         for start in range(0, len(poses), batch_size):
             chunk = slice(start, start + batch_size)
             K = torch.stack([intrinsics_from_fov(float(f), height, width) for f in fov_x_deg[chunk]])
-            out = renderer.render(poses[chunk], K, height, width)
+            out = renderer.render(poses[chunk], K, height, width).to("cpu")
             prediction = model(out.rgb, K)
             scores["delta1"].append(
                 depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)["delta1"]
@@ -282,8 +282,8 @@ def _inside_points(
         points[near, 0] = np.clip(around[near, 0], inner_lo[0], inner_hi[0])
         points[near, 2] = np.clip(around[near, 2], inner_lo[2], inner_hi[2])
     down = np.broadcast_to(np.array([0.0, -1.0, 0.0]), points.shape)
-    below = renderer.cast(points, down)
-    above = renderer.cast(points, -down)
+    below = renderer.cast(points, down).numpy()
+    above = renderer.cast(points, -down).numpy()
     inside = below.hit & (above.hit if bool((below.hit & above.hit).any()) else True)
     return points[inside][:count], (points[:, 1] - np.where(below.hit, below.t, np.nan))[inside][:count]
 

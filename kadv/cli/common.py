@@ -34,6 +34,7 @@ from kadv.io import write_json
 from kadv.losses import DELTA1_TEMPERATURE, AlignedLoss, depth_loss
 from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
 from kadv.render import BakeConfig, ExactRenderer, Shading
+from kadv.render.raycast import DEFAULT_MAX_RAYS
 from kadv.runs import RunDirectoryBusy
 from kadv.scenes import Scene, scene_from_node
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, ROOM_FEATURES, check_shares
@@ -327,8 +328,12 @@ def shading_from_config(cfg: DictConfig) -> Shading:
 
 def renderer_from_config(scene: Scene, cfg: DictConfig, device: torch.device | str = "cpu") -> ExactRenderer:
     """The exact renderer of ``scene`` that a ``render/`` node describes: its shading and its ray
-    caster (``render.backend``, on ``device``; a run saved before backends existed casts with auto)."""
-    return ExactRenderer(scene, shading_from_config(cfg), backend=cfg.get("backend", "auto"), device=device)
+    caster (``render.backend``, on ``device``; a run saved before backends existed casts with auto) and
+    the most rays it casts at once (``render.max_rays``)."""
+    max_rays = config_int(cfg.get("max_rays", DEFAULT_MAX_RAYS), "render.max_rays", 1)
+    return ExactRenderer(
+        scene, shading_from_config(cfg), backend=cfg.get("backend", "auto"), device=device, max_rays=max_rays
+    )
 
 
 def check_render_config(cfg: DictConfig) -> tuple[int, int, int]:

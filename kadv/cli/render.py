@@ -59,7 +59,7 @@ def main(cfg: DictConfig) -> None:
             f", moved {moved:+.3f} m along its optical axis to clear {penalty.margin} m" if moved else ""
         )
     K = intrinsics_from_fov(fov, height, width)
-    out = renderer.render(world_T_cam, K, height, width, supersample=supersample)
+    out = renderer.render(world_T_cam, K, height, width, supersample=supersample).to("cpu")
     validity = view_validity(renderer, world_T_cam, K, height, width, render=out, **penalty.validity_options())
     verdict, reason = validity.verdicts[0], validity.reasons[0]
     if verdict != "valid" and not cfg.camera.allow_invalid:

@@ -180,7 +180,7 @@ def render_procedural_views(
                 wide = round(height * rng.uniform(width / height, MAX_SQUEEZED_ASPECT))
                 K = intrinsics_from_fov(fov, height, wide)
                 K[0] *= width / wide  # the wide frame's columns squeezed into width
-            out = renderer.render(poses, K, height, width, supersample=2)
+            out = renderer.render(poses, K, height, width, supersample=2).to("cpu")
             rgb.append(out.rgb)
             depth.append(out.depth)
             mask.append(out.mask)

@@ -62,13 +62,13 @@ def supersampled_maps(
     renderer: ExactRenderer, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Box-averaged RGB (B, 3, H, W) and z-depth (B, 1, H, W) (misses count as depth 0) of s x s samples."""
-    origins, directions = pixel_rays(world_T_cam, K, height, width, supersample)
-    hits = renderer.cast(origins, directions)
-    shaded = renderer.shader.shade(hits, origins, directions, pixel_angle(K) / supersample, geometry=False)
+    origins, directions = pixel_rays(world_T_cam, K, height, width, supersample, device=renderer.device)
     batch, s = origins.shape[0], supersample
-    rgb = shaded["rgb"].astype(np.float64).reshape(batch, height, s, width, s, 3).mean(axis=(2, 4))
-    depth = np.where(hits.hit, hits.t, 0.0).reshape(batch, height, s, width, s).mean(axis=(2, 4))
-    return (torch.from_numpy(rgb).permute(0, 3, 1, 2), torch.from_numpy(depth)[:, None])
+    angle = pixel_angle(K) / supersample
+    hits, shaded = renderer.cast_and_shade(origins.reshape(-1, 3), directions.reshape(-1, 3), angle, True, False)
+    rgb = shaded["rgb"].double().reshape(batch, height, s, width, s, 3).mean(dim=(2, 4))
+    depth = torch.where(hits.hit, hits.t.double(), 0.0).reshape(batch, height, s, width, s).mean(dim=(2, 4))
+    return rgb.permute(0, 3, 1, 2).cpu(), depth[:, None].cpu()
 
 
 @dataclass

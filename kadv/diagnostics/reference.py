@@ -193,7 +193,7 @@ def _both_images(
 ) -> tuple[RenderOutput, np.ndarray, np.ndarray]:  # fmt: skip
     """kadv's render of a view, its image (H, W, 3), and Mitsuba's image of the same ``sensor``
     exposed to match it (``reference``: Mitsuba's linear image when already rendered)."""
-    ours = renderer.render(world_T_cam, K, height, width, supersample=2)
+    ours = renderer.render(world_T_cam, K, height, width, supersample=2).to("cpu")
     linear = render_reference(mitsuba_scene, sensor, spp, seed) if reference is None else reference
     kadv_rgb = ours.rgb[0].permute(1, 2, 0).numpy()
     return ours, kadv_rgb, _display(linear * _exposure(linear, kadv_rgb))

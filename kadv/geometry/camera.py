@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numpy as np
 import open3d as o3d
 import torch
 
@@ -95,24 +94,36 @@ def batched_intrinsics(K: torch.Tensor, batch: int) -> torch.Tensor:
     return K
 
 
-def camera_rays(K: torch.Tensor, height: int, width: int, supersample: int = 1) -> torch.Tensor:
+def camera_rays(
+    K: torch.Tensor, height: int, width: int, supersample: int = 1, device: torch.device | str | None = None
+) -> torch.Tensor:
     """Camera-frame rays (B, H, s, W, s, 3) float64 with z = 1 through pixel (sub-)centres, for
-    intrinsics K (B, 3, 3): a hit at ray parameter t is the camera-frame point t * ray."""
+    intrinsics K (B, 3, 3), made on ``device`` (None: K's): a hit at ray parameter t is the
+    camera-frame point t * ray."""
     s = int(supersample)
     if s < 1:
         raise ValueError(f"supersample must be >= 1, got {supersample}")
-    sub = (torch.arange(s, dtype=torch.float64) + 0.5) / s
-    v = torch.arange(height, dtype=torch.float64)[:, None] + sub[None, :]  # (H, s)
-    u = torch.arange(width, dtype=torch.float64)[:, None] + sub[None, :]  # (W, s)
+    # inverted where K is (the host: an inverse checks for singular matrices, a wait on a GPU), then
+    # copied without waiting
+    device = K.device if device is None else torch.device(device)
+    K_inv = torch.linalg.inv(K.double()).to(device, non_blocking=True)
+    sub = (torch.arange(s, dtype=torch.float64, device=device) + 0.5) / s
+    v = torch.arange(height, dtype=torch.float64, device=device)[:, None] + sub[None, :]  # (H, s)
+    u = torch.arange(width, dtype=torch.float64, device=device)[:, None] + sub[None, :]  # (W, s)
     vv = v[:, :, None, None].expand(height, s, width, s)
     uu = u[None, None, :, :].expand(height, s, width, s)
     pixels = torch.stack([uu, vv, torch.ones_like(uu)], dim=-1)  # (H, s, W, s, 3)
-    return torch.einsum("bij,hawcj->bhawci", torch.linalg.inv(K), pixels)
+    return torch.einsum("bij,hawcj->bhawci", K_inv, pixels)
 
 
 def pixel_rays(
-    world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, supersample: int = 1
-) -> tuple[np.ndarray, np.ndarray]:
+    world_T_cam: torch.Tensor,
+    K: torch.Tensor,
+    height: int,
+    width: int,
+    supersample: int = 1,
+    device: torch.device | str | None = None,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """World-frame rays through pixel (sub-)centres, for all cameras at once.
 
     Directions have camera-frame z = 1 (not unit length), so a ray parameter is a z-depth.
@@ -123,31 +134,34 @@ def pixel_rays(
         height: image height in pixels.
         width: image width in pixels.
         supersample: s; each pixel gets s x s rays on a regular sub-grid.
+        device: where the rays are made (None: the pose's device).
 
     Returns:
-        origins, directions: float64 arrays (B, H, s, W, s, 3); averaging over axes 2 and 4 gives
-        per-pixel values.
+        origins, directions: float64 tensors (B, H, s, W, s, 3) on ``device``; averaging over axes
+        2 and 4 gives per-pixel values. The origins are a broadcast view of the B centres.
 
     Examples:
         >>> from kadv.geometry import look_at
         >>> world_T_cam = look_at(torch.tensor([0.0, 1.0, 0.0]), torch.tensor([0.0, 1.0, 5.0]))
         >>> origins, directions = pixel_rays(world_T_cam, intrinsics_from_fov(90.0, 2, 2), 2, 2)
-        >>> origins.shape, directions.shape  # (B, H, s, W, s, 3) with s = 1
+        >>> tuple(origins.shape), tuple(directions.shape)  # (B, H, s, W, s, 3) with s = 1
         ((1, 2, 1, 2, 1, 3), (1, 2, 1, 2, 1, 3))
-        >>> origins[0, 0, 0, 0, 0].tolist(), directions[0, 1, 0, 1, 0].round(9).tolist()  # lower right
+        >>> origins[0, 0, 0, 0, 0].tolist(), directions[0, 1, 0, 1, 0].round(decimals=9).tolist()  # lower right
         ([0.0, 1.0, 0.0], [-0.5, -0.5, 1.0])
     """
     pose = check_world_T_cam(world_T_cam).detach().double()
-    return world_rays(pose, camera_rays(batched_intrinsics(K, pose.shape[0]), height, width, supersample))
+    device = pose.device if device is None else device
+    return world_rays(pose, camera_rays(batched_intrinsics(K, pose.shape[0]), height, width, supersample, device))
 
 
-def world_rays(world_T_cam: torch.Tensor, rays_cam: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
-    """World-frame origins and directions, float64 arrays (B, ..., 3), of camera-frame rays
-    (B, ..., 3) (from :func:`camera_rays`) of cameras at poses (B, 4, 4)."""
-    pose = world_T_cam.detach().double()
+def world_rays(world_T_cam: torch.Tensor, rays_cam: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """World-frame origins and directions, float64 tensors (B, ..., 3) on the rays' device, of
+    camera-frame rays (B, ..., 3) (from :func:`camera_rays`) of cameras at poses (B, 4, 4); the
+    origins are a broadcast view of the B centres."""
+    pose = world_T_cam.detach().double().to(rays_cam.device, non_blocking=True)  # (B, 4, 4): nothing to wait for
     dirs_world = torch.einsum("bij,b...j->b...i", pose[:, :3, :3], rays_cam)
     origins = pose[:, :3, 3].reshape(len(pose), *[1] * (rays_cam.dim() - 2), 3).expand_as(dirs_world)
-    return origins.numpy(), dirs_world.numpy()
+    return origins, dirs_world
 
 
 def to_open3d_pinhole(world_T_cam: torch.Tensor, K: torch.Tensor) -> tuple[o3d.core.Tensor, o3d.core.Tensor]:

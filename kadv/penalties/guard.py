@@ -76,7 +76,7 @@ def step_guard(
     direction = np.where(moving[:, None], step / np.maximum(length, 1e-300)[:, None], [[1.0, 0.0, 0.0]])
     first, second = _perpendicular_basis(direction)
     origins = old[:, None, :] + _OFFSETS[None, :, :1] * first[:, None] + _OFFSETS[None, :, 1:] * second[:, None]
-    hits = renderer.cast(origins, np.repeat(direction[:, None], len(_OFFSETS), axis=1))
+    hits = renderer.cast(origins, np.repeat(direction[:, None], len(_OFFSETS), axis=1)).numpy()
     first_hit = hits.t.reshape(len(old), len(_OFFSETS)).min(axis=1)  # metres: directions are unit
     clear = np.clip(first_hit - margin, 0.0, None)
     fraction = np.where(moving, np.clip(clear / np.maximum(length, 1e-300), 0.0, 1.0), 1.0)

@@ -162,7 +162,8 @@ def probe_directions_hits(
     rays = np.broadcast_to(directions[None], origins.shape)
     hits = renderer.cast(origins, rays)
     shape = (len(centres), len(directions))
-    return ~hits.hit.reshape(shape), renderer.back_facing(hits, rays).reshape(shape)
+    back = renderer.back_facing(hits, rays).cpu().numpy()
+    return ~hits.hit.cpu().numpy().reshape(shape), back.reshape(shape)
 
 
 def view_validity(
@@ -214,16 +215,17 @@ def view_validity(
     if render is None:
         origins, directions = pixel_rays(pose, K, height, width)
         hits = renderer.cast(origins, directions)
+        view_back = renderer.back_facing(hits, directions).cpu().numpy().reshape(batch, -1)
+        hits = hits.numpy()
         triangle_ids = hits.triangle_ids.reshape(batch, -1)
         hit = hits.hit.reshape(batch, -1)
-        view_back = renderer.back_facing(hits, directions).reshape(batch, -1)
         near_hit = hit & (hits.t.reshape(batch, -1) < near)
     else:
         check_shape(render.depth, f"B 1 {height} {width}", "render.depth", {"B": batch})
-        triangle_ids = render.triangle_ids.reshape(batch, -1).numpy()
+        triangle_ids = render.triangle_ids.reshape(batch, -1).cpu().numpy()
         hit = triangle_ids >= 0
-        view_back = render.back_face.reshape(batch, -1).numpy()
-        near_hit = hit & (render.depth.reshape(batch, -1).double().numpy() < near)
+        view_back = render.back_face.reshape(batch, -1).cpu().numpy()
+        near_hit = hit & (render.depth.reshape(batch, -1).double().cpu().numpy() < near)
     probe_miss, probe_back = probe_directions_hits(renderer, centres, fibonacci_sphere(probe_rays))
     distance = distance_to_surface(renderer, torch.from_numpy(centres)).numpy()
     share = plane_shares(renderer, triangle_ids)

@@ -40,8 +40,8 @@ from kadv.device import free_memory
 from kadv.io import atomic_write
 from kadv.render.colour import LUMINANCE, exposed
 from kadv.render.irradiance import BakedLighting, lattice_ij, lattice_taps
-from kadv.render.lights import SURFACE_OFFSET, area_irradiance, delta_irradiance, scene_lights, sky_radiance
-from kadv.render.surface import Surfaces
+from kadv.render.lights import SURFACE_OFFSET, DeltaLights, Sky, area_irradiance, scene_lights
+from kadv.render.surface import RayHits, Surfaces
 from kadv.scenes.emitters import DEFAULT_CEILING_LIGHT_SIZE, DEFAULT_LAMP_RADIANCE, MISSING_ENVMAP_RADIANCE, Emitters
 from kadv.scenes.scene import Scene
 
@@ -229,14 +229,16 @@ def _meter(surfaces: Surfaces, rng: np.random.Generator, count: int = 4096) -> t
     return np.repeat(eyes, count, axis=0), directions.reshape(-1, 3)
 
 
-def _nearest(lattice: _Lattice, surfaces: Surfaces, hits, directions: np.ndarray) -> np.ndarray:
+def _nearest(lattice: _Lattice, surfaces: Surfaces, hits: RayHits, directions: np.ndarray) -> np.ndarray:
     """(N,) the lattice point nearest each hit (-1 on a miss), on the side the ray arrived from."""
+    back = surfaces.back_facing(hits, directions).cpu()
+    hits = hits.numpy()
     taps, weights = lattice_taps(
         torch.from_numpy(lattice.resolution),
         torch.from_numpy(lattice.offsets),
         torch.from_numpy(np.maximum(hits.triangle_ids, 0)),
         torch.from_numpy(hits.barycentrics),
-        torch.from_numpy(surfaces.back_facing(hits, directions)),
+        back,
     )
     nearest = taps.gather(1, weights.argmax(dim=1, keepdim=True))[:, 0].numpy()
     return np.where(hits.hit, nearest, -1)
@@ -323,11 +325,11 @@ def _buried(lattice: _Lattice, hit_point: np.ndarray) -> np.ndarray:
 
 def _albedo(surfaces: Surfaces, lattice: _Lattice) -> np.ndarray:
     """(N, 3) linear albedo at the lattice points, textures filtered to the lattice's spacing."""
-    ids = torch.from_numpy(lattice.triangle_ids)
-    uv = surfaces.interpolate(surfaces.uvs, ids, torch.from_numpy(lattice.bary))
-    footprint = torch.full((len(ids),), float(lattice.texel), dtype=torch.float32)
-    base = surfaces.albedo(ids, uv, footprint)
-    return surfaces.reflectance(ids, base).double().numpy()
+    ids = torch.from_numpy(lattice.triangle_ids).to(surfaces.device)
+    bary = torch.from_numpy(lattice.bary).to(surfaces.device)
+    footprint = torch.full((len(ids),), float(lattice.texel), dtype=torch.float32, device=surfaces.device)
+    base = surfaces.albedo(ids, bary, footprint)
+    return surfaces.reflectance(ids, base).double().cpu().numpy()
 
 
 def bake_bytes(points: int, config: BakeConfig) -> int:
@@ -358,7 +360,7 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
     eyes, meter_directions = _meter(surfaces, rng)
     emitters = scene.emitters
     if emitters.empty:
-        escape_share = float((~surfaces.cast(eyes, meter_directions).hit).mean())
+        escape_share = float((~surfaces.cast(eyes, meter_directions).hit).double().mean())
         emitters = default_emitters(scene, escape_share)
     lattice = _build_lattice(scene, config)
     count = len(lattice.points)
@@ -368,18 +370,20 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
     delta = np.zeros((count, 3))
     sky = np.zeros((count, 3))
     hit_point = np.empty((count, config.rays), np.int32)
+    sky_along, delta_lights = Sky(emitters), DeltaLights(emitters, surfaces.device)
     chunk = max(1, 2_000_000 // config.rays)
     steps = range(0, count, chunk)
     for begin in tqdm(steps, desc=f"baking {scene.name}", unit="chunk", disable=not progress, leave=False):
         end = min(begin + chunk, count)
         points, normals = lattice.points[begin:end], lattice.normals[begin:end]
         direct[begin:end] = area_irradiance(surfaces, emitters, points, normals, rng, config.light_samples)
-        delta[begin:end] = delta_irradiance(surfaces, emitters, points, normals)
+        on_device = (torch.from_numpy(a).to(surfaces.device) for a in (points, normals))
+        delta[begin:end] = delta_lights.irradiance(surfaces, *on_device).cpu().numpy()
         directions = _cosine_directions(normals, rng, config.rays).reshape(-1, 3)
         origins = np.repeat(points + SURFACE_OFFSET * normals, config.rays, axis=0)
         hits = surfaces.cast(origins, directions)
-        escaped = ~hits.hit
-        sky_seen = np.where(escaped[:, None], sky_radiance(emitters, directions), 0.0)
+        escaped = ~hits.hit.cpu().numpy()
+        sky_seen = np.where(escaped[:, None], sky_along(torch.from_numpy(directions)).numpy(), 0.0)
         sky[begin:end] = np.pi * sky_seen.reshape(end - begin, config.rays, 3).mean(axis=1)
         nearest = _nearest(lattice, surfaces, hits, directions)
         hit_point[begin:end] = nearest.reshape(end - begin, config.rays)

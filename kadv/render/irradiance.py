@@ -31,13 +31,22 @@ class BakedLighting:
     seconds: float = 0.0
 
     def irradiance_at(self, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor) -> torch.Tensor:
-        """(N, 3) irradiance at hits: triangle ids (N,), Open3D barycentrics (N, 2) and side (N,) bool."""
-        taps, weights = lattice_taps(
-            torch.from_numpy(self.resolution), torch.from_numpy(self.offsets), triangle_ids, bary, back
-        )
-        irradiance = torch.from_numpy(self.irradiance)
+        """(N, 3) irradiance at hits: triangle ids (N,), Open3D barycentrics (N, 2) and side (N,) bool,
+        on the hits' device (the tables are copied there once)."""
+        resolution, offsets, irradiance = self._tables(triangle_ids.device)
+        taps, weights = lattice_taps(resolution, offsets, triangle_ids, bary, back)
         values = irradiance.index_select(0, taps.reshape(-1)).reshape(*taps.shape, 3)
         return (values * weights[..., None].float()).sum(dim=1)
+
+    def _tables(self, device: torch.device) -> tuple[torch.Tensor, ...]:
+        """resolution, offsets and irradiance as tensors on ``device``, made on first use."""
+        tables = self.__dict__.setdefault("_device_tables", {})
+        if device not in tables:
+            tables[device] = tuple(
+                torch.from_numpy(np.ascontiguousarray(a)).to(device)
+                for a in (self.resolution, self.offsets, self.irradiance)
+            )
+        return tables[device]
 
 
 def lattice_ij(r: int) -> tuple[np.ndarray, np.ndarray]:
@@ -69,8 +78,9 @@ def lattice_taps(
     j0 = torch.minimum(torch.floor(b).long(), r.clamp_min(1) - 1 - i0).clamp_min(0)
     fa, fb = a - i0, b - j0
     upper = fa + fb > 1.0
-    corner_i = torch.stack([i0, i0 + 1, i0], dim=1) + upper[:, None] * torch.tensor([[1, -1, 1]])
-    corner_j = torch.stack([j0, j0, j0 + 1], dim=1) + upper[:, None] * torch.tensor([[1, 1, -1]])
+    step = upper.long()
+    corner_i = torch.stack([i0 + step, i0 + 1 - step, i0 + step], dim=1)
+    corner_j = torch.stack([j0 + step, j0 + step, j0 + 1 - step], dim=1)
     weights = torch.where(
         upper[:, None],
         torch.stack([fa + fb - 1.0, 1.0 - fa, 1.0 - fb], dim=1),
@@ -80,5 +90,6 @@ def lattice_taps(
     taps = start[:, None] + row_start + corner_j
     centroid = r == 0  # one point: every tap is it
     taps = torch.where(centroid[:, None], start[:, None].expand(-1, 3), taps)
-    weights = torch.where(centroid[:, None], torch.tensor([1.0, 0.0, 0.0], dtype=weights.dtype), weights)
+    first = torch.arange(3, device=weights.device) == 0
+    weights = torch.where(centroid[:, None], first.to(weights.dtype), weights)
     return taps, weights / weights.sum(dim=1, keepdim=True)

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import torch
 
 from kadv.geometry.camera import batched_intrinsics, camera_rays, world_rays
@@ -79,29 +78,34 @@ def ring_view(K: torch.Tensor, height: int, width: int) -> tuple[torch.Tensor, i
 
 
 def camera_face_normals(scene: Scene, triangle_ids: torch.Tensor, world_T_cam: torch.Tensor) -> torch.Tensor:
-    """Camera-frame geometric normals (B, ..., 3) float64 of triangles ``triangle_ids`` (B, ...);
-    0 where an id is -1."""
-    face = torch.from_numpy(scene.face_normals).index_select(0, triangle_ids.clamp_min(0).flatten()).double()
-    rotation = world_T_cam[:, :3, :3].detach().double().cpu()
+    """Camera-frame geometric normals (B, ..., 3) float64 of triangles ``triangle_ids`` (B, ...),
+    on the ids' device; 0 where an id is -1."""
+    device = triangle_ids.device
+    face = torch.from_numpy(scene.face_normals).to(device).index_select(0, triangle_ids.clamp_min(0).flatten()).double()
+    rotation = world_T_cam[:, :3, :3].detach().double().to(device)
     normals = (face.reshape(len(rotation), -1, 3) @ rotation).reshape(*triangle_ids.shape, 3)  # rows: (R^T n)^T
     return torch.where((triangle_ids >= 0)[..., None], normals, 0.0)
 
 
-def _peel(renderer: ExactRenderer, origins: np.ndarray, directions: np.ndarray, layers: int) -> list[RayHits]:
-    """The first ``layers`` opaque surfaces along each ray, nearest first."""
-    n = len(origins.reshape(-1, 3))
-    ray_ids, t, ids, bary = renderer.intersections(origins.reshape(-1, 3), directions.reshape(-1, 3))
-    if len(t):
-        # Coplanar duplicates (z-fighting) would fill several layers with one surface.
-        keep = np.ones(len(t), bool)
-        keep[1:] = ~((ray_ids[1:] == ray_ids[:-1]) & (np.abs(t[1:] - t[:-1]) <= 1e-5 * np.maximum(t[1:], 1e-6)))
-        ray_ids, t, ids, bary = ray_ids[keep], t[keep], ids[keep], bary[keep]
-    first = np.searchsorted(ray_ids, np.arange(n))
-    rank = np.arange(len(ray_ids)) - first[ray_ids] if len(ray_ids) else np.zeros(0, np.int64)
+def _peel(renderer: ExactRenderer, origins: torch.Tensor, directions: torch.Tensor, layers: int) -> list[RayHits]:
+    """The first ``layers`` opaque surfaces along each ray (N, 3), nearest first."""
+    n = len(origins)
+    ray_ids, t, ids, bary = renderer.intersections(origins, directions)
+    # Coplanar duplicates (z-fighting) would fill several layers with one surface.
+    t64 = t.double()
+    keep = torch.ones_like(ray_ids, dtype=torch.bool)
+    keep[1:] = ~((ray_ids[1:] == ray_ids[:-1]) & ((t64[1:] - t64[:-1]).abs() <= 1e-5 * t64[1:].clamp_min(1e-6)))
+    ray_ids, t, ids, bary = ray_ids[keep], t[keep], ids[keep], bary[keep]
+    first = torch.searchsorted(ray_ids, torch.arange(n, device=ray_ids.device))
+    rank = torch.arange(len(ray_ids), device=ray_ids.device) - first[ray_ids]
     out = []
     for layer in range(layers):
         selected = rank == layer
-        hits = RayHits(np.full(n, np.inf), np.full(n, -1, np.int64), np.zeros((n, 2)))
+        hits = RayHits(
+            torch.full((n,), torch.inf, device=t.device),
+            torch.full((n,), -1, dtype=torch.int64, device=t.device),
+            torch.zeros(n, 2, device=t.device),
+        )
         hits.t[ray_ids[selected]] = t[selected]
         hits.triangle_ids[ray_ids[selected]] = ids[selected]
         hits.barycentrics[ray_ids[selected]] = bary[selected]
@@ -134,8 +138,8 @@ def render_anchor(
     K = batched_intrinsics(K, batch)
     K_anchor = guard_band_intrinsics(K, guard_band, supersample)
     h, w = supersample * (height + 2 * guard_band), supersample * (width + 2 * guard_band)
-    rays_cam = camera_rays(K_anchor, h, w)
-    origins, directions = world_rays(pose, rays_cam)
+    rays_cam = camera_rays(K_anchor, h, w, device=renderer.device)
+    origins, directions = (rays.reshape(-1, 3) for rays in world_rays(pose, rays_cam))
     rays_cam = rays_cam.reshape(batch, -1, 3)
     hits_per_layer = (
         [renderer.cast(origins, directions)] if layers == 1 else _peel(renderer, origins, directions, layers)
@@ -143,9 +147,9 @@ def render_anchor(
     maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
     for hits in hits_per_layer:
         shaded = renderer.shader.shade(hits, origins, directions, pixel_angle(K_anchor), geometry=False)
-        ids = torch.from_numpy(hits.triangle_ids).reshape(batch, -1)
-        depth = torch.from_numpy(np.where(hits.hit, hits.t, 0.0)).reshape(batch, -1, 1)
-        maps["rgb"].append(torch.from_numpy(shaded["rgb"]).reshape(batch, -1, 3))
+        ids = hits.triangle_ids.reshape(batch, -1)
+        depth = torch.where(hits.hit, hits.t.double(), 0.0).reshape(batch, -1, 1)
+        maps["rgb"].append(shaded["rgb"].reshape(batch, -1, 3))
         maps["points"].append((depth * rays_cam).float())  # 0 where invalid
         maps["normals"].append(camera_face_normals(renderer.scene, ids, pose).float())
         maps["ids"].append(ids[..., None])

@@ -4,14 +4,18 @@ direction, and where the direct shading's lights stand."""
 
 from __future__ import annotations
 
-import numpy as np
+import math
 
+import numpy as np
+import torch
+
+from kadv.geometry.vector import dot
 from kadv.render.colour import LUMINANCE
 from kadv.render.surface import Surfaces
 from kadv.scenes.emitters import MISSING_ENVMAP_RADIANCE, Emitters
 from kadv.scenes.scene import Scene
 
-__all__ = ["SURFACE_OFFSET", "area_irradiance", "delta_irradiance", "scene_lights", "sky_emitters", "sky_radiance"]
+__all__ = ["SURFACE_OFFSET", "DeltaLights", "Sky", "area_irradiance", "scene_lights", "sky_emitters"]
 
 SURFACE_OFFSET = 1e-3  # metres: ray origins leave the surface by this much, and keep as far from its edges
 
@@ -32,24 +36,42 @@ def sky_emitters(scene: Scene) -> Emitters:
     return scene.emitters if not scene.emitters.empty else Emitters(sky_radiance=np.full(3, MISSING_ENVMAP_RADIANCE))
 
 
-def sky_radiance(emitters: Emitters, directions: np.ndarray) -> np.ndarray:
-    """(N, 3) radiance of the sky seen along unit ``directions`` (N, 3)."""
-    if emitters.envmap is None:
-        return np.broadcast_to(emitters.sky_radiance, directions.shape)
-    local = directions @ emitters.envmap_world_T_map  # the map's frame: the rotation's inverse
-    # Mitsuba's latitude-longitude layout: u from the azimuth about +y, v = 0 at +y
-    u = (np.arctan2(local[:, 0], -local[:, 2]) / (2.0 * np.pi)) % 1.0
-    v = np.arccos(np.clip(local[:, 1], -1.0, 1.0)) / np.pi
-    height, width = emitters.envmap.shape[:2]
-    rows = np.minimum((v * height).astype(np.int64), height - 1)
-    columns = np.minimum((u * width).astype(np.int64), width - 1)
-    return emitters.envmap[rows, columns].astype(np.float64)
+class Sky:
+    """The radiance of the sky the bake was lit by (:func:`sky_emitters`), as seen along a
+    direction, with its tables on one device.
+
+    Args:
+        emitters: the emitters whose uniform sky or environment map this is.
+        device: where the lookups run.
+    """
+
+    def __init__(self, emitters: Emitters, device: torch.device | str = "cpu") -> None:
+        self.radiance = torch.from_numpy(np.asarray(emitters.sky_radiance, np.float64)).to(device)
+        self.envmap = (
+            None if emitters.envmap is None else torch.from_numpy(emitters.envmap.astype(np.float64)).to(device)
+        )
+        self.world_T_map = torch.from_numpy(np.asarray(emitters.envmap_world_T_map, np.float64)).to(device)
+
+    def __call__(self, directions: torch.Tensor) -> torch.Tensor:
+        """(N, 3) float64 radiance seen along unit ``directions`` (N, 3) float64."""
+        if self.envmap is None:
+            return self.radiance.expand(len(directions), 3)
+        local = directions @ self.world_T_map  # the map's frame: the rotation's inverse
+        # Mitsuba's latitude-longitude layout: u from the azimuth about +y, v = 0 at +y
+        u = torch.remainder(torch.atan2(local[:, 0], -local[:, 2]) / (2.0 * math.pi), 1.0)
+        v = torch.arccos(local[:, 1].clamp(-1.0, 1.0)) / math.pi
+        height, width = self.envmap.shape[:2]
+        rows = (v * height).long().clamp_max(height - 1)
+        columns = (u * width).long().clamp_max(width - 1)
+        return self.envmap.flatten(0, 1).index_select(0, rows * width + columns)
 
 
-def _visible(surfaces: Surfaces, origins: np.ndarray, directions: np.ndarray, distance: np.ndarray) -> np.ndarray:
+def _visible(
+    surfaces: Surfaces, origins: torch.Tensor, directions: torch.Tensor, distance: torch.Tensor
+) -> torch.Tensor:
     """(N,) True where nothing lies between ``origins`` and ``distance`` along unit ``directions``."""
-    hits = surfaces.cast(origins, directions)
-    return hits.t >= distance * (1.0 - 1e-6) - SURFACE_OFFSET
+    t = surfaces.cast(origins, directions).t.double()
+    return t >= distance.to(t.device) * (1.0 - 1e-6) - SURFACE_OFFSET
 
 
 def area_irradiance(
@@ -82,33 +104,56 @@ def area_irradiance(
         cos_receiver = np.einsum("nd,nd->n", direction, normals).clip(0.0)
         cos_light = -np.einsum("nd,nd->n", direction, light_normals[chosen]).clip(max=0.0)
         geometry = cos_receiver * cos_light / np.maximum(distance, 1e-3) ** 2 * area[chosen] / probability[chosen]
-        lit = (geometry > 0) & _visible(surfaces, origins, direction, distance)
+        visible = _visible(surfaces, *(torch.from_numpy(a) for a in (origins, direction, distance)))
+        lit = (geometry > 0) & visible.cpu().numpy()
         irradiance += (emitters.area_radiance[chosen] * (geometry * lit)[:, None]) / light_samples
     return irradiance
 
 
-def delta_irradiance(surfaces: Surfaces, emitters: Emitters, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """(N, 3) irradiance at surface points (N, 3) with unit normals (N, 3) from the lights of no
-    extent (point and spot lights, directional suns), one shadow ray each: exact, so the renderer
-    shades it per hit and the bake carries only its bounces."""
-    irradiance = np.zeros((len(points), 3))
-    origins = points + SURFACE_OFFSET * normals
-    for index, position in enumerate(emitters.point_positions):
-        offset = position - origins
-        distance = np.linalg.norm(offset, axis=1)
-        direction = offset / np.maximum(distance, 1e-12)[:, None]
-        falloff = np.ones(len(points))
-        if emitters.spot_cos_cutoff[index] > -1.0:
-            cos_axis = -direction @ emitters.spot_directions[index]
-            angle, beam = np.arccos(np.clip(cos_axis, -1, 1)), np.arccos(emitters.spot_cos_beam[index])
-            cutoff = np.arccos(emitters.spot_cos_cutoff[index])
-            falloff = np.clip((cutoff - angle) / max(cutoff - beam, 1e-9), 0.0, 1.0)
-        cosine = np.einsum("nd,nd->n", direction, normals).clip(0.0) * falloff
-        lit = (cosine > 0) & _visible(surfaces, origins, direction, distance)
-        irradiance += emitters.point_intensity[index] * (cosine * lit / np.maximum(distance, 1e-3) ** 2)[:, None]
-    for direction, sun in zip(emitters.sun_directions, emitters.sun_irradiance):
-        directions = np.broadcast_to(direction, origins.shape)
-        cosine = normals @ direction
-        lit = (cosine > 0) & ~surfaces.cast(origins, directions).hit
-        irradiance += sun * (cosine.clip(0.0) * lit)[:, None]
-    return irradiance
+class DeltaLights:
+    """The scene's lights of no extent (point and spot lights, directional suns) as tensors on one
+    device, and the exact irradiance they give, one shadow ray each: the renderer shades it per hit
+    and the bake carries only its bounces.
+
+    Args:
+        emitters: the scene's emitters.
+        device: where the shading runs.
+    """
+
+    def __init__(self, emitters: Emitters, device: torch.device | str = "cpu") -> None:
+        def table(values: np.ndarray) -> torch.Tensor:
+            return torch.from_numpy(np.asarray(values, np.float64).reshape(-1, 3)).to(device)
+
+        self.positions, self.intensity = table(emitters.point_positions), table(emitters.point_intensity)
+        self.spot_axes = table(emitters.spot_directions)
+        # per light, what the spot's falloff needs (None: a point light), known when the scene is read
+        self.spots = [
+            (float(np.arccos(beam)), float(np.arccos(cutoff))) if cutoff > -1.0 else None
+            for beam, cutoff in zip(emitters.spot_cos_beam, emitters.spot_cos_cutoff)
+        ]
+        self.sun_directions, self.sun_irradiance = table(emitters.sun_directions), table(emitters.sun_irradiance)
+
+    @property
+    def empty(self) -> bool:
+        return not (len(self.positions) or len(self.sun_directions))
+
+    def irradiance(self, surfaces: Surfaces, points: torch.Tensor, normals: torch.Tensor) -> torch.Tensor:
+        """(N, 3) float64 irradiance at surface points (N, 3) with unit normals (N, 3), both float64."""
+        irradiance = torch.zeros_like(points)
+        origins = points + SURFACE_OFFSET * normals
+        for index, spot in enumerate(self.spots):
+            offset = self.positions[index] - origins
+            distance = offset.norm(dim=1)
+            direction = offset / distance.clamp_min(1e-12)[:, None]
+            cosine = dot(direction, normals).clamp_min(0.0)
+            if spot is not None:
+                beam, cutoff = spot
+                angle = torch.arccos((-direction @ self.spot_axes[index]).clamp(-1.0, 1.0))
+                cosine = cosine * ((cutoff - angle) / max(cutoff - beam, 1e-9)).clamp(0.0, 1.0)
+            lit = (cosine > 0) & _visible(surfaces, origins, direction, distance)
+            irradiance += self.intensity[index] * (cosine * lit / distance.clamp_min(1e-3) ** 2)[:, None]
+        for direction, sun in zip(self.sun_directions, self.sun_irradiance):
+            cosine = normals @ direction
+            lit = (cosine > 0) & ~surfaces.cast(origins, direction.expand_as(origins)).hit
+            irradiance += sun * (cosine.clamp_min(0.0) * lit)[:, None]
+        return irradiance

@@ -2,8 +2,8 @@
 scene's surfaces (:mod:`kadv.render.surface`), shaded (:mod:`kadv.render.shading`), and assembled
 into images and maps.
 
-All cameras of a call are cast in one batch against casters built once per scene. Values are exact
-and bit-identical across runs; nothing here carries a gradient.
+All cameras of a call are cast in one batch against casters built once per scene, and shaded on
+the casters' device. Values are exact and bit-identical across runs; nothing here carries a gradient.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from kadv.render.shading import Shader, Shading
 from kadv.render.surface import RayHits, Surfaces
 from kadv.scenes.scene import Scene
 
-__all__ = ["ExactRenderer", "RayHits", "RenderOutput", "pixel_angle"]
+__all__ = ["DEFAULT_MAX_RAYS", "ExactRenderer", "RayHits", "RenderOutput", "pixel_angle"]
 
 _MIN_HIT_DEPTH = 1e-6  # metres
 
@@ -64,8 +64,12 @@ def pixel_angle(K: torch.Tensor) -> float:
     return float(1.0 / torch.maximum(K[:, 0, 0], K[:, 1, 1]).max())
 
 
+DEFAULT_MAX_RAYS = 2**22  # rays cast and shaded at once: about 1 GiB of temporaries (220 bytes a ray, measured)
+
+
 class ExactRenderer:
-    """Ray-cast renderer of a :class:`Scene`.
+    """Ray-cast renderer of a :class:`Scene`: casting, shading and the output maps all run on the
+    casters' device, where the scene's data are uploaded once.
 
     Args:
         scene: the scene; its triangles go into one ray caster reused by every call.
@@ -74,7 +78,9 @@ class ExactRenderer:
         progress: show the bake's progress bar.
         backend: the ray caster: ``"open3d"`` (Embree, CPU), ``"warp"`` (Warp's BVH on ``device``)
             or ``"auto"`` (Warp on CUDA, Open3D on the CPU).
-        device: where the rays are cast.
+        device: where the rays are cast and shaded.
+        max_rays: the most rays cast and shaded at once; a render of more (views x pixels x
+            samples) goes through in parts of this many, so that a large batch fits the device.
     """
 
     def __init__(
@@ -84,27 +90,54 @@ class ExactRenderer:
         progress: bool = True,
         backend: str = "auto",
         device: torch.device | str = "cpu",
+        max_rays: int = DEFAULT_MAX_RAYS,
     ) -> None:
+        if max_rays < 1:
+            raise ValueError(f"render.max_rays must be a positive number of rays, got {max_rays}")
         self.scene = scene
         self.shading = shading or Shading()
+        self.max_rays = max_rays
         self.surfaces = Surfaces(scene, backend, device)
+        self.device = self.surfaces.device
         self.caster = self.surfaces.caster
         baked = self.shading.lighting == "baked"
         self.baked = load_or_bake(self.surfaces, self.shading.bake, progress) if baked else None
         self.shader = Shader(self.surfaces, self.shading, self.baked)
         self.lights = self.shader.lights
 
-    def cast(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
-        """First opaque hits of rays (..., 3), flattened (:meth:`Surfaces.cast`)."""
+    def cast(self, origins: torch.Tensor | np.ndarray, directions: torch.Tensor | np.ndarray) -> RayHits:
+        """First opaque hits of rays (..., 3), flattened, on the renderer's device (:meth:`Surfaces.cast`)."""
         return self.surfaces.cast(origins, directions)
 
-    def intersections(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, ...]:
+    def intersections(
+        self, origins: torch.Tensor | np.ndarray, directions: torch.Tensor | np.ndarray
+    ) -> tuple[torch.Tensor, ...]:
         """Every opaque intersection of rays (N, 3), by ray then distance (:meth:`Surfaces.intersections`)."""
         return self.surfaces.intersections(origins, directions)
 
-    def back_facing(self, hits: RayHits, directions: np.ndarray) -> np.ndarray:
+    def back_facing(self, hits: RayHits, directions: torch.Tensor | np.ndarray) -> torch.Tensor:
         """(N,) True where a ray hit the back of a triangle (:meth:`Surfaces.back_facing`)."""
         return self.surfaces.back_facing(hits, directions)
+
+    def cast_and_shade(
+        self, origins: torch.Tensor, directions: torch.Tensor, pixel_angle: float, colour: bool, geometry: bool
+    ) -> tuple[RayHits, dict[str, torch.Tensor]]:
+        """Hits and shaded maps (:meth:`Shader.shade`) of rays (N, 3) float64 on the renderer's
+        device, cast and shaded in parts of at most :attr:`max_rays`."""
+        parts = [
+            self._cast_and_shade(o, d, pixel_angle, colour, geometry)
+            for o, d in zip(origins.split(self.max_rays), directions.split(self.max_rays))
+        ]
+        if len(parts) == 1:
+            return parts[0]
+        hits = RayHits(*(torch.cat([getattr(h, f.name) for h, _ in parts]) for f in fields(RayHits)))
+        return hits, {key: torch.cat([maps[key] for _, maps in parts]) for key in parts[0][1]}
+
+    def _cast_and_shade(
+        self, origins: torch.Tensor, directions: torch.Tensor, pixel_angle: float, colour: bool, geometry: bool
+    ) -> tuple[RayHits, dict[str, torch.Tensor]]:
+        hits = self.cast(origins, directions)
+        return hits, self.shader.shade(hits, origins, directions, pixel_angle, colour=colour, geometry=geometry)
 
     def render(
         self,
@@ -115,7 +148,7 @@ class ExactRenderer:
         supersample: int = 1,
         sub_rgb: torch.Tensor | None = None,
     ) -> RenderOutput:
-        """Render B cameras in one cast.
+        """Render B cameras in one cast (in parts of :attr:`max_rays` rays when they are more).
 
         Args:
             world_T_cam: (B, 4, 4) or (4, 4) poses (OpenCV camera, metres).
@@ -127,39 +160,37 @@ class ExactRenderer:
             sub_rgb: (B, 3, s * height, s * width) colours of those s x s rays, when the caller has
                 already shaded them (an anchor render at this pose covers them): they are not cast again.
 
+        Returns:
+            The maps, on the renderer's device.
+
         Raises:
             ValueError: on a NaN or non-rigid pose, bad intrinsics or a bad size.
         """
-        origins, directions = pixel_rays(world_T_cam, K, height, width)
+        origins, directions = pixel_rays(world_T_cam, K, height, width, device=self.device)
         batch, s = origins.shape[0], supersample
-        hits = self.cast(origins, directions)
         angle = pixel_angle(K)
-        maps = self.shader.shade(hits, origins, directions, angle, colour=s == 1)
+        hits, maps = self.cast_and_shade(origins.reshape(-1, 3), directions.reshape(-1, 3), angle, s == 1, True)
 
-        def image(values: np.ndarray, channels: int) -> torch.Tensor:
-            return torch.from_numpy(
-                np.ascontiguousarray(values.reshape(batch, height, width, channels).transpose(0, 3, 1, 2))
-            )
+        def image(values: torch.Tensor, channels: int) -> torch.Tensor:
+            return values.reshape(batch, height, width, channels).permute(0, 3, 1, 2).contiguous()
 
         if sub_rgb is not None:
             if s == 1:
                 raise ValueError("sub_rgb: given with supersample 1, where there are no sub-pixel rays")
             check_shape(sub_rgb, f"B 3 {s * height} {s * width}", "sub_rgb", {"B": batch})
+            sub_rgb = sub_rgb.to(self.device)
         elif s > 1:
-            sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s)
-            sub = self.shader.shade(self.cast(sub_origins, sub_dirs), sub_origins, sub_dirs, angle / s, geometry=False)[
-                "rgb"
-            ]
-            sub_rgb = torch.from_numpy(sub).reshape(batch, s * height, s * width, 3).permute(0, 3, 1, 2)
+            sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s, device=self.device)
+            _, sub = self.cast_and_shade(sub_origins.reshape(-1, 3), sub_dirs.reshape(-1, 3), angle / s, True, False)
+            sub_rgb = sub["rgb"].reshape(batch, s * height, s * width, 3).permute(0, 3, 1, 2)
         rgb = F.avg_pool2d(sub_rgb, s).contiguous() if s > 1 else image(maps["rgb"], 3)
 
         # a ray that meets a surface within a micrometre of the eye starts on it (the eye lies on the
         # surface): it measures no depth, so it is no hit in the mask
         mask = hits.hit & (hits.t > _MIN_HIT_DEPTH)
-        depth = np.where(mask, hits.t, 0.0).astype(np.float32)
         return RenderOutput(
             rgb=rgb,
-            depth=image(depth, 1),
+            depth=image(torch.where(mask, hits.t, 0.0), 1),
             mask=image(mask, 1),
             normals=image(maps["normals"], 3),
             triangle_ids=image(hits.triangle_ids, 1),

@@ -24,7 +24,7 @@ from kadv.geometry.vector import dot
 from kadv.render.bake import BakeConfig
 from kadv.render.colour import tone_map
 from kadv.render.irradiance import BakedLighting
-from kadv.render.lights import delta_irradiance, scene_lights, sky_emitters, sky_radiance
+from kadv.render.lights import DeltaLights, Sky, scene_lights, sky_emitters
 from kadv.render.surface import RayHits, Surfaces, first_hits
 
 __all__ = ["Shader", "Shading", "shade"]
@@ -72,113 +72,110 @@ def shade(
 
 class Shader:
     """Colours of hits on ``surfaces`` under ``shading``, with the scene's ``baked`` lighting (None:
-    direct lighting).
+    direct lighting), computed on the surfaces' device.
 
-    Scene data the shading reads (lights, emitters, their colours) are tensors made once, here.
+    Scene data the shading reads (lights, emitters, their colours, the sky) are tensors made once,
+    here, on that device.
     """
 
     def __init__(self, surfaces: Surfaces, shading: Shading, baked: BakedLighting | None = None) -> None:
-        scene = surfaces.scene
+        scene, device = surfaces.scene, surfaces.device
         self.surfaces, self.shading, self.baked = surfaces, shading, baked
         self.lights = scene_lights(scene, shading.lights)
-        self._lights = torch.from_numpy(self.lights.astype(np.float32))
+        self._lights = torch.from_numpy(self.lights.astype(np.float32)).to(device)
+        self._background = torch.tensor(shading.background, dtype=torch.float32).to(device)
         self._emitter_caster = None
         if baked is not None:
-            self._delta_lights = bool(len(scene.emitters.point_positions) or len(scene.emitters.sun_directions))
-            self._sky = sky_emitters(scene)
+            self._delta_lights = DeltaLights(scene.emitters, device)
+            self._sky = Sky(sky_emitters(scene), device)
             emitters = scene.emitters.area_triangles
             if len(emitters):  # the file's lamps and glowing panels, seen as a camera sees them
                 self._emitter_caster = surfaces.caster_of(
                     emitters.reshape(-1, 3), np.arange(3 * len(emitters)).reshape(-1, 3)
                 )
                 cross = np.cross(emitters[:, 1] - emitters[:, 0], emitters[:, 2] - emitters[:, 0])
-                self._emitter_normals = torch.from_numpy(cross)
-                self._emitter_colour = tone_map(torch.from_numpy(scene.emitters.area_radiance * baked.exposure)).float()
+                self._emitter_normals = torch.from_numpy(cross).to(device)
+                glow = tone_map(torch.from_numpy(scene.emitters.area_radiance * baked.exposure)).float()
+                self._emitter_colour = glow.to(device)
 
     def shade(
         self,
         hits: RayHits,
-        origins: np.ndarray,
-        directions: np.ndarray,
+        origins: torch.Tensor,
+        directions: torch.Tensor,
         pixel_angle: float,
         colour: bool = True,
         geometry: bool = True,
-    ) -> dict[str, np.ndarray]:
-        """Shade hits; ``pixel_angle`` (radians per sample) selects the texture mip level.
+    ) -> dict[str, torch.Tensor]:
+        """Shade hits of rays (N, 3) float64 on the surfaces' device; ``pixel_angle`` (radians per
+        sample) selects the texture mip level.
 
         Returns "rgb" (N, 3) float32 and, with ``geometry``, the masked "points", "normals" (N, 3)
-        and "back_face" (N,). With ``colour`` False "rgb" is the background: the caller takes
-        colour from other rays.
+        float32 and "back_face" (N,) bool, on the same device. With ``colour`` False "rgb" is the
+        background: the caller takes colour from other rays.
         """
         # Every ray is shaded (a miss as a point on triangle 0 at the eye) and misses are masked at
-        # the end: indoors nearly every ray hits, and compacting the hits would cost more.
-        hit = torch.from_numpy(hits.hit)
-        ids = torch.from_numpy(np.maximum(hits.triangle_ids, 0))
-        bary = torch.from_numpy(hits.barycentrics)
-        t = torch.from_numpy(np.where(hits.hit, hits.t, 0.0))
-        dirs = torch.from_numpy(directions.reshape(-1, 3))
-        points = (torch.from_numpy(origins.reshape(-1, 3)) + dirs * t[:, None]).float()
-        facing = self.surfaces.facing(ids, dirs)
+        # the end: indoors nearly every ray hits, and compacting the hits would cost more (and, on a
+        # GPU, a wait for their count).
+        hit = hits.hit
+        ids = hits.triangle_ids.clamp_min(0)
+        bary = hits.barycentrics
+        t = torch.where(hit, hits.t.double(), 0.0)
+        points = origins + directions * t[:, None]
+        facing = self.surfaces.facing(ids, directions)
         back = hit & (facing > 0)
         normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
         normals = torch.where(back[:, None], -normals, normals)
-        background = torch.tensor(self.shading.background, dtype=torch.float32)
-        rgb = background.expand(len(t), 3)
+        rgb = self._background.expand(len(t), 3)
         if colour:
-            uv = self.surfaces.interpolate(self.surfaces.uvs, ids, bary)
-            length = dirs.norm(dim=1)
+            length = directions.norm(dim=1)
             incidence = facing.abs() / length
             # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
             footprint = t * length * pixel_angle / incidence.clamp_min(0.05).sqrt()
-            base = self.surfaces.albedo(ids, uv, footprint.float())
+            base = self.surfaces.albedo(ids, bary, footprint.float())
+            background = self._background
             if self.baked is None:
-                shaded = shade(self.shading, self._lights, points, normals, base)
+                shaded = shade(self.shading, self._lights, points.float(), normals, base)
             else:
                 irradiance = self.baked.irradiance_at(ids, bary, back)
-                if self._delta_lights:
-                    irradiance = irradiance + self._delta_irradiance(hits, origins, directions, normals)
+                if not self._delta_lights.empty:
+                    irradiance = irradiance + self._delta_irradiance(points, directions, normals, hit)
                 shaded = tone_map(self.surfaces.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi))
                 # a ray that leaves the scene sees the sky the bake was lit by
-                sky = sky_radiance(self._sky, F.normalize(dirs, dim=1).numpy())
-                background = tone_map(torch.from_numpy(sky * self.baked.exposure).float())
+                sky = self._sky(F.normalize(directions, dim=1))
+                background = tone_map(sky * self.baked.exposure).float()
             rgb = torch.where(hit[:, None], shaded, background)
             if self._emitter_caster is not None:
                 rgb = self._emitters_seen(rgb, hits, origins, directions)
-        maps = {"rgb": np.ascontiguousarray(rgb.numpy())}
+        maps = {"rgb": rgb.contiguous()}
         if geometry:
             maps.update(
-                points=torch.where(hit[:, None], points, 0.0).numpy(),
-                normals=torch.where(hit[:, None], normals, 0.0).numpy(),
-                back_face=back.numpy(),
+                points=torch.where(hit[:, None], points.float(), 0.0),
+                normals=torch.where(hit[:, None], normals, 0.0),
+                back_face=back,
             )
         return maps
 
     def _delta_irradiance(
-        self, hits: RayHits, origins: np.ndarray, directions: np.ndarray, normals: torch.Tensor
+        self, points: torch.Tensor, directions: torch.Tensor, normals: torch.Tensor, hit: torch.Tensor
     ) -> torch.Tensor:
-        """(N, 3) irradiance at the hits from the scene's point, spot and sun lights, with one
-        shadow ray each (zero on misses)."""
-        hit = hits.hit
-        dirs = directions.reshape(-1, 3)[hit]
-        points = origins.reshape(-1, 3)[hit] + dirs * hits.t[hit, None]
-        facing = normals.numpy()[hit].astype(np.float64)
+        """(N, 3) float32 irradiance at the hits (points (N, 3) float64) from the scene's point, spot
+        and sun lights, with one shadow ray each (zero on misses)."""
+        facing = normals.double()
         # the side the ray arrived from, whatever the file's normals say
-        facing *= np.where(np.einsum("nd,nd->n", facing, dirs) > 0, -1.0, 1.0)[:, None]
-        irradiance = torch.zeros(len(hit), 3)
-        irradiance[torch.from_numpy(hit)] = torch.from_numpy(
-            delta_irradiance(self.surfaces, self.surfaces.scene.emitters, points, facing)
-        ).float()
-        return irradiance
+        facing = torch.where((dot(facing, directions) > 0)[:, None], -facing, facing)
+        irradiance = self._delta_lights.irradiance(self.surfaces, points, facing)
+        return torch.where(hit[:, None], irradiance, 0.0).float()
 
     def _emitters_seen(
-        self, rgb: torch.Tensor, hits: RayHits, origins: np.ndarray, directions: np.ndarray
+        self, rgb: torch.Tensor, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor
     ) -> torch.Tensor:
         """``rgb`` (N, 3) with the colour of an area emitter wherever a ray meets one before any
         surface: its radiance on its emitting side, black behind. Emitters are no geometry (they
         carry no depth): only the colour shows them."""
-        t, ids, _ = first_hits(self._emitter_caster, origins.reshape(-1, 3), directions.reshape(-1, 3))
-        seen = torch.from_numpy((ids >= 0) & (t < np.where(hits.hit, hits.t, np.inf)))
-        ids = torch.from_numpy(np.maximum(ids, 0))
-        facing = dot(self._emitter_normals.index_select(0, ids), torch.from_numpy(directions.reshape(-1, 3))) < 0
+        emitter = first_hits(self._emitter_caster, origins, directions)
+        seen = emitter.hit & (emitter.t < torch.where(hits.hit, hits.t, torch.inf))
+        ids = emitter.triangle_ids.clamp_min(0)
+        facing = dot(self._emitter_normals.index_select(0, ids), directions) < 0
         glow = self._emitter_colour.index_select(0, ids) * facing[:, None]
         return torch.where(seen[:, None], glow, rgb)

@@ -212,7 +212,7 @@ def _bisect(
     bg_a, bg_step = dot(bg_normal, world_a), dot(bg_normal, world_step)
     for _ in range(_BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        hits = renderer.cast(pairs.c, world_a + mid[:, None] * world_step)
+        hits = renderer.cast(pairs.c, world_a + mid[:, None] * world_step).numpy()
         z_fg = _plane_z(fg_id, fg_offset, fg_a + mid * fg_step)
         z_bg = _plane_z(bg_id, bg_offset, bg_a + mid * bg_step)
         # a hit is foreground up to a share of the way to the background's plane, and no further
@@ -276,8 +276,8 @@ def find_edge_pairs(
     Three steps: candidate neighbours across a depth jump in each direction, a bisection with real
     rays for the occluder and the crossing, and the occluder's edge that crosses there.
     """
-    depth = exact.depth[:, 0].double().numpy()
-    ids = exact.triangle_ids[:, 0].numpy()
+    depth = exact.depth[:, 0].double().cpu().numpy()
+    ids = exact.triangle_ids[:, 0].cpu().numpy()
     batch = depth.shape[0]
     pose = check_world_T_cam(world_T_cam).detach().double().numpy()
     K = batched_intrinsics(K, batch).numpy()

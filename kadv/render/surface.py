@@ -17,7 +17,7 @@ from kadv.geometry.vector import dot
 from kadv.render.backends import make_caster
 from kadv.render.casting import RayCaster
 from kadv.render.colour import coat_table, coated_albedo, srgb_decode
-from kadv.render.textures import albedo, mip_pyramid, sample_texture, uv_density
+from kadv.render.textures import MaterialTextures, TextureAtlas
 from kadv.scenes.scene import Scene
 
 __all__ = ["RayHits", "Surfaces", "first_hits", "pyramid_bytes"]
@@ -27,28 +27,47 @@ _ALPHA_CUTOFF = 0.5
 
 @dataclass
 class RayHits:
-    """Hits of N rays: parameter t (z-depth for z=1 directions), triangle id (-1 = miss), barycentrics."""
+    """Hits of N rays, tensors on the caster's device.
 
-    t: np.ndarray
-    triangle_ids: np.ndarray
-    barycentrics: np.ndarray
+    Attributes:
+        t: (N,) float32 ray parameter (z-depth for z = 1 directions), inf on a miss.
+        triangle_ids: (N,) int64, -1 on a miss.
+        barycentrics: (N, 2) float32, Open3D's (u, v).
+    """
+
+    t: torch.Tensor
+    triangle_ids: torch.Tensor
+    barycentrics: torch.Tensor
 
     @property
-    def hit(self) -> np.ndarray:
+    def hit(self) -> torch.Tensor:
         return self.triangle_ids >= 0
 
+    def numpy(self) -> RayHits:
+        """The same hits as host arrays (t and barycentrics float64), for the stages that still
+        compute on the host (the bake, the step guard, the validity probes, the silhouette search)."""
+        return RayHits(
+            self.t.cpu().double().numpy(), self.triangle_ids.cpu().numpy(), self.barycentrics.cpu().double().numpy()
+        )
 
-def first_hits(
-    caster: RayCaster, origins: np.ndarray, directions: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """First hits of rays (N, 3): t (inf on a miss), triangle id (-1 on a miss) and barycentrics."""
-    t, ids, bary = caster.first_hits(*_rays(caster, origins, directions))
-    return t.cpu().numpy().astype(np.float64), ids.cpu().numpy(), bary.cpu().numpy().astype(np.float64)
+
+def _vectors(device: torch.device, dtype: torch.dtype, *arrays: torch.Tensor | np.ndarray) -> list[torch.Tensor]:
+    """(N, 3) tensors of ``dtype`` on ``device`` of vectors (..., 3): tensors, or host arrays (copied:
+    they may be read-only broadcast views)."""
+    return [
+        (torch.from_numpy(np.array(a, np.float64)) if isinstance(a, np.ndarray) else a).reshape(-1, 3).to(device, dtype)
+        for a in arrays
+    ]
 
 
-def _rays(caster: RayCaster, *arrays: np.ndarray) -> list[torch.Tensor]:
-    """float32 tensors on the caster's device of arrays (N, 3)."""
-    return [torch.from_numpy(np.asarray(a, np.float32).reshape(-1, 3)).to(caster.device) for a in arrays]
+def _rays(device: torch.device, *arrays: torch.Tensor | np.ndarray) -> list[torch.Tensor]:
+    """float32 (N, 3) tensors on ``device`` of rays (..., 3)."""
+    return _vectors(device, torch.float32, *arrays)
+
+
+def first_hits(caster: RayCaster, origins: torch.Tensor | np.ndarray, directions: torch.Tensor | np.ndarray) -> RayHits:
+    """First hits of rays (..., 3) in one caster (alpha masks not applied), flattened."""
+    return RayHits(*caster.first_hits(*_rays(caster.device, origins, directions)))
 
 
 def pyramid_bytes(scene: Scene) -> int:
@@ -58,130 +77,132 @@ def pyramid_bytes(scene: Scene) -> int:
     return 4 * (texels + sum(m.opacity.size for m in scene.materials if m.opacity is not None))
 
 
-def _check_textures_fit(scene: Scene) -> None:
-    """Refuse, in one line with the figures, a scene whose textures cannot fit in memory, before any
-    pyramid is built (shading samples them on the host)."""
-    needed, free = pyramid_bytes(scene), free_memory("cpu")
+def _check_textures_fit(scene: Scene, device: torch.device) -> None:
+    """Refuse, in one line with the figures, a scene whose textures cannot fit in ``device``'s
+    memory, before any pyramid is built (shading samples them there)."""
+    needed, free = pyramid_bytes(scene), free_memory(device)
     if needed > free:
+        where = "memory" if device.type == "cpu" else f"{device} memory"
         raise ValueError(
-            f"scene {scene.name!r}: its texture pyramids need about {needed / 2**20:.0f} MiB of memory and "
+            f"scene {scene.name!r}: its texture pyramids need about {needed / 2**20:.0f} MiB of {where} and "
             f"{free / 2**20:.0f} MiB are available: downscale its textures"
         )
 
 
 class Surfaces:
-    """The surfaces of a :class:`Scene` behind ray casters built once.
+    """The surfaces of a :class:`Scene` behind ray casters built once, and what shading reads per
+    hit (texture coordinates, normals, materials), uploaded once to the casters' device.
 
     Args:
         scene: the scene.
         backend: the ray caster: ``"open3d"`` (Embree, CPU), ``"warp"`` (Warp's BVH on ``device``)
             or ``"auto"`` (Warp on CUDA, Open3D on the CPU).
-        device: where the rays are cast.
+        device: where the rays are cast and the hits shaded.
     """
 
     def __init__(self, scene: Scene, backend: str = "auto", device: torch.device | str = "cpu") -> None:
         self.scene = scene
-        self.backend, self.device = backend, device
-        self.caster = self.caster_of(scene.vertices, scene.faces)
+        self.backend = backend
+        self.caster = self.caster_of(scene.vertices, scene.faces, device)
+        self.device = device = self.caster.device
         # A ray that met a transparent texel continues in two smaller scenes: the first hit among the
         # opaque materials' triangles, and every hit on the alpha-masked ones (a few, where listing
         # them in the whole scene would list every wall behind).
-        masked_faces = np.array([m.opacity is not None for m in scene.materials], bool)[scene.material_ids]
-        self._masked_face = np.r_[masked_faces, False]  # per triangle, and a False that a miss (id -1) reads
-        self._opaque_faces, self._masked_faces = np.flatnonzero(~masked_faces), np.flatnonzero(masked_faces)
-        if len(self._masked_faces):
-            self._opaque_caster = self.caster_of(scene.vertices, scene.faces[self._opaque_faces])
-            self._masked_caster = self.caster_of(scene.vertices, scene.faces[self._masked_faces])
-        # shading reads these per hit: torch copies made once
-        _check_textures_fit(scene)
-        self.pyramids = {i: mip_pyramid(m.texture) for i, m in enumerate(scene.materials) if m.texture is not None}
-        self.opacity = {
-            i: torch.from_numpy(np.ascontiguousarray(m.opacity[:, :, None], np.float32))
-            for i, m in enumerate(scene.materials)
-            if m.opacity is not None
-        }
-        self.texel_density = torch.from_numpy(uv_density(scene).astype(np.float32))
-        self.uvs = torch.from_numpy(scene.uvs.astype(np.float64))
-        self.normals = torch.from_numpy(scene.normals.astype(np.float32))
-        self.face_normals = torch.from_numpy(scene.face_normals.astype(np.float64))
-        self.coats = torch.from_numpy(coat_table(scene)).float()[torch.from_numpy(scene.material_ids)]
+        masked = np.array([m.opacity is not None for m in scene.materials], bool)[scene.material_ids]
+        self._opaque_faces = torch.from_numpy(np.flatnonzero(~masked)).to(device)
+        self._masked_faces = torch.from_numpy(np.flatnonzero(masked)).to(device)
+        self._masked = masked.any()
+        if self._masked:
+            self._masked_face = torch.from_numpy(masked).to(device)
+            self._opaque_caster = self.caster_of(scene.vertices, scene.faces[~masked], device)
+            self._masked_caster = self.caster_of(scene.vertices, scene.faces[masked], device)
+            self._alpha = TextureAtlas.build(
+                [None if m.opacity is None else m.opacity[:, :, None] for m in scene.materials], device, mipmap=False
+            )
+        _check_textures_fit(scene, device)
+        self.materials = MaterialTextures(scene, device)
+        self.uvs = torch.from_numpy(scene.uvs.astype(np.float64)).to(device)
+        self.normals = torch.from_numpy(scene.normals.astype(np.float32)).to(device)
+        self.face_normals = torch.from_numpy(scene.face_normals.astype(np.float64)).to(device)
+        self.coats = torch.from_numpy(coat_table(scene)).float()[torch.from_numpy(scene.material_ids)].to(device)
 
-    def caster_of(self, vertices: np.ndarray, faces: np.ndarray) -> RayCaster:
+    def caster_of(self, vertices: np.ndarray, faces: np.ndarray, device: torch.device | str | None = None) -> RayCaster:
         """A caster of triangles ``faces`` (F, 3) of ``vertices`` (V, 3) on this backend and device."""
-        return make_caster(vertices, faces, self.backend, self.device)
+        return make_caster(vertices, faces, self.backend, self.device if device is None else device)
 
-    def cast(self, origins: np.ndarray, directions: np.ndarray) -> RayHits:
-        """Cast rays (..., 3) each; alpha-masked texels let rays through.
+    def cast(self, origins: torch.Tensor | np.ndarray, directions: torch.Tensor | np.ndarray) -> RayHits:
+        """First opaque hits of rays (..., 3), flattened to N; alpha-masked texels let rays through.
 
-        Returns:
-            Hits flattened to N = prod(...) rays.
+        Rays may be tensors anywhere or host arrays; they are cast as float32 on the casters' device.
         """
-        origins = origins.reshape(-1, 3)
-        directions = directions.reshape(-1, 3)
-        t, ids, bary = first_hits(self.caster, origins, directions)
-        if len(self._masked_faces):
-            # the few rays that met a transparent texel take their first opaque hit from one cast and
-            # one list of intersections, however many leaves they pass
-            pending = np.flatnonzero(self.see_through(ids, bary))
-            if len(pending):
-                t[pending], ids[pending], bary[pending] = self._first_opaque(origins[pending], directions[pending])
-        return RayHits(t, ids, bary)
+        origins, directions = _rays(self.device, origins, directions)
+        hits = first_hits(self.caster, origins, directions)
+        if not self._masked:
+            return hits
+        # the few rays that met a transparent texel take their first opaque hit from one cast and one
+        # list of intersections, however many leaves they pass (their number is read: one sync)
+        pending = torch.nonzero(self.see_through(hits.triangle_ids, hits.barycentrics))[:, 0]
+        if len(pending):
+            t, ids, bary = self._first_opaque(origins.index_select(0, pending), directions.index_select(0, pending))
+            hits.t[pending], hits.triangle_ids[pending], hits.barycentrics[pending] = t, ids, bary
+        return hits
 
-    def _first_opaque(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _first_opaque(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """First opaque hit (t, triangle id, barycentrics) of rays (N, 3) whose first hit is a
         transparent texel: the nearer of the first hit on an opaque material's triangle and the
         first opaque texel among the hits on alpha-masked triangles."""
-        t, local, bary = first_hits(self._opaque_caster, origins, directions)
-        ids = np.where(local >= 0, self._opaque_faces[np.maximum(local, 0)], -1)
+        t, local, bary = self._opaque_caster.first_hits(origins, directions)
+        ids = torch.where(local >= 0, self._opaque_faces[local.clamp_min(0)], -1)
         ray_ids, t_masked, ids_masked, bary_masked = self._list_opaque(
             self._masked_caster, self._masked_faces, origins, directions
         )
-        first = np.r_[True, ray_ids[1:] != ray_ids[:-1]] if len(ray_ids) else np.zeros(0, bool)
+        first = torch.ones_like(ray_ids, dtype=torch.bool)
+        first[1:] = ray_ids[1:] != ray_ids[:-1]
         nearer = first & (t_masked < t[ray_ids])
         rays = ray_ids[nearer]
         t[rays], ids[rays], bary[rays] = t_masked[nearer], ids_masked[nearer], bary_masked[nearer]
         return t, ids, bary
 
-    def intersections(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, ...]:
+    def intersections(
+        self, origins: torch.Tensor | np.ndarray, directions: torch.Tensor | np.ndarray
+    ) -> tuple[torch.Tensor, ...]:
         """Every opaque intersection of rays (N, 3), sorted by ray then distance: ray index (M,),
-        parameter t (M,), triangle id (M,) and barycentrics (M, 2)."""
-        return self._list_opaque(self.caster, None, origins, directions)
+        parameter t (M,) float32, triangle id (M,) and barycentrics (M, 2) float32."""
+        return self._list_opaque(self.caster, None, *_rays(self.device, origins, directions))
 
     def _list_opaque(
-        self, caster: RayCaster, faces: np.ndarray | None, origins: np.ndarray, directions: np.ndarray
-    ) -> tuple[np.ndarray, ...]:
+        self, caster: RayCaster, faces: torch.Tensor | None, origins: torch.Tensor, directions: torch.Tensor
+    ) -> tuple[torch.Tensor, ...]:
         """:meth:`intersections` in ``caster``, whose triangle i is the scene's ``faces[i]`` (or i
         when ``faces`` is None)."""
-        ray_ids, t, ids, bary = (x.cpu().numpy() for x in caster.all_hits(*_rays(caster, origins, directions)))
-        t, bary = t.astype(np.float64), bary.astype(np.float64)
+        ray_ids, t, ids, bary = caster.all_hits(origins, directions)
         ids = ids if faces is None else faces[ids]
-        if len(t):
+        if self._masked:
             opaque = ~self.see_through(ids, bary)
             ray_ids, t, ids, bary = ray_ids[opaque], t[opaque], ids[opaque], bary[opaque]
-        order = np.lexsort((t, ray_ids))
+        # by ray, then by distance: two stable sorts
+        order = torch.argsort(t, stable=True)
+        order = order[torch.argsort(ray_ids[order], stable=True)]
         return ray_ids[order], t[order], ids[order], bary[order]
 
-    def see_through(self, ids: np.ndarray, bary: np.ndarray) -> np.ndarray:
-        """(N,) True where a hit (triangle ids, barycentrics) falls on a transparent texel of an alpha mask."""
-        see_through = np.zeros(len(ids), bool)
-        candidates = np.flatnonzero(self._masked_face[ids])
-        material_ids = self.scene.material_ids[ids[candidates]]
-        for index in np.unique(material_ids):
-            selected = candidates[material_ids == index]
-            uv = self.interpolate(self.uvs, torch.from_numpy(ids[selected]), torch.from_numpy(bary[selected]))
-            uv_scale = torch.as_tensor(self.scene.materials[index].uv_scale, dtype=uv.dtype)
-            alpha = sample_texture(self.opacity[index], uv * uv_scale)[:, 0]
-            see_through[selected[(alpha < _ALPHA_CUTOFF).numpy()]] = True
+    def see_through(self, ids: torch.Tensor, bary: torch.Tensor) -> torch.Tensor:
+        """(N,) True where hits (triangle ids (N,), barycentrics (N, 2)) fall on a transparent texel of
+        an alpha mask."""
+        see_through = torch.zeros_like(ids, dtype=torch.bool)
+        if not self._masked:
+            return see_through
+        candidates = torch.nonzero((ids >= 0) & self._masked_face.index_select(0, ids.clamp_min(0)))[:, 0]
+        ids, bary = ids.index_select(0, candidates), bary.index_select(0, candidates)
+        material = self.materials.material_ids.index_select(0, ids)
+        uv = self.interpolate(self.uvs, ids, bary) * self.materials.uv_scale.index_select(0, material)
+        alpha = self._alpha.bilinear(material, torch.zeros_like(material), uv)[:, 0]
+        see_through[candidates] = alpha < _ALPHA_CUTOFF
         return see_through
 
-    def back_facing(self, hits: RayHits, directions: np.ndarray) -> np.ndarray:
+    def back_facing(self, hits: RayHits, directions: torch.Tensor | np.ndarray) -> torch.Tensor:
         """(N,) True where a ray (directions (..., 3), N in all) hit the back of a triangle; False on misses."""
-        # a copy: the directions may be a read-only broadcast view
-        facing = self.facing(
-            torch.from_numpy(np.maximum(hits.triangle_ids, 0)),
-            torch.tensor(directions.reshape(-1, 3), dtype=torch.float64),
-        )
-        return hits.hit & (facing > 0).numpy()
+        (directions,) = _vectors(self.device, torch.float64, directions)
+        return hits.hit & (self.facing(hits.triangle_ids.clamp_min(0), directions) > 0)
 
     def facing(self, triangle_ids: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
         """(N,) dot products of ray directions (N, 3) with their triangles' face normals: positive
@@ -205,7 +226,17 @@ class Surfaces:
         (N, 3) on triangles (N,), with their materials' coats (:func:`coated_albedo`)."""
         return coated_albedo(srgb_decode(base), self.coats.index_select(0, triangle_ids))
 
-    def albedo(self, triangle_ids: torch.Tensor, uv: torch.Tensor, footprint: torch.Tensor) -> torch.Tensor:
-        """(N, 3) float32 display base colour of hits on triangles (N,) at texture coordinates (N, 2),
-        textures filtered to each hit's ``footprint`` (N,) metres (:func:`kadv.render.textures.albedo`)."""
-        return albedo(self.scene, triangle_ids, uv, footprint, self.pyramids, self.texel_density)
+    def albedo(self, triangle_ids: torch.Tensor, bary: torch.Tensor, footprint: torch.Tensor) -> torch.Tensor:
+        """(N, 3) float32 display base colour of hits on triangles (N,) at barycentrics (N, 2),
+        textures filtered to each hit's ``footprint`` (N,) metres (:meth:`MaterialTextures.albedo`)."""
+        materials = self.materials
+        if self.device.type != "cpu":  # a GPU computes every row sooner than it would wait for a count
+            return materials.albedo(triangle_ids, self.interpolate(self.uvs, triangle_ids, bary), footprint)
+        # on the CPU, texture work in proportion to the hits on textured materials (often a few)
+        material = materials.material_ids.index_select(0, triangle_ids)
+        colour = materials.base.index_select(0, material)
+        rows = torch.nonzero(materials.textured.index_select(0, material))[:, 0]
+        ids = triangle_ids.index_select(0, rows)
+        uv = self.interpolate(self.uvs, ids, bary.index_select(0, rows))
+        colour[rows] = materials.albedo(ids, uv, footprint.index_select(0, rows))
+        return colour

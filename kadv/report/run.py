@@ -176,7 +176,7 @@ class ViewRenderer:
         poses = torch.stack([r.world_T_cam(init.world_T_cam) for r in records])
         K = intrinsics_from_fov(init.fov_x_deg, self.height, self.width)
         with torch.no_grad():
-            out = self.objective.renderer.render(poses, K, self.height, self.width, supersample=self.supersample)
+            out = self.objective.renderer.render(poses, K, self.height, self.width, self.supersample).to("cpu")
             prediction = self.objective.model(out.rgb, K)
             aligned = aligned_depth(prediction.double(), out.depth.double(), out.mask, self.objective.model.output_kind)
         return {

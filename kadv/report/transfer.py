@@ -56,7 +56,7 @@ def transfer_tables(
             height, width = run.summary.height, run.summary.width
             supersample = int(run.config.get("render", {}).get("supersample", 1))
             with torch.no_grad():
-                out = renderer.render(poses, Ks, height, width, supersample=supersample)
+                out = renderer.render(poses, Ks, height, width, supersample=supersample).to("cpu")
                 for name in names:
                     model = model_of(models[name])
                     objective = Objective(model, loss, renderer, PenaltyConfig(), space)

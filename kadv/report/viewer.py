@@ -21,7 +21,7 @@ import torch
 import trimesh
 
 from kadv.attack.records import ViewRecord, incumbent_path
-from kadv.render.textures import albedo, mip_pyramid, uv_density
+from kadv.render.textures import MaterialTextures
 from kadv.report.run import TRAJECTORY, read_trajectory
 from kadv.report.sweep import RunRecord, collect_runs
 from kadv.scenes import Scene, scene_from_node
@@ -96,9 +96,7 @@ def scene_colours(scene: Scene) -> np.ndarray:
     uv = torch.from_numpy(scene.uvs.mean(axis=1).astype(np.float32))
     corners = scene.vertices[scene.faces]
     size = np.linalg.norm(corners - corners.mean(axis=1, keepdims=True), axis=2).max(axis=1)
-    pyramids = {i: mip_pyramid(m.texture) for i, m in enumerate(scene.materials) if m.texture is not None}
-    density = torch.from_numpy(uv_density(scene).astype(np.float32))
-    colour = albedo(scene, ids, uv, torch.from_numpy(size.astype(np.float32)), pyramids, density)
+    colour = MaterialTextures(scene).albedo(ids, uv, torch.from_numpy(size.astype(np.float32)))
     return (colour.clamp(0.0, 1.0).numpy() * 255 + 0.5).astype(np.uint8)
 
 

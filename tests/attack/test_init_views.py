@@ -63,7 +63,7 @@ def test_sampled_views_are_valid_clear_in_range_and_ranked(tiny_objective) -> No
     assert ((scores.content() > 0) & (scores.content() <= 1)).all() and (scores.surfaces >= 1).all()
     assert (distance_to_surface(renderer, poses[:, :3, 3]) > 2 * PENALTY.d_th).all()
     centres = poses[:, :3, 3].numpy()
-    below = renderer.cast(centres, np.broadcast_to(np.array([0.0, -1.0, 0.0]), centres.shape))
+    below = renderer.cast(centres, np.broadcast_to(np.array([0.0, -1.0, 0.0]), centres.shape)).numpy()
     assert ((below.t >= 1.2 - 1e-9) & (below.t <= 1.6 + 1e-9)).all()  # eye height above what is below
     pitch = torch.rad2deg(torch.asin(poses[:, 1, 2]))  # the optical axis' upward component (world y up)
     assert ((pitch >= -20.0 - 1e-6) & (pitch <= 1e-6)).all()

@@ -248,6 +248,7 @@ BAD_INPUTS = [
     ("kadv-attack", ["+render.foo=1"], "+render.foo=1: render has no key 'foo'; it has: height, width"),
     ("kadv-render", ["+render.shading.glow=2"], "render.shading has no key 'glow'; it has: ambient"),
     ("kadv-attack", ["render.backend=bogus"], "render.backend must be one of auto, open3d, warp, got 'bogus'"),
+    ("kadv-attack", ["render.max_rays=0"], "render.max_rays must be an integer >= 1, got 0"),
     ("kadv-render", ["scene=procedural", "scene.seed=abc"], "scene.seed must be an integer, got 'abc'"),
     ("kadv-render", ["scene=procedural", "scene.stairs_share=2"], "scene.stairs_share must be in [0, 1], got 2.0"),
     ("kadv-render", ["scene=file", "scene.path=/no/such/room.glb"], "/no/such/room.glb"),

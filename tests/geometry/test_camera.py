@@ -28,7 +28,7 @@ def test_rays_have_unit_camera_z_and_pass_through_pixel_centres() -> None:
     K = intrinsics_from_fov(60.0, 7, 9)
     origins, dirs = pixel_rays(pose, K, 7, 9)
     assert origins.shape == (1, 7, 1, 9, 1, 3)
-    dirs_cam = dirs.reshape(-1, 3) @ pose[:3, :3].numpy()
+    dirs_cam = dirs.reshape(-1, 3).numpy() @ pose[:3, :3].numpy()
     assert np.allclose(dirs_cam[:, 2], 1.0)
     projected = dirs_cam @ K.numpy().T
     u = projected[:, 0].reshape(7, 9)

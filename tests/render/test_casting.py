@@ -39,7 +39,7 @@ def test_warp_renders_and_distances_equal_open3d(name: str, device: str) -> None
     camera = scene.cameras[0]
     poses = torch.cat([camera.world_T_cam[None], random_valid_poses(open3d, 3, np.random.default_rng(0), 70.0)])
     K = intrinsics_from_fov(70.0, HEIGHT, WIDTH)
-    a, b = (r.render(poses, K, HEIGHT, WIDTH) for r in (open3d, warp))
+    a, b = (r.render(poses, K, HEIGHT, WIDTH).to("cpu") for r in (open3d, warp))
     assert (a.mask == b.mask).float().mean() >= 0.999
     both = a.mask & b.mask
     same_ids = a.triangle_ids == b.triangle_ids
@@ -102,7 +102,8 @@ def test_textures_too_large_for_memory_are_refused_with_the_figures(monkeypatch)
     ):
         ExactRenderer(room)
     monkeypatch.setattr(surface, "free_memory", lambda device: needed)
-    assert ExactRenderer(room).surfaces.pyramids
+    built = ExactRenderer(room).surfaces.materials.atlas.texels
+    assert 0 < built.numel() * built.element_size() <= needed  # the estimate covers what is built
 
 
 def test_a_scene_too_large_for_the_device_is_refused_with_the_figures(monkeypatch) -> None:

@@ -80,9 +80,8 @@ def _irradiance_at(renderer: ExactRenderer, point: np.ndarray) -> np.ndarray:
     """(3,) baked irradiance where a ray from ``point`` going down meets a surface."""
     direction = np.array([[0.0, -1.0, 0.0]])
     hits = renderer.cast(point[None], direction)
-    back = torch.from_numpy(renderer.back_facing(hits, direction))
-    ids, bary = torch.from_numpy(hits.triangle_ids), torch.from_numpy(hits.barycentrics)
-    return renderer.baked.irradiance_at(ids, bary, back)[0].double().numpy()
+    back = renderer.back_facing(hits, direction)
+    return renderer.baked.irradiance_at(hits.triangle_ids, hits.barycentrics, back)[0].double().numpy()
 
 
 def _baked(scene, config: BakeConfig, tmp_path) -> ExactRenderer:
@@ -337,7 +336,8 @@ def test_a_sun_through_a_window_is_shaded_per_hit_with_a_sharp_shadow(tmp_path) 
     renderer = _baked(_room(albedo=0.5, window=True, emitters=sun), BakeConfig(texel=1.0, rays=8, bounces=0), tmp_path)
     points = np.array([[2.0, 0.0, 1.02], [2.0, 0.0, 0.98], [1.52, 0.0, 1.5], [1.48, 0.0, 1.5], [2.0, 0.0, 1.5]])
     up = np.tile([0.0, 1.0, 0.0], (len(points), 1))
-    irradiance = lights.delta_irradiance(renderer.surfaces, renderer.scene.emitters, points, up)
+    delta_lights = lights.DeltaLights(renderer.scene.emitters)
+    irradiance = delta_lights.irradiance(renderer.surfaces, torch.from_numpy(points), torch.from_numpy(up)).numpy()
     lit = 5.0 * toward_sun[1]
     np.testing.assert_allclose(irradiance[:, 0], [lit, 0.0, lit, 0.0, lit], atol=1e-9)
     # the lattice holds no direct sun (with no bounce, nothing) ...

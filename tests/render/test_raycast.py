@@ -32,7 +32,7 @@ def _quad_scene(opacity: np.ndarray | None = None, wall_behind: bool = False):
 def _analytic_room_depth(size, world_T_cam, K, height, width) -> np.ndarray:
     """z-depth of the nearest of the six room planes along every pixel ray."""
     origins, dirs = pixel_rays(world_T_cam, K, height, width)
-    o, d = origins.reshape(-1, 3), dirs.reshape(-1, 3)
+    o, d = origins.reshape(-1, 3).numpy(), dirs.reshape(-1, 3).numpy()
     best = np.full(len(d), np.inf)
     for axis in range(3):
         for plane in (0.0, size[axis]):
@@ -66,7 +66,7 @@ def test_checker_quad_colours_at_chosen_pixels() -> None:
     K = intrinsics_from_fov(60.0, height, width)
     out = ExactRenderer(scene, FLAT).render(pose, K, height, width)
     _, dirs = pixel_rays(pose, K, height, width)
-    hit = dirs.reshape(height, width, 3) * 2.0  # ray parameter = z-depth = 2 on the quad
+    hit = dirs.reshape(height, width, 3).numpy() * 2.0  # ray parameter = z-depth = 2 on the quad
     u, v = (hit[..., 0] + 1) / 2, (hit[..., 1] + 1) / 2
     inside = (u > 0) & (u < 1) & (v > 0) & (v < 1)
     cell_u, cell_v = u * 4, (1 - v) * 4  # v = 1 is the top image row of the texture
@@ -128,9 +128,10 @@ def test_first_opaque_hit_behind_transparent_texels_is_the_nearest_of_all_inters
     directions = np.c_[np.random.default_rng(0).uniform(-0.6, 0.6, (4000, 2)), np.ones(4000)]
     origins = np.zeros_like(directions)
     hits = renderer.cast(origins, directions)
-    ray_ids, t, ids, bary = renderer.intersections(origins, directions)
+    ray_ids, t, ids, bary = (x.numpy() for x in renderer.intersections(origins, directions))
     first = np.r_[True, ray_ids[1:] != ray_ids[:-1]]
     assert len(np.unique(ids[first])) >= 6  # rays stop on every layer (two triangles a quad)
+    hits = hits.numpy()
     np.testing.assert_array_equal(np.flatnonzero(hits.hit), ray_ids[first])
     np.testing.assert_array_equal(hits.t[ray_ids[first]], t[first])
     np.testing.assert_array_equal(hits.triangle_ids[ray_ids[first]], ids[first])

@@ -6,7 +6,7 @@ import numpy as np
 import torch
 
 from kadv.render.shading import Shading, shade
-from kadv.render.textures import mip_pyramid, sample_texture, sample_texture_filtered
+from kadv.render.textures import TextureAtlas, mip_pyramid, sample_texture
 
 
 def _texture() -> np.ndarray:
@@ -28,10 +28,27 @@ def test_mip_levels_halve_down_to_the_mean_and_the_lookup_blends_two_levels() ->
     levels = mip_pyramid(_texture())
     assert [tuple(level.shape[:2]) for level in levels] == [(4, 8), (2, 4), (1, 2), (1, 1)]
     np.testing.assert_allclose(levels[-1][0, 0].numpy(), _texture().mean(axis=(0, 1)), atol=1e-6)
+    atlas = TextureAtlas.build([_texture()])
     uv = torch.tensor([[0.3, 0.6]], dtype=torch.float64)
-    between = sample_texture_filtered(levels, uv, torch.tensor([2.25]))
+    slot = torch.zeros(1, dtype=torch.int64)
+    between = atlas.trilinear(slot, uv, torch.tensor([2.25]))
     torch.testing.assert_close(between, 0.75 * sample_texture(levels[2], uv) + 0.25 * sample_texture(levels[3], uv))
-    torch.testing.assert_close(sample_texture_filtered(levels, uv, torch.tensor([9.0])), levels[-1][0])
+    torch.testing.assert_close(atlas.trilinear(slot, uv, torch.tensor([9.0])), levels[-1][0])
+
+
+def test_one_atlas_samples_textures_of_several_sizes_and_a_texel_of_ones_in_one_call() -> None:
+    small = np.random.default_rng(1).random((2, 3, 3)).astype(np.float32)
+    atlas = TextureAtlas.build([_texture(), None, small])
+    uv = torch.tensor([[0.3, 0.6], [0.7, 0.1], [0.45, 0.8], [-2.3, 5.6]], dtype=torch.float64)
+    slots = torch.tensor([0, 1, 2, 0])
+    levels = torch.tensor([0.0, 0.0, 1.5, 0.5])
+    mixed = atlas.trilinear(slots, uv, levels)
+    torch.testing.assert_close(mixed[0], sample_texture(torch.from_numpy(_texture()), uv[:1])[0])
+    torch.testing.assert_close(mixed[1], torch.ones(3))
+    # the small texture has two levels: 1.5 blends its last level with itself
+    torch.testing.assert_close(mixed[2], mip_pyramid(small)[1].reshape(3))
+    alone = TextureAtlas.build([_texture()]).trilinear(torch.tensor([0]), uv[3:], levels[3:])
+    torch.testing.assert_close(mixed[3:], alone, rtol=0, atol=0)
 
 
 def test_ambient_only_returns_the_base_colour_and_a_facing_light_adds_the_diffuse_weight() -> None:

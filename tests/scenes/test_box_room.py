@@ -22,7 +22,7 @@ def test_room_is_closed_and_camera_is_sensible(seed: int) -> None:
     camera = scene.cameras[0]
     centre = camera.world_T_cam[:3, 3].numpy()
     directions = np.random.default_rng(seed).normal(size=(2000, 3))
-    hits = renderer.cast(np.broadcast_to(centre, directions.shape), directions)
+    hits = renderer.cast(np.broadcast_to(centre, directions.shape), directions).numpy()
     assert hits.hit.all()  # closed: every direction from inside hits a surface
     assert (hits.t * np.linalg.norm(directions, axis=1)).min() > 0.5
     out = renderer.render(camera.world_T_cam, camera.intrinsics(60, 80), 60, 80)

@@ -7,9 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 from PIL import Image
 
-from kadv.render.lights import sky_radiance
+from kadv.render.lights import Sky
 from kadv.scenes import Emitters, load_scene, procedural_room
 from kadv.scenes.emitters import DEFAULT_LAMP_RADIANCE, MISSING_ENVMAP_RADIANCE, SUNSKY_SKY_PER_SCALE
 
@@ -92,7 +93,7 @@ def test_an_environment_map_is_looked_up_in_latitude_and_longitude(tmp_path: Pat
         "</scene>"
     )
     emitters = load_scene(tmp_path / "scene.xml").emitters
-    seen = sky_radiance(emitters, np.array([[0.0, 1.0, 0.0], [0.3, -0.9, 0.3]]))
+    seen = Sky(emitters)(torch.tensor([[0.0, 1.0, 0.0], [0.3, -0.9, 0.3]], dtype=torch.float64)).numpy()
     np.testing.assert_allclose(seen, [[2, 0, 0], [0, 0, 2]])
 
 

@@ -37,7 +37,7 @@ def test_each_probe_has_valid_init_views_inside_closed_geometry(name: str) -> No
     for view in views:
         origins = np.broadcast_to(view.world_T_cam[:3, 3].numpy(), directions.shape)
         hits = renderer.cast(origins, directions)
-        back = renderer.back_facing(hits, directions)
+        back = renderer.back_facing(hits, directions).numpy()
         # no camera inside geometry: it sees surfaces from the front (a ray that grazes a box's edge
         # may meet the millimetre by which its faces overlap from behind: a few in a thousand)
         assert back.mean() < 0.005, f"{name}: {int(back.sum())} rays from {view.name} meet a back face"
