@@ -153,7 +153,7 @@ class DeltaLights:
             lit = (cosine > 0) & _visible(surfaces, origins, direction, distance)
             irradiance += self.intensity[index] * (cosine * lit / distance.clamp_min(1e-3) ** 2)[:, None]
         for direction, sun in zip(self.sun_directions, self.sun_irradiance):
-            cosine = normals @ direction
+            cosine = dot(normals, direction)
             lit = (cosine > 0) & ~surfaces.cast(origins, direction.expand_as(origins)).hit
             irradiance += sun * (cosine.clamp_min(0.0) * lit)[:, None]
         return irradiance

@@ -137,13 +137,14 @@ class Shader:
             if self.baked is None:
                 shaded = shade(self.shading, self._lights, points.float(), normals, base)
             else:
-                irradiance = self.baked.irradiance_at(ids, bary, back)
+                # the lattice weights in float64: a hit's place between lattice points is a small difference
+                irradiance = self.baked.irradiance_at(ids, bary.double(), back)
                 if not self._delta_lights.empty:
                     irradiance = irradiance + self._delta_irradiance(points, directions, normals, hit)
                 shaded = tone_map(self.surfaces.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi))
                 # a ray that leaves the scene sees the sky the bake was lit by
                 sky = self._sky(F.normalize(directions, dim=1))
-                background = tone_map(sky * self.baked.exposure).float()
+                background = tone_map((sky * self.baked.exposure).float())
             rgb = torch.where(hit[:, None], shaded, background)
             if self._emitter_caster is not None:
                 rgb = self._emitters_seen(rgb, hits, origins, directions)
