@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-import numpy as np
 import torch
 
 from kadv.checks import check_shape
@@ -24,6 +23,7 @@ from kadv.geometry.pose import check_world_T_cam
 from kadv.geometry.vector import dot, mat_vec
 from kadv.render.raycast import ExactRenderer, RenderOutput
 from kadv.render.straight_through import straight_through
+from kadv.render.surface import Surfaces
 
 __all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term"]
 
@@ -37,49 +37,51 @@ _MAX_CROSSING_ERROR = 0.25  # the chosen edge's exact crossing within a quarter 
 
 @dataclass
 class EdgePairs:
-    """Occlusion-edge pairs found in exact renders (N pairs).
+    """Occlusion-edge pairs found in exact renders (N pairs), tensors on the host.
 
     Attributes:
-        batch: (N,) view index.
-        a, b: (N,) flat pixel indices (b is a's right or lower neighbour).
+        batch: (N,) int64 view index.
+        a, b: (N,) int64 flat pixel indices (b is a's right or lower neighbour).
         horizontal: (N,) bool, True for (x, x+1) pairs.
-        edge: (N, 2) vertex indices of the occluder's silhouette edge.
-        t: (N,) crossing position found by bisection (no gradient).
+        edge: (N, 2) int64 vertex indices of the occluder's silhouette edge.
+        t: (N,) float64 crossing position found by bisection (no gradient).
     """
 
-    batch: np.ndarray
-    a: np.ndarray
-    b: np.ndarray
-    horizontal: np.ndarray
-    edge: np.ndarray
-    t: np.ndarray
+    batch: torch.Tensor
+    a: torch.Tensor
+    b: torch.Tensor
+    horizontal: torch.Tensor
+    edge: torch.Tensor
+    t: torch.Tensor
+
+    def to(self, device: torch.device | str) -> EdgePairs:
+        return EdgePairs(*(getattr(self, f.name).to(device) for f in fields(self)))
 
 
-def _rays(K_inv: np.ndarray, batch: np.ndarray, uv: np.ndarray) -> np.ndarray:
+def _rays(K_inv: torch.Tensor, batch: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
     """Camera-frame rays (N, 3) with z = 1 through pixel coordinates uv (N, 2)."""
-    return mat_vec(K_inv[batch], np.c_[uv, np.ones(len(uv))])
+    return mat_vec(K_inv[batch], torch.cat([uv, torch.ones_like(uv[:, :1])], dim=1))
 
 
-def _planes(renderer: ExactRenderer, ids: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _planes(surfaces: Surfaces, ids: torch.Tensor, c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """World normals (N, 3) of triangles ``ids`` (N,) and their planes' offsets n . (v0 - c) (N,)
     from the camera centres ``c`` (N, 3)."""
-    safe = np.maximum(ids, 0)
-    normal = renderer.scene.face_normals[safe].astype(np.float64)
-    offset = dot(normal, renderer.scene.vertices[renderer.scene.faces[safe, 0]] - c)
+    safe = ids.clamp_min(0)
+    normal = surfaces.face_normals[safe]
+    offset = dot(normal, surfaces.vertices[surfaces.faces[safe, 0]] - c)
     return normal, offset
 
 
-def _plane_z(ids: np.ndarray, offset: np.ndarray, normal_dot_ray: np.ndarray) -> np.ndarray:
+def _plane_z(ids: torch.Tensor, offset: torch.Tensor, normal_dot_ray: torch.Tensor) -> torch.Tensor:
     """z-depth where rays (z = 1 in the camera) meet the planes of triangles ``ids`` (inf for ids < 0
     or behind the camera), from the planes' offsets and the normals' dot products with the rays."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = offset / normal_dot_ray
-    return np.where((ids >= 0) & (z > 0), z, np.inf)
+    z = offset / normal_dot_ray
+    return torch.where((ids >= 0) & (z > 0), z, torch.inf)
 
 
-def _plane_depth(renderer: ExactRenderer, ids: np.ndarray, rays_world: np.ndarray, c: np.ndarray) -> np.ndarray:
+def _plane_depth(surfaces: Surfaces, ids: torch.Tensor, rays_world: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
     """z-depth where camera rays (z = 1, world frame) (N, 3) from ``c`` meet the plane of triangles ``ids``."""
-    normal, offset = _planes(renderer, ids, c)
+    normal, offset = _planes(surfaces, ids, c)
     return _plane_z(ids, offset, dot(normal, rays_world))
 
 
@@ -124,47 +126,47 @@ class _Candidates:
     """Neighbour pairs (N) across a possible occlusion edge: pixel indices, direction and centres,
     camera rays (z = 1) through both centres in the camera and world frames, and their views' poses."""
 
-    batch: np.ndarray
-    a: np.ndarray
-    b: np.ndarray
-    horizontal: np.ndarray
-    uv_a: np.ndarray
-    uv_b: np.ndarray
-    rays_a: np.ndarray
-    rays_b: np.ndarray
-    world_a: np.ndarray
-    world_b: np.ndarray
-    R: np.ndarray
-    c: np.ndarray
+    batch: torch.Tensor
+    a: torch.Tensor
+    b: torch.Tensor
+    horizontal: torch.Tensor
+    uv_a: torch.Tensor
+    uv_b: torch.Tensor
+    rays_a: torch.Tensor
+    rays_b: torch.Tensor
+    world_a: torch.Tensor
+    world_b: torch.Tensor
+    R: torch.Tensor
+    c: torch.Tensor
 
-    def subset(self, keep: np.ndarray) -> _Candidates:
+    def subset(self, keep: torch.Tensor) -> _Candidates:
         return _Candidates(*(getattr(self, f.name)[keep] for f in fields(self)))
 
     @staticmethod
     def concatenate(parts: list[_Candidates]) -> _Candidates:
-        return _Candidates(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(_Candidates)))
+        return _Candidates(*(torch.cat([getattr(p, f.name) for p in parts]) for f in fields(_Candidates)))
 
 
 def _candidate_pairs(
-    renderer: ExactRenderer, z: np.ndarray, ids: np.ndarray, pose: np.ndarray, K_inv: np.ndarray, horizontal: bool
+    surfaces: Surfaces, z: torch.Tensor, ids: torch.Tensor, pose: torch.Tensor, K_inv: torch.Tensor, horizontal: bool
 ) -> _Candidates:
     """Neighbours (x, x+1) or (y, y+1) on different triangles whose depths (B, H, W) jump."""
     batch, _, width = z.shape
     za, zb = (z[:, :, :-1], z[:, :, 1:]) if horizontal else (z[:, :-1, :], z[:, 1:, :])
     ia, ib = (ids[:, :, :-1], ids[:, :, 1:]) if horizontal else (ids[:, :-1, :], ids[:, 1:, :])
-    near, far = np.minimum(za, zb), np.maximum(za, zb)
-    with np.errstate(invalid="ignore"):  # both rays missing: inf - inf
-        candidate = (ia != ib) & np.isfinite(near) & (~np.isfinite(far) | ((far - near) > _MIN_JUMP * near))
-    bi, yi, xi = np.nonzero(candidate)
+    near, far = torch.minimum(za, zb), torch.maximum(za, zb)
+    candidate = (ia != ib) & torch.isfinite(near) & (~torch.isfinite(far) | ((far - near) > _MIN_JUMP * near))
+    bi, yi, xi = torch.nonzero(candidate).unbind(dim=1)  # how many: the one wait of the search
     a = yi * width + xi
-    uv_a = np.c_[xi + 0.5, yi + 0.5]
-    uv_b = uv_a + ([1.0, 0.0] if horizontal else [0.0, 1.0])
+    uv_a = torch.stack([xi + 0.5, yi + 0.5], dim=1).double()
+    uv_b = uv_a.clone()
+    uv_b[:, 0 if horizontal else 1] += 1.0
     rays_a, rays_b, R = _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b), pose[bi, :3, :3]
     pairs = _Candidates(
         bi,
         a,
         a + (1 if horizontal else width),
-        np.full(len(bi), horizontal),
+        torch.full_like(bi, horizontal, dtype=torch.bool),
         uv_a,
         uv_b,
         rays_a,
@@ -179,16 +181,15 @@ def _candidate_pairs(
     # either one's triangle, extended to the other's ray, meets it at its depth. Dropping them here
     # spares the bisection most candidates; it would find no occlusion between them either.
     z_a, z_b = flat_z[bi, pairs.a], flat_z[bi, pairs.b]
-    with np.errstate(invalid="ignore"):
-        b_on_a = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.a], pairs.world_b, pairs.c) - z_b)
-        a_on_b = np.abs(_plane_depth(renderer, flat_ids[bi, pairs.b], pairs.world_a, pairs.c) - z_a)
-        continuous = (b_on_a <= _CONTINUITY * z_b) & (a_on_b <= _CONTINUITY * z_a)
+    b_on_a = (_plane_depth(surfaces, flat_ids[bi, pairs.a], pairs.world_b, pairs.c) - z_b).abs()
+    a_on_b = (_plane_depth(surfaces, flat_ids[bi, pairs.b], pairs.world_a, pairs.c) - z_a).abs()
+    continuous = (b_on_a <= _CONTINUITY * z_b) & (a_on_b <= _CONTINUITY * z_a)
     return pairs.subset(~continuous)
 
 
 def _bisect(
-    renderer: ExactRenderer, pairs: _Candidates, flat_z: np.ndarray, flat_ids: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    surfaces: Surfaces, pairs: _Candidates, flat_z: torch.Tensor, flat_ids: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Bisect each segment a -> b with real rays for where the foreground ends.
 
     Returns the occluding triangle (N,), whether the depths on the two sides of the final bracket
@@ -196,106 +197,105 @@ def _bisect(
     """
     bi = pairs.batch
     a_is_fg = flat_z[bi, pairs.a] <= flat_z[bi, pairs.b]
-    fg_id = np.where(a_is_fg, flat_ids[bi, pairs.a], flat_ids[bi, pairs.b])
-    bg_id = np.where(a_is_fg, flat_ids[bi, pairs.b], flat_ids[bi, pairs.a])
-    lo, hi = np.zeros(len(bi)), np.ones(len(bi))
-    id_lo, id_hi = flat_ids[bi, pairs.a].copy(), flat_ids[bi, pairs.b].copy()
-    z_lo, z_hi = flat_z[bi, pairs.a].copy(), flat_z[bi, pairs.b].copy()
+    fg_id = torch.where(a_is_fg, flat_ids[bi, pairs.a], flat_ids[bi, pairs.b])
+    bg_id = torch.where(a_is_fg, flat_ids[bi, pairs.b], flat_ids[bi, pairs.a])
+    lo, hi = torch.zeros_like(pairs.uv_a[:, 0]), torch.ones_like(pairs.uv_a[:, 0])
+    id_lo, id_hi = flat_ids[bi, pairs.a], flat_ids[bi, pairs.b]
+    z_lo, z_hi = flat_z[bi, pairs.a], flat_z[bi, pairs.b]
     # A ray through a point of the segment is affine in the point's position along it, and so are
     # its dot products with the two planes: everything but the cast is computed once.
     world_a, world_step = pairs.world_a, pairs.world_b - pairs.world_a
     (fg_normal, fg_offset), (bg_normal, bg_offset) = (
-        _planes(renderer, fg_id, pairs.c),
-        _planes(renderer, bg_id, pairs.c),
+        _planes(surfaces, fg_id, pairs.c),
+        _planes(surfaces, bg_id, pairs.c),
     )
     fg_a, fg_step = dot(fg_normal, world_a), dot(fg_normal, world_step)
     bg_a, bg_step = dot(bg_normal, world_a), dot(bg_normal, world_step)
     for _ in range(_BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        hits = renderer.cast(pairs.c, world_a + mid[:, None] * world_step).numpy()
+        hits = surfaces.cast(pairs.c, world_a + mid[:, None] * world_step)
         z_fg = _plane_z(fg_id, fg_offset, fg_a + mid * fg_step)
         z_bg = _plane_z(bg_id, bg_offset, bg_a + mid * bg_step)
         # a hit is foreground up to a share of the way to the background's plane, and no further
-        # than a bounded ratio beyond the foreground's own plane
-        with np.errstate(invalid="ignore", divide="ignore"):  # a plane the ray misses: inf / inf
-            limit = z_fg * np.minimum(1.0 + _FG_SHARE * (z_bg / z_fg - 1.0), _FG_MAX_RATIO)
-        mid_z = np.where(hits.hit, hits.t, np.inf)
+        # than a bounded ratio beyond the foreground's own plane (a plane the ray misses: inf / inf)
+        limit = z_fg * torch.clamp_max(1.0 + _FG_SHARE * (z_bg / z_fg - 1.0), _FG_MAX_RATIO)
+        mid_z = torch.where(hits.hit, hits.t.double(), torch.inf)
         same_as_a = (hits.hit & (mid_z < limit)) == a_is_fg
         lo, id_lo, z_lo = (
-            np.where(same_as_a, mid, lo),
-            np.where(same_as_a, hits.triangle_ids, id_lo),
-            np.where(same_as_a, mid_z, z_lo),
+            torch.where(same_as_a, mid, lo),
+            torch.where(same_as_a, hits.triangle_ids, id_lo),
+            torch.where(same_as_a, mid_z, z_lo),
         )
         hi, id_hi, z_hi = (
-            np.where(same_as_a, hi, mid),
-            np.where(same_as_a, id_hi, hits.triangle_ids),
-            np.where(same_as_a, z_hi, mid_z),
+            torch.where(same_as_a, hi, mid),
+            torch.where(same_as_a, id_hi, hits.triangle_ids),
+            torch.where(same_as_a, z_hi, mid_z),
         )
-    occluder = np.where(a_is_fg, id_lo, id_hi)
-    near_z, far_z = np.minimum(z_lo, z_hi), np.maximum(z_lo, z_hi)
-    occlusion = (occluder >= 0) & np.isfinite(near_z) & ((far_z - near_z) > _CONTINUITY * near_z)
+    occluder = torch.where(a_is_fg, id_lo, id_hi)
+    near_z, far_z = torch.minimum(z_lo, z_hi), torch.maximum(z_lo, z_hi)
+    occlusion = (occluder >= 0) & torch.isfinite(near_z) & ((far_z - near_z) > _CONTINUITY * near_z)
     return occluder, occlusion, 0.5 * (lo + hi)
 
 
 def _occluder_edge(
-    renderer: ExactRenderer, pairs: _Candidates, occluder: np.ndarray, t_star: np.ndarray, K: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    surfaces: Surfaces, pairs: _Candidates, occluder: torch.Tensor, t_star: torch.Tensor, K: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Which of the occluder's three edges crosses the segment at ``t_star``.
 
     Returns its vertex indices (N, 2), how far (in segment units) its exact crossing lies from
     ``t_star`` (N,), and whether it is steep in the image (N,).
     """
     bi, R, c = pairs.batch, pairs.R, pairs.c
-    faces = renderer.scene.faces[np.maximum(occluder, 0)]
-    edges = np.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], axis=1)  # (N, 3, 2)
-    vertices_cam = mat_vec(R.swapaxes(1, 2), renderer.scene.vertices[edges] - c[:, None, None])
-    three = lambda array: torch.from_numpy(np.repeat(array, 3, axis=0))
+    faces = surfaces.faces[occluder.clamp_min(0)]
+    edges = torch.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], dim=1)  # (N, 3, 2)
+    vertices_cam = mat_vec(R.transpose(1, 2), surfaces.vertices[edges] - c[:, None, None])
+    three = lambda tensor: tensor.repeat_interleave(3, dim=0)
     t_all, ok_all = edge_crossings(
-        torch.from_numpy(vertices_cam.reshape(-1, 2, 3)),
-        three(pairs.rays_a),
-        three(pairs.rays_b),
-        three(K[bi]),
-        three(pairs.uv_a),
+        vertices_cam.reshape(-1, 2, 3), three(pairs.rays_a), three(pairs.rays_b), three(K[bi]), three(pairs.uv_a),
         three(pairs.uv_b),
-    )
+    )  # fmt: skip
     n = len(bi)
-    error = np.where(ok_all.numpy(), np.abs(t_all.numpy() - np.repeat(t_star, 3)), np.inf).reshape(n, 3)
-    best = error.argmin(axis=1)
-    chosen = edges[np.arange(n), best]
-    v = renderer.scene.vertices[chosen]
+    error = torch.where(ok_all, (t_all - three(t_star)).abs(), torch.inf).reshape(n, 3)
+    best = error.argmin(dim=1)
+    rows = torch.arange(n, device=best.device)
+    chosen = edges[rows, best]
+    v = surfaces.vertices[chosen]
     # image-plane direction of the edge (first order, at the crossing depth)
-    direction_cam = mat_vec(R.swapaxes(1, 2), v[:, 1] - v[:, 0])
-    return chosen, error[np.arange(n), best], np.abs(direction_cam[:, 1]) >= np.abs(direction_cam[:, 0])
+    direction_cam = mat_vec(R.transpose(1, 2), v[:, 1] - v[:, 0])
+    return chosen, error[rows, best], direction_cam[:, 1].abs() >= direction_cam[:, 0].abs()
 
 
 def find_edge_pairs(
     renderer: ExactRenderer, exact: RenderOutput, world_T_cam: torch.Tensor, K: torch.Tensor
 ) -> EdgePairs:
-    """Locate occlusion-edge pairs and their occluding triangle edges in exact renders (no gradient).
+    """Locate occlusion-edge pairs and their occluding triangle edges in exact renders (no gradient),
+    on the renderer's device; the pairs come back to the host, where the pose algebra is.
 
     Three steps: candidate neighbours across a depth jump in each direction, a bisection with real
     rays for the occluder and the crossing, and the occluder's edge that crosses there.
     """
-    depth = exact.depth[:, 0].double().cpu().numpy()
-    ids = exact.triangle_ids[:, 0].cpu().numpy()
+    surfaces, device = renderer.surfaces, renderer.device
+    depth = exact.depth[:, 0].double().to(device)
+    ids = exact.triangle_ids[:, 0].to(device)
     batch = depth.shape[0]
-    pose = check_world_T_cam(world_T_cam).detach().double().numpy()
-    K = batched_intrinsics(K, batch).numpy()
-    K_inv = np.linalg.inv(K)
-    z = np.where(depth > 0, depth, np.inf)
+    pose = check_world_T_cam(world_T_cam).detach().double()
+    K = batched_intrinsics(K, batch)
+    K_inv = torch.linalg.inv(K).to(device, non_blocking=True)
+    pose, K = pose.to(device, non_blocking=True), K.to(device, non_blocking=True)
+    z = torch.where(depth > 0, depth, torch.inf)
     # both directions' candidates in one bisection: its casts are batched
     pairs = _Candidates.concatenate(
-        [_candidate_pairs(renderer, z, ids, pose, K_inv, horizontal) for horizontal in (True, False)]
+        [_candidate_pairs(surfaces, z, ids, pose, K_inv, horizontal) for horizontal in (True, False)]
     )
     if not len(pairs.batch):
-        empty = np.zeros(0, np.int64)
-        return EdgePairs(empty, empty, empty, np.zeros(0, bool), np.zeros((0, 2), np.int64), np.zeros(0))
-    occluder, occlusion, t_star = _bisect(renderer, pairs, z.reshape(batch, -1), ids.reshape(batch, -1))
-    chosen, error, steep = _occluder_edge(renderer, pairs, occluder, t_star, K)
+        empty = torch.zeros(0, dtype=torch.int64)
+        return EdgePairs(empty, empty, empty, torch.zeros(0, dtype=torch.bool), empty.reshape(0, 2), empty.double())
+    occluder, occlusion, t_star = _bisect(surfaces, pairs, z.reshape(batch, -1), ids.reshape(batch, -1))
+    chosen, error, steep = _occluder_edge(surfaces, pairs, occluder, t_star, K)
     keep = occlusion & (error < _MAX_CROSSING_ERROR) & (steep == pairs.horizontal)
     return EdgePairs(
         pairs.batch[keep], pairs.a[keep], pairs.b[keep], pairs.horizontal[keep], chosen[keep], t_star[keep]
-    )
+    ).to("cpu")
 
 
 def silhouette_term(
@@ -319,25 +319,25 @@ def silhouette_term(
             0 * world_T_cam.sum()
         ).to(device)
     K = batched_intrinsics(K, batch)
-    bi = torch.from_numpy(pairs.batch)
+    bi = pairs.batch
     R, c = world_T_cam[bi, :3, :3].double(), world_T_cam[bi, :3, 3].double()
-    vertices = torch.from_numpy(renderer.scene.vertices[pairs.edge])  # (N, 2, 3) world
+    vertices = torch.from_numpy(renderer.scene.vertices)[pairs.edge]  # (N, 2, 3) world
     vertices_cam = (vertices - c[:, None]) @ R  # R^T (v - c), row-vector form
-    ya, xa = np.divmod(pairs.a, width)
-    uv_a = torch.from_numpy(np.c_[xa + 0.5, ya + 0.5])
-    uv_b = uv_a + torch.from_numpy(np.where(pairs.horizontal[:, None], [[1.0, 0.0]], [[0.0, 1.0]]))
+    ya, xa = pairs.a.div(width, rounding_mode="floor"), pairs.a.remainder(width)
+    uv_a = torch.stack([xa + 0.5, ya + 0.5], dim=1).double()
+    uv_b = uv_a + torch.stack([pairs.horizontal, ~pairs.horizontal], dim=1).double()
     K_inv = torch.linalg.inv(K[bi])
     rays_a = (K_inv @ torch.cat([uv_a, torch.ones(len(bi), 1, dtype=torch.float64)], 1)[..., None])[..., 0]
     rays_b = (K_inv @ torch.cat([uv_b, torch.ones(len(bi), 1, dtype=torch.float64)], 1)[..., None])[..., 0]
     t, genuine = edge_crossings(vertices_cam, rays_a, rays_b, K[bi], uv_a, uv_b)
-    far_b = torch.from_numpy(pairs.t > 0.5)
+    far_b = pairs.t > 0.5
     # the pixel beyond the crossing's half is partly covered by its neighbour's surface
     coefficient = (torch.where(far_b, t - 0.5, 0.5 - t) * genuine).to(device)
     # per pair on the CPU (the pose algebra), per pixel on the values' device
     flat = values.detach().double().permute(0, 2, 3, 1).reshape(batch, -1, channels)
     bi, far_b = bi.to(device), far_b.to(device)
-    va, vb = flat[bi, torch.from_numpy(pairs.a).to(device)], flat[bi, torch.from_numpy(pairs.b).to(device)]
+    va, vb = flat[bi, pairs.a.to(device)], flat[bi, pairs.b.to(device)]
     blend = coefficient[:, None] * torch.where(far_b[:, None], va - vb, vb - va)
-    target = bi * height * width + torch.from_numpy(np.where(pairs.t > 0.5, pairs.b, pairs.a)).to(device)
+    target = bi * height * width + torch.where(pairs.t > 0.5, pairs.b, pairs.a).to(device)
     term = term.index_add(0, target, straight_through(blend))
     return term.view(batch, height, width, channels).permute(0, 3, 1, 2).to(values.dtype)

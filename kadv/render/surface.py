@@ -124,6 +124,8 @@ class Surfaces:
         self.uvs = torch.from_numpy(scene.uvs.astype(np.float64)).to(device)
         self.normals = torch.from_numpy(scene.normals.astype(np.float32)).to(device)
         self.face_normals = torch.from_numpy(scene.face_normals.astype(np.float64)).to(device)
+        self.vertices = torch.from_numpy(scene.vertices.astype(np.float64)).to(device)
+        self.faces = torch.from_numpy(scene.faces.astype(np.int64)).to(device)
         self.coats = torch.from_numpy(coat_table(scene)).float()[torch.from_numpy(scene.material_ids)].to(device)
 
     def caster_of(self, vertices: np.ndarray, faces: np.ndarray, device: torch.device | str | None = None) -> RayCaster:
