@@ -121,9 +121,9 @@ def plane_labels(renderer: ExactRenderer) -> np.ndarray:
     return _PLANE_LABELS[renderer]
 
 
-def plane_shares(renderer: ExactRenderer, triangle_ids: np.ndarray) -> np.ndarray:
-    """(B,) share of each view's hit pixels that lie on its most common plane (0 for a view that
-    hits nothing), from per-pixel triangle ids (B, N) with -1 for a miss.
+def plane_shares(renderer: ExactRenderer, triangle_ids: torch.Tensor) -> torch.Tensor:
+    """(B,) float64 share of each view's hit pixels that lie on its most common plane (0 for a view
+    that hits nothing), from per-pixel triangle ids (B, N) with -1 for a miss, on their device.
 
     Examples:
         >>> import kadv
@@ -132,38 +132,44 @@ def plane_shares(renderer: ExactRenderer, triangle_ids: np.ndarray) -> np.ndarra
         >>> facing_wall = look_at(torch.tensor([2.0, 1.5, 4.0]), torch.tensor([2.0, 1.5, 5.0]))  # 1 m from it
         >>> corner = look_at(torch.tensor([1.0, 2.0, 1.0]), torch.tensor([4.0, 0.0, 5.0]))
         >>> out = room.render(torch.stack([facing_wall, corner]), intrinsics_from_fov(60.0, 24, 32), 24, 32)
-        >>> shares = plane_shares(room, out.triangle_ids[:, 0].numpy())
+        >>> shares = plane_shares(room, out.triangle_ids[:, 0].flatten(1))
         >>> shares[0].item(), shares[1].item() < 0.9
         (1.0, True)
     """
     labels = plane_labels(renderer)
-    shares = np.zeros(len(triangle_ids))
-    for b, ids in enumerate(triangle_ids):
-        hit = ids[ids >= 0]
-        if len(hit):
-            shares[b] = np.bincount(labels[hit]).max() / len(hit)
-    return shares
+    planes = int(labels.max()) + 1 if len(labels) else 0
+    labels = torch.from_numpy(labels).to(triangle_ids.device, non_blocking=True)
+    hit = triangle_ids >= 0
+    # per view, pixels per plane (a last column for misses), counted without a loop over views
+    label = torch.where(hit, labels[triangle_ids.clamp_min(0)], planes)
+    counts = torch.zeros(len(triangle_ids), planes + 1, dtype=torch.int64, device=triangle_ids.device)
+    counts.scatter_add_(1, label, torch.ones_like(label))
+    hits = hit.sum(dim=1)
+    most = counts[:, :planes].amax(dim=1) if planes else torch.zeros_like(hits)
+    return torch.where(hits > 0, most.double() / hits.clamp_min(1).double(), 0.0)
 
 
 def probe_directions_hits(
-    renderer: ExactRenderer, centres: np.ndarray, directions: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """(miss, back) booleans (B, N) for rays from each centre (B, 3) along each direction (N, 3).
+    renderer: ExactRenderer, centres: torch.Tensor, directions: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(miss, back) booleans (B, N) on the renderer's device for rays from each centre (B, 3) along
+    each direction (N, 3).
 
     Examples:
         >>> import kadv
         >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
-        >>> centres = np.array([[2.0, 1.5, 2.5], [2.0, 1.5, -1.0]])  # inside; outside, behind the wall z = 0
+        >>> centres = torch.tensor([[2.0, 1.5, 2.5], [2.0, 1.5, -1.0]])  # inside; outside, behind the wall z = 0
         >>> miss, back = probe_directions_hits(room, centres, fibonacci_sphere(64))
-        >>> miss.any(axis=1).tolist(), back.any(axis=1).tolist()  # from outside: escaping rays, back faces
+        >>> miss.any(dim=1).tolist(), back.any(dim=1).tolist()  # from outside: escaping rays, back faces
         ([False, True], [False, True])
     """
-    origins = np.broadcast_to(centres[:, None, :], (len(centres), len(directions), 3))
-    rays = np.broadcast_to(directions[None], origins.shape)
+    centres = torch.as_tensor(centres).to(renderer.device, torch.float64, non_blocking=True)
+    directions = torch.as_tensor(directions).to(renderer.device, torch.float64, non_blocking=True)
+    origins = centres[:, None, :].expand(len(centres), len(directions), 3)
+    rays = directions[None].expand(origins.shape)
     hits = renderer.cast(origins, rays)
     shape = (len(centres), len(directions))
-    back = renderer.back_facing(hits, rays).cpu().numpy()
-    return ~hits.hit.cpu().numpy().reshape(shape), back.reshape(shape)
+    return ~hits.hit.reshape(shape), renderer.back_facing(hits, rays).reshape(shape)
 
 
 def view_validity(
@@ -210,38 +216,48 @@ def view_validity(
         ([True, False], ['valid', 'outside the scene'])
     """
     pose = check_world_T_cam(world_T_cam)
-    centres = pose[:, :3, 3].detach().double().numpy()
-    batch = len(centres)
+    centres = pose[:, :3, 3].detach().double()
+    batch, device = len(centres), renderer.device
     if render is None:
-        origins, directions = pixel_rays(pose, K, height, width)
+        origins, directions = pixel_rays(pose, K, height, width, device=device)
         hits = renderer.cast(origins, directions)
-        view_back = renderer.back_facing(hits, directions).cpu().numpy().reshape(batch, -1)
-        hits = hits.numpy()
+        view_back = renderer.back_facing(hits, directions).reshape(batch, -1)
         triangle_ids = hits.triangle_ids.reshape(batch, -1)
-        hit = hits.hit.reshape(batch, -1)
-        near_hit = hit & (hits.t.reshape(batch, -1) < near)
+        near_hit = (triangle_ids >= 0) & (hits.t.double().reshape(batch, -1) < near)
     else:
         check_shape(render.depth, f"B 1 {height} {width}", "render.depth", {"B": batch})
-        triangle_ids = render.triangle_ids.reshape(batch, -1).cpu().numpy()
-        hit = triangle_ids >= 0
-        view_back = render.back_face.reshape(batch, -1).cpu().numpy()
-        near_hit = hit & (render.depth.reshape(batch, -1).double().cpu().numpy() < near)
+        triangle_ids = render.triangle_ids.reshape(batch, -1).to(device)
+        view_back = render.back_face.reshape(batch, -1).to(device)
+        near_hit = (triangle_ids >= 0) & (render.depth.reshape(batch, -1).double().to(device) < near)
     probe_miss, probe_back = probe_directions_hits(renderer, centres, fibonacci_sphere(probe_rays))
-    distance = distance_to_surface(renderer, torch.from_numpy(centres)).numpy()
-    share = plane_shares(renderer, triangle_ids)
+    # the per-view figures, computed where the pixels are, come to the host in one copy: the
+    # verdicts are words
+    figures = torch.stack(
+        [
+            (triangle_ids < 0).double().mean(dim=1),
+            view_back.double().mean(dim=1),
+            near_hit.double().mean(dim=1),
+            probe_miss.double().mean(dim=1),
+            probe_back.double().mean(dim=1),
+            plane_shares(renderer, triangle_ids),
+            near_hit.any(dim=1).double(),
+        ]
+    ).cpu()
+    miss_fraction, back_fraction, near_fraction, probe_miss, probe_back, share, any_near = figures
+    distance = distance_to_surface(renderer, centres)
     verdicts, reasons = [], []
     for b in range(batch):
-        miss_frac, back_frac = probe_miss[b].mean(), probe_back[b].mean()
+        miss_frac, back_frac = float(probe_miss[b]), float(probe_back[b])
         if miss_frac > outside_threshold:
             verdicts.append(OUTSIDE)
             reasons.append(f"{miss_frac:.0%} of probe rays escape the scene (> {outside_threshold:.0%})")
         elif back_frac > inside_threshold:
             verdicts.append(INSIDE)
             reasons.append(f"{back_frac:.0%} of probe rays first hit a back face (> {inside_threshold:.0%})")
-        elif distance[b] < min_distance or near_hit[b].any():
+        elif distance[b] < min_distance or any_near[b] > 0:
             verdicts.append(TOO_CLOSE)
             reasons.append(
-                f"centre {distance[b]:.3f} m from a surface, {near_hit[b].mean():.1%} of pixels nearer "
+                f"centre {distance[b]:.3f} m from a surface, {near_fraction[b]:.1%} of pixels nearer "
                 f"than {near} m (limits {min_distance} m, 0 pixels)"
             )
         elif max_plane_share is not None and share[b] > max_plane_share:
@@ -250,15 +266,14 @@ def view_validity(
         else:
             verdicts.append(VALID)
             reasons.append(f"enclosed ({miss_frac:.0%} escape, {back_frac:.0%} back faces), {distance[b]:.2f} m clear")
-    as_tensor = lambda a: torch.from_numpy(np.asarray(a, np.float64))
     return ViewValidity(
-        miss_fraction=as_tensor((~hit).mean(axis=1)),
-        back_face_fraction=as_tensor(view_back.mean(axis=1)),
-        near_fraction=as_tensor(near_hit.mean(axis=1)),
-        probe_miss_fraction=as_tensor(probe_miss.mean(axis=1)),
-        probe_back_fraction=as_tensor(probe_back.mean(axis=1)),
-        distance=as_tensor(distance),
-        plane_share=as_tensor(share),
+        miss_fraction=miss_fraction,
+        back_face_fraction=back_fraction,
+        near_fraction=near_fraction,
+        probe_miss_fraction=probe_miss,
+        probe_back_fraction=probe_back,
+        distance=distance.detach(),
+        plane_share=share,
         verdicts=verdicts,
         reasons=reasons,
     )
