@@ -111,7 +111,8 @@ class Preprocess:
         """(rgb - mean) / std per channel for rgb (B, 3, h, w); unchanged without a mean."""
         if self.mean is None or self.std is None:
             return rgb
-        as_tensor = lambda values: torch.tensor(values, dtype=rgb.dtype, device=rgb.device)
+        # made on the host and copied without waiting for the device (three numbers)
+        as_tensor = lambda values: torch.tensor(values, dtype=rgb.dtype).to(rgb.device, non_blocking=True)
         return normalize(rgb, as_tensor(self.mean), as_tensor(self.std))
 
     def _resize(self, x: torch.Tensor, shape: tuple[int, int]) -> torch.Tensor:
