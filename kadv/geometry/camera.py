@@ -175,9 +175,9 @@ def to_open3d_pinhole(world_T_cam: torch.Tensor, K: torch.Tensor) -> tuple[o3d.c
         K: intrinsics (3, 3) in kadv's convention.
 
     Examples:
-        >>> from kadv.geometry import look_at
         >>> import numpy as np
         >>> from kadv.geometry import look_at
+        >>> world_T_cam = look_at(torch.tensor([0.0, 1.0, 0.0]), torch.tensor([0.0, 1.0, 5.0]))
         >>> intrinsic, extrinsic = to_open3d_pinhole(world_T_cam, intrinsics_from_fov(90.0, 2, 2))
         >>> bool(np.allclose(extrinsic.numpy() @ [0.0, 1.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0]))  # eye -> origin
         True
