@@ -141,12 +141,14 @@ def render_anchor(
     rays_cam = camera_rays(K_anchor, h, w, device=renderer.device)
     origins, directions = (rays.reshape(-1, 3) for rays in world_rays(pose, rays_cam))
     rays_cam = rays_cam.reshape(batch, -1, 3)
-    hits_per_layer = (
-        [renderer.cast(origins, directions)] if layers == 1 else _peel(renderer, origins, directions, layers)
-    )
+    angle = pixel_angle(K_anchor)
+    if layers == 1:  # cast and shaded in parts of render.max_rays
+        layered = [renderer.cast_and_shade(origins, directions, angle, colour=True, geometry=False)]
+    else:
+        peeled = _peel(renderer, origins, directions, layers)
+        layered = [(hits, renderer.shader.shade(hits, origins, directions, angle, geometry=False)) for hits in peeled]
     maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
-    for hits in hits_per_layer:
-        shaded = renderer.shader.shade(hits, origins, directions, pixel_angle(K_anchor), geometry=False)
+    for hits, shaded in layered:
         ids = hits.triangle_ids.reshape(batch, -1)
         depth = torch.where(hits.hit, hits.t.double(), 0.0).reshape(batch, -1, 1)
         maps["rgb"].append(shaded["rgb"].reshape(batch, -1, 3))
@@ -157,6 +159,6 @@ def render_anchor(
 
     def stack(key: str) -> torch.Tensor:
         tensor = torch.stack(maps[key], dim=1)  # (B, L, N, C)
-        return tensor.reshape(batch, len(hits_per_layer), h, w, -1).permute(0, 1, 4, 2, 3).contiguous()
+        return tensor.reshape(batch, len(layered), h, w, -1).permute(0, 1, 4, 2, 3).contiguous()
 
     return AnchorLayers(pose, K_anchor, supersample, guard_band, *(stack(key) for key in maps))

@@ -1,0 +1,162 @@
+"""Where the time of an attack goes, phase by phase: a black-box evaluation batch (exact render of
+EVAL_BATCH nearby views at supersample 2 and one kadv-tiny forward pass) and a gradient step of
+kadv-tiny + SSIM (one restart), on grey_white_room at 240x320.
+
+Each phase is a function of kadv wrapped for this run: the device is synchronised before and after
+it, so that its time is its own (what the phases leave out is the rest of the step: the optimiser,
+the records). Then torch's profiler lists the operators that took the most time in one more
+gradient step (device time on CUDA, CPU time on the CPU).
+
+Run: .venv/bin/python benchmarks/profile_step.py [--device cpu|cuda|auto] [--backend auto|open3d|warp]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections import defaultdict
+from collections.abc import Callable
+
+import torch
+from common import add_backend_option, checked_backend, load_bench_scene
+from torch.profiler import ProfilerActivity, profile
+
+import kadv.attack.objective
+import kadv.attack.search
+import kadv.render.differentiable
+from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
+from kadv.device import resolve_device
+from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam
+from kadv.losses import depth_loss
+from kadv.models import load_model
+from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
+
+HEIGHT, WIDTH = 240, 320
+EVAL_BATCH = 8
+STEPS = 6
+# (module, attribute, phase): the functions timed, where the step calls them from
+PHASES = [
+    (kadv.render.differentiable, "render_anchor", "anchor render"),
+    (kadv.render.differentiable, "reproject", "warp of the anchor"),
+    (kadv.render.differentiable, "find_edge_pairs", "silhouette search"),
+    (kadv.render.differentiable, "silhouette_term", "silhouette term"),
+    (kadv.attack.search, "step_guard", "step guard"),
+    (kadv.attack.search, "view_validity", "view validity"),
+    (kadv.attack.objective, "distance_to_surface", "penalty distance"),
+]
+
+
+def wrap_phases(device: torch.device, seconds: dict[str, float]) -> Callable[[], None]:
+    """Time the PHASES' functions into ``seconds``, and the exact render and the objective's model
+    and loss; returns the function that puts them back."""
+
+    def synchronise() -> None:
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+
+    def timed(fn: Callable, phase: str) -> Callable:
+        def run(*args, **kwargs):
+            synchronise()
+            start = time.perf_counter()
+            out = fn(*args, **kwargs)
+            synchronise()
+            seconds[phase] += time.perf_counter() - start
+            return out
+
+        return run
+
+    restore = []
+    targets = [*PHASES, (ExactRenderer, "render", "exact render"), (Objective, "forward", "model, loss, metrics")]
+    for owner, name, phase in targets:
+        original = getattr(owner, name)
+        setattr(owner, name, timed(original, phase))
+        restore.append((owner, name, original))
+
+    def put_back() -> None:
+        for owner, name, original in restore:
+            setattr(owner, name, original)
+
+    return put_back
+
+
+def report(evaluation: dict[str, float], seconds: dict[str, float], total: float, device: torch.device) -> None:
+    """Print the phases of the evaluation and of the gradient steps, in milliseconds."""
+    print(f"\nblack-box evaluation of {EVAL_BATCH} views at {HEIGHT}x{WIDTH}, s=2, on {device} (ms)")
+    for phase, spent in evaluation.items():
+        print(f"  {phase:<28} {spent * 1e3:>8.1f}")
+    # the attack evaluates its init view and each step's poses: STEPS + 1 passes through the step
+    print(f"\ngradient step, kadv-tiny + SSIM, one restart, on {device} (ms per step, {STEPS + 1} passes)")
+    for phase, spent in sorted(seconds.items(), key=lambda item: -item[1]):
+        print(f"  {phase:<28} {spent / (STEPS + 1) * 1e3:>8.1f}")
+    print(f"  {'whole step':<28} {total / (STEPS + 1) * 1e3:>8.1f}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description="Time an attack's phases and list its costliest operators.")
+    parser.add_argument("--device", default="cpu", help="auto, cpu or cuda")
+    add_backend_option(parser)
+    args = parser.parse_args()
+    try:
+        device = resolve_device(args.device)
+    except ValueError as error:
+        parser.exit(2, f"{parser.prog}: error: {error}\n")  # one line and exit status 2, as the commands answer
+    backend = checked_backend(parser, args.backend, device)
+    renderer = ExactRenderer(load_bench_scene("grey_white_room"), backend=backend, device=device)
+    penalty = PenaltyConfig()
+    view = file_init_views(renderer, penalty.margin)[0]
+    model = load_model("kadv_tiny").to(device)
+    objective = Objective(model, depth_loss("ssim"), renderer, penalty, device=device)
+    differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(), device)
+
+    def gradient(steps: int) -> None:
+        config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=1), budget_evaluations=None)
+        attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
+
+    generator = torch.Generator().manual_seed(0)
+    offsets = 0.05 * (2 * torch.rand(EVAL_BATCH, 6, generator=generator, dtype=torch.float64) - 1)
+    poses = perturb_world_T_cam(view.world_T_cam.expand(EVAL_BATCH, 4, 4), offsets[:, :3], offsets[:, 3:])
+    K = intrinsics_from_fov(view.fov_x_deg, HEIGHT, WIDTH)
+
+    def evaluate() -> None:
+        with torch.no_grad():
+            rgb = renderer.render(poses, K, HEIGHT, WIDTH, supersample=2).rgb
+            if device.type == "cuda":
+                torch.cuda.synchronize(device)
+            start = time.perf_counter()
+            model(rgb)
+            if device.type == "cuda":
+                torch.cuda.synchronize(device)
+            seconds["model forward"] += time.perf_counter() - start
+
+    seconds: dict[str, float] = defaultdict(float)
+    gradient(2)  # warm-up: kernels compiled, tables uploaded
+    evaluate()
+    seconds.clear()
+    put_back = wrap_phases(device, seconds)
+    try:
+        evaluate()
+        evaluation = dict(seconds)
+        seconds.clear()
+        started = time.perf_counter()
+        gradient(STEPS)
+        total = time.perf_counter() - started
+    finally:
+        put_back()
+    report(evaluation, seconds, total, device)
+    activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda" else [])
+    with profile(activities=activities) as profiler:
+        gradient(1)
+    sort = "self_cuda_time_total" if device.type == "cuda" else "self_cpu_time_total"
+    print(f"\noperators of one gradient run (2 passes), by {sort}")
+    print(profiler.key_averages().table(sort_by=sort, row_limit=15, max_name_column_width=36))
+    step = total / (STEPS + 1)
+    render = evaluation.get("exact render", 0.0)
+    print(
+        f"profile_step step_ms={step * 1e3:.0f} eval_render_ms={render * 1e3:.0f} "
+        f"anchor_ms={seconds['anchor render'] / (STEPS + 1) * 1e3:.0f} "
+        f"silhouette_ms={seconds['silhouette search'] / (STEPS + 1) * 1e3:.0f} device={device.type} backend={backend}"
+    )
+
+
+if __name__ == "__main__":
+    main()
