@@ -23,7 +23,6 @@ Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto] [--back
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import statistics
 import tempfile
@@ -31,12 +30,11 @@ import time
 from collections.abc import Callable
 
 import torch
-from common import add_backend_option, checked_backend, fastest_seconds, load_bench_scene, timings
+from common import device_and_backend, fastest_seconds, load_bench_scene, timings
 from torch.optim.optimizer import register_optimizer_step_post_hook
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
 from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
-from kadv.device import resolve_device
 from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam
 from kadv.losses import VGG16_TAPS, PerceptualLoss, depth_loss, vgg16_features
 from kadv.models import DepthModel, load_model
@@ -281,15 +279,7 @@ def evaluations_per_second(renderer: ExactRenderer, model: DepthModel, view, dev
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description="Time one gradient attack step, part by part.")
-    parser.add_argument("--device", default="cpu", help="auto, cpu or cuda (the networks and the warp)")
-    add_backend_option(parser)
-    args = parser.parse_args()
-    try:
-        device = resolve_device(args.device)
-    except ValueError as error:
-        parser.exit(2, f"{parser.prog}: error: {error}\n")  # one line and exit status 2, as the commands answer
-    backend = checked_backend(parser, args.backend, device)
+    device, backend = device_and_backend("Time one gradient attack step, part by part.")
     scene = load_bench_scene("grey_white_room")
     renderer = ExactRenderer(scene, backend=backend, device=device)
     penalty = PenaltyConfig()

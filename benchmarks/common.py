@@ -17,6 +17,7 @@ from pathlib import Path
 import torch
 import yaml
 
+from kadv.device import resolve_device
 from kadv.render.backends import resolve_backend
 from kadv.scenes import Scene, box_room, load_scene
 
@@ -38,6 +39,20 @@ def checked_backend(parser: argparse.ArgumentParser, backend: str, device: str |
         return resolve_backend(backend, device)
     except ValueError as error:
         parser.exit(2, f"{parser.prog}: error: {error}\n")  # as the commands answer
+
+
+def device_and_backend(description: str) -> tuple[torch.device, str]:
+    """The ``--device`` (auto, cpu or cuda) and ``--backend`` a benchmark is run with; a bad one
+    ends it in one line with exit status 2, as the commands answer."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--device", default="cpu", help="auto, cpu or cuda")
+    add_backend_option(parser)
+    args = parser.parse_args()
+    try:
+        device = resolve_device(args.device)
+    except ValueError as error:
+        parser.exit(2, f"{parser.prog}: error: {error}\n")
+    return device, checked_backend(parser, args.backend, device)
 
 
 def default_lighting() -> str:

@@ -12,20 +12,18 @@ Run: .venv/bin/python benchmarks/profile_step.py [--device cpu|cuda|auto] [--bac
 
 from __future__ import annotations
 
-import argparse
 import time
 from collections import defaultdict
 from collections.abc import Callable
 
 import torch
-from common import add_backend_option, checked_backend, load_bench_scene
+from common import device_and_backend, load_bench_scene
 from torch.profiler import ProfilerActivity, profile
 
 import kadv.attack.objective
 import kadv.attack.search
 import kadv.render.differentiable
 from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
-from kadv.device import resolve_device
 from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam
 from kadv.losses import depth_loss
 from kadv.models import load_model
@@ -92,15 +90,7 @@ def report(evaluation: dict[str, float], seconds: dict[str, float], total: float
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description="Time an attack's phases and list its costliest operators.")
-    parser.add_argument("--device", default="cpu", help="auto, cpu or cuda")
-    add_backend_option(parser)
-    args = parser.parse_args()
-    try:
-        device = resolve_device(args.device)
-    except ValueError as error:
-        parser.exit(2, f"{parser.prog}: error: {error}\n")  # one line and exit status 2, as the commands answer
-    backend = checked_backend(parser, args.backend, device)
+    device, backend = device_and_backend("Time an attack's phases and list its costliest operators.")
     renderer = ExactRenderer(load_bench_scene("grey_white_room"), backend=backend, device=device)
     penalty = PenaltyConfig()
     view = file_init_views(renderer, penalty.margin)[0]

@@ -124,8 +124,11 @@ class Shader:
         points = origins + directions * t[:, None]
         facing = self.surfaces.facing(ids, directions)
         back = hit & (facing > 0)
-        normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
-        normals = torch.where(back[:, None], -normals, normals)
+        # shading normals, where something reads them: the maps, Lambert's term or the delta lights
+        lit_by_normals = self.baked is None or not self._delta_lights.empty
+        if geometry or (colour and lit_by_normals):
+            normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
+            normals = torch.where(back[:, None], -normals, normals)
         rgb = self._background.expand(len(t), 3)
         if colour:
             length = directions.norm(dim=1)

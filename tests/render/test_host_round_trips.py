@@ -127,5 +127,5 @@ def test_a_batch_split_by_max_rays_renders_as_one(tmp_path) -> None:
     # colours to float32 rounding: torch's CPU kernels compute a tensor's last few elements (its
     # tail after whole SIMD vectors) with scalar code, whose exp and pow round differently
     torch.testing.assert_close(parts.rgb, whole.rgb, rtol=0, atol=1e-6)
-    with pytest.raises(ValueError, match="render.max_rays must be a positive number of rays, got 0"):
+    with pytest.raises(ValueError, match=r"render\.max_rays must be a positive number of rays, got 0"):
         ExactRenderer(scene, max_rays=0)
