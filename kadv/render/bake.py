@@ -231,17 +231,15 @@ def _meter(surfaces: Surfaces, rng: np.random.Generator, count: int = 4096) -> t
 
 def _nearest(lattice: _Lattice, surfaces: Surfaces, hits: RayHits, directions: np.ndarray) -> np.ndarray:
     """(N,) the lattice point nearest each hit (-1 on a miss), on the side the ray arrived from."""
-    back = surfaces.back_facing(hits, directions).cpu()
-    hits = hits.numpy()
     taps, weights = lattice_taps(
         torch.from_numpy(lattice.resolution),
         torch.from_numpy(lattice.offsets),
-        torch.from_numpy(np.maximum(hits.triangle_ids, 0)),
-        torch.from_numpy(hits.barycentrics),
-        back,
+        hits.triangle_ids.clamp_min(0).cpu(),
+        hits.barycentrics.double().cpu(),
+        surfaces.back_facing(hits, directions).cpu(),
     )
-    nearest = taps.gather(1, weights.argmax(dim=1, keepdim=True))[:, 0].numpy()
-    return np.where(hits.hit, nearest, -1)
+    nearest = taps.gather(1, weights.argmax(dim=1, keepdim=True))[:, 0]
+    return torch.where(hits.hit.cpu(), nearest, -1).numpy()
 
 
 def _blocks(count: int, width: int) -> Iterator[slice]:

@@ -227,7 +227,7 @@ class DifferentiableRenderer:
         K_render, render_height, render_width = ring_view(K, height, width) if border else (K, height, width)
         rendered = self._exact_render(current, K_render, render_height, render_width, border, anchor)
         exact = rendered.cropped(border) if border else rendered
-        normals = camera_face_normals(self.renderer.scene, exact.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
+        normals = camera_face_normals(self.renderer.surfaces, exact.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
         inside = (..., slice(border, render_height - border), slice(border, render_width - border))
         rgb_rendered, depth_rendered = rendered.rgb.to(self.device), rendered.depth.to(self.device)
         return _ExactFrame(

@@ -15,7 +15,7 @@ import torch
 from kadv.geometry.camera import batched_intrinsics, camera_rays, world_rays
 from kadv.geometry.pose import check_world_T_cam
 from kadv.render.raycast import ExactRenderer, RayHits, pixel_angle
-from kadv.scenes.scene import Scene
+from kadv.render.surface import Surfaces
 
 __all__ = ["RING", "AnchorLayers", "camera_face_normals", "guard_band_intrinsics", "render_anchor", "ring_view"]
 
@@ -77,12 +77,12 @@ def ring_view(K: torch.Tensor, height: int, width: int) -> tuple[torch.Tensor, i
     return guard_band_intrinsics(K, RING, 1), height + 2 * RING, width + 2 * RING
 
 
-def camera_face_normals(scene: Scene, triangle_ids: torch.Tensor, world_T_cam: torch.Tensor) -> torch.Tensor:
-    """Camera-frame geometric normals (B, ..., 3) float64 of triangles ``triangle_ids`` (B, ...),
-    on the ids' device; 0 where an id is -1."""
-    device = triangle_ids.device
-    face = torch.from_numpy(scene.face_normals).to(device).index_select(0, triangle_ids.clamp_min(0).flatten()).double()
-    rotation = world_T_cam[:, :3, :3].detach().double().to(device)
+def camera_face_normals(surfaces: Surfaces, triangle_ids: torch.Tensor, world_T_cam: torch.Tensor) -> torch.Tensor:
+    """Camera-frame geometric normals (B, ..., 3) float64 of triangles ``triangle_ids`` (B, ...) of
+    ``surfaces``, on the surfaces' device (where their face normals already are); 0 where an id is -1."""
+    triangle_ids = triangle_ids.to(surfaces.device)
+    face = surfaces.face_normals.index_select(0, triangle_ids.clamp_min(0).flatten())
+    rotation = world_T_cam[:, :3, :3].detach().double().to(surfaces.device)
     normals = (face.reshape(len(rotation), -1, 3) @ rotation).reshape(*triangle_ids.shape, 3)  # rows: (R^T n)^T
     return torch.where((triangle_ids >= 0)[..., None], normals, 0.0)
 
@@ -153,7 +153,7 @@ def render_anchor(
         depth = torch.where(hits.hit, hits.t.double(), 0.0).reshape(batch, -1, 1)
         maps["rgb"].append(shaded["rgb"].reshape(batch, -1, 3))
         maps["points"].append((depth * rays_cam).float())  # 0 where invalid
-        maps["normals"].append(camera_face_normals(renderer.scene, ids, pose).float())
+        maps["normals"].append(camera_face_normals(renderer.surfaces, ids, pose).float())
         maps["ids"].append(ids[..., None])
         maps["mask"].append(ids[..., None] >= 0)
 

@@ -121,12 +121,13 @@ class Shader:
         ids = hits.triangle_ids.clamp_min(0)
         bary = hits.barycentrics
         t = torch.where(hit, hits.t.double(), 0.0)
-        points = origins + directions * t[:, None]
         facing = self.surfaces.facing(ids, directions)
         back = hit & (facing > 0)
-        # shading normals, where something reads them: the maps, Lambert's term or the delta lights
-        lit_by_normals = self.baked is None or not self._delta_lights.empty
-        if geometry or (colour and lit_by_normals):
+        # hit points and shading normals, where something reads them: the maps, Lambert's term or
+        # the delta lights (baked light alone needs neither)
+        lit_at_points = self.baked is None or not self._delta_lights.empty
+        if geometry or (colour and lit_at_points):
+            points = origins + directions * t[:, None]
             normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
             normals = torch.where(back[:, None], -normals, normals)
         rgb = self._background.expand(len(t), 3)

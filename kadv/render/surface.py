@@ -109,11 +109,11 @@ class Surfaces:
         # opaque materials' triangles, and every hit on the alpha-masked ones (a few, where listing
         # them in the whole scene would list every wall behind).
         masked = np.array([m.opacity is not None for m in scene.materials], bool)[scene.material_ids]
-        self._opaque_faces = torch.from_numpy(np.flatnonzero(~masked)).to(device)
-        self._masked_faces = torch.from_numpy(np.flatnonzero(masked)).to(device)
         self._masked = masked.any()
         if self._masked:
             self._masked_face = torch.from_numpy(masked).to(device)
+            self._opaque_faces = torch.from_numpy(np.flatnonzero(~masked)).to(device)
+            self._masked_faces = torch.from_numpy(np.flatnonzero(masked)).to(device)
             self._opaque_caster = self.caster_of(scene.vertices, scene.faces[~masked], device)
             self._masked_caster = self.caster_of(scene.vertices, scene.faces[masked], device)
             self._alpha = TextureAtlas.build(

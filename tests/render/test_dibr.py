@@ -26,7 +26,7 @@ def _wall_view() -> tuple[ExactRenderer, torch.Tensor, torch.Tensor]:
 def _warp(renderer: ExactRenderer, anchor_pose: torch.Tensor, pose: torch.Tensor, K: torch.Tensor):
     anchor = render_anchor(renderer, anchor_pose, K, H, W, guard_band=4, supersample=2)
     exact = renderer.render(pose.detach(), K, H, W)
-    normals = camera_face_normals(renderer.scene, exact.triangle_ids[:, 0], pose).permute(0, 3, 1, 2)
+    normals = camera_face_normals(renderer.surfaces, exact.triangle_ids[:, 0], pose).permute(0, 3, 1, 2)
     return exact, reproject(anchor, exact.depth, normals, torch.linalg.inv(anchor.world_T_cam) @ pose, K)
 
 
@@ -69,7 +69,7 @@ def test_pixels_without_a_surface_stay_invalid() -> None:
     exact = renderer.render(pose, K, H, W)
     depth = exact.depth.clone()
     depth[..., :4, :] = 0.0  # as if these rays had missed
-    normals = camera_face_normals(renderer.scene, exact.triangle_ids[:, 0], pose).permute(0, 3, 1, 2)
+    normals = camera_face_normals(renderer.surfaces, exact.triangle_ids[:, 0], pose).permute(0, 3, 1, 2)
     warp = reproject(anchor, depth, normals, torch.eye(4, dtype=torch.float64)[None], K)
     assert not bool(warp.valid[..., :4, :].any()) and bool(warp.valid[..., 4:, :].all())
     assert float(warp.depth[..., :4, :].abs().max()) == 0.0
@@ -85,7 +85,7 @@ def test_at_the_anchor_pose_the_closed_form_taps_match_the_gathered_ones(monkeyp
     pose, K = renderer.scene.cameras[0].world_T_cam.double()[None], intrinsics_from_fov(60.0, H, W)
     anchor = render_anchor(renderer, pose, K, H, W, guard_band=1, supersample=2)
     exact = renderer.render(pose, K, H, W)
-    normals = camera_face_normals(renderer.scene, exact.triangle_ids[:, 0], pose).permute(0, 3, 1, 2)
+    normals = camera_face_normals(renderer.surfaces, exact.triangle_ids[:, 0], pose).permute(0, 3, 1, 2)
     monkeypatch.setattr(dibr, "_DTYPE", torch.float64)
     results = []
     for closed_form in (True, False):
