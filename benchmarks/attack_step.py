@@ -128,6 +128,7 @@ class FixedRender:
 
     def __init__(self, differentiable: DifferentiableRenderer, output: DiffRenderOutput) -> None:
         self.renderer, self.config, self.output = differentiable.renderer, differentiable.config, output
+        self.device = differentiable.device
 
     def reset(self) -> None:
         """Nothing to forget (the attack calls it before each init view)."""

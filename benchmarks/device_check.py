@@ -1,8 +1,9 @@
 """The device check: kadv's CUDA tests, the attack step's figures and a short attack, in one run.
 
 1. the CUDA tests: ``tests/test_device.py`` (render, objective and training on the device against
-   the CPU) and the Warp/Open3D equivalence of ``tests/render/test_casting.py`` on the device's
-   Warp caster against Open3D's CPU renders (box room, a generated room, grey_white_room);
+   the CPU), the Warp/Open3D equivalence of ``tests/render/test_casting.py`` on the device's
+   Warp caster against Open3D's CPU renders (box room, a generated room, grey_white_room), and the
+   host-round-trip guards of a render (``tests/render/``) and of whole attack steps (``tests/attack/``);
 2. ``benchmarks/attack_step.py --device <device> --backend warp``;
 3. a short ``kadv-attack device=<device> render.backend=warp`` on grey_white_room that writes its
    run directory, pictures included;
@@ -111,6 +112,7 @@ def main() -> None:
                 "tests/test_device.py",
                 "tests/render/test_casting.py",
                 "tests/render/test_host_round_trips.py",
+                "tests/attack/test_host_round_trips.py",
                 "-k",
                 CARRIED,
             ],

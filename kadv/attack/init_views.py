@@ -228,13 +228,14 @@ def score_views(
     batch_size: int = 8,
 ) -> ViewScores:
     """Score N views at poses (N, 4, 4) with fields of view (N,) at the given size."""
-    labels = plane_labels(renderer)
+    labels = torch.from_numpy(plane_labels(renderer)).to(renderer.device)
+    planes = int(labels.max()) + 1 if len(labels) else 0
     scores: dict[str, list[torch.Tensor]] = {"delta1": [], "surfaces": [], "depth_range": [], "structure": []}
     with torch.no_grad():
         for start in range(0, len(poses), batch_size):
             chunk = slice(start, start + batch_size)
             K = torch.stack([intrinsics_from_fov(float(f), height, width) for f in fov_x_deg[chunk]])
-            out = renderer.render(poses[chunk], K, height, width).to("cpu")
+            out = renderer.render(poses[chunk], K, height, width)
             prediction = model(out.rgb, K)
             scores["delta1"].append(
                 depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)["delta1"]
@@ -243,19 +244,17 @@ def score_views(
             far = torch.where(out.mask, depth, torch.zeros_like(depth)).amax(dim=(1, 2, 3))
             near = torch.where(out.mask, depth, torch.full_like(depth, torch.inf)).amin(dim=(1, 2, 3))
             scores["depth_range"].append(torch.log(far.clamp_min(_MIN_DEPTH) / near.clamp_min(_MIN_DEPTH)))
-            ids = out.triangle_ids.reshape(len(depth), -1).numpy()
-            scores["surfaces"].append(
-                torch.tensor(
-                    [
-                        float((np.bincount(labels[row[row >= 0]]) >= _SURFACE_SHARE * max((row >= 0).sum(), 1)).sum())
-                        for row in ids
-                    ],
-                    dtype=torch.float64,
-                )
-            )
+            # pixels per plane and view (a last column for misses), counted on the render's device
+            ids = out.triangle_ids.reshape(len(depth), -1)
+            hit = ids >= 0
+            label = torch.where(hit, labels[ids.clamp_min(0)], planes)
+            counts = torch.zeros(len(ids), planes + 1, dtype=torch.int64, device=ids.device)
+            counts.scatter_add_(1, label, torch.ones_like(label))
+            least = _SURFACE_SHARE * hit.sum(dim=1).clamp_min(1).double()
+            scores["surfaces"].append((counts[:, :planes] >= least[:, None]).sum(dim=1).double())
             gradient = kornia.filters.sobel(kornia.color.rgb_to_grayscale(out.rgb.float()))
             scores["structure"].append(gradient.mean(dim=(1, 2, 3)).double())
-    return ViewScores(**{key: torch.cat(values) for key, values in scores.items()})
+    return ViewScores(**{key: torch.cat(values).cpu() for key, values in scores.items()})
 
 
 def _inside_points(
@@ -282,10 +281,12 @@ def _inside_points(
         points[near, 0] = np.clip(around[near, 0], inner_lo[0], inner_hi[0])
         points[near, 2] = np.clip(around[near, 2], inner_lo[2], inner_hi[2])
     down = np.broadcast_to(np.array([0.0, -1.0, 0.0]), points.shape)
-    below = renderer.cast(points, down).numpy()
-    above = renderer.cast(points, -down).numpy()
-    inside = below.hit & (above.hit if bool((below.hit & above.hit).any()) else True)
-    return points[inside][:count], (points[:, 1] - np.where(below.hit, below.t, np.nan))[inside][:count]
+    below, above = renderer.cast(points, down), renderer.cast(points, -down)
+    # what the host needs of the casts, in one copy
+    below_hit, above_hit, below_t = torch.stack([below.hit.double(), above.hit.double(), below.t.double()]).cpu()
+    below_hit, above_hit = below_hit.numpy() > 0, above_hit.numpy() > 0
+    inside = below_hit & (above_hit if (below_hit & above_hit).any() else True)
+    return points[inside][:count], (points[:, 1] - np.where(below_hit, below_t.numpy(), np.nan))[inside][:count]
 
 
 def _candidate_poses(
@@ -338,7 +339,8 @@ def sample_valid_views(
         poses = _candidate_poses(renderer, config, 8 * needed, rng, clearance)
         distance = distance_to_surface(renderer, poses[:, :3, 3])
         validity = view_validity(renderer, poses, K, small_h, small_w, **penalty.validity_options())
-        keep = validity.valid & (distance > clearance) & (1.0 - validity.miss_fraction >= config.min_hit_fraction)
+        hits_enough = 1.0 - validity.miss_fraction.cpu() >= config.min_hit_fraction
+        keep = validity.valid & (distance > clearance) & hits_enough
         accepted += list(poses[keep][:needed])
     return torch.stack(accepted) if accepted else torch.zeros(0, 4, 4, dtype=torch.float64)
 

@@ -64,7 +64,7 @@ class Objective:
         penalty: d_th and lambda.
         space: "disparity" or "depth".
         device: where the model and the loss run (see :mod:`kadv.device`); they are moved there.
-            Inputs may live anywhere; the terms come back on the CPU, where the pose is.
+            Inputs may live anywhere; the terms stay on that device (nothing is read back to the host).
     """
 
     def __init__(
@@ -128,13 +128,13 @@ class Objective:
         """
         rgb, depth, mask = rgb.to(self.device), depth.to(self.device), mask.to(self.device)
         prediction = self.model(rgb.float(), K)
-        loss = self.attacked_loss(depth, prediction, mask).cpu()
+        loss = self.attacked_loss(depth, prediction, mask)
         if self.measure is self.loss:
             l_depth = loss
         else:
             with torch.no_grad():
-                l_depth = self.l_depth(depth, prediction, mask).cpu()
-        distance = distance_to_surface(self.renderer, world_T_cam[:, :3, 3])
+                l_depth = self.l_depth(depth, prediction, mask)
+        distance = distance_to_surface(self.renderer, world_T_cam[:, :3, 3].to(self.device))
         l_dist = shortcut_penalty(distance, self.penalty.d_th)
         with torch.no_grad():
             metrics = depth_metrics(prediction.double(), depth.double(), mask, self.model.output_kind)
@@ -144,7 +144,7 @@ class Objective:
             l_depth=l_depth,
             l_dist=l_dist,
             distance=distance.detach(),
-            delta1=metrics["delta1"].cpu(),
-            abs_rel=metrics["abs_rel"].cpu(),
-            prediction=prediction.detach().cpu(),
+            delta1=metrics["delta1"],
+            abs_rel=metrics["abs_rel"],
+            prediction=prediction.detach(),
         )

@@ -17,10 +17,10 @@ from kadv.attack.objective import Objective, ObjectiveTerms
 from kadv.attack.records import Budget, InitViewResult, ViewRecord, select_top_views
 from kadv.attack.registry import get_method
 from kadv.geometry import intrinsics_from_fov, matrix_to_axis_angle, perturb_world_T_cam
-from kadv.penalties import step_guard, view_validity
+from kadv.penalties import ViewValidity, step_guard, view_validity
 from kadv.render import DifferentiableRenderer, RenderOutput
 
-__all__ = ["DEFAULT_METHOD", "AttackConfig", "Clock", "SearchContext", "check_settings", "scaled_size"]
+__all__ = ["DEFAULT_METHOD", "AttackConfig", "Clock", "Measures", "SearchContext", "check_settings", "scaled_size"]
 
 # The method that led the anytime benchmark at its full budget (benchmarks/search_anytime.py).
 DEFAULT_METHOD = "hybrid"
@@ -181,6 +181,65 @@ class Clock:
         self._last_batch = seconds
 
 
+@dataclass
+class Measures:
+    """The measures of B views of one step, on the device where they were computed, until
+    :meth:`records` reads them to the host (a gradient run does so once it ends).
+
+    Attributes:
+        step: the step.
+        lanes: each view's lane.
+        table: (B, 19 or 22) float64: params (6), theta (3), centre (3), L_depth, loss, L_dist,
+            objective, delta1, AbsRel, the guard's fraction, and the warp's coverage, rgb and depth
+            errors when the views were rendered through the warp.
+        validity: the views' validity (its verdicts are made when read).
+        refreshed: whether the anchor was rendered again at this step.
+        seconds: the search's clock when the step was measured.
+        scale: the render's size relative to the run's.
+    """
+
+    step: int
+    lanes: list[int]
+    table: torch.Tensor
+    validity: ViewValidity
+    refreshed: bool
+    seconds: float
+    scale: float
+
+    def records(self) -> list[ViewRecord]:
+        """One :class:`ViewRecord` per view."""
+        rows = self.table.cpu().tolist()
+        verdicts = self.validity.verdicts
+        records = []
+        for b, (lane, row) in enumerate(zip(self.lanes, rows)):
+            l_depth, loss, l_dist, objective, delta1, abs_rel, fraction = row[12:19]
+            coverage, rgb_error, depth_error = row[19:22] if len(row) > 19 else (math.nan,) * 3
+            records.append(
+                ViewRecord(
+                    step=self.step,
+                    restart=lane,
+                    params=row[0:6],
+                    theta=row[6:9],
+                    centre=row[9:12],
+                    l_depth=l_depth,
+                    loss=loss,
+                    l_dist=l_dist,
+                    objective=objective,
+                    delta1=delta1,
+                    abs_rel=abs_rel,
+                    verdict=verdicts[b],
+                    guard_fraction=fraction,
+                    coverage=coverage,
+                    rgb_error=rgb_error,
+                    depth_error=depth_error,
+                    refreshed=self.refreshed,
+                    seconds=self.seconds,
+                    scale=self.scale,
+                )
+            )
+        return records
+
+
 class SearchContext:
     """Everything needed to evaluate views around one init view.
 
@@ -205,7 +264,10 @@ class SearchContext:
         self.objective = objective
         self.differentiable = differentiable
         self.renderer = differentiable.renderer
+        # where poses live: the differentiable render's device, so that a step reads nothing back
+        self.device = differentiable.device
         self.init = init
+        self._base = init.world_T_cam.double().to(self.device, non_blocking=True)
         self.config = config
         self.height, self.width = height, width
         self.K = intrinsics_from_fov(init.fov_x_deg, height, width)
@@ -214,26 +276,28 @@ class SearchContext:
         self.clock = Clock(config.evaluations, config.budget_seconds)
 
     def base(self, batch: int) -> torch.Tensor:
-        return self.init.world_T_cam.double()[None].expand(batch, 4, 4)
+        """The init view's pose (batch, 4, 4) float64 on :attr:`device`."""
+        return self._base[None].expand(batch, 4, 4)
 
     def guard(self, old: torch.Tensor, new: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Let the centre offsets (B, 3) move from ``old`` to ``new`` only as far as the step guard allows.
 
         A refused move is shortened to the guard's clear fraction; if that is still refused, the
-        camera stays. Returns the offsets reached and the fraction of each move taken (B,).
+        camera stays. Returns the offsets reached and the fraction of each move taken (B,), on
+        :attr:`device`.
         """
-        c0 = self.init.world_T_cam[:3, 3].double()
+        old, new = old.to(self.device), new.to(self.device)
+        c0 = self._base[:3, 3]
         check = step_guard(self.renderer, c0 + old, c0 + new, self.margin)
         fraction = torch.where(check.allowed, torch.ones_like(check.max_fraction), check.max_fraction)
         shortened = old + fraction[:, None] * (new - old)
-        refused = ~check.allowed
-        if bool(refused.any()):
-            again = step_guard(self.renderer, c0 + old[refused], c0 + shortened[refused], self.margin)
-            fraction[refused] = torch.where(again.allowed, fraction[refused], torch.zeros_like(fraction[refused]))
-            shortened = old + fraction[:, None] * (new - old)
-        return shortened, fraction
+        # every move is checked again, the allowed ones too: deciding which to check would read the
+        # verdicts back from the device
+        again = step_guard(self.renderer, c0 + old, c0 + shortened, self.margin)
+        fraction = torch.where(check.allowed | again.allowed, fraction, torch.zeros_like(fraction))
+        return old + fraction[:, None] * (new - old), fraction
 
-    def records(
+    def measure(
         self,
         step: int,
         params: torch.Tensor,
@@ -245,42 +309,31 @@ class SearchContext:
         lanes: list[int] | range | None = None,
         render: RenderOutput | None = None,
         scale: float = 1.0,
-    ) -> list[ViewRecord]:
-        """One :class:`ViewRecord` per view, with the view's validity verdict (from ``render``, the
-        views' exact render, when given, at ``scale`` times the run's size) and the search's clock."""
+    ) -> Measures:
+        """What the records of B views will hold, left where it was computed (see :class:`Measures`):
+        the view's validity (from ``render``, the views' exact render, when given, at ``scale`` times
+        the run's size) and the search's clock."""
         pose = world_T_cam.detach()
         K, height, width = self.size(scale)
         validity = view_validity(self.renderer, pose, K, height, width, render=render, **self.validity_options)
-        theta = matrix_to_axis_angle(pose[:, :3, :3])
-        lanes = lanes if lanes is not None else range(len(pose))
-        seconds = self.clock.elapsed()
-        rows = []
-        for b, lane in enumerate(lanes):
-            coverage, rgb_error, depth_error = (float(s[b]) for s in stats) if stats else (math.nan,) * 3
-            rows.append(
-                ViewRecord(
-                    step=step,
-                    restart=lane,
-                    params=params[b].detach().tolist(),
-                    theta=theta[b].tolist(),
-                    centre=pose[b, :3, 3].tolist(),
-                    l_depth=float(terms.l_depth[b].detach()),
-                    loss=float(terms.loss[b].detach()),
-                    l_dist=float(terms.l_dist[b].detach()),
-                    objective=float(terms.objective[b].detach()),
-                    delta1=float(terms.delta1[b]),
-                    abs_rel=float(terms.abs_rel[b]),
-                    verdict=validity.verdicts[b],
-                    guard_fraction=float(guard_fraction[b]),
-                    coverage=coverage,
-                    rgb_error=rgb_error,
-                    depth_error=depth_error,
-                    refreshed=refreshed,
-                    seconds=seconds,
-                    scale=scale,
-                )
-            )
-        return rows
+        numbers = [
+            params.detach(),
+            matrix_to_axis_angle(pose[:, :3, :3]),
+            pose[:, :3, 3],
+            *(value.detach()[:, None] for value in (terms.l_depth, terms.loss, terms.l_dist, terms.objective)),
+            terms.delta1[:, None],
+            terms.abs_rel[:, None],
+            guard_fraction[:, None],
+            *(s[:, None] for s in stats or ()),
+        ]
+        device = params.device
+        table = torch.cat([n.to(device, torch.float64, non_blocking=True) for n in numbers], dim=1)
+        lanes = list(lanes) if lanes is not None else list(range(len(pose)))
+        return Measures(step, lanes, table, validity, refreshed, self.clock.elapsed(), scale)
+
+    def records(self, *args, **kwargs) -> list[ViewRecord]:
+        """One :class:`ViewRecord` per view: :meth:`measure`'s arguments, read to the host at once."""
+        return self.measure(*args, **kwargs).records()
 
     def size(self, scale: float = 1.0) -> tuple[torch.Tensor, int, int]:
         """Intrinsics (3, 3), height and width of renders at ``scale`` times the run's size."""
@@ -295,7 +348,7 @@ class SearchContext:
         """Move from the init view to each pose (B, 6) through the step guard, render exactly at
         ``scale`` times the run's size, evaluate and record, counting the views against the budget."""
         started = time.perf_counter()
-        params = self.config.project(params)
+        params = self.config.project(params.to(self.device))
         reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
         params = torch.cat([params[:, :3], reached], dim=1)
         K, height, width = self.size(scale)

@@ -9,6 +9,8 @@ from __future__ import annotations
 import torch
 from kornia.geometry.conversions import axis_angle_to_rotation_matrix, rotation_matrix_to_axis_angle
 
+from kadv.checks import check_values
+
 __all__ = [
     "axis_angle_to_matrix",
     "check_world_T_cam",
@@ -151,16 +153,23 @@ def check_world_T_cam(world_T_cam: torch.Tensor, name: str = "world_T_cam", atol
     if pose.ndim != 3 or pose.shape[-2:] != (4, 4):
         raise ValueError(f"{name}: expected shape (B, 4, 4) or (4, 4), got {tuple(torch.as_tensor(world_T_cam).shape)}")
     detached = pose.detach().double()
+    bottom = torch.eye(4, dtype=torch.float64, device=pose.device)[3]
+    rotation = detached[:, :3, :3]
+
+    def rotations() -> torch.Tensor:
+        eye = torch.eye(3, dtype=torch.float64, device=pose.device).expand_as(rotation)
+        orthonormal = (rotation.transpose(-1, -2) @ rotation - eye).abs().amax(dim=(-1, -2)) < atol
+        return orthonormal & ((torch.linalg.det(rotation) - 1.0).abs() < atol)
+
+    if pose.device.type != "cpu":  # one assertion that does not wait for the device
+        rigid = torch.isfinite(detached).all() & ((detached[:, 3] - bottom).abs() <= atol).all() & rotations().all()
+        check_values(rigid, f"{name}: not a finite rigid pose (last row [0, 0, 0, 1], R^T R = I, det R = +1)")
+        return pose
     if not bool(torch.isfinite(detached).all()):
         raise ValueError(f"{name}: pose contains NaN or inf")
-    bottom = torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=torch.float64)
     if not bool(torch.allclose(detached[:, 3], bottom.expand_as(detached[:, 3]), atol=atol)):
         raise ValueError(f"{name}: last row must be [0, 0, 0, 1]")
-    rotation = detached[:, :3, :3]
-    eye = torch.eye(3, dtype=torch.float64).expand_as(rotation)
-    orthonormal = (rotation.transpose(-1, -2) @ rotation - eye).abs().amax(dim=(-1, -2)) < atol
-    proper = (torch.linalg.det(rotation) - 1.0).abs() < atol
-    bad = ~(orthonormal & proper)
+    bad = ~rotations()
     if bool(bad.any()):
         index = int(bad.nonzero()[0, 0])
         raise ValueError(f"{name}[{index}]: rotation block is not a rotation matrix (R^T R != I or det != +1)")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import torch
 
-from kadv.checks import check_shape
+from kadv.checks import check_shape, check_values
 from kadv.render.raycast import ExactRenderer
 
 __all__ = ["distance_to_surface", "shortcut_penalty"]
@@ -48,8 +48,7 @@ def distance_to_surface(renderer: ExactRenderer, centres: torch.Tensor) -> torch
         [1.0, 0.5]
     """
     check_shape(centres, "B 3", "centres")
-    if not bool(torch.isfinite(centres.detach()).all()):
-        raise ValueError("centres: contain NaN or inf")
+    check_values(torch.isfinite(centres.detach()), "centres: contain NaN or inf")
     return _SurfaceDistance.apply(centres, renderer)
 
 

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 import torch
 
-from kadv.checks import check_shape
+from kadv.checks import check_shape, check_values
 from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface
 from kadv.render.raycast import ExactRenderer
@@ -16,7 +15,7 @@ __all__ = ["StepCheck", "step_guard"]
 
 # Parallel rays around the segment: a ray through the exact shared edge of two triangles can
 # slip between them in Embree's non-watertight mode; a few micro-offset copies cannot all do so.
-_OFFSETS = 1e-4 * np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]], np.float64)
+_OFFSETS = 1e-4 * torch.tensor([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]], dtype=torch.float64)
 
 
 @dataclass
@@ -35,11 +34,13 @@ class StepCheck:
     end_distance: torch.Tensor
 
 
-def _perpendicular_basis(direction: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    helper = np.where(np.abs(direction[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    first = np.cross(direction, helper)
-    first /= np.linalg.norm(first, axis=1, keepdims=True)
-    return first, np.cross(direction, first)
+def _perpendicular_basis(direction: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Two unit vectors (B, 3) perpendicular to unit ``direction`` (B, 3) and to each other."""
+    axes = torch.eye(3, dtype=direction.dtype, device=direction.device)
+    helper = torch.where(direction[:, :1].abs() < 0.9, axes[0], axes[1])
+    first = torch.linalg.cross(direction, helper)
+    first = first / torch.linalg.vector_norm(first, dim=1, keepdim=True)
+    return first, torch.linalg.cross(direction, first)
 
 
 def step_guard(
@@ -66,22 +67,25 @@ def step_guard(
         0.45
     """
     check_shape(c_new, "B 3", "c_new", check_shape(c_old, "B 3", "c_old"))
-    old = c_old.detach().double().cpu().numpy()
-    new = c_new.detach().double().cpu().numpy()
-    if not (np.isfinite(old).all() and np.isfinite(new).all()):
-        raise ValueError("c_old / c_new: contain NaN or inf")
+    device = renderer.device
+    old = c_old.detach().to(device, torch.float64, non_blocking=True)
+    new = c_new.detach().to(device, torch.float64, non_blocking=True)
+    check_values(torch.isfinite(old).all() & torch.isfinite(new).all(), "c_old / c_new: contain NaN or inf")
     step = new - old
-    length = np.linalg.norm(step, axis=1)
+    length = torch.linalg.vector_norm(step, dim=1)
     moving = length > 0
-    direction = np.where(moving[:, None], step / np.maximum(length, 1e-300)[:, None], [[1.0, 0.0, 0.0]])
+    unit_x = torch.eye(3, dtype=torch.float64, device=device)[0]
+    direction = torch.where(moving[:, None], step / length.clamp_min(1e-300)[:, None], unit_x)
     first, second = _perpendicular_basis(direction)
-    origins = old[:, None, :] + _OFFSETS[None, :, :1] * first[:, None] + _OFFSETS[None, :, 1:] * second[:, None]
-    hits = renderer.cast(origins, np.repeat(direction[:, None], len(_OFFSETS), axis=1)).numpy()
-    first_hit = hits.t.reshape(len(old), len(_OFFSETS)).min(axis=1)  # metres: directions are unit
-    clear = np.clip(first_hit - margin, 0.0, None)
-    fraction = np.where(moving, np.clip(clear / np.maximum(length, 1e-300), 0.0, 1.0), 1.0)
-    distances = distance_to_surface(renderer, torch.from_numpy(np.concatenate([old, new]))).numpy()
+    offsets = _OFFSETS.to(device, non_blocking=True)
+    origins = old[:, None, :] + offsets[None, :, :1] * first[:, None] + offsets[None, :, 1:] * second[:, None]
+    hits = renderer.cast(origins, direction[:, None].expand(-1, len(offsets), 3))
+    first_hit = hits.t.double().reshape(len(old), len(offsets)).amin(dim=1)  # metres: directions are unit
+    clear = (first_hit - margin).clamp_min(0.0)
+    fraction = torch.where(moving, (clear / length.clamp_min(1e-300)).clamp(0.0, 1.0), 1.0)
+    distances = distance_to_surface(renderer, torch.cat([old, new]))
     start_distance, end_distance = distances[: len(old)], distances[len(old) :]
     # A camera already within the margin may still back away from the surface.
     allowed = (first_hit > length + margin) & ((end_distance >= margin) | (end_distance > start_distance))
-    return StepCheck(torch.from_numpy(allowed), torch.from_numpy(fraction), torch.from_numpy(end_distance))
+    where = c_new.device
+    return StepCheck(allowed.to(where), fraction.to(where), end_distance.to(where))

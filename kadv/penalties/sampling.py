@@ -42,7 +42,7 @@ def random_valid_poses(
         roll = torch.from_numpy(np.radians(rng.uniform(-5, 5, candidates)))
         poses[:, :3, :3] = poses[:, :3, :3] @ axis_angle_to_matrix(torch.stack([0 * roll, 0 * roll, roll], dim=1))
         result = view_validity(renderer, poses, K, 24, 32)
-        keep = result.valid & (result.distance >= min_clearance)
+        keep = result.valid & (result.distance.cpu() >= min_clearance)
         accepted += list(poses[keep])
         if len(accepted) >= count:
             return torch.stack(accepted[:count])

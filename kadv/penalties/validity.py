@@ -23,8 +23,9 @@ optical centre instead:
 
 from __future__ import annotations
 
+import functools
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -36,7 +37,15 @@ from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface
 from kadv.render.raycast import ExactRenderer, RenderOutput
 
-__all__ = ["ViewValidity", "fibonacci_sphere", "plane_labels", "plane_shares", "probe_directions_hits", "view_validity"]
+__all__ = [
+    "ValidityLimits",
+    "ViewValidity",
+    "fibonacci_sphere",
+    "plane_labels",
+    "plane_shares",
+    "probe_directions_hits",
+    "view_validity",
+]
 
 VALID, INSIDE, OUTSIDE, TOO_CLOSE = "valid", "inside an object", "outside the scene", "too close"
 UNINFORMATIVE = "uninformative"
@@ -44,23 +53,36 @@ UNINFORMATIVE = "uninformative"
 # coarse enough for a wall split into many triangles, fine enough to part a table top from the floor.
 _PLANE_NORMAL_STEP, _PLANE_OFFSET_STEP = 0.02, 0.02
 _PLANE_LABELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_DEVICE_PLANE_LABELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+@dataclass(frozen=True)
+class ValidityLimits:
+    """The limits a :class:`ViewValidity` judges its figures by (:func:`view_validity`'s arguments)."""
+
+    near: float = PenaltyConfig.near
+    min_distance: float = PenaltyConfig.min_distance
+    outside_threshold: float = PenaltyConfig.outside_threshold
+    inside_threshold: float = PenaltyConfig.inside_threshold
+    max_plane_share: float | None = PenaltyConfig.max_plane_share
 
 
 @dataclass
 class ViewValidity:
-    """Per-camera validity statistics (B cameras).
+    """Per-camera validity statistics (B cameras), tensors (B,) on the renderer's device.
+
+    The verdicts are words, so they are made on the host, from all figures in one copy, when first
+    read: a search can hold a step's validity without waiting for the device.
 
     Attributes:
-        miss_fraction: (B,) fraction of the view's pixels whose ray hits nothing.
-        back_face_fraction: (B,) fraction of the view's pixels that see the back of a triangle.
-        near_fraction: (B,) fraction of the view's pixels closer than the near plane.
-        probe_miss_fraction: (B,) fraction of spherical probe directions that escape.
-        probe_back_fraction: (B,) fraction of probe directions whose first hit is a back face.
-        distance: (B,) distance from the optical centre to the nearest surface, metres.
-        plane_share: (B,) share of the pixels that hit a surface which lie on the most common plane.
-        verdicts: one of "valid", "inside an object", "outside the scene", "too close",
-            "uninformative" per camera.
-        reasons: a sentence per camera saying why.
+        miss_fraction: fraction of the view's pixels whose ray hits nothing.
+        back_face_fraction: fraction of the view's pixels that see the back of a triangle.
+        near_fraction: fraction of the view's pixels closer than the near plane.
+        probe_miss_fraction: fraction of spherical probe directions that escape.
+        probe_back_fraction: fraction of probe directions whose first hit is a back face.
+        distance: distance from the optical centre to the nearest surface, metres.
+        plane_share: share of the pixels that hit a surface which lie on the most common plane.
+        limits: what the figures are judged by.
     """
 
     miss_fraction: torch.Tensor
@@ -70,12 +92,62 @@ class ViewValidity:
     probe_back_fraction: torch.Tensor
     distance: torch.Tensor
     plane_share: torch.Tensor
-    verdicts: list[str]
-    reasons: list[str]
+    limits: ValidityLimits = field(default_factory=ValidityLimits)
+
+    @property
+    def verdicts(self) -> list[str]:
+        """One of "valid", "inside an object", "outside the scene", "too close", "uninformative" per camera."""
+        return self._judged[0]
+
+    @property
+    def reasons(self) -> list[str]:
+        """A sentence per camera saying why."""
+        return self._judged[1]
 
     @property
     def valid(self) -> torch.Tensor:
+        """(B,) bool on the CPU, True where the verdict is "valid"."""
         return torch.tensor([v == VALID for v in self.verdicts])
+
+    @functools.cached_property
+    def _judged(self) -> tuple[list[str], list[str]]:
+        figures = [
+            self.probe_miss_fraction,
+            self.probe_back_fraction,
+            self.distance,
+            self.near_fraction,
+            self.plane_share,
+        ]
+        # the distance is on the centres' device, the rest on the renderer's: one device, then one copy
+        probe_miss, probe_back, distance, near_fraction, share = torch.stack(
+            [f.detach().to(self.miss_fraction.device, torch.float64, non_blocking=True) for f in figures]
+        ).cpu()
+        limits, verdicts, reasons = self.limits, [], []
+        for b in range(len(distance)):
+            miss_frac, back_frac = float(probe_miss[b]), float(probe_back[b])
+            if miss_frac > limits.outside_threshold:
+                verdicts.append(OUTSIDE)
+                reasons.append(f"{miss_frac:.0%} of probe rays escape the scene (> {limits.outside_threshold:.0%})")
+            elif back_frac > limits.inside_threshold:
+                verdicts.append(INSIDE)
+                reasons.append(f"{back_frac:.0%} of probe rays first hit a back face (> {limits.inside_threshold:.0%})")
+            elif distance[b] < limits.min_distance or near_fraction[b] > 0:
+                verdicts.append(TOO_CLOSE)
+                reasons.append(
+                    f"centre {distance[b]:.3f} m from a surface, {near_fraction[b]:.1%} of pixels nearer "
+                    f"than {limits.near} m (limits {limits.min_distance} m, 0 pixels)"
+                )
+            elif limits.max_plane_share is not None and share[b] > limits.max_plane_share:
+                verdicts.append(UNINFORMATIVE)
+                reasons.append(
+                    f"one plane covers {share[b]:.0%} of the surface pixels (> {limits.max_plane_share:.0%})"
+                )
+            else:
+                verdicts.append(VALID)
+                reasons.append(
+                    f"enclosed ({miss_frac:.0%} escape, {back_frac:.0%} back faces), {distance[b]:.2f} m clear"
+                )
+        return verdicts, reasons
 
 
 def fibonacci_sphere(count: int) -> np.ndarray:
@@ -136,9 +208,7 @@ def plane_shares(renderer: ExactRenderer, triangle_ids: torch.Tensor) -> torch.T
         >>> shares[0].item(), shares[1].item() < 0.9
         (1.0, True)
     """
-    labels = plane_labels(renderer)
-    planes = int(labels.max()) + 1 if len(labels) else 0
-    labels = torch.from_numpy(labels).to(triangle_ids.device, non_blocking=True)
+    labels, planes = _device_plane_labels(renderer, triangle_ids.device)
     hit = triangle_ids >= 0
     # per view, pixels per plane (a last column for misses), counted without a loop over views
     label = torch.where(hit, labels[triangle_ids.clamp_min(0)], planes)
@@ -147,6 +217,16 @@ def plane_shares(renderer: ExactRenderer, triangle_ids: torch.Tensor) -> torch.T
     hits = hit.sum(dim=1)
     most = counts[:, :planes].amax(dim=1) if planes else torch.zeros_like(hits)
     return torch.where(hits > 0, most.double() / hits.clamp_min(1).double(), 0.0)
+
+
+def _device_plane_labels(renderer: ExactRenderer, device: torch.device) -> tuple[torch.Tensor, int]:
+    """:func:`plane_labels` as a tensor on ``device`` (made once per renderer and device), and the
+    number of planes."""
+    tables = _DEVICE_PLANE_LABELS.setdefault(renderer, {})
+    if device not in tables:
+        labels = plane_labels(renderer)
+        tables[device] = torch.from_numpy(labels).to(device), int(labels.max()) + 1 if len(labels) else 0
+    return tables[device]
 
 
 def probe_directions_hits(
@@ -229,51 +309,20 @@ def view_validity(
         triangle_ids = render.triangle_ids.reshape(batch, -1).to(device)
         view_back = render.back_face.reshape(batch, -1).to(device)
         near_hit = (triangle_ids >= 0) & (render.depth.reshape(batch, -1).double().to(device) < near)
-    probe_miss, probe_back = probe_directions_hits(renderer, centres, fibonacci_sphere(probe_rays))
-    # the per-view figures, computed where the pixels are, come to the host in one copy: the
-    # verdicts are words
-    figures = torch.stack(
-        [
-            (triangle_ids < 0).double().mean(dim=1),
-            view_back.double().mean(dim=1),
-            near_hit.double().mean(dim=1),
-            probe_miss.double().mean(dim=1),
-            probe_back.double().mean(dim=1),
-            plane_shares(renderer, triangle_ids),
-            near_hit.any(dim=1).double(),
-        ]
-    ).cpu()
-    miss_fraction, back_fraction, near_fraction, probe_miss, probe_back, share, any_near = figures
-    distance = distance_to_surface(renderer, centres)
-    verdicts, reasons = [], []
-    for b in range(batch):
-        miss_frac, back_frac = float(probe_miss[b]), float(probe_back[b])
-        if miss_frac > outside_threshold:
-            verdicts.append(OUTSIDE)
-            reasons.append(f"{miss_frac:.0%} of probe rays escape the scene (> {outside_threshold:.0%})")
-        elif back_frac > inside_threshold:
-            verdicts.append(INSIDE)
-            reasons.append(f"{back_frac:.0%} of probe rays first hit a back face (> {inside_threshold:.0%})")
-        elif distance[b] < min_distance or any_near[b] > 0:
-            verdicts.append(TOO_CLOSE)
-            reasons.append(
-                f"centre {distance[b]:.3f} m from a surface, {near_fraction[b]:.1%} of pixels nearer "
-                f"than {near} m (limits {min_distance} m, 0 pixels)"
-            )
-        elif max_plane_share is not None and share[b] > max_plane_share:
-            verdicts.append(UNINFORMATIVE)
-            reasons.append(f"one plane covers {share[b]:.0%} of the surface pixels (> {max_plane_share:.0%})")
-        else:
-            verdicts.append(VALID)
-            reasons.append(f"enclosed ({miss_frac:.0%} escape, {back_frac:.0%} back faces), {distance[b]:.2f} m clear")
+    probe_miss, probe_back = probe_directions_hits(renderer, centres, _probe_directions(probe_rays, device))
     return ViewValidity(
-        miss_fraction=miss_fraction,
-        back_face_fraction=back_fraction,
-        near_fraction=near_fraction,
-        probe_miss_fraction=probe_miss,
-        probe_back_fraction=probe_back,
-        distance=distance.detach(),
-        plane_share=share,
-        verdicts=verdicts,
-        reasons=reasons,
+        miss_fraction=(triangle_ids < 0).double().mean(dim=1),
+        back_face_fraction=view_back.double().mean(dim=1),
+        near_fraction=near_hit.double().mean(dim=1),
+        probe_miss_fraction=probe_miss.double().mean(dim=1),
+        probe_back_fraction=probe_back.double().mean(dim=1),
+        distance=distance_to_surface(renderer, centres).detach(),
+        plane_share=plane_shares(renderer, triangle_ids),
+        limits=ValidityLimits(near, min_distance, outside_threshold, inside_threshold, max_plane_share),
     )
+
+
+@functools.lru_cache(maxsize=8)
+def _probe_directions(count: int, device: torch.device) -> torch.Tensor:
+    """:func:`fibonacci_sphere` as a float64 tensor on ``device``, made once."""
+    return torch.from_numpy(fibonacci_sphere(count)).to(device)

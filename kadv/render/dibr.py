@@ -291,7 +291,7 @@ def _project_to_anchor(
     device = sub_points_P.device
     sub_points_A = transform_points(A_T_P[:, None, None].to(device, _DTYPE), sub_points_P.reshape(batch, height, -1, 3))
     sub_points_A = sub_points_A.reshape(batch, -1, 3)
-    q = project_points(sub_points_A, anchor.K[:, None].to(device, _DTYPE))
+    q = project_points(sub_points_A, anchor.K[:, None].to(device, _DTYPE, non_blocking=True))
     q = torch.where(torch.isfinite(q), q, torch.full_like(q, _OFF_IMAGE))
     return sub_points_A.transpose(1, 2), q
 
@@ -304,6 +304,7 @@ def reproject(
     K: torch.Tensor,
     depth_tolerance: float = 0.01,
     plane_tolerance: float = 0.02,
+    at_anchor: bool | None = None,
 ) -> Reprojection:
     """Warp the anchor into current views.
 
@@ -319,6 +320,8 @@ def reproject(
             pixel is invalid.
         plane_tolerance: relative distance from a tap's surface plane above which the tap is
             taken to belong to another surface.
+        at_anchor: True when the caller rendered the anchor at these very poses and intrinsics (the
+            comparison, which reads the poses back from the device, is then skipped); None: compare.
     """
     sizes = check_shape(depth, "B 1 H W", "depth")
     check_shape(normals, "B 3 H W", "normals", sizes)
@@ -330,12 +333,14 @@ def reproject(
     # Pixels without a surface get a stand-in depth so that no NaN enters the graph; they stay invalid.
     depth = torch.where(depth > 0, depth, torch.ones_like(depth))
     K = batched_intrinsics(K, batch)
-    sub_points_P = _sub_pixel_points(depth, normals, K.to(device, _DTYPE), anchor.supersample)
-    P_T_A = torch.linalg.inv(A_T_P.double()).to(device, _DTYPE)
-    if _at_anchor(anchor, A_T_P, K, height, width):
+    sub_points_P = _sub_pixel_points(depth, normals, K.to(device, _DTYPE, non_blocking=True), anchor.supersample)
+    P_T_A = torch.linalg.inv_ex(A_T_P.double())[0].to(device, _DTYPE)  # inv_ex: no wait for its check
+    if _at_anchor(anchor, A_T_P, K, height, width, at_anchor):
         expected = sub_points_P.reshape(batch, -1, 3).transpose(1, 2)  # A = P, to within _SAME_POSE
         # pixel centres, shaped as one sub-sample per pixel
-        centres = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K.to(device, _DTYPE)), normalize_points=False)
+        centres = depth_to_3d_v2(
+            depth[:, 0], _shift_half_pixel(K.to(device, _DTYPE, non_blocking=True)), normalize_points=False
+        )
         _, q = _project_to_anchor(anchor, centres[:, :, None, :, None, :], A_T_P)
         shift = straight_through(q).transpose(1, 2).reshape(batch, 2, height, width)
 
@@ -352,12 +357,16 @@ def reproject(
     )
 
 
-def _at_anchor(anchor: AnchorLayers, A_T_P: torch.Tensor, K: torch.Tensor, height: int, width: int) -> bool:
+def _at_anchor(
+    anchor: AnchorLayers, A_T_P: torch.Tensor, K: torch.Tensor, height: int, width: int, known: bool | None
+) -> bool:
     """Whether the views (B, 4, 4 relative poses, (B, 3, 3) intrinsics) are the anchor's own, up to
-    rounding, and its band holds every sample's 3 x 3 taps."""
+    rounding (``known``: as the caller says, None: compared), and its band holds every sample's 3 x 3 taps."""
     s, g = anchor.supersample, anchor.guard_band
     if s * g < 1 or tuple(anchor.rgb.shape[-2:]) != (s * (height + 2 * g), s * (width + 2 * g)):
         return False
+    if known is not None:
+        return known
     identity = torch.eye(4, dtype=torch.float64).expand(A_T_P.shape[0], 4, 4)
     return torch.allclose(A_T_P.detach().double().cpu(), identity, rtol=0.0, atol=_SAME_POSE) and torch.allclose(
         anchor.K.double().cpu(), guard_band_intrinsics(K, g, s).cpu(), rtol=0.0, atol=_SAME_POSE

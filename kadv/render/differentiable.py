@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import torch
 
-from kadv.checks import check_shape
+from kadv.checks import check_shape, check_values
 from kadv.device import resolve_device
 from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import perturb_world_T_cam
@@ -85,9 +85,9 @@ class DiffRenderOutput:
     Attributes:
         rgb: (B, 3, H, W); depth: (B, 1, H, W) z-depth (0 invalid); mask: (B, 1, H, W) bool; on
             the renderer's device.
-        exact: the exact render at the current poses (no gradient), on the CPU.
-        world_T_cam: (B, 4, 4) current poses (differentiable), on the CPU.
-        coverage: (B,) fraction of hit pixels with a valid warp.
+        exact: the exact render at the current poses (no gradient), on the exact renderer's device.
+        world_T_cam: (B, 4, 4) current poses (differentiable), on the pose parameters' device.
+        coverage: (B,) fraction of hit pixels with a valid warp; it and the errors on the renderer's device.
         rgb_error: (B,) mean |rgb_warp - rgb_exact| over valid pixels.
         depth_error: (B,) mean |depth_warp - depth_exact| / depth_exact over valid pixels.
         refreshed: whether the anchor was re-rendered at the current poses in this call.
@@ -129,7 +129,7 @@ class DifferentiableRenderer:
         renderer: the scene's exact renderer.
         config: options.
         device: where the reprojection and the silhouette term run (see :mod:`kadv.device`); the
-            ray casts stay on the CPU.
+            ray casts run on the exact renderer's device.
     """
 
     def __init__(
@@ -139,7 +139,7 @@ class DifferentiableRenderer:
         self.config = config or DiffRenderConfig()
         self.device = resolve_device(device)
         self.anchor: AnchorLayers | None = None
-        self._anchor_key: tuple | None = None
+        self._anchor_key: _ViewKey | None = None
         self._steps_since_refresh = 0
 
     @property
@@ -179,8 +179,7 @@ class DifferentiableRenderer:
             width: image width.
         """
         check_shape(pose_params, "B 6", "pose_params")
-        if not bool(torch.isfinite(pose_params.detach()).all()):
-            raise ValueError("pose_params: contain NaN or inf")
+        check_values(torch.isfinite(pose_params.detach()), "pose_params: contain NaN or inf")
         base = torch.as_tensor(base_world_T_cam, dtype=torch.float64).reshape(-1, 4, 4)
         world_T_cam = perturb_world_T_cam(base, pose_params[:, :3].double(), pose_params[:, 3:].double())
         K = batched_intrinsics(K, base.shape[0])
@@ -203,9 +202,9 @@ class DifferentiableRenderer:
             mask=frame.mask,
             exact=frame.exact,
             world_T_cam=world_T_cam,
-            coverage=agreement.coverage.cpu(),
-            rgb_error=agreement.rgb_error.cpu(),
-            depth_error=agreement.depth_error.cpu(),
+            coverage=agreement.coverage,
+            rgb_error=agreement.rgb_error,
+            depth_error=agreement.depth_error,
             refreshed=refreshed,
         )
 
@@ -248,12 +247,13 @@ class DifferentiableRenderer:
     ) -> tuple[Reprojection, WarpAgreement, bool]:
         """The warp to the current poses and its agreement with the exact frame; with ``on_drift``,
         an anchor that drifted too far is rendered again first."""
-        warp = self._warp(frame.depth, frame.normals, world_T_cam, K)
+        # an anchor rendered in this call is at the current poses: the warp need not compare them
+        warp = self._warp(frame.depth, frame.normals, world_T_cam, K, True if refreshed else None)
         agreement = WarpAgreement.of(warp, frame.rgb, frame.depth, frame.mask)
         if self.config.refresh == "on_drift" and not refreshed and agreement.drifted(self.config):
             self._refresh(world_T_cam.detach(), K, height, width)
             refreshed = True
-            warp = self._warp(frame.depth, frame.normals, world_T_cam, K)
+            warp = self._warp(frame.depth, frame.normals, world_T_cam, K, True)
             agreement = WarpAgreement.of(warp, frame.rgb, frame.depth, frame.mask)
         return warp, agreement, refreshed
 
@@ -283,8 +283,15 @@ class DifferentiableRenderer:
             sub_rgb = anchor.rgb[:, 0, :, start : start + s * height, start : start + s * width]
         return self.renderer.render(world_T_cam, K, height, width, supersample=self.config.supersample, sub_rgb=sub_rgb)
 
-    def _warp(self, depth: torch.Tensor, normals: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor):
-        A_T_P = torch.linalg.inv(self.anchor.world_T_cam) @ world_T_cam
+    def _warp(
+        self,
+        depth: torch.Tensor,
+        normals: torch.Tensor,
+        world_T_cam: torch.Tensor,
+        K: torch.Tensor,
+        at_anchor: bool | None,
+    ):
+        A_T_P = torch.linalg.inv_ex(self.anchor.world_T_cam)[0] @ world_T_cam  # inv_ex: no wait for its check
         return reproject(
             self.anchor,
             depth,
@@ -293,12 +300,30 @@ class DifferentiableRenderer:
             K,
             depth_tolerance=self.config.depth_tolerance,
             plane_tolerance=self.config.plane_tolerance,
+            at_anchor=at_anchor,
         )
 
 
-def _view_key(K: torch.Tensor, height: int, width: int) -> tuple:
-    """What an anchor was rendered for, besides the pose: batch size, image size and intrinsics (B, 3, 3)."""
-    return K.shape[0], height, width, tuple(K.flatten().tolist())
+@dataclass(frozen=True)
+class _ViewKey:
+    """What an anchor was rendered for, besides the pose: image size and intrinsics (B, 3, 3),
+    compared by value (the intrinsics live on the host, so comparing them waits for no device)."""
+
+    height: int
+    width: int
+    K: torch.Tensor
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, _ViewKey)
+            and (self.height, self.width) == (other.height, other.width)
+            and self.K.shape == other.K.shape
+            and torch.equal(self.K, other.K)
+        )
+
+
+def _view_key(K: torch.Tensor, height: int, width: int) -> _ViewKey:
+    return _ViewKey(height, width, K.detach().clone())
 
 
 @dataclass

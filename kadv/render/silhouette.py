@@ -37,7 +37,7 @@ _MAX_CROSSING_ERROR = 0.25  # the chosen edge's exact crossing within a quarter 
 
 @dataclass
 class EdgePairs:
-    """Occlusion-edge pairs found in exact renders (N pairs), tensors on the host.
+    """Occlusion-edge pairs found in exact renders (N pairs), tensors on the renderer's device.
 
     Attributes:
         batch: (N,) int64 view index.
@@ -140,7 +140,9 @@ class _Candidates:
     c: torch.Tensor
 
     def subset(self, keep: torch.Tensor) -> _Candidates:
-        return _Candidates(*(getattr(self, f.name)[keep] for f in fields(self)))
+        """The pairs where ``keep`` (N,) is True (their count read once, not once per field)."""
+        rows = torch.nonzero(keep)[:, 0]
+        return _Candidates(*(getattr(self, f.name).index_select(0, rows) for f in fields(self)))
 
     @staticmethod
     def concatenate(parts: list[_Candidates]) -> _Candidates:
@@ -247,7 +249,7 @@ def _occluder_edge(
     """
     bi, R, c = pairs.batch, pairs.R, pairs.c
     faces = surfaces.faces[occluder.clamp_min(0)]
-    edges = torch.stack([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]], dim=1)  # (N, 3, 2)
+    edges = torch.stack([faces, faces.roll(-1, dims=1)], dim=2)  # (N, 3, 2): (0, 1), (1, 2), (2, 0)
     vertices_cam = mat_vec(R.transpose(1, 2), surfaces.vertices[edges] - c[:, None, None])
     three = lambda tensor: tensor.repeat_interleave(3, dim=0)
     t_all, ok_all = edge_crossings(
@@ -269,7 +271,7 @@ def find_edge_pairs(
     renderer: ExactRenderer, exact: RenderOutput, world_T_cam: torch.Tensor, K: torch.Tensor
 ) -> EdgePairs:
     """Locate occlusion-edge pairs and their occluding triangle edges in exact renders (no gradient),
-    on the renderer's device; the pairs come back to the host, where the pose algebra is.
+    on the renderer's device, where the pairs stay.
 
     Three steps: candidate neighbours across a depth jump in each direction, a bisection with real
     rays for the occluder and the crossing, and the occluder's edge that crosses there.
@@ -288,14 +290,15 @@ def find_edge_pairs(
         [_candidate_pairs(surfaces, z, ids, pose, K_inv, horizontal) for horizontal in (True, False)]
     )
     if not len(pairs.batch):
-        empty = torch.zeros(0, dtype=torch.int64)
-        return EdgePairs(empty, empty, empty, torch.zeros(0, dtype=torch.bool), empty.reshape(0, 2), empty.double())
+        empty = torch.zeros(0, dtype=torch.int64, device=device)
+        none = torch.zeros(0, dtype=torch.bool, device=device)
+        return EdgePairs(empty, empty, empty, none, empty.reshape(0, 2), empty.double())
     occluder, occlusion, t_star = _bisect(surfaces, pairs, z.reshape(batch, -1), ids.reshape(batch, -1))
     chosen, error, steep = _occluder_edge(surfaces, pairs, occluder, t_star, K)
-    keep = occlusion & (error < _MAX_CROSSING_ERROR) & (steep == pairs.horizontal)
+    keep = torch.nonzero(occlusion & (error < _MAX_CROSSING_ERROR) & (steep == pairs.horizontal))[:, 0]
     return EdgePairs(
-        pairs.batch[keep], pairs.a[keep], pairs.b[keep], pairs.horizontal[keep], chosen[keep], t_star[keep]
-    ).to("cpu")
+        *(values.index_select(0, keep) for values in (pairs.batch, pairs.a, pairs.b, pairs.horizontal, chosen, t_star))
+    )
 
 
 def silhouette_term(
@@ -308,7 +311,7 @@ def silhouette_term(
         world_T_cam: (B, 4, 4) current poses, differentiable.
         K: intrinsics (3, 3) or (B, 3, 3).
         values: (B, C, H, W) exact per-pixel values (detached) whose jumps the edges carry; the
-            term is built on their device.
+            term is built on their device (the pose algebra runs on ``world_T_cam``'s).
     """
     check_shape(world_T_cam, "B 4 4", "world_T_cam", check_shape(values, "B C H W", "values"))
     batch, channels, height, width = values.shape
@@ -318,22 +321,25 @@ def silhouette_term(
         return term.view(batch, height, width, channels).permute(0, 3, 1, 2).to(values.dtype) + (
             0 * world_T_cam.sum()
         ).to(device)
-    K = batched_intrinsics(K, batch)
+    pose_device = world_T_cam.device
+    pairs = pairs.to(pose_device)
+    K = batched_intrinsics(K, batch).to(pose_device, non_blocking=True)
     bi = pairs.batch
     R, c = world_T_cam[bi, :3, :3].double(), world_T_cam[bi, :3, 3].double()
-    vertices = torch.from_numpy(renderer.scene.vertices)[pairs.edge]  # (N, 2, 3) world
+    vertices = renderer.surfaces.vertices.to(pose_device)[pairs.edge]  # (N, 2, 3) world
     vertices_cam = (vertices - c[:, None]) @ R  # R^T (v - c), row-vector form
     ya, xa = pairs.a.div(width, rounding_mode="floor"), pairs.a.remainder(width)
     uv_a = torch.stack([xa + 0.5, ya + 0.5], dim=1).double()
     uv_b = uv_a + torch.stack([pairs.horizontal, ~pairs.horizontal], dim=1).double()
-    K_inv = torch.linalg.inv(K[bi])
-    rays_a = (K_inv @ torch.cat([uv_a, torch.ones(len(bi), 1, dtype=torch.float64)], 1)[..., None])[..., 0]
-    rays_b = (K_inv @ torch.cat([uv_b, torch.ones(len(bi), 1, dtype=torch.float64)], 1)[..., None])[..., 0]
+    K_inv = torch.linalg.inv_ex(K[bi])[0]  # inv_ex: no wait to check for singular matrices
+    ones = torch.ones(len(bi), 1, dtype=torch.float64, device=pose_device)
+    rays_a = (K_inv @ torch.cat([uv_a, ones], 1)[..., None])[..., 0]
+    rays_b = (K_inv @ torch.cat([uv_b, ones], 1)[..., None])[..., 0]
     t, genuine = edge_crossings(vertices_cam, rays_a, rays_b, K[bi], uv_a, uv_b)
     far_b = pairs.t > 0.5
     # the pixel beyond the crossing's half is partly covered by its neighbour's surface
     coefficient = (torch.where(far_b, t - 0.5, 0.5 - t) * genuine).to(device)
-    # per pair on the CPU (the pose algebra), per pixel on the values' device
+    # per pair where the pose is (its algebra), per pixel on the values' device
     flat = values.detach().double().permute(0, 2, 3, 1).reshape(batch, -1, channels)
     bi, far_b = bi.to(device), far_b.to(device)
     va, vb = flat[bi, pairs.a.to(device)], flat[bi, pairs.b.to(device)]

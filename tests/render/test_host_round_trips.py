@@ -4,8 +4,6 @@ host round trip; and a batch split by ``max_rays`` renders as one."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import replace
 
 import numpy as np
@@ -14,46 +12,9 @@ import torch
 
 from kadv import ExactRenderer, box_room, load_model, look_at
 from kadv.geometry import intrinsics_from_fov
-from kadv.render import BakeConfig, Shading
-from kadv.scenes import Emitters
+from tests.round_trips import DEVICES, lit_room_emitters, no_host_round_trips
 
-DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 H, W = 24, 32
-_READS = ("numpy", "__array__", "item", "tolist")
-_CONVERSIONS = ("from_numpy", "as_tensor", "tensor")
-
-
-@contextmanager
-def no_host_round_trips(device: str) -> Iterator[None]:
-    """Fail on any read of a tensor's values into the host (``Tensor.numpy``, ``__array__``,
-    ``.item()``, ``.tolist()``) and on any numpy array turned into a tensor; on CUDA, on any call
-    that waits for the device (``torch.cuda.set_sync_debug_mode("error")``)."""
-
-    def refuse(name: str, original=None):
-        def refused(*args, **kwargs):
-            if original is not None and not any(isinstance(a, np.ndarray) for a in args):
-                return original(*args, **kwargs)
-            raise AssertionError(f"a host round trip inside the step: {name}")
-
-        return refused
-
-    reads = {name: getattr(torch.Tensor, name) for name in _READS}
-    conversions = {name: getattr(torch, name) for name in _CONVERSIONS}
-    for name in _READS:
-        setattr(torch.Tensor, name, refuse(f"Tensor.{name}"))
-    for name, original in conversions.items():
-        setattr(torch, name, refuse(f"torch.{name} of a numpy array", None if name == "from_numpy" else original))
-    if device == "cuda":
-        torch.cuda.set_sync_debug_mode("error")
-    try:
-        yield
-    finally:
-        if device == "cuda":
-            torch.cuda.set_sync_debug_mode("default")
-        for name, original in reads.items():
-            setattr(torch.Tensor, name, original)
-        for name, original in conversions.items():
-            setattr(torch, name, original)
 
 
 def test_the_guard_fails_on_each_kind_of_round_trip() -> None:
@@ -73,23 +34,9 @@ def test_the_guard_fails_on_each_kind_of_round_trip() -> None:
     assert tensor.tolist() == [1.0, 1.0, 1.0]  # and everything is restored after
 
 
-def _lit_room(tmp_path) -> tuple[Emitters, Shading]:
-    """Baked lighting of a box room lit by every kind of emitter: a sky, an area lamp (seen by the
-    camera), a point light, a spot and a sun (shaded per hit, with shadow rays)."""
-    lamp = np.array([[[1.5, 2.9, 1.5], [2.5, 2.9, 1.5], [2.5, 2.9, 2.5]]])
-    emitters = (
-        Emitters(sky_radiance=np.full(3, 0.2))
-        .area(lamp, np.full((1, 3), 4.0))
-        .point(np.array([2.0, 2.0, 2.0]), np.full(3, 3.0))
-        .spot(np.array([1.0, 2.5, 1.0]), np.full(3, 5.0), np.array([0.0, -1.0, 0.0]), 30.0, 20.0)
-        .sun(np.array([0.3, 1.0, 0.2]), np.full(3, 2.0))
-    )
-    return emitters, Shading(lighting="baked", bake=BakeConfig(texel=1.0, rays=8, bounces=1, cache=str(tmp_path)))
-
-
 @pytest.mark.parametrize("device", DEVICES)
 def test_a_warp_render_and_the_models_forward_pass_read_nothing_back_to_the_host(device: str, tmp_path) -> None:
-    emitters, shading = _lit_room(tmp_path)
+    emitters, shading = lit_room_emitters(str(tmp_path))
     scene = replace(box_room(seed=0), emitters=emitters)
     renderer = ExactRenderer(scene, shading, progress=False, backend="warp", device=device)
     model = load_model("kadv_tiny").to(device)
@@ -114,7 +61,7 @@ def test_a_warp_render_and_the_models_forward_pass_read_nothing_back_to_the_host
 
 
 def test_a_batch_split_by_max_rays_renders_as_one(tmp_path) -> None:
-    emitters, shading = _lit_room(tmp_path)
+    emitters, shading = lit_room_emitters(str(tmp_path))
     scene = replace(box_room(seed=0), emitters=emitters)
     eyes = torch.tensor([[1.0, 1.5, 1.0], [3.0, 1.2, 3.2], [1.2, 2.0, 3.0]])
     poses = look_at(eyes, torch.tensor([[3.0, 1.0, 3.0], [1.0, 2.8, 1.0], [3.0, 1.0, 1.0]])).double()

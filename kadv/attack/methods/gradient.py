@@ -12,7 +12,7 @@ from tqdm import tqdm
 
 from kadv.attack.records import InitViewResult, ViewRecord
 from kadv.attack.registry import register_method
-from kadv.attack.search import SearchContext
+from kadv.attack.search import Measures, SearchContext
 
 __all__ = ["GradientSettings", "gradient_ascent", "gradient_search", "restart_jitter"]
 
@@ -57,26 +57,28 @@ def gradient_ascent(
     lr_translation: float,
     bar: tqdm,
     first_step: int = 0,
-) -> list[ViewRecord]:
-    """Batched Adam runs from ``start`` (R, 6) within the context's budget; their records.
+) -> list[Measures]:
+    """Batched Adam runs from ``start`` (R, 6) within the context's budget; the measures of each step.
 
     Each update is pulled back within the pose bounds, then passes the step guard (a move that
     would cross or approach a surface is shortened; the fraction taken is recorded). A step runs
     only while the budget allows all R views; restart r is lane r, step s is ``first_step + s``.
+    The poses stay on the context's device and nothing is read back to the host until the run
+    ends: :meth:`Measures.records` then makes the records.
     """
     clock = context.clock
     batch = clock.allows(len(start))
     if batch == 0:
         return []
-    start = context.config.project(start[:batch].double())
-    reached, fraction = context.guard(torch.zeros(batch, 3, dtype=torch.float64), start[:, 3:])
+    start = context.config.project(start[:batch].to(context.device, torch.float64, non_blocking=True))
+    reached, fraction = context.guard(torch.zeros_like(start[:, 3:]), start[:, 3:])
     omega = start[:, :3].clone().requires_grad_(True)
     delta = reached.clone().requires_grad_(True)
     optimiser = torch.optim.Adam(
         [{"params": [omega], "lr": lr_rotation}, {"params": [delta], "lr": lr_translation}], maximize=True
     )
     base = context.base(batch)
-    records: list[ViewRecord] = []
+    measures: list[Measures] = []
     for step in range(steps + 1):
         if step > 0 and clock.allows(batch) < batch:
             break
@@ -84,17 +86,18 @@ def gradient_ascent(
         params = torch.cat([omega, delta], dim=1)
         out = context.differentiable(params, base, context.K, context.height, context.width)
         terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
-        records += context.records(
-            first_step + step,
-            params,
-            out.world_T_cam,
-            terms,
-            fraction,
-            (out.coverage, out.rgb_error, out.depth_error),
-            out.refreshed,
-            render=out.exact,
+        measures.append(
+            context.measure(
+                first_step + step,
+                params,
+                out.world_T_cam,
+                terms,
+                fraction,
+                (out.coverage, out.rgb_error, out.depth_error),
+                out.refreshed,
+                render=out.exact,
+            )
         )
-        bar.set_postfix(loss=f"{float(terms.loss.detach().max()):.4f}", refresh=False)
         bar.update(batch)
         if step == steps:
             clock.spent(batch, time.perf_counter() - started)
@@ -109,7 +112,7 @@ def gradient_ascent(
             omega.copy_(bounded[:, :3])
             delta.copy_(reached)
         clock.spent(batch, time.perf_counter() - started, backward=batch)
-    return records
+    return measures
 
 
 def best_lane(records: list[ViewRecord]) -> list[ViewRecord]:
@@ -141,5 +144,8 @@ def gradient_search(
     else:
         zero = (start == 0).all(dim=1)
         start = torch.cat([torch.zeros(1, 6, dtype=torch.float64), start[~zero].double()])
-    records = gradient_ascent(context, start, settings.steps, settings.lr_rotation, settings.lr_translation, bar)
+    measures = gradient_ascent(context, start, settings.steps, settings.lr_rotation, settings.lr_translation, bar)
+    records = [record for step in measures for record in step.records()]
+    if records:
+        bar.set_postfix(loss=f"{max(r.loss for r in records):.4f}", refresh=False)
     return context.result(records, best_lane(records))

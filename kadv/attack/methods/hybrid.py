@@ -111,7 +111,8 @@ def trust_region_refine(
             current + torch.where(fresh[:, None], 0.0, _steps(gradient, radius, settings))
         )
         reached, fraction = context.guard(current[:, 3:], proposal[:, 3:])
-        trial = torch.cat([proposal[:, :3], reached], dim=1).requires_grad_(True)
+        # the lanes' bookkeeping stays on the host, where its decisions are made; the trial goes to the device
+        trial = torch.cat([proposal[:, :3].to(context.device), reached], dim=1).requires_grad_(True)
         out = context.differentiable(trial, base, context.K, context.height, context.width)
         terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
         rows = context.records(
@@ -126,14 +127,14 @@ def trust_region_refine(
             render=out.exact,
         )
         records += rows
-        value = terms.objective.detach()
+        value = terms.objective.detach().cpu()
         rankable = torch.tensor([r.rankable for r in rows])
         accepted = fresh | (rankable & (value > best))
         backward = int(accepted.sum())
         if backward:
-            (terms.objective * accepted).sum().backward()
-            gradient[accepted] = trial.grad[accepted]
-            current[accepted] = trial.detach()[accepted]
+            (terms.objective * accepted.to(terms.objective.device)).sum().backward()
+            gradient[accepted] = trial.grad.cpu()[accepted]
+            current[accepted] = trial.detach().cpu()[accepted]
             best[accepted] = torch.where(rankable, value, torch.full_like(value, -math.inf))[accepted]
         radius = torch.where(accepted & ~fresh, radius * settings.grow, radius)
         radius = torch.where(accepted, radius, radius * settings.shrink)
