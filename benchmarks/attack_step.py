@@ -3,7 +3,8 @@ grey_white_room: the Depth Anything V2 Small architecture (random weights) with 
 (random VGG-16 weights), and kadv-tiny with SSIM.
 
 Every part is timed in this one run. A step is the time between two consecutive optimiser updates
-of a gradient run (step guard, differentiable render, objective, records, backward, update). The
+of a gradient run (step guard, differentiable render, objective, records, backward, update), the
+device's queued work included (a step on a GPU waits for nothing, so each update waits for it). The
 networks are the model's and the loss's forward passes and one backward pass through both, as a step
 runs them, timed as one call (as two separate forward+backward pairs they take about 3% less: a
 step's graph holds both networks' activations at once, and that memory comes as fresh pages). The
@@ -107,6 +108,9 @@ def step_seconds(
     updates, resumes, inside = [], [], []
 
     def hook(*_) -> None:
+        # a step queues its work on a GPU without waiting for it: the step ends when that work has run
+        if torch.cuda.is_initialized():
+            torch.cuda.synchronize()
         updates.append(time.perf_counter())
         if between is not None:
             inside.append(between())

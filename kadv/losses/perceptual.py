@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
 
 import torch
 from kornia.enhance import normalize
-from kornia.losses import ssim_loss as kornia_ssim_loss
+from kornia.filters import filter2d_separable, get_gaussian_kernel1d
 from torch import nn
 
 from kadv.losses.aligned import ALIGNED_LOSSES, DELTA1_TEMPERATURE, AlignedLoss
@@ -48,7 +49,8 @@ class PerceptualLoss(nn.Module):
         return cls(network, VGG16_TAPS)
 
     def features(self, depth: torch.Tensor) -> list[torch.Tensor]:
-        x = normalize(depth.expand(-1, 3, -1, -1), IMAGENET_MEAN.to(depth), IMAGENET_STD.to(depth))
+        mean, std = (v.to(depth, non_blocking=True) for v in (IMAGENET_MEAN, IMAGENET_STD))
+        x = normalize(depth.expand(-1, 3, -1, -1), mean, std)
         taps = []
         for index, module in enumerate(self.network):
             x = module(x)
@@ -61,8 +63,22 @@ class PerceptualLoss(nn.Module):
         return sum((fa - fb).abs().mean(dim=(1, 2, 3)) for fa, fb in zip(self.features(a), self.features(b)))
 
 
+@functools.lru_cache(maxsize=16)
+def _gaussian_window(window_size: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+    """SSIM's Gaussian window (1, window_size), sigma 1.5, made once per device: kornia builds it from a
+    host number at every call, an upload that waits for the device's queue."""
+    return get_gaussian_kernel1d(window_size, 1.5, device=device, dtype=dtype)
+
+
+# SSIM's stabilising constants for a dynamic range of 1 (Wang et al. 2004), and kornia's eps
+_C1, _C2, _EPS = 0.01**2, 0.03**2, 1e-12
+
+
 def ssim_loss(a: torch.Tensor, b: torch.Tensor, window_size: int = 11) -> torch.Tensor:
     """Per-sample structural dissimilarity (1 - SSIM) / 2 (B,) of normalised maps (B, 1, H, W).
+
+    kornia's ``ssim_loss`` (same padding, max_val 1), value for value, with its Gaussian window
+    made once per device.
 
     Examples:
         >>> ramp = torch.linspace(0.0, 1.0, 256).reshape(1, 1, 16, 16)
@@ -71,8 +87,21 @@ def ssim_loss(a: torch.Tensor, b: torch.Tensor, window_size: int = 11) -> torch.
         >>> 0.0 < ssim_loss(ramp, ramp.flip(-1)).item() <= 1.0
         True
     """
-    per_pixel = kornia_ssim_loss(a, b, window_size=window_size, max_val=1.0, reduction="none")
-    return per_pixel.mean(dim=(1, 2, 3))
+    kernel = _gaussian_window(window_size, a.device, torch.promote_types(a.dtype, b.dtype))
+    a, b = a.to(kernel.dtype), b.to(kernel.dtype)
+
+    def blur(image: torch.Tensor) -> torch.Tensor:
+        return filter2d_separable(image, kernel, kernel)
+
+    mu_a, mu_b = blur(a), blur(b)
+    mu_a_sq, mu_b_sq, mu_ab = mu_a**2, mu_b**2, mu_a * mu_b
+    sigma_a_sq = blur(a**2) - mu_a_sq
+    sigma_b_sq = blur(b**2) - mu_b_sq
+    sigma_ab = blur(a * b) - mu_ab
+    ssim = ((2.0 * mu_ab + _C1) * (2.0 * sigma_ab + _C2)) / (
+        (mu_a_sq + mu_b_sq + _C1) * (sigma_a_sq + sigma_b_sq + _C2) + _EPS
+    )
+    return torch.clamp((1.0 - ssim) / 2, min=0, max=1).mean(dim=(1, 2, 3))
 
 
 def depth_loss(

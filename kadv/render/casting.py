@@ -29,9 +29,12 @@ class RayCaster(ABC):
     device: torch.device
 
     @abstractmethod
-    def first_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    def first_hits(
+        self, origins: torch.Tensor, directions: torch.Tensor, live: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, ...]:
         """First hit of each ray: t (N,) float32 (inf on a miss), triangle id (N,) int64 (-1 on a miss)
-        and barycentrics (N, 2) float32."""
+        and barycentrics (N, 2) float32. ``live`` (N,) bool: the rays to cast; the others come back
+        as misses (None: all)."""
 
     @abstractmethod
     def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
@@ -59,12 +62,18 @@ class Open3DCaster(RayCaster):
         # one copy into Open3D's (N, 6) layout, whose memory Open3D then shares
         return o3d.core.Tensor.from_numpy(torch.cat([origins, directions], dim=1).numpy())
 
-    def first_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    def first_hits(
+        self, origins: torch.Tensor, directions: torch.Tensor, live: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, ...]:
         result = self.scene.cast_rays(self._rays(origins, directions))
         # Open3D's ids are uint32, 2**32 - 1 on a miss: read as int32, that is -1 (and scenes have far
         # fewer than 2**31 triangles); one conversion instead of a comparison and a select
         ids = torch.from_numpy(result["primitive_ids"].numpy().view(np.int32)).long()
-        return torch.from_numpy(result["t_hit"].numpy()), ids, torch.from_numpy(result["primitive_uvs"].numpy())
+        t, bary = torch.from_numpy(result["t_hit"].numpy()), torch.from_numpy(result["primitive_uvs"].numpy())
+        if live is None:
+            return t, ids, bary
+        # Embree casts every ray of a call; the dead ones are reported as misses
+        return torch.where(live, t, torch.inf), torch.where(live, ids, -1), torch.where(live[:, None], bary, 0.0)
 
     def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         result = self.scene.list_intersections(self._rays(origins, directions))

@@ -46,6 +46,10 @@ class DiffRenderConfig:
             its own pose, within a pixel of the frame, so one pixel is rendered.
         supersample: s x s samples per pixel for the anchor, the exact RGB and the warp's box filter.
         silhouette: add the occlusion-edge term.
+        edge_search: how the silhouette term finds its edges (:func:`~kadv.render.find_edge_pairs`):
+            "compact" keeps only the candidate pairs at each stage (the fewest rays and operations;
+            on a GPU each stage waits for its count), "every_pair" computes every neighbour pair and
+            marks the candidates (nothing waits; the arithmetic grows with the pixels).
         depth_tolerance: relative warped-vs-exact depth disagreement that invalidates a pixel.
         plane_tolerance: relative distance from a tap's surface plane above which the warp takes
             the tap to belong to another surface.
@@ -61,6 +65,7 @@ class DiffRenderConfig:
     guard_band: int = 16
     supersample: int = 2
     silhouette: bool = True
+    edge_search: str = "compact"
     depth_tolerance: float = 0.01
     plane_tolerance: float = 0.02
 
@@ -69,6 +74,10 @@ class DiffRenderConfig:
             raise ValueError(f"render.values must be 'exact' or 'warp', got {self.values!r}")
         if self.refresh not in ("always", "on_drift", "every_k"):
             raise ValueError(f"render.refresh must be 'always', 'on_drift' or 'every_k', got {self.refresh!r}")
+        if self.edge_search not in ("compact", "every_pair"):
+            raise ValueError(
+                f"render.differentiable.edge_search must be 'compact' or 'every_pair', got {self.edge_search!r}"
+            )
         if self.layers < 1 or self.supersample < 1 or self.guard_band < 0 or self.every_k < 1:
             raise ValueError("render.layers, supersample and every_k must be >= 1 and guard_band >= 0")
         if not (self.depth_tolerance > 0 and self.plane_tolerance > 0):
@@ -191,7 +200,8 @@ class DifferentiableRenderer:
         self._steps_since_refresh += 1
         rgb, depth = self._values(frame, warp)
         if self.config.silhouette:
-            pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K)
+            compact = self.config.edge_search == "compact"
+            pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K, compact)
             term = silhouette_term(
                 self.renderer, pairs, world_T_cam, frame.K, torch.cat([frame.rgb_rendered, frame.depth_rendered], dim=1)
             )[frame.inside]

@@ -13,6 +13,7 @@ edge is counted once.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, fields
 
 import torch
@@ -45,6 +46,8 @@ class EdgePairs:
         horizontal: (N,) bool, True for (x, x+1) pairs.
         edge: (N, 2) int64 vertex indices of the occluder's silhouette edge.
         t: (N,) float64 crossing position found by bisection (no gradient).
+        keep: (N,) bool, the pairs that are occlusion edges, where the search kept every neighbour pair
+            (on a GPU, which computes them all sooner than it would wait for their count); None: all.
     """
 
     batch: torch.Tensor
@@ -53,9 +56,10 @@ class EdgePairs:
     horizontal: torch.Tensor
     edge: torch.Tensor
     t: torch.Tensor
+    keep: torch.Tensor | None = None
 
     def to(self, device: torch.device | str) -> EdgePairs:
-        return EdgePairs(*(getattr(self, f.name).to(device) for f in fields(self)))
+        return EdgePairs(*(None if (v := getattr(self, f.name)) is None else v.to(device) for f in fields(self)))
 
 
 def _rays(K_inv: torch.Tensor, batch: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
@@ -124,7 +128,8 @@ def edge_crossings(
 @dataclass
 class _Candidates:
     """Neighbour pairs (N) across a possible occlusion edge: pixel indices, direction and centres,
-    camera rays (z = 1) through both centres in the camera and world frames, and their views' poses."""
+    camera rays (z = 1) through both centres in the camera and world frames, their views' poses, and
+    whether each is still a candidate (``live``: all True once compacted)."""
 
     batch: torch.Tensor
     a: torch.Tensor
@@ -138,9 +143,13 @@ class _Candidates:
     world_b: torch.Tensor
     R: torch.Tensor
     c: torch.Tensor
+    live: torch.Tensor
 
-    def subset(self, keep: torch.Tensor) -> _Candidates:
-        """The pairs where ``keep`` (N,) is True (their count read once, not once per field)."""
+    def subset(self, keep: torch.Tensor, compact: bool) -> _Candidates:
+        """The pairs where ``keep`` (N,) is True: compacted (their count read once, not once per
+        field), or all of them with ``keep`` marked in :attr:`live`."""
+        if not compact:
+            return dataclasses.replace(self, live=self.live & keep)
         rows = torch.nonzero(keep)[:, 0]
         return _Candidates(*(getattr(self, f.name).index_select(0, rows) for f in fields(self)))
 
@@ -150,15 +159,30 @@ class _Candidates:
 
 
 def _candidate_pairs(
-    surfaces: Surfaces, z: torch.Tensor, ids: torch.Tensor, pose: torch.Tensor, K_inv: torch.Tensor, horizontal: bool
+    surfaces: Surfaces,
+    z: torch.Tensor,
+    ids: torch.Tensor,
+    pose: torch.Tensor,
+    K_inv: torch.Tensor,
+    horizontal: bool,
+    compact: bool,
 ) -> _Candidates:
-    """Neighbours (x, x+1) or (y, y+1) on different triangles whose depths (B, H, W) jump."""
+    """Neighbours (x, x+1) or (y, y+1) on different triangles whose depths (B, H, W) jump: compacted,
+    or every neighbour pair with the candidates marked live."""
     batch, _, width = z.shape
     za, zb = (z[:, :, :-1], z[:, :, 1:]) if horizontal else (z[:, :-1, :], z[:, 1:, :])
     ia, ib = (ids[:, :, :-1], ids[:, :, 1:]) if horizontal else (ids[:, :-1, :], ids[:, 1:, :])
     near, far = torch.minimum(za, zb), torch.maximum(za, zb)
     candidate = (ia != ib) & torch.isfinite(near) & (~torch.isfinite(far) | ((far - near) > _MIN_JUMP * near))
-    bi, yi, xi = torch.nonzero(candidate).unbind(dim=1)  # how many: the one wait of the search
+    if compact:
+        bi, yi, xi = torch.nonzero(candidate).unbind(dim=1)  # how many: a wait for the device
+        live = torch.ones_like(bi, dtype=torch.bool)
+    else:
+        bi, yi, xi = (
+            index.flatten()
+            for index in torch.meshgrid(*(torch.arange(n, device=z.device) for n in candidate.shape), indexing="ij")
+        )
+        live = candidate.flatten()
     a = yi * width + xi
     uv_a = torch.stack([xi + 0.5, yi + 0.5], dim=1).double()
     uv_b = uv_a.clone()
@@ -177,6 +201,7 @@ def _candidate_pairs(
         mat_vec(R, rays_b),
         R,
         pose[bi, :3, 3],
+        live,
     )
     flat_ids, flat_z = ids.reshape(batch, -1), z.reshape(batch, -1)
     # Neighbours on one continuous surface (a grazing floor's triangles) are no edge: the plane of
@@ -186,13 +211,14 @@ def _candidate_pairs(
     b_on_a = (_plane_depth(surfaces, flat_ids[bi, pairs.a], pairs.world_b, pairs.c) - z_b).abs()
     a_on_b = (_plane_depth(surfaces, flat_ids[bi, pairs.b], pairs.world_a, pairs.c) - z_a).abs()
     continuous = (b_on_a <= _CONTINUITY * z_b) & (a_on_b <= _CONTINUITY * z_a)
-    return pairs.subset(~continuous)
+    return pairs.subset(~continuous, compact)
 
 
 def _bisect(
-    surfaces: Surfaces, pairs: _Candidates, flat_z: torch.Tensor, flat_ids: torch.Tensor
+    surfaces: Surfaces, pairs: _Candidates, flat_z: torch.Tensor, flat_ids: torch.Tensor, compact: bool
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Bisect each segment a -> b with real rays for where the foreground ends.
+    """Bisect each segment a -> b with real rays for where the foreground ends (uncompacted, only the
+    live pairs' rays are cast).
 
     Returns the occluding triangle (N,), whether the depths on the two sides of the final bracket
     differ enough to be an occlusion (N,), and the crossing t in [0, 1] (N,).
@@ -215,7 +241,7 @@ def _bisect(
     bg_a, bg_step = dot(bg_normal, world_a), dot(bg_normal, world_step)
     for _ in range(_BISECTION_STEPS):
         mid = 0.5 * (lo + hi)
-        hits = surfaces.cast(pairs.c, world_a + mid[:, None] * world_step)
+        hits = surfaces.cast(pairs.c, world_a + mid[:, None] * world_step, None if compact else pairs.live)
         z_fg = _plane_z(fg_id, fg_offset, fg_a + mid * fg_step)
         z_bg = _plane_z(bg_id, bg_offset, bg_a + mid * bg_step)
         # a hit is foreground up to a share of the way to the background's plane, and no further
@@ -268,13 +294,19 @@ def _occluder_edge(
 
 
 def find_edge_pairs(
-    renderer: ExactRenderer, exact: RenderOutput, world_T_cam: torch.Tensor, K: torch.Tensor
+    renderer: ExactRenderer,
+    exact: RenderOutput,
+    world_T_cam: torch.Tensor,
+    K: torch.Tensor,
+    compact: bool = True,
 ) -> EdgePairs:
     """Locate occlusion-edge pairs and their occluding triangle edges in exact renders (no gradient),
     on the renderer's device, where the pairs stay.
 
     Three steps: candidate neighbours across a depth jump in each direction, a bisection with real
-    rays for the occluder and the crossing, and the occluder's edge that crosses there.
+    rays for the occluder and the crossing, and the occluder's edge that crosses there. With
+    ``compact`` the candidates are compacted at each step (a GPU waits for their counts); otherwise
+    every neighbour pair goes through, the others marked (:attr:`EdgePairs.keep`), and nothing waits.
     """
     surfaces, device = renderer.surfaces, renderer.device
     depth = exact.depth[:, 0].double().to(device)
@@ -287,18 +319,20 @@ def find_edge_pairs(
     z = torch.where(depth > 0, depth, torch.inf)
     # both directions' candidates in one bisection: its casts are batched
     pairs = _Candidates.concatenate(
-        [_candidate_pairs(surfaces, z, ids, pose, K_inv, horizontal) for horizontal in (True, False)]
+        [_candidate_pairs(surfaces, z, ids, pose, K_inv, horizontal, compact) for horizontal in (True, False)]
     )
     if not len(pairs.batch):
         empty = torch.zeros(0, dtype=torch.int64, device=device)
         none = torch.zeros(0, dtype=torch.bool, device=device)
         return EdgePairs(empty, empty, empty, none, empty.reshape(0, 2), empty.double())
-    occluder, occlusion, t_star = _bisect(surfaces, pairs, z.reshape(batch, -1), ids.reshape(batch, -1))
+    occluder, occlusion, t_star = _bisect(surfaces, pairs, z.reshape(batch, -1), ids.reshape(batch, -1), compact)
     chosen, error, steep = _occluder_edge(surfaces, pairs, occluder, t_star, K)
-    keep = torch.nonzero(occlusion & (error < _MAX_CROSSING_ERROR) & (steep == pairs.horizontal))[:, 0]
-    return EdgePairs(
-        *(values.index_select(0, keep) for values in (pairs.batch, pairs.a, pairs.b, pairs.horizontal, chosen, t_star))
-    )
+    keep = pairs.live & occlusion & (error < _MAX_CROSSING_ERROR) & (steep == pairs.horizontal)
+    found = (pairs.batch, pairs.a, pairs.b, pairs.horizontal, chosen, t_star)
+    if not compact:
+        return EdgePairs(*found, keep=keep)
+    rows = torch.nonzero(keep)[:, 0]
+    return EdgePairs(*(values.index_select(0, rows) for values in found))
 
 
 def silhouette_term(
@@ -338,7 +372,10 @@ def silhouette_term(
     t, genuine = edge_crossings(vertices_cam, rays_a, rays_b, K[bi], uv_a, uv_b)
     far_b = pairs.t > 0.5
     # the pixel beyond the crossing's half is partly covered by its neighbour's surface
-    coefficient = (torch.where(far_b, t - 0.5, 0.5 - t) * genuine).to(device)
+    coefficient = torch.where(far_b, t - 0.5, 0.5 - t) * genuine
+    if pairs.keep is not None:  # the pairs that are no edges add nothing, and no gradient
+        coefficient = torch.where(pairs.keep, coefficient, 0.0)
+    coefficient = coefficient.to(device)
     # per pair where the pose is (its algebra), per pixel on the values' device
     flat = values.detach().double().permute(0, 2, 3, 1).reshape(batch, -1, channels)
     bi, far_b = bi.to(device), far_b.to(device)

@@ -65,9 +65,15 @@ def _rays(device: torch.device, *arrays: torch.Tensor | np.ndarray) -> list[torc
     return _vectors(device, torch.float32, *arrays)
 
 
-def first_hits(caster: RayCaster, origins: torch.Tensor | np.ndarray, directions: torch.Tensor | np.ndarray) -> RayHits:
-    """First hits of rays (..., 3) in one caster (alpha masks not applied), flattened."""
-    return RayHits(*caster.first_hits(*_rays(caster.device, origins, directions)))
+def first_hits(
+    caster: RayCaster,
+    origins: torch.Tensor | np.ndarray,
+    directions: torch.Tensor | np.ndarray,
+    live: torch.Tensor | None = None,
+) -> RayHits:
+    """First hits of rays (..., 3) in one caster (alpha masks not applied), flattened; ``live`` (N,):
+    the rays to cast, the others misses (None: all)."""
+    return RayHits(*caster.first_hits(*_rays(caster.device, origins, directions), live))
 
 
 def pyramid_bytes(scene: Scene) -> int:
@@ -132,13 +138,19 @@ class Surfaces:
         """A caster of triangles ``faces`` (F, 3) of ``vertices`` (V, 3) on this backend and device."""
         return make_caster(vertices, faces, self.backend, self.device if device is None else device)
 
-    def cast(self, origins: torch.Tensor | np.ndarray, directions: torch.Tensor | np.ndarray) -> RayHits:
+    def cast(
+        self,
+        origins: torch.Tensor | np.ndarray,
+        directions: torch.Tensor | np.ndarray,
+        live: torch.Tensor | None = None,
+    ) -> RayHits:
         """First opaque hits of rays (..., 3), flattened to N; alpha-masked texels let rays through.
 
         Rays may be tensors anywhere or host arrays; they are cast as float32 on the casters' device.
+        ``live`` (N,) bool on that device: the rays to cast, the others misses (None: all).
         """
         origins, directions = _rays(self.device, origins, directions)
-        hits = first_hits(self.caster, origins, directions)
+        hits = first_hits(self.caster, origins, directions, live)
         if not self._masked:
             return hits
         # the few rays that met a transparent texel take their first opaque hit from one cast and one

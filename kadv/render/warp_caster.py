@@ -116,14 +116,17 @@ class WarpCaster(RayCaster):
     def _rays(self, *rays: torch.Tensor) -> list[torch.Tensor]:
         return [x.to(self.device, torch.float32).contiguous() for x in rays]
 
-    def first_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    def first_hits(
+        self, origins: torch.Tensor, directions: torch.Tensor, live: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, ...]:
         n = len(origins)
         t = torch.full((n,), torch.inf, device=self.device)
         ids = torch.full((n,), -1, dtype=torch.int64, device=self.device)
         bary = torch.zeros(n, 2, device=self.device)
-        ones = torch.ones(n, dtype=torch.int32, device=self.device)
+        # hits wanted per ray: one, or none for a dead ray, whose thread then returns at once
+        limits = torch.ones(n, dtype=torch.int32, device=self.device) if live is None else live.to(torch.int32)
         slots = torch.arange(n, device=self.device)
-        self._launch(_walk, n, [*self._rays(origins, directions), 1, ones, slots, slots.clone(), t, ids, bary])
+        self._launch(_walk, n, [*self._rays(origins, directions), 1, limits, slots, slots.clone(), t, ids, bary])
         return t, ids, bary
 
     def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:

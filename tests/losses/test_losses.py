@@ -99,6 +99,22 @@ def test_ssim_loss_zero_for_identical_positive_otherwise() -> None:
     assert (ssim_loss(a, torch.rand(2, 1, 24, 24)) > 0.1).all()
 
 
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_ssim_loss_equals_kornias_value_for_value_and_in_its_gradient(dtype: torch.dtype) -> None:
+    # kadv builds SSIM's window once per device (kornia uploads it at every call); nothing else differs
+    from kornia.losses import ssim_loss as kornia_ssim_loss
+
+    generator = torch.Generator().manual_seed(0)
+    a, b = (torch.rand(3, 1, 40, 56, generator=generator, dtype=dtype, requires_grad=True) for _ in range(2))
+    ours = ssim_loss(a, b)
+    theirs = kornia_ssim_loss(a, b, window_size=11, max_val=1.0, reduction="none").mean(dim=(1, 2, 3))
+    assert torch.equal(ours, theirs) and ours.dtype == dtype
+    for mine, reference in zip(torch.autograd.grad(ours.sum(), (a, b)), torch.autograd.grad(theirs.sum(), (a, b))):
+        assert torch.equal(mine, reference)
+    with torch.no_grad():  # kornia's other path (channels-last on the CPU) gives the same values
+        assert torch.equal(ssim_loss(a, b), theirs.detach())
+
+
 def test_normalisation_and_spaces() -> None:
     depth = torch.tensor([[[[1.0, 2.0], [4.0, 0.0]]]])
     mask = depth > 0

@@ -3,8 +3,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from kadv import box_room
 from kadv.geometry import intrinsics_from_fov, look_at
-from kadv.render import ExactRenderer, find_edge_pairs, render_anchor
+from kadv.render import ExactRenderer, find_edge_pairs, render_anchor, silhouette_term
 from kadv.render.layers import guard_band_intrinsics
 from kadv.render.silhouette import edge_crossings
 from kadv.scenes import Material, assemble_scene
@@ -65,6 +66,29 @@ def test_edge_pairs_sit_on_the_panel_outline_with_exact_crossings() -> None:
         row, col = divmod(int(a), width)
         coordinate = (col if horizontal else row) + 0.5 + t
         assert min(abs(coordinate - (16 + s * focal * 0.25)) for s in (-1, 1)) < 1e-2
+
+
+def test_the_uncompacted_search_keeps_the_compacted_pairs_and_gives_the_same_gradient() -> None:
+    # what a GPU runs (every neighbour pair, the edges marked: no count to wait for), here on the CPU
+    renderer = ExactRenderer(box_room(seed=0))
+    eyes = torch.tensor([[0.8, 1.6, 0.8], [3.2, 1.2, 0.9]])
+    poses = look_at(eyes, torch.tensor([[3.0, 0.4, 3.5], [1.0, 0.3, 3.0]])).double()
+    K = intrinsics_from_fov(70.0, 24, 32)
+    exact = renderer.render(poses, K, 24, 32)
+    compacted = find_edge_pairs(renderer, exact, poses, K)
+    every = find_edge_pairs(renderer, exact, poses, K, compact=False)
+    assert compacted.keep is None and len(compacted.a) > 10 and set(compacted.batch.tolist()) == {0, 1}
+    assert len(every.a) == 2 * (24 * 31 + 23 * 32)  # each view's horizontal and vertical neighbours
+    for name in ("batch", "a", "b", "horizontal", "edge", "t"):
+        assert torch.equal(getattr(every, name)[every.keep], getattr(compacted, name)), name
+    values = torch.cat([exact.rgb, exact.depth], dim=1)
+    weights = torch.rand(values.shape, generator=torch.Generator().manual_seed(0))
+    gradients = []
+    for pairs in (compacted, every):
+        pose = poses.clone().requires_grad_(True)
+        (silhouette_term(renderer, pairs, pose, K, values) * weights).sum().backward()
+        gradients.append(pose.grad)
+    assert gradients[0].abs().sum() > 0 and torch.equal(gradients[0], gradients[1])
 
 
 def test_crossing_of_a_known_edge() -> None:
