@@ -1,11 +1,12 @@
 """Where a gradient attack step still waits for the device: a short gradient run (kadv-tiny + SSIM,
-two restarts, on the box room lit by every kind of emitter, Warp's backend) under
-``torch.cuda.set_sync_debug_mode("warn")``, each wait traced to the line of kadv that made it.
+two restarts, on the box room lit by every kind of emitter, Warp's backend; the whole-step
+round-trip test's run) under ``torch.cuda.set_sync_debug_mode("warn")``, each wait traced to the
+line of kadv that made it.
 
 Prints each site with its waits per step, the steps counted being all but the first (which
 compiles kernels and uploads tables). On the CPU there is nothing to wait for: it refuses in one line.
 
-Run: .venv/bin/python benchmarks/sync_sites.py [--device cuda]
+Run: .venv/bin/python benchmarks/sync_sites.py [--device cuda] [--edge-search compact|every_pair]
 """
 
 from __future__ import annotations
@@ -15,28 +16,14 @@ import sys
 import traceback
 import warnings
 from collections import Counter
-from dataclasses import replace
 from pathlib import Path
 
 import torch
-from tqdm import tqdm
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from kadv import ExactRenderer, box_room, load_model, look_at  # noqa: E402
-from kadv.attack import (  # noqa: E402
-    AttackConfig,
-    GradientSettings,
-    InitView,
-    Objective,
-    PenaltyConfig,
-    SearchContext,
-    gradient_ascent,
-)
-from kadv.losses import depth_loss  # noqa: E402
-from kadv.render import DifferentiableRenderer, DiffRenderConfig  # noqa: E402
-from tests.round_trips import lit_room_emitters  # noqa: E402
+from tests.round_trips import corner_attack, gradient_measures  # noqa: E402
 
 H, W, STEPS = 48, 64, 4
 
@@ -54,25 +41,16 @@ def kadv_site(stack: list[traceback.FrameSummary]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description="Where a gradient attack step still waits for the device.")
     parser.add_argument("--device", default="cuda")
-    device = parser.parse_args().device
+    parser.add_argument("--edge-search", default="compact", choices=("compact", "every_pair"))
+    args = parser.parse_args()
+    device = args.device
     if not device.startswith("cuda") or not torch.cuda.is_available():
         print(f"sync_sites: --device {device}: only a CUDA device waits (no CUDA here)", file=sys.stderr)
         sys.exit(2)
-    emitters, shading = lit_room_emitters(str(Path("/tmp/kadv-sync-sites")))
-    renderer = ExactRenderer(replace(box_room(seed=0), emitters=emitters), shading, False, "warp", device)
-    objective = Objective(load_model("kadv_tiny"), depth_loss("ssim"), renderer, PenaltyConfig(), device=device)
-    view = InitView(
-        "corner", "file", look_at(torch.tensor([1.0, 1.4, 1.0]), torch.tensor([3.0, 1.0, 3.5])).double(), 70.0
-    )
-    start = torch.tensor([[0.0] * 6, [0.05, -0.03, 0.02, -0.2, 0.0, 0.0]], dtype=torch.float64)
+    objective, view, start = corner_attack(device, "/tmp/kadv-sync-sites")
 
     def run(steps: int) -> None:
-        config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=2), budget_evaluations=None)
-        context = SearchContext(
-            objective, DifferentiableRenderer(renderer, DiffRenderConfig(), device), view, H, W, config
-        )
-        with tqdm(disable=True) as bar:
-            gradient_ascent(context, start, steps, 0.02, 0.03, bar)
+        gradient_measures(objective, view, start, steps, (H, W), args.edge_search)
 
     run(1)  # kernels compiled, tables uploaded
     sites: Counter[str] = Counter()
@@ -92,7 +70,10 @@ def main() -> None:
     finally:
         torch.cuda.set_sync_debug_mode("default")
         warnings.showwarning = original
-    print(f"waits per step of a {STEPS}-step gradient run (2 restarts, {H}x{W}), by kadv's line that made them:")
+    print(
+        f"waits per step of a {STEPS}-step gradient run (2 restarts, {H}x{W}, edge_search={args.edge_search}), "
+        "by kadv's line that made them:"
+    )
     for site, count in sites.most_common():
         print(f"  {count / (STEPS + 1):6.1f}  {site}")
     total = sum(sites.values())

@@ -1,15 +1,31 @@
-"""A guard that fails on any host round trip, and a box room lit by every kind of emitter, shared by
-the render's and the attack's round-trip tests."""
+"""A guard that fails on any host round trip, a box room lit by every kind of emitter, and a short
+gradient attack in it: shared by the render's and the attack's round-trip tests and by
+``benchmarks/sync_sites.py``."""
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
+from dataclasses import replace
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
-from kadv.render import BakeConfig, Shading
+from kadv import ExactRenderer, box_room, load_model, look_at
+from kadv.attack import (
+    AttackConfig,
+    GradientSettings,
+    InitView,
+    Measures,
+    Objective,
+    PenaltyConfig,
+    SearchContext,
+    gradient_ascent,
+)
+from kadv.losses import depth_loss
+from kadv.render import BakeConfig, DifferentiableRenderer, DiffRenderConfig, Shading
 from kadv.scenes import Emitters
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
@@ -82,3 +98,36 @@ def lit_room_emitters(cache: str) -> tuple[Emitters, Shading]:
         .sun(np.array([0.3, 1.0, 0.2]), np.full(3, 2.0))
     )
     return emitters, Shading(lighting="baked", bake=BakeConfig(texel=1.0, rays=8, bounces=1, cache=cache))
+
+
+def corner_attack(device: str, cache: str) -> tuple[Objective, InitView, torch.Tensor]:
+    """kadv-tiny + SSIM on the lit box room (Warp's caster on ``device``, its bake cached in
+    ``cache``), an init view in a corner, and two restarts' start parameters (2, 6): the init view,
+    and one turned and moved 20 cm towards the wall x = 0."""
+    emitters, shading = lit_room_emitters(cache)
+    renderer = ExactRenderer(replace(box_room(seed=0), emitters=emitters), shading, False, "warp", device)
+    objective = Objective(load_model("kadv_tiny"), depth_loss("ssim"), renderer, PenaltyConfig(), device=device)
+    pose = look_at(torch.tensor([1.0, 1.4, 1.0]), torch.tensor([3.0, 1.0, 3.5])).double()
+    start = torch.tensor([[0.0] * 6, [0.05, -0.03, 0.02, -0.2, 0.0, 0.0]], dtype=torch.float64)
+    return objective, InitView("corner", "file", pose, 70.0), start
+
+
+def gradient_measures(
+    objective: Objective,
+    view: InitView,
+    start: torch.Tensor,
+    steps: int,
+    size: tuple[int, int],
+    edge_search: str,
+    around: AbstractContextManager | None = None,
+) -> list[Measures]:
+    """The measures of a gradient run of ``steps`` steps from ``start`` (R, 6) at ``size`` (H, W),
+    its steps inside the context ``around`` (None: none)."""
+    config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=len(start)), budget_evaluations=None)
+    render = DiffRenderConfig(edge_search=edge_search)
+    context = SearchContext(
+        objective, DifferentiableRenderer(objective.renderer, render, objective.device), view, *size, config
+    )
+    settings = config.settings
+    with tqdm(disable=True) as bar, around or contextlib.nullcontext():
+        return gradient_ascent(context, start, steps, settings.lr_rotation, settings.lr_translation, bar)

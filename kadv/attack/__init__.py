@@ -35,7 +35,7 @@ from kadv.attack.records import (
 )
 from kadv.attack.registry import METHODS, NoSettings, SearchMethod, get_method, register_method
 from kadv.attack.runner import attack
-from kadv.attack.search import DEFAULT_METHOD, AttackConfig, Clock, SearchContext
+from kadv.attack.search import DEFAULT_METHOD, AttackConfig, Clock, Measures, SearchContext
 from kadv.penalties import PenaltyConfig
 
 __all__ = [
@@ -52,6 +52,7 @@ __all__ = [
     "InitViewConfig",
     "InitViewError",
     "InitViewResult",
+    "Measures",
     "NevergradSettings",
     "NoSettings",
     "Objective",

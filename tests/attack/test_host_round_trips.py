@@ -11,58 +11,22 @@ from dataclasses import replace
 
 import pytest
 import torch
-from tqdm import tqdm
 
-from kadv import ExactRenderer, box_room, load_model, look_at
-from kadv.attack import (
-    AttackConfig,
-    GradientSettings,
-    InitView,
-    Objective,
-    PenaltyConfig,
-    SearchContext,
-    gradient_ascent,
-)
-from kadv.losses import depth_loss
-from kadv.render import DifferentiableRenderer, DiffRenderConfig
-from tests.round_trips import DEVICES, lit_room_emitters, no_host_round_trips
+from tests.round_trips import DEVICES, corner_attack, gradient_measures, no_host_round_trips
 
 H, W = 24, 32
 STEPS = 3
 
 
-def _run(objective: Objective, view: InitView, start: torch.Tensor, guarded: str | None) -> list:
-    """The records of a gradient run of STEPS steps from ``start`` (R, 6), its steps under the guard
-    on device ``guarded`` (None: unguarded); the records are read once the run has ended."""
-    config = AttackConfig("gradient", GradientSettings(steps=STEPS, restarts=len(start)), budget_evaluations=None)
-    # edges found without compacting: a compacted search waits for its counts on a GPU
-    config_render = DiffRenderConfig(edge_search="every_pair")
-    differentiable = DifferentiableRenderer(objective.renderer, config_render, objective.device)
-    context = SearchContext(objective, differentiable, view, H, W, config)
-    settings = config.settings
-    with tqdm(disable=True) as bar:
-        if guarded is None:
-            measures = gradient_ascent(context, start, STEPS, settings.lr_rotation, settings.lr_translation, bar)
-        else:
-            # Adam keeps its step count on the host (torch's design, on every device): it reads no device
-            with no_host_round_trips(guarded, allow=((torch.optim.Adam, "step"),)):
-                measures = gradient_ascent(context, start, STEPS, settings.lr_rotation, settings.lr_translation, bar)
-    # the clock's seconds differ between runs; everything else must not
-    return [replace(record, seconds=0.0) for step in measures for record in step.records()]
-
-
 @pytest.mark.parametrize("device", DEVICES)
 def test_gradient_attack_steps_read_nothing_back_to_the_host(device: str, tmp_path) -> None:
-    emitters, shading = lit_room_emitters(str(tmp_path))
-    scene = replace(box_room(seed=0), emitters=emitters)
-    renderer = ExactRenderer(scene, shading, progress=False, backend="warp", device=device)
-    objective = Objective(load_model("kadv_tiny"), depth_loss("ssim"), renderer, PenaltyConfig(), device=device)
-    pose = look_at(torch.tensor([1.0, 1.4, 1.0]), torch.tensor([3.0, 1.0, 3.5])).double()
-    view = InitView("corner", "file", pose, 70.0)
-    # two restarts: the init view, and one turned and moved 20 cm towards the wall x = 0
-    start = torch.tensor([[0.0] * 6, [0.05, -0.03, 0.02, -0.2, 0.0, 0.0]], dtype=torch.float64)
-    reference = _run(objective, view, start, None)
-    records = _run(objective, view, start, device)
+    objective, view, start = corner_attack(device, str(tmp_path))
+    # edges found without compacting: a compacted search waits for its counts on a GPU. Adam keeps
+    # its step count on the host (torch's design, on every device): its reads wait for no device
+    guard = no_host_round_trips(device, allow=((torch.optim.Adam, "step"),))
+    runs = [gradient_measures(objective, view, start, STEPS, (H, W), "every_pair", around) for around in (None, guard)]
+    # the records are read once the runs have ended; the clock's seconds differ, everything else must not
+    reference, records = ([replace(r, seconds=0.0) for step in run for r in step.records()] for run in runs)
     if device == "cpu":
         assert records == reference  # the guarded steps are the steps, bit for bit
     else:  # CUDA's atomic sums reorder from run to run: the same run, to rounding
