@@ -20,7 +20,7 @@ from kadv.geometry import axis_angle_to_matrix, check_world_T_cam, intrinsics_fr
 from kadv.io import write_json
 from kadv.losses import depth_metrics
 from kadv.models import DepthModel
-from kadv.penalties import PenaltyConfig, distance_to_surface, plane_labels, step_guard, view_validity
+from kadv.penalties import PenaltyConfig, distance_to_surface, plane_counts, step_guard, view_validity
 from kadv.render import ExactRenderer
 
 __all__ = [
@@ -228,8 +228,6 @@ def score_views(
     batch_size: int = 8,
 ) -> ViewScores:
     """Score N views at poses (N, 4, 4) with fields of view (N,) at the given size."""
-    labels = torch.from_numpy(plane_labels(renderer)).to(renderer.device)
-    planes = int(labels.max()) + 1 if len(labels) else 0
     scores: dict[str, list[torch.Tensor]] = {"delta1": [], "surfaces": [], "depth_range": [], "structure": []}
     with torch.no_grad():
         for start in range(0, len(poses), batch_size):
@@ -244,14 +242,9 @@ def score_views(
             far = torch.where(out.mask, depth, torch.zeros_like(depth)).amax(dim=(1, 2, 3))
             near = torch.where(out.mask, depth, torch.full_like(depth, torch.inf)).amin(dim=(1, 2, 3))
             scores["depth_range"].append(torch.log(far.clamp_min(_MIN_DEPTH) / near.clamp_min(_MIN_DEPTH)))
-            # pixels per plane and view (a last column for misses), counted on the render's device
             ids = out.triangle_ids.reshape(len(depth), -1)
-            hit = ids >= 0
-            label = torch.where(hit, labels[ids.clamp_min(0)], planes)
-            counts = torch.zeros(len(ids), planes + 1, dtype=torch.int64, device=ids.device)
-            counts.scatter_add_(1, label, torch.ones_like(label))
-            least = _SURFACE_SHARE * hit.sum(dim=1).clamp_min(1).double()
-            scores["surfaces"].append((counts[:, :planes] >= least[:, None]).sum(dim=1).double())
+            least = _SURFACE_SHARE * (ids >= 0).sum(dim=1).clamp_min(1).double()
+            scores["surfaces"].append((plane_counts(renderer, ids) >= least[:, None]).sum(dim=1).double())
             gradient = kornia.filters.sobel(kornia.color.rgb_to_grayscale(out.rgb.float()))
             scores["structure"].append(gradient.mean(dim=(1, 2, 3)).double())
     return ViewScores(**{key: torch.cat(values).cpu() for key, values in scores.items()})

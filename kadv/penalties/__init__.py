@@ -9,6 +9,7 @@ from kadv.penalties.sampling import random_valid_poses
 from kadv.penalties.validity import (
     ViewValidity,
     fibonacci_sphere,
+    plane_counts,
     plane_labels,
     plane_shares,
     probe_directions_hits,
@@ -21,6 +22,7 @@ __all__ = [
     "ViewValidity",
     "distance_to_surface",
     "fibonacci_sphere",
+    "plane_counts",
     "plane_labels",
     "plane_shares",
     "probe_directions_hits",

@@ -41,6 +41,7 @@ __all__ = [
     "ValidityLimits",
     "ViewValidity",
     "fibonacci_sphere",
+    "plane_counts",
     "plane_labels",
     "plane_shares",
     "probe_directions_hits",
@@ -118,10 +119,7 @@ class ViewValidity:
             self.near_fraction,
             self.plane_share,
         ]
-        # the distance is on the centres' device, the rest on the renderer's: one device, then one copy
-        probe_miss, probe_back, distance, near_fraction, share = torch.stack(
-            [f.detach().to(self.miss_fraction.device, torch.float64, non_blocking=True) for f in figures]
-        ).cpu()
+        probe_miss, probe_back, distance, near_fraction, share = torch.stack(figures).cpu()  # one copy
         limits, verdicts, reasons = self.limits, [], []
         for b in range(len(distance)):
             miss_frac, back_frac = float(probe_miss[b]), float(probe_back[b])
@@ -208,15 +206,21 @@ def plane_shares(renderer: ExactRenderer, triangle_ids: torch.Tensor) -> torch.T
         >>> shares[0].item(), shares[1].item() < 0.9
         (1.0, True)
     """
+    counts = plane_counts(renderer, triangle_ids)
+    hits = (triangle_ids >= 0).sum(dim=1)
+    most = counts.amax(dim=1) if counts.shape[1] else torch.zeros_like(hits)
+    return torch.where(hits > 0, most.double() / hits.clamp_min(1).double(), 0.0)
+
+
+def plane_counts(renderer: ExactRenderer, triangle_ids: torch.Tensor) -> torch.Tensor:
+    """(B, P) int64 pixels of each view on each of the scene's P planes (:func:`plane_labels`), from
+    per-pixel triangle ids (B, N) with -1 for a miss, on their device, without a loop over views."""
     labels, planes = _device_plane_labels(renderer, triangle_ids.device)
     hit = triangle_ids >= 0
-    # per view, pixels per plane (a last column for misses), counted without a loop over views
+    # misses go to a last column, dropped
     label = torch.where(hit, labels[triangle_ids.clamp_min(0)], planes)
     counts = torch.zeros(len(triangle_ids), planes + 1, dtype=torch.int64, device=triangle_ids.device)
-    counts.scatter_add_(1, label, torch.ones_like(label))
-    hits = hit.sum(dim=1)
-    most = counts[:, :planes].amax(dim=1) if planes else torch.zeros_like(hits)
-    return torch.where(hits > 0, most.double() / hits.clamp_min(1).double(), 0.0)
+    return counts.scatter_add_(1, label, torch.ones_like(label))[:, :planes]
 
 
 def _device_plane_labels(renderer: ExactRenderer, device: torch.device) -> tuple[torch.Tensor, int]:
@@ -296,8 +300,8 @@ def view_validity(
         ([True, False], ['valid', 'outside the scene'])
     """
     pose = check_world_T_cam(world_T_cam)
-    centres = pose[:, :3, 3].detach().double()
-    batch, device = len(centres), renderer.device
+    batch, device = len(pose), renderer.device
+    centres = pose[:, :3, 3].detach().double().to(device, non_blocking=True)
     if render is None:
         origins, directions = pixel_rays(pose, K, height, width, device=device)
         hits = renderer.cast(origins, directions)

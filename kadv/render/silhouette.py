@@ -365,7 +365,7 @@ def silhouette_term(
     ya, xa = pairs.a.div(width, rounding_mode="floor"), pairs.a.remainder(width)
     uv_a = torch.stack([xa + 0.5, ya + 0.5], dim=1).double()
     uv_b = uv_a + torch.stack([pairs.horizontal, ~pairs.horizontal], dim=1).double()
-    K_inv = torch.linalg.inv_ex(K[bi])[0]  # inv_ex: no wait to check for singular matrices
+    K_inv = torch.linalg.inv_ex(K)[0][bi]  # per view; inv_ex: no wait to check for singular matrices
     ones = torch.ones(len(bi), 1, dtype=torch.float64, device=pose_device)
     rays_a = (K_inv @ torch.cat([uv_a, ones], 1)[..., None])[..., 0]
     rays_b = (K_inv @ torch.cat([uv_b, ones], 1)[..., None])[..., 0]
