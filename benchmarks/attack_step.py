@@ -284,7 +284,7 @@ def evaluations_per_second(renderer: ExactRenderer, model: DepthModel, view, dev
 
 
 def main() -> None:
-    device, backend = device_and_backend("Time one gradient attack step, part by part.")
+    device, backend, _ = device_and_backend("Time one gradient attack step, part by part.")
     scene = load_bench_scene("grey_white_room")
     renderer = ExactRenderer(scene, backend=backend, device=device)
     penalty = PenaltyConfig()

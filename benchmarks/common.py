@@ -41,10 +41,13 @@ def checked_backend(parser: argparse.ArgumentParser, backend: str, device: str |
         parser.exit(2, f"{parser.prog}: error: {error}\n")  # as the commands answer
 
 
-def device_and_backend(description: str) -> tuple[torch.device, str]:
-    """The ``--device`` (auto, cpu or cuda) and ``--backend`` a benchmark is run with; a bad one
-    ends it in one line with exit status 2, as the commands answer."""
-    parser = argparse.ArgumentParser(description=description)
+def device_and_backend(
+    description: str, parser: argparse.ArgumentParser | None = None
+) -> tuple[torch.device, str, argparse.Namespace]:
+    """The ``--device`` (auto, cpu or cuda) and ``--backend`` a benchmark is run with, and all its
+    parsed options (``parser``: one with the benchmark's own options); a bad device or backend ends it
+    in one line with exit status 2, as the commands answer."""
+    parser = parser or argparse.ArgumentParser(description=description)
     parser.add_argument("--device", default="cpu", help="auto, cpu or cuda")
     add_backend_option(parser)
     args = parser.parse_args()
@@ -52,7 +55,7 @@ def device_and_backend(description: str) -> tuple[torch.device, str]:
         device = resolve_device(args.device)
     except ValueError as error:
         parser.exit(2, f"{parser.prog}: error: {error}\n")
-    return device, checked_backend(parser, args.backend, device)
+    return device, checked_backend(parser, args.backend, device), args
 
 
 def default_lighting() -> str:

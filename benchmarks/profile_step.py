@@ -8,10 +8,12 @@ the records). Then torch's profiler lists the operators that took the most time 
 gradient step (device time on CUDA, CPU time on the CPU).
 
 Run: .venv/bin/python benchmarks/profile_step.py [--device cpu|cuda|auto] [--backend auto|open3d|warp]
+     [--edge-search compact|every_pair]
 """
 
 from __future__ import annotations
 
+import argparse
 import time
 from collections import defaultdict
 from collections.abc import Callable
@@ -90,13 +92,16 @@ def report(evaluation: dict[str, float], seconds: dict[str, float], total: float
 
 
 def main() -> None:
-    device, backend = device_and_backend("Time an attack's phases and list its costliest operators.")
+    description = "Time an attack's phases and list its costliest operators."
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--edge-search", default="compact", choices=("compact", "every_pair"))
+    device, backend, args = device_and_backend(description, parser)
     renderer = ExactRenderer(load_bench_scene("grey_white_room"), backend=backend, device=device)
     penalty = PenaltyConfig()
     view = file_init_views(renderer, penalty.margin)[0]
     model = load_model("kadv_tiny").to(device)
     objective = Objective(model, depth_loss("ssim"), renderer, penalty, device=device)
-    differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(), device)
+    differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(edge_search=args.edge_search), device)
 
     def gradient(steps: int) -> None:
         config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=1), budget_evaluations=None)
@@ -144,7 +149,8 @@ def main() -> None:
     print(
         f"profile_step step_ms={step * 1e3:.0f} eval_render_ms={render * 1e3:.0f} "
         f"anchor_ms={seconds['anchor render'] / (STEPS + 1) * 1e3:.0f} "
-        f"silhouette_ms={seconds['silhouette search'] / (STEPS + 1) * 1e3:.0f} device={device.type} backend={backend}"
+        f"silhouette_ms={seconds['silhouette search'] / (STEPS + 1) * 1e3:.0f} device={device.type} backend={backend} "
+        f"edge_search={args.edge_search}"
     )
 
 

@@ -189,9 +189,10 @@ class Measures:
     Attributes:
         step: the step.
         lanes: each view's lane.
-        table: (B, 19 or 22) float64: params (6), theta (3), centre (3), L_depth, loss, L_dist,
-            objective, delta1, AbsRel, the guard's fraction, and the warp's coverage, rgb and depth
-            errors when the views were rendered through the warp.
+        table: (B, 25 or 28) float64: params (6), the rotation matrix (9, row-major: its rotation
+            vector is computed on the host, where its hundred-odd small operations cost no launches),
+            centre (3), L_depth, loss, L_dist, objective, delta1, AbsRel, the guard's fraction, and
+            the warp's coverage, rgb and depth errors when the views were rendered through the warp.
         validity: the views' validity (its verdicts are made when read).
         refreshed: whether the anchor was rendered again at this step.
         seconds: the search's clock when the step was measured.
@@ -208,7 +209,9 @@ class Measures:
 
     def records(self) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view."""
-        rows = self.table.cpu().tolist()
+        table = self.table.cpu()
+        theta = matrix_to_axis_angle(table[:, 6:15].reshape(-1, 3, 3))
+        rows = torch.cat([table[:, :6], theta, table[:, 15:]], dim=1).tolist()
         verdicts = self.validity.verdicts
         records = []
         for b, (lane, row) in enumerate(zip(self.lanes, rows)):
@@ -318,7 +321,7 @@ class SearchContext:
         validity = view_validity(self.renderer, pose, K, height, width, render=render, **self.validity_options)
         numbers = [
             params.detach(),
-            matrix_to_axis_angle(pose[:, :3, :3]),
+            pose[:, :3, :3].flatten(1),
             pose[:, :3, 3],
             *(value.detach()[:, None] for value in (terms.l_depth, terms.loss, terms.l_dist, terms.objective)),
             terms.delta1[:, None],

@@ -10,12 +10,42 @@ caster's device.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 
 import numpy as np
 import open3d as o3d
 import torch
 
-__all__ = ["Open3DCaster", "RayCaster"]
+__all__ = ["AlphaMasks", "Open3DCaster", "RayCaster"]
+
+
+@dataclass(frozen=True)
+class AlphaMasks:
+    """Alpha-masked materials as a caster's traversal reads them, on its device.
+
+    A hit on triangle f with ``slot[f]`` >= 0 is looked up in that slot's mask at the texture
+    coordinates ``uv_scale[slot]`` x (the corners' ``corner_uvs`` interpolated at the hit), bilinearly
+    with wrap-around, v = 1 the first row (as :class:`~kadv.render.textures.TextureAtlas` samples);
+    a ray passes through where the mask is below ``cutoff``.
+
+    Attributes:
+        slot: (F,) int32 each triangle's mask (its material), -1 for an opaque material.
+        corner_uvs: (F * 3, 2) float64 texture coordinates of the triangles' corners.
+        uv_scale: (M, 2) float64 per mask.
+        texels: (T,) float32 every mask's texels, row-major.
+        offset: (M,) int64 each mask's first texel.
+        height: (M,) int64 and width: (M,) int64 each mask's size.
+        cutoff: opacity below which a texel lets rays through.
+    """
+
+    slot: torch.Tensor
+    corner_uvs: torch.Tensor
+    uv_scale: torch.Tensor
+    texels: torch.Tensor
+    offset: torch.Tensor
+    height: torch.Tensor
+    width: torch.Tensor
+    cutoff: float
 
 
 class RayCaster(ABC):
@@ -35,6 +65,16 @@ class RayCaster(ABC):
         """First hit of each ray: t (N,) float32 (inf on a miss), triangle id (N,) int64 (-1 on a miss)
         and barycentrics (N, 2) float32. ``live`` (N,) bool: the rays to cast; the others come back
         as misses (None: all)."""
+
+    #: whether :meth:`first_opaque_hits` applies alpha masks within the traversal
+    applies_alpha_masks: bool = False
+
+    def first_opaque_hits(
+        self, origins: torch.Tensor, directions: torch.Tensor, live: torch.Tensor | None, masks: AlphaMasks
+    ) -> tuple[torch.Tensor, ...]:
+        """:meth:`first_hits` that passes through transparent texels of ``masks``, for casters whose
+        :attr:`applies_alpha_masks`; the others leave masks to :class:`~kadv.render.surface.Surfaces`."""
+        raise NotImplementedError(f"{type(self).__name__} does not apply alpha masks while it casts")
 
     @abstractmethod
     def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:

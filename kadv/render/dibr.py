@@ -121,10 +121,13 @@ def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: t
     return colour, point, total
 
 
-# hi-res samples whose closed-form taps are computed at once, at most: bands this large spread each
-# of their hundred-odd torch calls' fixed cost (dispatch, waking the threads) over enough samples,
-# and keep the temporaries to a few MB. Bands of 64 rows at 640 samples took half as long again.
+# hi-res samples whose closed-form taps are computed at once, at most. On the CPU, per view: bands
+# this large spread each of their hundred-odd torch calls' fixed cost (dispatch, waking the threads)
+# over enough samples, and keep the temporaries to a few MB (bands of 64 rows at 640 samples took
+# half as long again). On a GPU, whose cost is the launches, the batch's views at once, within a
+# few hundred MB of temporaries.
 _BAND_SAMPLES = 160_000
+_DEVICE_BAND_SAMPLES = 4_000_000
 
 
 def _centred_taps(
@@ -174,6 +177,15 @@ def _centred_taps(
     torch.mul(maps[:, 5:7, 1 : 1 + h, 1 : 1 + w], centre[:, 4:5], out=value[:, 5:7])
 
 
+def _band_rows(batch: int, height: int, width: int, device: torch.device) -> int:
+    """Rows of a (batch, ..., height, width) hi-res image whose taps :func:`_centred_taps` computes
+    at once: bands of equal height, within :data:`_BAND_SAMPLES` samples per view on the CPU and
+    :data:`_DEVICE_BAND_SAMPLES` for the batch elsewhere."""
+    if device.type == "cpu":
+        return math.ceil(height / math.ceil(height * width / _BAND_SAMPLES))
+    return math.ceil(height / math.ceil(batch * height * width / _DEVICE_BAND_SAMPLES))
+
+
 def _anchor_layer_pixels(
     anchor: AnchorLayers,
     layer: int,
@@ -216,7 +228,7 @@ def _anchor_layer_pixels(
         expected_image = expected.reshape(batch, 3, hs, ws)
         value, slope_x, slope_y = (maps.new_empty(batch, channels, hs, ws) for channels in (7, 4, 4))
         # in bands of rows of equal height
-        band = math.ceil(hs / math.ceil(hs * ws / _BAND_SAMPLES))
+        band = _band_rows(batch, hs, ws, maps.device)
         for top in range(0, hs, band):
             bottom = min(top + band, hs)
             rows = slice(top, bottom)

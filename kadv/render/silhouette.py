@@ -29,6 +29,7 @@ from kadv.render.surface import Surfaces
 __all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term"]
 
 _BISECTION_STEPS = 6
+_STEPS_PER_CAST = 3  # bisection steps one cast decides (:func:`_bisect`)
 _MIN_JUMP = 0.005  # relative depth difference below which neighbours are one surface
 _CONTINUITY = 0.01  # relative depth gap at the located crossing that makes it an occlusion
 _FG_SHARE = 0.5  # share of the way from the foreground's plane to the background's still foreground
@@ -220,6 +221,11 @@ def _bisect(
     """Bisect each segment a -> b with real rays for where the foreground ends (uncompacted, only the
     live pairs' rays are cast).
 
+    Each cast decides :data:`_STEPS_PER_CAST` steps: it casts every midpoint those steps could
+    visit (the 2**k - 1 points of the bracket's grid), and the steps then pick theirs. The rays and
+    the result are the one-ray-per-step bisection's, with a third of its casts, each of which (with
+    its alpha-mask tests) is a few hundred operations that a GPU launches one by one.
+
     Returns the occluding triangle (N,), whether the depths on the two sides of the final bracket
     differ enough to be an occlusion (N,), and the crossing t in [0, 1] (N,).
     """
@@ -239,26 +245,46 @@ def _bisect(
     )
     fg_a, fg_step = dot(fg_normal, world_a), dot(fg_normal, world_step)
     bg_a, bg_step = dot(bg_normal, world_a), dot(bg_normal, world_step)
-    for _ in range(_BISECTION_STEPS):
-        mid = 0.5 * (lo + hi)
-        hits = surfaces.cast(pairs.c, world_a + mid[:, None] * world_step, None if compact else pairs.live)
-        z_fg = _plane_z(fg_id, fg_offset, fg_a + mid * fg_step)
-        z_bg = _plane_z(bg_id, bg_offset, bg_a + mid * bg_step)
+    n = len(bi)
+    for first in range(0, _BISECTION_STEPS, _STEPS_PER_CAST):
+        steps = min(_STEPS_PER_CAST, _BISECTION_STEPS - first)
+        points = 2**steps
+        # the bracket's grid: lo + (hi - lo) k / points, k = 1 .. points - 1, exact in float64
+        grid = torch.arange(1, points, dtype=lo.dtype, device=lo.device) / points
+        mids = lo[:, None] + (hi - lo)[:, None] * grid  # (N, points - 1)
+        live = None if compact else pairs.live[:, None].expand(-1, points - 1).reshape(-1)
+        hits = surfaces.cast(
+            pairs.c[:, None].expand(-1, points - 1, -1).reshape(-1, 3),
+            (world_a[:, None] + mids[..., None] * world_step[:, None]).reshape(-1, 3),
+            live,
+        )
+        z_fg = _plane_z(fg_id[:, None], fg_offset[:, None], fg_a[:, None] + mids * fg_step[:, None])
+        z_bg = _plane_z(bg_id[:, None], bg_offset[:, None], bg_a[:, None] + mids * bg_step[:, None])
         # a hit is foreground up to a share of the way to the background's plane, and no further
         # than a bounded ratio beyond the foreground's own plane (a plane the ray misses: inf / inf)
         limit = z_fg * torch.clamp_max(1.0 + _FG_SHARE * (z_bg / z_fg - 1.0), _FG_MAX_RATIO)
-        mid_z = torch.where(hits.hit, hits.t.double(), torch.inf)
-        same_as_a = (hits.hit & (mid_z < limit)) == a_is_fg
-        lo, id_lo, z_lo = (
-            torch.where(same_as_a, mid, lo),
-            torch.where(same_as_a, hits.triangle_ids, id_lo),
-            torch.where(same_as_a, mid_z, z_lo),
-        )
-        hi, id_hi, z_hi = (
-            torch.where(same_as_a, hi, mid),
-            torch.where(same_as_a, id_hi, hits.triangle_ids),
-            torch.where(same_as_a, z_hi, mid_z),
-        )
+        hit, ids = hits.hit.reshape(n, -1), hits.triangle_ids.reshape(n, -1)
+        mid_z = torch.where(hit, hits.t.reshape(n, -1).double(), torch.inf)
+        same_as_a = (hit & (mid_z < limit)) == a_is_fg[:, None]
+        # the steps, on the grid: k_lo and k_hi bracket the crossing, the midpoint is their mean
+        k_lo, k_hi = torch.zeros_like(id_lo), torch.full_like(id_lo, points)
+        for _ in range(steps):
+            k = ((k_lo + k_hi) // 2)[:, None]
+            column = k - 1
+            mid, step_same, step_ids, step_z = (
+                values.gather(1, column)[:, 0] for values in (mids, same_as_a, ids, mid_z)
+            )
+            lo, id_lo, z_lo = (
+                torch.where(step_same, mid, lo),
+                torch.where(step_same, step_ids, id_lo),
+                torch.where(step_same, step_z, z_lo),
+            )
+            hi, id_hi, z_hi = (
+                torch.where(step_same, hi, mid),
+                torch.where(step_same, id_hi, step_ids),
+                torch.where(step_same, z_hi, step_z),
+            )
+            k_lo, k_hi = torch.where(step_same, k[:, 0], k_lo), torch.where(step_same, k_hi, k[:, 0])
     occluder = torch.where(a_is_fg, id_lo, id_hi)
     near_z, far_z = torch.minimum(z_lo, z_hi), torch.maximum(z_lo, z_hi)
     occlusion = (occluder >= 0) & torch.isfinite(near_z) & ((far_z - near_z) > _CONTINUITY * near_z)

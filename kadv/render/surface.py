@@ -15,7 +15,7 @@ import torch
 from kadv.device import free_memory
 from kadv.geometry.vector import dot
 from kadv.render.backends import make_caster
-from kadv.render.casting import RayCaster
+from kadv.render.casting import AlphaMasks, RayCaster
 from kadv.render.colour import coat_table, coated_albedo, srgb_decode
 from kadv.render.textures import MaterialTextures, TextureAtlas
 from kadv.scenes.scene import Scene
@@ -125,6 +125,7 @@ class Surfaces:
             self._alpha = TextureAtlas.build(
                 [None if m.opacity is None else m.opacity[:, :, None] for m in scene.materials], device, mipmap=False
             )
+            self._alpha_masks = self._masks_for_casting(scene, masked) if self.caster.applies_alpha_masks else None
         _check_textures_fit(scene, device)
         self.materials = MaterialTextures(scene, device)
         self.uvs = torch.from_numpy(scene.uvs.astype(np.float64)).to(device)
@@ -133,6 +134,23 @@ class Surfaces:
         self.vertices = torch.from_numpy(scene.vertices.astype(np.float64)).to(device)
         self.faces = torch.from_numpy(scene.faces.astype(np.int64)).to(device)
         self.coats = torch.from_numpy(coat_table(scene)).float()[torch.from_numpy(scene.material_ids)].to(device)
+
+    def _masks_for_casting(self, scene: Scene, masked: np.ndarray) -> AlphaMasks:
+        """The alpha masks as a caster that applies them while it casts reads them (one gather table
+        per quantity, on the device)."""
+        device = self.device
+        slot = np.where(masked, scene.material_ids, -1).astype(np.int32)
+        scale = np.array([m.uv_scale for m in scene.materials], np.float64).reshape(-1, 2)
+        return AlphaMasks(
+            slot=torch.from_numpy(slot).to(device),
+            corner_uvs=torch.from_numpy(scene.uvs.astype(np.float64).reshape(-1, 2)).to(device),
+            uv_scale=torch.from_numpy(scale).to(device),
+            texels=self._alpha.texels[:, 0].contiguous(),
+            offset=self._alpha.offsets[:, 0].contiguous(),
+            height=self._alpha.sizes[:, 0, 0].contiguous(),
+            width=self._alpha.sizes[:, 0, 1].contiguous(),
+            cutoff=_ALPHA_CUTOFF,
+        )
 
     def caster_of(self, vertices: np.ndarray, faces: np.ndarray, device: torch.device | str | None = None) -> RayCaster:
         """A caster of triangles ``faces`` (F, 3) of ``vertices`` (V, 3) on this backend and device."""
@@ -150,6 +168,8 @@ class Surfaces:
         ``live`` (N,) bool on that device: the rays to cast, the others misses (None: all).
         """
         origins, directions = _rays(self.device, origins, directions)
+        if self._masked and self._alpha_masks is not None:  # in the caster's traversal: one launch
+            return RayHits(*self.caster.first_opaque_hits(origins, directions, live, self._alpha_masks))
         hits = first_hits(self.caster, origins, directions, live)
         if not self._masked:
             return hits

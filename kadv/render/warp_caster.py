@@ -9,13 +9,14 @@ imports it only when a Warp caster is built. Kernels compile on first use and ar
 from __future__ import annotations
 
 import contextlib
+from dataclasses import fields
 
 import numpy as np
 import torch
 import warp as wp
 
 from kadv.device import free_memory
-from kadv.render.casting import RayCaster
+from kadv.render.casting import AlphaMasks, RayCaster
 
 __all__ = ["WarpCaster"]
 
@@ -73,6 +74,104 @@ def _walk(
         counts[i] = count
 
 
+@wp.func
+def _lerp(start: wp.float32, end: wp.float32, weight: wp.float32):
+    # torch.lerp's two-sided form, so that a mask reads here as the shading's lookups read it
+    if weight < wp.float32(0.5):
+        return start + weight * (end - start)
+    return end - (end - start) * (wp.float32(1.0) - weight)
+
+
+@wp.struct
+class _Masks:
+    """:class:`~kadv.render.casting.AlphaMasks` as kernels read them (shared with its tensors)."""
+
+    slot: wp.array(dtype=wp.int32)
+    corner_uvs: wp.array(dtype=wp.vec2d)
+    uv_scale: wp.array(dtype=wp.vec2d)
+    texels: wp.array(dtype=wp.float32)
+    offset: wp.array(dtype=wp.int64)
+    height: wp.array(dtype=wp.int64)
+    width: wp.array(dtype=wp.int64)
+    cutoff: wp.float32
+
+
+@wp.func
+def _opacity(face: wp.int32, u: wp.float32, v: wp.float32, slot: wp.int32, masks: _Masks):
+    """Bilinear opacity with wrap-around of mask ``slot`` at Open3D barycentrics (u, v) of ``face``:
+    the arithmetic of Surfaces.see_through and TextureAtlas._bilinear, in their precisions."""
+    bu = wp.float64(u)
+    bv = wp.float64(v)
+    uv = masks.corner_uvs[3 * face] * (wp.float64(1.0) - bu - bv) + masks.corner_uvs[3 * face + 1] * bu
+    uv = uv + masks.corner_uvs[3 * face + 2] * bv
+    scale = masks.uv_scale[slot]
+    x_uv = uv[0] * scale[0]
+    y_uv = wp.float64(1.0) - uv[1] * scale[1]
+    x_uv = x_uv - wp.floor(x_uv)
+    y_uv = y_uv - wp.floor(y_uv)
+    h = wp.float64(masks.height[slot])
+    w = wp.float64(masks.width[slot])
+    x = x_uv * w - wp.float64(0.5)
+    y = y_uv * h - wp.float64(0.5)
+    x0 = wp.floor(x)
+    y0 = wp.floor(y)
+    fx = wp.float32(x - x0)
+    fy = wp.float32(y - y0)
+    x1 = x0 + wp.float64(1.0)
+    y1 = y0 + wp.float64(1.0)
+    if x0 < wp.float64(0.0):
+        x0 = x0 + w
+    if y0 < wp.float64(0.0):
+        y0 = y0 + h
+    if x1 >= w:
+        x1 = x1 - w
+    if y1 >= h:
+        y1 = y1 - h
+    first = masks.offset[slot]
+    top = y0 * w
+    bottom = y1 * w
+    upper = _lerp(masks.texels[first + wp.int64(top + x0)], masks.texels[first + wp.int64(top + x1)], fx)
+    lower = _lerp(masks.texels[first + wp.int64(bottom + x0)], masks.texels[first + wp.int64(bottom + x1)], fx)
+    return _lerp(upper, lower, fy)
+
+
+@wp.kernel
+def _walk_opaque(
+    mesh: wp.uint64,
+    origins: wp.array(dtype=wp.vec3),
+    directions: wp.array(dtype=wp.vec3),
+    live: wp.array(dtype=wp.int32),
+    masks: _Masks,
+    t: wp.array(dtype=wp.float32),
+    ids: wp.array(dtype=wp.int64),
+    bary: wp.array(dtype=wp.vec2),
+):
+    """Walk each live ray from hit to hit (as _walk lists them) to its first hit on an opaque
+    material or an opaque texel of an alpha mask; misses are left as they are."""
+    i = wp.tid()
+    if live[i] == 0:
+        return
+    start = wp.float32(0.0)
+    count = wp.int32(0)
+    while count < _MAX_HITS:
+        query = wp.mesh_query_ray(mesh, origins[i] + directions[i] * start, directions[i], 1.0e30)
+        if not query.result:
+            return
+        u = query.v
+        v = wp.float32(1.0) - query.u - query.v
+        slot = masks.slot[query.face]
+        opaque = True
+        if slot >= 0:
+            opaque = _opacity(query.face, u, v, slot, masks) >= masks.cutoff
+        if opaque:
+            t[i] = start + query.t
+            ids[i] = wp.int64(query.face)
+            bary[i] = wp.vec2(u, v)
+            return
+        count += 1
+        start = _next_start(start + query.t)
+
+
 @wp.kernel
 def _closest_points(
     mesh: wp.uint64,
@@ -93,6 +192,7 @@ class WarpCaster(RayCaster):
         self.device = device
         self._wp_device = wp.device_from_torch(device)
         self._empty = len(faces) == 0
+        self._masks_of: AlphaMasks | None = None
         if self._empty:
             return
         _check_fits(len(vertices), len(faces), device)
@@ -128,6 +228,30 @@ class WarpCaster(RayCaster):
         slots = torch.arange(n, device=self.device)
         self._launch(_walk, n, [*self._rays(origins, directions), 1, limits, slots, slots.clone(), t, ids, bary])
         return t, ids, bary
+
+    applies_alpha_masks = True
+
+    def first_opaque_hits(
+        self, origins: torch.Tensor, directions: torch.Tensor, live: torch.Tensor | None, masks: AlphaMasks
+    ) -> tuple[torch.Tensor, ...]:
+        """In one kernel: each ray walks past the transparent texels it meets to its first opaque hit."""
+        n = len(origins)
+        t = torch.full((n,), torch.inf, device=self.device)
+        ids = torch.full((n,), -1, dtype=torch.int64, device=self.device)
+        bary = torch.zeros(n, 2, device=self.device)
+        live = torch.ones(n, dtype=torch.int32, device=self.device) if live is None else live.to(torch.int32)
+        self._launch(_walk_opaque, n, [*self._rays(origins, directions), live, self._masks(masks), t, ids, bary])
+        return t, ids, bary
+
+    def _masks(self, masks: AlphaMasks) -> _Masks:
+        """The kernels' view of ``masks``, made on first use (its arrays share the tensors)."""
+        if self._masks_of is not masks:
+            tables = _Masks()
+            for field in fields(AlphaMasks):
+                value = getattr(masks, field.name)
+                setattr(tables, field.name, _array(value) if isinstance(value, torch.Tensor) else value)
+            self._masks_of, self._mask_tables = masks, tables
+        return self._mask_tables
 
     def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         n = len(origins)
@@ -168,8 +292,10 @@ def _check_fits(vertices: int, faces: int, device: torch.device) -> None:
 
 
 def _array(x: torch.Tensor) -> wp.array:
-    """``x`` as a Warp array without a copy: (N, 3) as vec3, (N, 2) as vec2, (N,) as scalars."""
+    """``x`` as a Warp array without a copy: (N, 3) as vec3 (float64: vec3d), (N, 2) as vec2 (vec2d),
+    (N,) as scalars."""
     x = x.contiguous()
     if x.ndim == 2:
-        return wp.from_torch(x, dtype={3: wp.vec3, 2: wp.vec2}[x.shape[1]])
+        vectors = {torch.float32: {3: wp.vec3, 2: wp.vec2}, torch.float64: {3: wp.vec3d, 2: wp.vec2d}}
+        return wp.from_torch(x, dtype=vectors[x.dtype][x.shape[1]])
     return wp.from_torch(x)

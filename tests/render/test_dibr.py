@@ -104,3 +104,23 @@ def test_at_the_anchor_pose_the_closed_form_taps_match_the_gathered_ones(monkeyp
     torch.testing.assert_close(fast.depth, general.depth, rtol=1e-9, atol=0)
     assert float(general_grad.abs().min()) > 0
     torch.testing.assert_close(fast_grad, general_grad, rtol=1.0 / float(K[0, 0]), atol=0)  # 0.02 measured
+
+
+def test_the_closed_form_taps_are_the_same_in_bands_as_at_once(monkeypatch) -> None:
+    """The CPU computes the taps in bands of rows, a GPU the batch at once: the rows' arithmetic is
+    the same either way, so values and gradients are equal bit for bit."""
+    renderer = ExactRenderer(box_room(seed=0))
+    pose, K = renderer.scene.cameras[0].world_T_cam.double()[None], intrinsics_from_fov(60.0, H, W)
+    anchor = render_anchor(renderer, pose, K, H, W, guard_band=1, supersample=2)
+    exact = renderer.render(pose, K, H, W)
+    normals = camera_face_normals(renderer.surfaces, exact.triangle_ids[:, 0], pose).permute(0, 3, 1, 2)
+    results = []
+    for samples in (10**9, 5 * 2 * W):  # one band; bands of 5 hi-res rows (the last one shorter)
+        monkeypatch.setattr(dibr, "_BAND_SAMPLES", samples)
+        params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
+        current = perturb_world_T_cam(pose, params[:, :3], params[:, 3:])
+        warp = reproject(anchor, exact.depth, normals, torch.linalg.inv(anchor.world_T_cam) @ current, K)
+        (torch.cat([warp.rgb, warp.depth], 1).double().sum()).backward()
+        results.append((warp.rgb, warp.depth, warp.valid, params.grad))
+    for whole, banded in zip(*results):
+        assert torch.equal(whole, banded)

@@ -1,0 +1,122 @@
+"""How many tensor operations a gradient attack step dispatches, phase by phase: kadv-tiny + SSIM,
+one restart, on grey_white_room at 240x320.
+
+On a GPU most operations are kernel launches (views are not) that the host dispatches one after
+another; at a few microseconds each, their number sets a floor under a step that the device's
+speed cannot lower (an H100 ran the step's kernels in a quarter of its time, 2026-11-26). The
+count is the same on every device but for a few choices made per device, so this CPU measures
+what a GPU's host would dispatch: run it with ``--backend warp``, the caster CUDA gets.
+
+Operations are counted as torch dispatches them (``TorchDispatchMode``), the backward pass's
+included, between two consecutive optimiser updates (the steps after the first, whose count
+includes the start's), and put to the phase of profile_step.py's whose function called them
+("rest": the step's own, the objective's pose algebra, the backward pass, the optimiser).
+
+Run: .venv/bin/python benchmarks/step_ops.py [--backend auto|open3d|warp] [--edge-search compact|every_pair]
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections import Counter
+
+from common import device_and_backend, load_bench_scene
+from profile_step import HEIGHT, PHASES, WIDTH
+from torch.optim.optimizer import register_optimizer_step_post_hook
+from torch.utils._python_dispatch import TorchDispatchMode
+
+from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
+from kadv.losses import depth_loss
+from kadv.models import load_model
+from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
+
+STEPS = 4
+
+
+class _Counter(TorchDispatchMode):
+    """Counts each operation (and, apart, the views among them) under the innermost phase running."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.phases = ["rest"]
+        self.operations: Counter[str] = Counter()
+        self.views: Counter[str] = Counter()
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        self.operations[self.phases[-1]] += 1
+        self.views[self.phases[-1]] += func.is_view
+        return func(*args, **(kwargs or {}))
+
+
+def _attributed(counter: _Counter) -> list:
+    """Wrap the PHASES' functions (and the exact render's and the objective's) so that the
+    operations they dispatch count under their phase; returns what puts them back."""
+    targets = [*PHASES, (ExactRenderer, "render", "exact render"), (Objective, "forward", "model, loss, metrics")]
+    restore = []
+    for owner, name, phase in targets:
+        original = getattr(owner, name)
+
+        def run(*args, _original=original, _phase=phase, **kwargs):
+            counter.phases.append(_phase)
+            try:
+                return _original(*args, **kwargs)
+            finally:
+                counter.phases.pop()
+
+        setattr(owner, name, run)
+        restore.append((owner, name, original))
+    return restore
+
+
+def main() -> None:
+    description = "Count the tensor operations of a gradient attack step, phase by phase."
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--edge-search", default="compact", choices=("compact", "every_pair"))
+    device, backend, args = device_and_backend(description, parser)
+    renderer = ExactRenderer(load_bench_scene("grey_white_room"), backend=backend, device=device)
+    penalty = PenaltyConfig()
+    view = file_init_views(renderer, penalty.margin)[0]
+    objective = Objective(load_model("kadv_tiny").to(device), depth_loss("ssim"), renderer, penalty, device=device)
+    differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(edge_search=args.edge_search), device)
+    config = AttackConfig("gradient", GradientSettings(steps=STEPS, restarts=1), budget_evaluations=None)
+
+    def run() -> None:
+        attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
+
+    run()  # warm-up: kernels compiled, tables uploaded
+    counter = _Counter()
+    steps: list[tuple[Counter, Counter]] = []
+
+    def hook(*_) -> None:  # an update ends a step: its counts are put aside, the next one's start
+        steps.append((counter.operations.copy(), counter.views.copy()))
+        counter.operations.clear()
+        counter.views.clear()
+
+    restore = _attributed(counter)
+    handle = register_optimizer_step_post_hook(hook)
+    try:
+        with counter:
+            run()
+    finally:
+        handle.remove()
+        for owner, name, original in restore:
+            setattr(owner, name, original)
+    counted = steps[1:]  # the first update closes the run's start as well as its first step
+    operations = sum((ops for ops, _ in counted), Counter())
+    views = sum((v for _, v in counted), Counter())
+    per_step = {phase: operations[phase] / len(counted) for phase in operations}
+    print(f"\ntensor operations per gradient step (mean of {len(counted)}), kadv-tiny + SSIM, {HEIGHT}x{WIDTH},")
+    print(f"backend {backend}, edge_search={args.edge_search}: all of them, and the views among them")
+    for phase, count in sorted(per_step.items(), key=lambda item: -item[1]):
+        print(f"  {phase:<28} {count:>7.0f} {views[phase] / len(counted):>7.0f}")
+    total = sum(per_step.values())
+    print(f"  {'whole step':<28} {total:>7.0f} {sum(views.values()) / len(counted):>7.0f}")
+    print(
+        f"step_ops total={total:.0f} non_view={total - sum(views.values()) / len(counted):.0f} "
+        f"silhouette_search={per_step.get('silhouette search', 0.0):.0f} "
+        f"device={device.type} backend={backend} edge_search={args.edge_search}"
+    )
+
+
+if __name__ == "__main__":
+    main()
