@@ -36,7 +36,7 @@ from torch.optim.optimizer import register_optimizer_step_post_hook
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
 from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
-from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam
+from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam, pixel_rays
 from kadv.losses import VGG16_TAPS, PerceptualLoss, depth_loss, vgg16_features
 from kadv.models import DepthModel, load_model
 from kadv.penalties import distance_to_surface, shortcut_penalty, step_guard, view_validity
@@ -267,9 +267,13 @@ def measure(
     return parts, overhead
 
 
-def evaluations_per_second(renderer: ExactRenderer, model: DepthModel, view, device: torch.device) -> float:
+def evaluations_per_second(
+    renderer: ExactRenderer, model: DepthModel, view, device: torch.device
+) -> tuple[float, float]:
     """Black-box evaluations per second: exact renders of EVAL_BATCH views near ``view`` and one
-    forward pass of ``model`` on them, the fastest of three batches."""
+    forward pass of ``model`` on them, the fastest of three batches; and the seconds of the batch's
+    ray casts alone (pixel centres and sub-pixel rays, without shading), the fastest of three: the
+    floor under a batch that keeps its exact depth and colour."""
     generator = torch.Generator().manual_seed(0)
     offsets = 0.05 * (2 * torch.rand(EVAL_BATCH, 6, generator=generator, dtype=torch.float64) - 1)
     poses = perturb_world_T_cam(view.world_T_cam.expand(EVAL_BATCH, 4, 4), offsets[:, :3], offsets[:, 3:])
@@ -280,7 +284,15 @@ def evaluations_per_second(renderer: ExactRenderer, model: DepthModel, view, dev
         with torch.no_grad():
             model(rgb)
 
-    return EVAL_BATCH / fastest_seconds(synchronised(evaluate, device), 3)
+    rays = [pixel_rays(poses, K, HEIGHT, WIDTH, s, device=renderer.device) for s in (1, 2)]
+
+    def cast() -> None:
+        for origins, directions in rays:
+            renderer.cast(origins.reshape(-1, 3), directions.reshape(-1, 3))
+
+    return EVAL_BATCH / fastest_seconds(synchronised(evaluate, device), 3), fastest_seconds(
+        synchronised(cast, renderer.device), 3
+    )
 
 
 def main() -> None:
@@ -305,10 +317,13 @@ def main() -> None:
             )
     (parts, overhead), (_, overhead_tiny) = results.values()
     render, networks = parts["render fwd+bwd"], parts["networks"]
-    evals_per_s = evaluations_per_second(renderer, load_model("kadv_tiny").to(device), view, device)
+    evals_per_s, cast = evaluations_per_second(renderer, load_model("kadv_tiny").to(device), view, device)
+    batch_ms = EVAL_BATCH / evals_per_s * 1e3
+    print(f"\nblack-box batch of {EVAL_BATCH} views, s=2: {batch_ms:.0f} ms, its casts alone {cast * 1e3:.0f} ms")
     print(
         f"\nattack_step overhead={overhead:.2f} render_ms={render * 1e3:.0f} networks_ms={networks * 1e3:.0f} "
-        f"overhead_tiny={overhead_tiny:.2f} evals_per_s={evals_per_s:.1f} device={device.type} backend={backend}"
+        f"overhead_tiny={overhead_tiny:.2f} evals_per_s={evals_per_s:.1f} eval_cast_ms={cast * 1e3:.0f} "
+        f"device={device.type} backend={backend}"
     )
 
 

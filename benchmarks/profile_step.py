@@ -91,16 +91,25 @@ def report(evaluation: dict[str, float], seconds: dict[str, float], total: float
     print(f"  {'whole step':<28} {total / (STEPS + 1) * 1e3:>8.1f}")
 
 
-def main() -> None:
-    description = "Time an attack's phases and list its costliest operators."
+def tiny_attack(description: str) -> tuple[torch.device, str, argparse.Namespace, ExactRenderer, object, Objective]:
+    """The options (``--device --backend --edge-search``) and what a kadv-tiny + SSIM attack on
+    grey_white_room's file view needs: the device, the backend, the options, the renderer, the
+    view, the objective; a bad option ends the script in one line with exit status 2."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--edge-search", default="compact", choices=("compact", "every_pair"))
     device, backend, args = device_and_backend(description, parser)
     renderer = ExactRenderer(load_bench_scene("grey_white_room"), backend=backend, device=device)
     penalty = PenaltyConfig()
     view = file_init_views(renderer, penalty.margin)[0]
-    model = load_model("kadv_tiny").to(device)
-    objective = Objective(model, depth_loss("ssim"), renderer, penalty, device=device)
+    objective = Objective(load_model("kadv_tiny").to(device), depth_loss("ssim"), renderer, penalty, device=device)
+    return device, backend, args, renderer, view, objective
+
+
+def main() -> None:
+    device, backend, args, renderer, view, objective = tiny_attack(
+        "Time an attack's phases and list its costliest operators."
+    )
+    model = objective.model
     differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(edge_search=args.edge_search), device)
 
     def gradient(steps: int) -> None:

@@ -5,7 +5,9 @@ On a GPU most operations are kernel launches (views are not) that the host dispa
 another; at a few microseconds each, their number sets a floor under a step that the device's
 speed cannot lower (an H100 ran the step's kernels in a quarter of its time, 2026-11-26). The
 count is the same on every device but for a few choices made per device, so this CPU measures
-what a GPU's host would dispatch: run it with ``--backend warp``, the caster CUDA gets.
+nearly what a GPU's host would dispatch: run it with ``--backend warp``, the caster CUDA gets. The
+CPU's own choices, where it pays per element rather than per operation: the warp's taps in bands,
+the silhouette bisection's one step a cast, textures sampled on the textured hits only.
 
 Operations are counted as torch dispatches them (``TorchDispatchMode``), the backward pass's
 included, between two consecutive optimiser updates (the steps after the first, whose count
@@ -17,17 +19,13 @@ Run: .venv/bin/python benchmarks/step_ops.py [--backend auto|open3d|warp] [--edg
 
 from __future__ import annotations
 
-import argparse
 from collections import Counter
 
-from common import device_and_backend, load_bench_scene
-from profile_step import HEIGHT, PHASES, WIDTH
+from profile_step import HEIGHT, PHASES, WIDTH, tiny_attack
 from torch.optim.optimizer import register_optimizer_step_post_hook
 from torch.utils._python_dispatch import TorchDispatchMode
 
-from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
-from kadv.losses import depth_loss
-from kadv.models import load_model
+from kadv.attack import AttackConfig, GradientSettings, Objective, attack
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
 
 STEPS = 4
@@ -69,14 +67,9 @@ def _attributed(counter: _Counter) -> list:
 
 
 def main() -> None:
-    description = "Count the tensor operations of a gradient attack step, phase by phase."
-    parser = argparse.ArgumentParser(description=description)
-    parser.add_argument("--edge-search", default="compact", choices=("compact", "every_pair"))
-    device, backend, args = device_and_backend(description, parser)
-    renderer = ExactRenderer(load_bench_scene("grey_white_room"), backend=backend, device=device)
-    penalty = PenaltyConfig()
-    view = file_init_views(renderer, penalty.margin)[0]
-    objective = Objective(load_model("kadv_tiny").to(device), depth_loss("ssim"), renderer, penalty, device=device)
+    device, backend, args, renderer, view, objective = tiny_attack(
+        "Count the tensor operations of a gradient attack step, phase by phase."
+    )
     differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(edge_search=args.edge_search), device)
     config = AttackConfig("gradient", GradientSettings(steps=STEPS, restarts=1), budget_evaluations=None)
 

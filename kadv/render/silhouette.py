@@ -29,7 +29,9 @@ from kadv.render.surface import Surfaces
 __all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term"]
 
 _BISECTION_STEPS = 6
-_STEPS_PER_CAST = 3  # bisection steps one cast decides (:func:`_bisect`)
+# bisection steps one cast decides (:func:`_bisect`): on a GPU a cast's cost is its launches (three
+# steps a cast: a third of them), on the CPU its rays (one step a cast: the fewest)
+_STEPS_PER_CAST = {"cpu": 1, "device": 3}
 _MIN_JUMP = 0.005  # relative depth difference below which neighbours are one surface
 _CONTINUITY = 0.01  # relative depth gap at the located crossing that makes it an occlusion
 _FG_SHARE = 0.5  # share of the way from the foreground's plane to the background's still foreground
@@ -221,10 +223,10 @@ def _bisect(
     """Bisect each segment a -> b with real rays for where the foreground ends (uncompacted, only the
     live pairs' rays are cast).
 
-    Each cast decides :data:`_STEPS_PER_CAST` steps: it casts every midpoint those steps could
-    visit (the 2**k - 1 points of the bracket's grid), and the steps then pick theirs. The rays and
-    the result are the one-ray-per-step bisection's, with a third of its casts, each of which (with
-    its alpha-mask tests) is a few hundred operations that a GPU launches one by one.
+    Each cast decides k steps (:data:`_STEPS_PER_CAST`): it casts every midpoint they could visit
+    (the 2**k - 1 points of the bracket's grid), and the steps then pick theirs. The rays and the
+    result are the same for every k; on a GPU, k = 3 takes a third of the casts, each tens of
+    operations that its host launches one by one, for 7/3 as many rays.
 
     Returns the occluding triangle (N,), whether the depths on the two sides of the final bracket
     differ enough to be an occlusion (N,), and the crossing t in [0, 1] (N,).
@@ -246,8 +248,9 @@ def _bisect(
     fg_a, fg_step = dot(fg_normal, world_a), dot(fg_normal, world_step)
     bg_a, bg_step = dot(bg_normal, world_a), dot(bg_normal, world_step)
     n = len(bi)
-    for first in range(0, _BISECTION_STEPS, _STEPS_PER_CAST):
-        steps = min(_STEPS_PER_CAST, _BISECTION_STEPS - first)
+    per_cast = _STEPS_PER_CAST["cpu" if surfaces.device.type == "cpu" else "device"]
+    for first in range(0, _BISECTION_STEPS, per_cast):
+        steps = min(per_cast, _BISECTION_STEPS - first)
         points = 2**steps
         # the bracket's grid: lo + (hi - lo) k / points, k = 1 .. points - 1, exact in float64
         grid = torch.arange(1, points, dtype=lo.dtype, device=lo.device) / points

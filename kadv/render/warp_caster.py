@@ -220,14 +220,25 @@ class WarpCaster(RayCaster):
         self, origins: torch.Tensor, directions: torch.Tensor, live: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, ...]:
         n = len(origins)
-        t = torch.full((n,), torch.inf, device=self.device)
-        ids = torch.full((n,), -1, dtype=torch.int64, device=self.device)
-        bary = torch.zeros(n, 2, device=self.device)
-        # hits wanted per ray: one, or none for a dead ray, whose thread then returns at once
-        limits = torch.ones(n, dtype=torch.int32, device=self.device) if live is None else live.to(torch.int32)
+        t, ids, bary = self._misses(n)
         slots = torch.arange(n, device=self.device)
+        # hits wanted per ray: one, or none for a dead ray
+        limits = self._live(n, live)
         self._launch(_walk, n, [*self._rays(origins, directions), 1, limits, slots, slots.clone(), t, ids, bary])
         return t, ids, bary
+
+    def _misses(self, n: int) -> tuple[torch.Tensor, ...]:
+        """t (inf), triangle ids (-1) and barycentrics (0) of ``n`` rays that hit nothing, for a
+        kernel to overwrite where they hit."""
+        return (
+            torch.full((n,), torch.inf, device=self.device),
+            torch.full((n,), -1, dtype=torch.int64, device=self.device),
+            torch.zeros(n, 2, device=self.device),
+        )
+
+    def _live(self, n: int, live: torch.Tensor | None) -> torch.Tensor:
+        """(n,) int32: 1 for a ray to cast, 0 for a dead one, whose thread returns at once."""
+        return torch.ones(n, dtype=torch.int32, device=self.device) if live is None else live.to(torch.int32)
 
     applies_alpha_masks = True
 
@@ -236,10 +247,8 @@ class WarpCaster(RayCaster):
     ) -> tuple[torch.Tensor, ...]:
         """In one kernel: each ray walks past the transparent texels it meets to its first opaque hit."""
         n = len(origins)
-        t = torch.full((n,), torch.inf, device=self.device)
-        ids = torch.full((n,), -1, dtype=torch.int64, device=self.device)
-        bary = torch.zeros(n, 2, device=self.device)
-        live = torch.ones(n, dtype=torch.int32, device=self.device) if live is None else live.to(torch.int32)
+        t, ids, bary = self._misses(n)
+        live = self._live(n, live)
         self._launch(_walk_opaque, n, [*self._rays(origins, directions), live, self._masks(masks), t, ids, bary])
         return t, ids, bary
 

@@ -1,11 +1,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from kadv import box_room
 from kadv.geometry import intrinsics_from_fov, look_at
-from kadv.render import ExactRenderer, find_edge_pairs, render_anchor, silhouette_term
+from kadv.render import ExactRenderer, find_edge_pairs, render_anchor, silhouette, silhouette_term
 from kadv.render.layers import guard_band_intrinsics
 from kadv.render.silhouette import edge_crossings
 from kadv.scenes import Material, assemble_scene
@@ -89,6 +90,25 @@ def test_the_uncompacted_search_keeps_the_compacted_pairs_and_gives_the_same_gra
         (silhouette_term(renderer, pairs, pose, K, values) * weights).sum().backward()
         gradients.append(pose.grad)
     assert gradients[0].abs().sum() > 0 and torch.equal(gradients[0], gradients[1])
+
+
+@pytest.mark.parametrize("compact", [True, False])
+def test_the_bisection_finds_the_same_edges_however_many_steps_a_cast_decides(monkeypatch, compact: bool) -> None:
+    # a GPU casts every midpoint of three steps at once, the CPU one midpoint a step: the same rays
+    renderer = ExactRenderer(box_room(seed=0))
+    eyes = torch.tensor([[0.8, 1.6, 0.8], [3.2, 1.2, 0.9]])
+    poses = look_at(eyes, torch.tensor([[3.0, 0.4, 3.5], [1.0, 0.3, 3.0]])).double()
+    K = intrinsics_from_fov(70.0, 24, 32)
+    exact = renderer.render(poses, K, 24, 32)
+    found = []
+    for steps in (1, 2, 3, 4, 6):  # 4: a round of four steps, then one of two
+        monkeypatch.setitem(silhouette._STEPS_PER_CAST, "cpu", steps)
+        found.append(find_edge_pairs(renderer, exact, poses, K, compact))
+    assert len(found[0].a) > 10
+    for pairs in found[1:]:
+        for name in ("batch", "a", "b", "horizontal", "edge", "t", "keep"):
+            first, other = getattr(found[0], name), getattr(pairs, name)
+            assert (first is None and other is None) or torch.equal(first, other), name
 
 
 def test_crossing_of_a_known_edge() -> None:
