@@ -111,21 +111,21 @@ class Surfaces:
         self.backend = backend
         self.caster = self.caster_of(scene.vertices, scene.faces, device)
         self.device = device = self.caster.device
-        # A ray that met a transparent texel continues in two smaller scenes: the first hit among the
-        # opaque materials' triangles, and every hit on the alpha-masked ones (a few, where listing
-        # them in the whole scene would list every wall behind).
         masked = np.array([m.opacity is not None for m in scene.materials], bool)[scene.material_ids]
         self._masked = masked.any()
         if self._masked:
             self._masked_face = torch.from_numpy(masked).to(device)
+            self._alpha = TextureAtlas.build(
+                [None if m.opacity is None else m.opacity[:, :, None] for m in scene.materials], device, mipmap=False
+            )
+        if self._masked and not self.caster.applies_alpha_masks:
+            # A ray that met a transparent texel continues in two smaller scenes: the first hit among the
+            # opaque materials' triangles, and every hit on the alpha-masked ones (a few, where listing
+            # them in the whole scene would list every wall behind).
             self._opaque_faces = torch.from_numpy(np.flatnonzero(~masked)).to(device)
             self._masked_faces = torch.from_numpy(np.flatnonzero(masked)).to(device)
             self._opaque_caster = self.caster_of(scene.vertices, scene.faces[~masked], device)
             self._masked_caster = self.caster_of(scene.vertices, scene.faces[masked], device)
-            self._alpha = TextureAtlas.build(
-                [None if m.opacity is None else m.opacity[:, :, None] for m in scene.materials], device, mipmap=False
-            )
-            self._alpha_masks = self._masks_for_casting(scene, masked) if self.caster.applies_alpha_masks else None
         _check_textures_fit(scene, device)
         self.materials = MaterialTextures(scene, device)
         self.uvs = torch.from_numpy(scene.uvs.astype(np.float64)).to(device)
@@ -134,17 +134,16 @@ class Surfaces:
         self.vertices = torch.from_numpy(scene.vertices.astype(np.float64)).to(device)
         self.faces = torch.from_numpy(scene.faces.astype(np.int64)).to(device)
         self.coats = torch.from_numpy(coat_table(scene)).float()[torch.from_numpy(scene.material_ids)].to(device)
+        # a caster that applies the masks while it casts reads the tables see_through reads
+        self._alpha_masks = self._masks_for_casting() if self._masked and self.caster.applies_alpha_masks else None
 
-    def _masks_for_casting(self, scene: Scene, masked: np.ndarray) -> AlphaMasks:
-        """The alpha masks as a caster that applies them while it casts reads them (one gather table
-        per quantity, on the device)."""
-        device = self.device
-        slot = np.where(masked, scene.material_ids, -1).astype(np.int32)
-        scale = np.array([m.uv_scale for m in scene.materials], np.float64).reshape(-1, 2)
+    def _masks_for_casting(self) -> AlphaMasks:
+        """The alpha masks as a caster reads them while it casts: the tables :meth:`see_through`
+        reads (texture coordinates, scales, the alpha atlas's full-size level), shared, not copied."""
         return AlphaMasks(
-            slot=torch.from_numpy(slot).to(device),
-            corner_uvs=torch.from_numpy(scene.uvs.astype(np.float64).reshape(-1, 2)).to(device),
-            uv_scale=torch.from_numpy(scale).to(device),
+            slot=torch.where(self._masked_face, self.materials.material_ids, -1).to(torch.int32),
+            corner_uvs=self.uvs.reshape(-1, 2),
+            uv_scale=self.materials.uv_scale,
             texels=self._alpha.texels[:, 0].contiguous(),
             offset=self._alpha.offsets[:, 0].contiguous(),
             height=self._alpha.sizes[:, 0, 0].contiguous(),
@@ -168,7 +167,7 @@ class Surfaces:
         ``live`` (N,) bool on that device: the rays to cast, the others misses (None: all).
         """
         origins, directions = _rays(self.device, origins, directions)
-        if self._masked and self._alpha_masks is not None:  # in the caster's traversal: one launch
+        if self._alpha_masks is not None:  # in the caster's traversal: one launch
             return RayHits(*self.caster.first_opaque_hits(origins, directions, live, self._alpha_masks))
         hits = first_hits(self.caster, origins, directions, live)
         if not self._masked:
