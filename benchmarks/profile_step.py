@@ -46,9 +46,26 @@ PHASES = [
 ]
 
 
-def wrap_phases(device: torch.device, seconds: dict[str, float]) -> Callable[[], None]:
-    """Time the PHASES' functions into ``seconds``, and the exact render and the objective's model
-    and loss; returns the function that puts them back."""
+def wrap_phases(around: Callable[[Callable, str], Callable]) -> Callable[[], None]:
+    """Replace the PHASES' functions, and the exact render and the objective's model and loss, by
+    ``around(function, phase)``; returns the function that puts them back."""
+    targets = [*PHASES, (ExactRenderer, "render", "exact render"), (Objective, "forward", "model, loss, metrics")]
+    restore = []
+    for owner, name, phase in targets:
+        original = getattr(owner, name)
+        setattr(owner, name, around(original, phase))
+        restore.append((owner, name, original))
+
+    def put_back() -> None:
+        for owner, name, original in restore:
+            setattr(owner, name, original)
+
+    return put_back
+
+
+def timed_into(device: torch.device, seconds: dict[str, float]) -> Callable[[Callable, str], Callable]:
+    """A :func:`wrap_phases` wrapper that adds each call's time to ``seconds[phase]``, the device
+    synchronised before and after it, so that its time is its own."""
 
     def synchronise() -> None:
         if device.type == "cuda":
@@ -65,18 +82,7 @@ def wrap_phases(device: torch.device, seconds: dict[str, float]) -> Callable[[],
 
         return run
 
-    restore = []
-    targets = [*PHASES, (ExactRenderer, "render", "exact render"), (Objective, "forward", "model, loss, metrics")]
-    for owner, name, phase in targets:
-        original = getattr(owner, name)
-        setattr(owner, name, timed(original, phase))
-        restore.append((owner, name, original))
-
-    def put_back() -> None:
-        for owner, name, original in restore:
-            setattr(owner, name, original)
-
-    return put_back
+    return timed
 
 
 def report(evaluation: dict[str, float], seconds: dict[str, float], total: float, device: torch.device) -> None:
@@ -136,7 +142,7 @@ def main() -> None:
     gradient(2)  # warm-up: kernels compiled, tables uploaded
     evaluate()
     seconds.clear()
-    put_back = wrap_phases(device, seconds)
+    put_back = wrap_phases(timed_into(device, seconds))
     try:
         evaluate()
         evaluation = dict(seconds)

@@ -20,13 +20,14 @@ Run: .venv/bin/python benchmarks/step_ops.py [--backend auto|open3d|warp] [--edg
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
 
-from profile_step import HEIGHT, PHASES, WIDTH, tiny_attack
+from profile_step import HEIGHT, WIDTH, tiny_attack, wrap_phases
 from torch.optim.optimizer import register_optimizer_step_post_hook
 from torch.utils._python_dispatch import TorchDispatchMode
 
-from kadv.attack import AttackConfig, GradientSettings, Objective, attack
-from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
+from kadv.attack import AttackConfig, GradientSettings, attack
+from kadv.render import DifferentiableRenderer, DiffRenderConfig
 
 STEPS = 4
 
@@ -45,25 +46,17 @@ class _Counter(TorchDispatchMode):
         self.views[self.phases[-1]] += func.is_view
         return func(*args, **(kwargs or {}))
 
+    def attributed(self, fn: Callable, phase: str) -> Callable:
+        """A :func:`~profile_step.wrap_phases` wrapper: what ``fn`` dispatches counts under ``phase``."""
 
-def _attributed(counter: _Counter) -> list:
-    """Wrap the PHASES' functions (and the exact render's and the objective's) so that the
-    operations they dispatch count under their phase; returns what puts them back."""
-    targets = [*PHASES, (ExactRenderer, "render", "exact render"), (Objective, "forward", "model, loss, metrics")]
-    restore = []
-    for owner, name, phase in targets:
-        original = getattr(owner, name)
-
-        def run(*args, _original=original, _phase=phase, **kwargs):
-            counter.phases.append(_phase)
+        def run(*args, **kwargs):
+            self.phases.append(phase)
             try:
-                return _original(*args, **kwargs)
+                return fn(*args, **kwargs)
             finally:
-                counter.phases.pop()
+                self.phases.pop()
 
-        setattr(owner, name, run)
-        restore.append((owner, name, original))
-    return restore
+        return run
 
 
 def main() -> None:
@@ -85,15 +78,14 @@ def main() -> None:
         counter.operations.clear()
         counter.views.clear()
 
-    restore = _attributed(counter)
+    put_back = wrap_phases(counter.attributed)
     handle = register_optimizer_step_post_hook(hook)
     try:
         with counter:
             run()
     finally:
         handle.remove()
-        for owner, name, original in restore:
-            setattr(owner, name, original)
+        put_back()
     counted = steps[1:]  # the first update closes the run's start as well as its first step
     operations = sum((ops for ops, _ in counted), Counter())
     views = sum((v for _, v in counted), Counter())
