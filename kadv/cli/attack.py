@@ -8,10 +8,13 @@ from kadv.runtime import configure_runtime
 configure_runtime()
 
 import contextlib
+import functools
 import logging
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
@@ -110,6 +113,26 @@ def _table(summary: RunSummary) -> str:
     return "\n".join(lines)
 
 
+def _interruptible_throughout(entry: Callable[[], Any]) -> Callable[[], Any]:
+    """Decorate the command so that SIGINT and SIGTERM outside a run too (while Hydra starts, or
+    between a sweep's jobs) end it with one line and exit status 130 or 143, not a traceback or
+    a silent kill; a run's own interruption says more (:func:`main`)."""
+
+    @functools.wraps(entry)
+    def wrapped() -> Any:
+        try:
+            with interruptible():
+                return entry()
+        except Interrupted as interruption:
+            print(
+                "interrupted between runs: each finished run is kept; run the same command to resume", file=sys.stderr
+            )
+            sys.exit(interruption.exit_status)
+
+    return wrapped
+
+
+@_interruptible_throughout
 @checks_overrides("kadv-attack")
 @hydra.main(version_base="1.3", config_path="../conf", config_name="kadv_attack")
 @reports_user_errors("kadv-attack")
@@ -125,7 +148,9 @@ def main(cfg: DictConfig) -> float:
     progress = {"done": 0, "total": cfg.init.get("count")}
     under_submitit = bool(os.environ.get("SUBMITIT_EXECUTOR"))
     try:
-        with run_lock(run_dir), contextlib.nullcontext() if under_submitit else interruptible():
+        # the handlers first: a signal that came once the lock was visible but before them would kill
+        # the process with nothing said (a launcher's worker process runs jobs without the decorator)
+        with contextlib.nullcontext() if under_submitit else interruptible(), run_lock(run_dir):
             return _attack(cfg, run_dir, progress)
     except Interrupted as interruption:
         print(

@@ -161,3 +161,21 @@ def test_a_read_only_run_directory_is_one_line_before_hydra_writes_there(tmp_pat
     folder = read_only / ("run" if where == "run" else "outputs")
     assert result.returncode == 1
     assert result.stderr == f"kadv-attack: error: cannot write {folder}: Read-only file system\n"
+
+
+@pytest.mark.parametrize("signum, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_outside_a_run_ends_the_command_in_one_line(signum: int, status: int, capsys) -> None:
+    """Between a sweep's jobs, or while Hydra starts, no run holds the signal: the command does."""
+    from kadv.cli.attack import _interruptible_throughout
+
+    def between_jobs() -> None:
+        os.kill(os.getpid(), signum)
+        time.sleep(60)  # the handler raises within this sleep
+
+    previous = signal.getsignal(signum)
+    with pytest.raises(SystemExit) as exit_:
+        _interruptible_throughout(between_jobs)()
+    assert exit_.value.code == status and signal.getsignal(signum) is previous
+    assert capsys.readouterr().err.splitlines() == [
+        "interrupted between runs: each finished run is kept; run the same command to resume"
+    ]
