@@ -19,6 +19,7 @@ import pytest
 from kadv.cli.attack import main as attack_main
 from tests.cli.in_process import call_main
 from tests.cli.test_attack_cli import _command, _run_in_process
+from tests.cli.waiting import wait_for
 
 # slow enough per init view to be caught between two, with direct light (no bake)
 RUN = [
@@ -46,11 +47,7 @@ def _start(run_dir: Path) -> subprocess.Popen:
     process = subprocess.Popen(
         _command("kadv-attack", run_dir, *RUN), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
-    part = run_dir / "partial" / "init0.json"
-    deadline = time.monotonic() + 300
-    while not part.exists() and process.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.02)
-    assert part.exists(), process.communicate()[1]
+    wait_for((run_dir / "partial" / "init0.json").exists, process, "the run finished its first init view")
     return process
 
 
@@ -84,15 +81,16 @@ def test_a_second_run_is_refused_and_interrupted_runs_say_what_they_kept_and_res
     )
     done = _interrupt(process, signal.SIGINT, run_dir)  # Ctrl-C: status 130
     assert 1 <= done < 3
-    # SIGTERM (Slurm's, a scheduler's) at once, before the resumed run finishes another init view
+    # SIGTERM (Slurm's, a scheduler's) once the resumed run has read what was kept: it keeps that,
+    # and the init view it finished too, should it finish one before the signal comes
     resumed = subprocess.Popen(_command("kadv-attack", run_dir, *RUN), stderr=subprocess.PIPE, text=True)
-    log, deadline = run_dir / "attack.log", time.monotonic() + 120  # Hydra's log of the job
-    while resumed.poll() is None and time.monotonic() < deadline and "resuming" not in _text(log):
-        time.sleep(0.02)
-    assert _interrupt(resumed, signal.SIGTERM, run_dir) == done  # status 143
+    log = run_dir / "attack.log"  # Hydra's log of the job
+    wait_for(lambda: "resuming" in _text(log), resumed, "the resumed run read what was kept")
+    kept = _interrupt(resumed, signal.SIGTERM, run_dir)  # status 143
+    assert done <= kept < 3
     finished = _run_in_process("kadv-attack", run_dir, *RUN)
     assert finished.returncode == 0, finished.stderr
-    assert json.loads((run_dir / "summary.json").read_text())["resumed_init_views"] == list(range(done))
+    assert json.loads((run_dir / "summary.json").read_text())["resumed_init_views"] == list(range(kept))
 
 
 def _full_disk(path: Path):

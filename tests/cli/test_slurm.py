@@ -6,13 +6,13 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
 from tests.cli.slurm import INSTALL, missing_binaries, slurm_cluster
 from tests.cli.test_sweeps import TINY
+from tests.cli.waiting import PATIENCE_S, wait_for
 
 BIN = Path(sys.executable).parent
 LAUNCHER = [
@@ -68,22 +68,22 @@ def test_a_job_signalled_as_at_its_time_limit_is_requeued_and_resumes(cluster, t
     command = [str(BIN / "kadv-attack"), "-m", "hydra.sweep.dir=sweep", *LAUNCHER, *TINY, *slow]
     command += ["render.lighting=direct", "hydra.launcher.max_num_timeout=3"]
     sweep = subprocess.Popen(command, cwd=tmp_path, env=cluster, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 240
-    while not list((tmp_path / "sweep").glob("*/partial/init0.json")) and time.monotonic() < deadline:
-        assert sweep.poll() is None, sweep.communicate()[1][-3000:]
-        time.sleep(0.1)
+    first = lambda: bool(list((tmp_path / "sweep").glob("*/partial/init0.json")))
+    wait_for(first, sweep, "the job finished its first init view", poll_s=0.1)
     (job,) = subprocess.run(["squeue", "-h", "-o", "%i"], env=cluster, capture_output=True, text=True).stdout.split()
     subprocess.run(["scancel", "--signal=USR2", job], env=cluster, check=True)
+
     # Slurm holds a requeued job back for a while (its BeginTime); a test need not wait for all of it.
     # Not "now": slurmd refuses a credential issued in the second its job's last one was revoked
     # ("Job credential revoked"), and a start within that second failed the job
-    while sweep.poll() is None and time.monotonic() < deadline + 120:
+    def held_back() -> bool:
         state = subprocess.run(["squeue", "-h", "-j", job, "-o", "%T %r"], env=cluster, capture_output=True, text=True)
-        if state.stdout.split()[:2] == ["PENDING", "BeginTime"]:
-            subprocess.run(["scontrol", "update", f"JobId={job}", "StartTime=now+2"], env=cluster, check=True)
-            break
-        time.sleep(0.2)
-    _, stderr = sweep.communicate(timeout=300)
+        return state.stdout.split()[:2] == ["PENDING", "BeginTime"]
+
+    wait_for(lambda: sweep.poll() is not None or held_back(), sweep, "the requeued job was held back", poll_s=0.2)
+    if sweep.poll() is None:
+        subprocess.run(["scontrol", "update", f"JobId={job}", "StartTime=now+2"], env=cluster, check=True)
+    _, stderr = sweep.communicate(timeout=PATIENCE_S)
     assert sweep.returncode == 0, stderr[-3000:]
     (summary,) = [json.loads(p.read_text()) for p in (tmp_path / "sweep").glob("*/summary.json")]
     done = summary["resumed_init_views"]

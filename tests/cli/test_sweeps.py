@@ -9,8 +9,6 @@ import re
 import signal
 import subprocess
 import sys
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,6 +16,7 @@ import pytest
 
 from kadv.cli.report import main as report_main
 from tests.cli.in_process import call_main
+from tests.cli.waiting import wait_for
 
 BIN = Path(sys.executable).parent
 TINY = [
@@ -91,19 +90,6 @@ def _works_on_an_unfinished_job(cwd: Path, pid: int) -> bool:
     return False
 
 
-def _wait_for(condition: Callable[[], bool], process: subprocess.Popen, what: str) -> None:
-    """Poll ``condition`` while ``process`` runs. The test acts on the condition alone: the deadline,
-    far above a loaded machine's minutes, only turns a hang into a failure that names it."""
-    deadline = time.monotonic() + 1800
-    while not condition():
-        if process.poll() is not None:
-            pytest.fail(f"the sweep exited ({process.returncode}) before {what}")
-        if time.monotonic() > deadline:
-            process.kill()
-            pytest.fail(f"no sign, after 30 minutes, that {what}")
-        time.sleep(0.02)
-
-
 @pytest.fixture(scope="module")
 def killed_sweep(tmp_path_factory) -> KilledSweep:
     cwd = tmp_path_factory.mktemp("killed_sweep")
@@ -111,12 +97,12 @@ def killed_sweep(tmp_path_factory) -> KilledSweep:
     process = subprocess.Popen(
         command, cwd=cwd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True
     )
-    _wait_for(lambda: bool(_summaries(cwd)), process, "a job finished")
+    wait_for(lambda: bool(_summaries(cwd)), process, "a job finished")
     os.killpg(process.pid, signal.SIGKILL)
     process.wait()
     killed = {p: p.stat().st_mtime_ns for p in _summaries(cwd)}
     rerun = subprocess.Popen(command, cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    _wait_for(lambda: _works_on_an_unfinished_job(cwd, rerun.pid), rerun, "the rerun worked on an unfinished job")
+    wait_for(lambda: _works_on_an_unfinished_job(cwd, rerun.pid), rerun, "the rerun worked on an unfinished job")
     rerun.send_signal(signal.SIGTERM)
     stdout, stderr = rerun.communicate(timeout=600)
     interrupted = subprocess.CompletedProcess(command, rerun.returncode, stdout, stderr)
