@@ -10,7 +10,7 @@ TEST_PACKAGES := $(DEMO_PACKAGES) $(shell sed -n 's/^test://p' system-packages.t
 
 DOCS_STAMP := $(VENV)/.kadv-docs-installed
 
-.PHONY: demo test docs lint bench clean demo-packages test-packages
+.PHONY: demo test test-kernels docs lint bench clean demo-packages test-packages
 
 # Installs the missing ones of $(1) with apt-get as root; otherwise prints the one line to run and stops.
 # dpkg-query's status, not `dpkg -s`: a removed package whose configuration remains still passes `dpkg -s`.
@@ -53,6 +53,12 @@ demo: demo-packages $(STAMP)
 # once; a worker that dies ends the run rather than leaving its file's tests waiting
 test: test-packages $(TEST_STAMP)
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile --max-worker-restart 0
+
+# the render, attack and report tests with torch's portable kernels (no AVX) and one OpenMP thread:
+# the rounding of another CPU, simulated on this one; the references' tolerances must absorb it
+test-kernels: test-packages $(TEST_STAMP)
+	ATEN_CPU_CAPABILITY=default OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile \
+	  --max-worker-restart 0 tests/render tests/attack tests/report
 
 $(DOCS_STAMP): pyproject.toml | $(STAMP)
 	$(BIN)/pip install --quiet -e ".[docs]"
