@@ -9,18 +9,19 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import kornia
 import numpy as np
 import torch
 
-from kadv.geometry import axis_angle_to_matrix, check_world_T_cam, intrinsics_from_fov, look_at
+from kadv.geometry import axis_angle_to_matrix, check_world_T_cam, intrinsics_from_fov, look_at, perturb_world_T_cam
 from kadv.io import write_json
 from kadv.losses import depth_metrics
 from kadv.models import DepthModel
 from kadv.penalties import PenaltyConfig, distance_to_surface, plane_counts, step_guard, view_validity
+from kadv.penalties.envelope import Envelope
 from kadv.render import ExactRenderer
 
 __all__ = [
@@ -31,6 +32,7 @@ __all__ = [
     "check_init_views",
     "clear_file_camera",
     "file_init_views",
+    "fit_into_envelope",
     "load_init_params",
     "sample_init_views",
     "sample_valid_views",
@@ -426,3 +428,30 @@ def load_init_params(path: str | Path) -> list[InitView]:
     if not views:
         raise ValueError(f"{path}: holds no init views")
     return views
+
+
+def fit_into_envelope(renderer: ExactRenderer, init: InitView, envelope: Envelope, margin: float) -> InitView:
+    """The init view moved into ``envelope`` (pitch and roll clamped at its yaw, the centre moved
+    straight up or down through the step guard), or itself when it lies inside.
+
+    Raises:
+        InitViewError: if it cannot be moved into the envelope (no surface below it for a height
+            bound, or the move up or down is blocked), naming the view, the envelope and why.
+    """
+    if envelope.free:
+        return init
+    base = init.world_T_cam.double().to(renderer.device)[None]
+    params = envelope.project(renderer, base, torch.zeros(1, 6, dtype=torch.float64, device=renderer.device))
+    if bool((params == 0).all()):
+        moved = base
+    else:
+        check = step_guard(renderer, base[:, :3, 3], base[:, :3, 3] + params[:, 3:], margin)
+        moved = perturb_world_T_cam(base, params[:, :3], params[:, 3:] * check.allowed[:, None].to(params))
+    (reason,) = envelope.figures(renderer, moved).reasons()
+    if reason is not None:
+        raise InitViewError(f"init view {init.name} lies outside the envelope {envelope.describe()}: {reason}")
+    if moved is base:
+        return init
+    angles = [round(a, 1) for a in torch.rad2deg(envelope.figures(renderer, base).angles[0, 1:]).tolist()]
+    note = f"moved into the envelope {envelope.name} (it had pitch {angles[0]}°, roll {angles[1]}°)"
+    return replace(init, world_T_cam=moved[0].cpu(), note=f"{init.note}; {note}" if init.note else note)

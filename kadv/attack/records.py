@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass, field
 import torch
 
 from kadv.attack.init_views import InitView
-from kadv.geometry import axis_angle_to_matrix, perturb_world_T_cam
+from kadv.geometry import axis_angle_to_matrix, perturb_world_T_cam, yaw_pitch_roll
 
 __all__ = [
     "AttackResult",
@@ -50,6 +50,8 @@ class ViewRecord:
             record built without it takes L_depth).
         scale: the render's size relative to the run's: views screened smaller are never chosen
             or ranked, their best are re-scored at full size.
+        yaw_deg, pitch_deg, roll_deg: the camera's heading, elevation and bank in degrees
+            (:func:`kadv.geometry.yaw_pitch_roll`); made from ``theta`` when not given.
     """
 
     step: int
@@ -71,10 +73,16 @@ class ViewRecord:
     seconds: float = math.nan
     loss: float = math.nan
     scale: float = 1.0
+    yaw_deg: float = math.nan
+    pitch_deg: float = math.nan
+    roll_deg: float = math.nan
 
     def __post_init__(self) -> None:
         if math.isnan(self.loss):
             self.loss = self.l_depth
+        if math.isnan(self.yaw_deg):
+            rotation = axis_angle_to_matrix(torch.tensor(self.theta, dtype=torch.float64))
+            self.yaw_deg, self.pitch_deg, self.roll_deg = torch.rad2deg(yaw_pitch_roll(rotation)).tolist()
 
     @property
     def valid(self) -> bool:

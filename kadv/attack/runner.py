@@ -7,7 +7,7 @@ from collections.abc import Callable
 import numpy as np
 from tqdm import tqdm
 
-from kadv.attack.init_views import InitView
+from kadv.attack.init_views import InitView, fit_into_envelope
 from kadv.attack.objective import Objective
 from kadv.attack.records import AttackResult, InitViewResult
 from kadv.attack.registry import get_method
@@ -38,7 +38,8 @@ def attack(
         objective: what to maximise; its penalty settings also rule the step guard and view validity.
         differentiable: the differentiable renderer (gradient steps use it; views evaluated
             without a gradient use its exact renderer and supersampling).
-        init_views: starting views.
+        init_views: starting views; one outside ``config.envelope`` is moved into it, or refused
+            (:class:`InitViewError`) when it cannot be.
         height: image height.
         width: image width.
         config: search settings.
@@ -48,6 +49,9 @@ def attack(
         progress: show a tqdm bar (in evaluated views; no total under a seconds budget alone).
     """
     method = get_method(config.method)
+    # all of them before any search: a view that cannot be moved in is refused before work is spent
+    margin = objective.penalty.margin
+    init_views = [fit_into_envelope(differentiable.renderer, init, config.envelope, margin) for init in init_views]
     completed = dict(completed or {})
     result = AttackResult(config.method)
     per_view = config.evaluations

@@ -16,8 +16,9 @@ from kadv.attack.init_views import InitView
 from kadv.attack.objective import Objective, ObjectiveTerms
 from kadv.attack.records import Budget, InitViewResult, ViewRecord, select_top_views
 from kadv.attack.registry import get_method
-from kadv.geometry import intrinsics_from_fov, matrix_to_axis_angle, perturb_world_T_cam
+from kadv.geometry import intrinsics_from_fov, matrix_to_axis_angle, perturb_world_T_cam, yaw_pitch_roll
 from kadv.penalties import ViewValidity, step_guard, view_validity
+from kadv.penalties.envelope import Envelope, get_envelope
 from kadv.render import DifferentiableRenderer, RenderOutput
 
 __all__ = ["DEFAULT_METHOD", "AttackConfig", "Clock", "Measures", "SearchContext", "check_settings", "scaled_size"]
@@ -66,6 +67,9 @@ class AttackConfig:
         top_n: adversarial views kept per init view.
         min_separation, min_separation_deg: two adversarial views differ by at least this much
             in centre position or in orientation.
+        envelope: bounds on the pose itself (roll, pitch, height; :mod:`kadv.penalties.envelope`),
+            a preset's name or an :class:`Envelope`; every method's views are moved into it, and
+            those that still lie outside are recorded, never chosen. ``free``: the study's protocol.
     """
 
     method: str = DEFAULT_METHOD
@@ -77,8 +81,10 @@ class AttackConfig:
     top_n: int = 5
     min_separation: float = 0.05
     min_separation_deg: float = 3.0
+    envelope: Envelope | str = "free"
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "envelope", get_envelope(self.envelope))
         method = get_method(self.method)
         if self.settings is None:
             object.__setattr__(self, "settings", method.settings())
@@ -210,11 +216,13 @@ class Measures:
     def records(self) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view."""
         table = self.table.cpu()
-        theta = matrix_to_axis_angle(table[:, 6:15].reshape(-1, 3, 3))
+        rotation = table[:, 6:15].reshape(-1, 3, 3)
+        theta = matrix_to_axis_angle(rotation)
         rows = torch.cat([table[:, :6], theta, table[:, 15:]], dim=1).tolist()
+        angles = torch.rad2deg(yaw_pitch_roll(rotation)).tolist()
         verdicts = self.validity.verdicts
         records = []
-        for b, (lane, row) in enumerate(zip(self.lanes, rows)):
+        for b, (lane, row, (yaw, pitch, roll)) in enumerate(zip(self.lanes, rows, angles)):
             l_depth, loss, l_dist, objective, delta1, abs_rel, fraction = row[12:19]
             coverage, rgb_error, depth_error = row[19:22] if len(row) > 19 else (math.nan,) * 3
             records.append(
@@ -238,6 +246,9 @@ class Measures:
                     refreshed=self.refreshed,
                     seconds=self.seconds,
                     scale=self.scale,
+                    yaw_deg=yaw,
+                    pitch_deg=pitch,
+                    roll_deg=roll,
                 )
             )
         return records
@@ -282,6 +293,12 @@ class SearchContext:
         """The init view's pose (batch, 4, 4) float64 on :attr:`device`."""
         return self._base[None].expand(batch, 4, 4)
 
+    def project(self, params: torch.Tensor) -> torch.Tensor:
+        """Pose parameters (B, 6) pulled back within the rotation and distance bounds, then moved
+        into the envelope (on the parameters' device); the step guard has yet to pass the move."""
+        params = self.config.project(params)
+        return self.config.envelope.project(self.renderer, self.base(len(params)), params)
+
     def guard(self, old: torch.Tensor, new: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Let the centre offsets (B, 3) move from ``old`` to ``new`` only as far as the step guard allows.
 
@@ -319,6 +336,8 @@ class SearchContext:
         pose = world_T_cam.detach()
         K, height, width = self.size(scale)
         validity = view_validity(self.renderer, pose, K, height, width, render=render, **self.validity_options)
+        if not self.config.envelope.free:
+            validity.envelope = self.config.envelope.figures(self.renderer, pose)
         numbers = [
             params.detach(),
             pose[:, :3, :3].flatten(1),
@@ -351,7 +370,7 @@ class SearchContext:
         """Move from the init view to each pose (B, 6) through the step guard, render exactly at
         ``scale`` times the run's size, evaluate and record, counting the views against the budget."""
         started = time.perf_counter()
-        params = self.config.project(params.to(self.device))
+        params = self.project(params.to(self.device))
         reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
         params = torch.cat([params[:, :3], reached], dim=1)
         K, height, width = self.size(scale)

@@ -48,6 +48,7 @@ from kadv.cli.common import (
 )
 from kadv.device import resolve_device
 from kadv.io import atomic_write, remove_temporaries
+from kadv.penalties import Envelope
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
 from kadv.report.run import (
     SUMMARY,
@@ -65,10 +66,13 @@ log = logging.getLogger(__name__)
 INIT_PARAMS = "init_params.json"
 
 
-def attack_settings(cfg: DictConfig) -> AttackConfig:
+def attack_settings(cfg: DictConfig, envelope: DictConfig | None = None) -> AttackConfig:
     """The ``attack`` node as an :class:`AttackConfig`: the shared keys, ``method``, and that method's
-    ``attack.<method>`` node as its settings dataclass; unknown keys are errors."""
+    ``attack.<method>`` node as its settings dataclass, with the ``envelope`` node's bounds; unknown
+    keys are errors."""
     node = OmegaConf.to_container(cfg, resolve=True)
+    if envelope is not None:
+        node["envelope"] = settings_from_node(Envelope, OmegaConf.to_container(envelope, resolve=True), "envelope")
     method = get_method(node.pop("method", DEFAULT_METHOD))
     settings = settings_from_node(method.settings, node.pop(method.name, None), f"attack.{method.name}")
     for name in METHODS:  # the nodes of other methods (a preset may carry several) are not this run's
@@ -174,7 +178,7 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     device = resolve_device(cfg.device)
     seed = config_int(cfg.seed, "seed")
     height, width, supersample = check_render_config(cfg.render)
-    attack_config = attack_settings(cfg.attack)
+    attack_config = attack_settings(cfg.attack, cfg.get("envelope"))
     init_config = settings_from_node(InitViewConfig, OmegaConf.to_container(cfg.init, resolve=True), "init")
     penalty = settings_from_node(PenaltyConfig, OmegaConf.to_container(cfg.penalty, resolve=True), "penalty")
     diff_config = DiffRenderConfig(

@@ -10,7 +10,9 @@ from kadv.geometry.pose import (
     matrix_to_axis_angle,
     perturb_world_T_cam,
     rc_from_world_T_cam,
+    rotation_from_yaw_pitch_roll,
     world_T_cam_from_rc,
+    yaw_pitch_roll,
 )
 
 __all__ = [
@@ -24,6 +26,8 @@ __all__ = [
     "perturb_world_T_cam",
     "pixel_rays",
     "rc_from_world_T_cam",
+    "rotation_from_yaw_pitch_roll",
     "to_open3d_pinhole",
     "world_T_cam_from_rc",
+    "yaw_pitch_roll",
 ]

@@ -18,7 +18,9 @@ __all__ = [
     "matrix_to_axis_angle",
     "perturb_world_T_cam",
     "rc_from_world_T_cam",
+    "rotation_from_yaw_pitch_roll",
     "world_T_cam_from_rc",
+    "yaw_pitch_roll",
 ]
 
 
@@ -174,3 +176,47 @@ def check_world_T_cam(world_T_cam: torch.Tensor, name: str = "world_T_cam", atol
         index = int(bad.nonzero()[0, 0])
         raise ValueError(f"{name}[{index}]: rotation block is not a rotation matrix (R^T R != I or det != +1)")
     return pose
+
+
+def yaw_pitch_roll(rotation: torch.Tensor) -> torch.Tensor:
+    """Heading, elevation and bank (..., 3) in radians of camera orientations (..., 3, 3) in kadv's
+    y-up world.
+
+    - yaw: the optical axis's heading about the world's y axis, ``atan2(f_x, f_z)``, in (-pi, pi];
+    - pitch: the optical axis's elevation above the horizon, in [-pi/2, pi/2] (positive: looking up);
+    - roll: the turn about the optical axis from the upright camera (image x horizontal, image
+      down towards the floor), positive from image x towards image y; undefined (0) looking straight
+      up or down.
+
+    Examples:
+        >>> import math
+        >>> level = look_at(torch.tensor([0.0, 1.0, 0.0]), torch.tensor([1.0, 2.0, 0.0])).double()
+        >>> yaw, pitch, roll = (math.degrees(a) for a in yaw_pitch_roll(level[:3, :3]).tolist())
+        >>> round(yaw, 9), round(pitch, 9), abs(roll) < 1e-9  # east (world +x), 45 degrees up, upright
+        (90.0, 45.0, True)
+    """
+    right, down, forward = rotation[..., 0], rotation[..., 1], rotation[..., 2]
+    yaw = torch.atan2(forward[..., 0], forward[..., 2])
+    pitch = torch.atan2(forward[..., 1], torch.hypot(forward[..., 0], forward[..., 2]))
+    roll = torch.atan2(-right[..., 1], -down[..., 1])
+    return torch.stack([yaw, pitch, roll], dim=-1)
+
+
+def rotation_from_yaw_pitch_roll(angles: torch.Tensor) -> torch.Tensor:
+    """Camera orientations (..., 3, 3) from yaw, pitch and roll (..., 3) in radians (the inverse of
+    :func:`yaw_pitch_roll` for pitch strictly inside (-pi/2, pi/2)).
+
+    Examples:
+        >>> angles = torch.tensor([0.3, -0.2, 0.1], dtype=torch.float64)
+        >>> torch.allclose(yaw_pitch_roll(rotation_from_yaw_pitch_roll(angles)), angles)
+        True
+    """
+    yaw, pitch, roll = angles.unbind(-1)
+    zero = torch.zeros_like(yaw)
+    forward = torch.stack([pitch.cos() * yaw.sin(), pitch.sin(), pitch.cos() * yaw.cos()], dim=-1)
+    level_right = torch.stack([-yaw.cos(), zero, yaw.sin()], dim=-1)  # forward x up, normalised
+    level_down = torch.linalg.cross(forward, level_right)
+    cos, sin = roll.cos()[..., None], roll.sin()[..., None]
+    right = cos * level_right + sin * level_down
+    down = cos * level_down - sin * level_right
+    return torch.stack([right, down, forward], dim=-1)

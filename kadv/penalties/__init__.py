@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface, shortcut_penalty
+from kadv.penalties.envelope import ENVELOPES, Envelope, EnvelopeFigures, get_envelope
 from kadv.penalties.guard import StepCheck, step_guard
 from kadv.penalties.sampling import random_valid_poses
 from kadv.penalties.validity import (
@@ -17,11 +18,15 @@ from kadv.penalties.validity import (
 )
 
 __all__ = [
+    "ENVELOPES",
+    "Envelope",
+    "EnvelopeFigures",
     "PenaltyConfig",
     "StepCheck",
     "ViewValidity",
     "distance_to_surface",
     "fibonacci_sphere",
+    "get_envelope",
     "plane_counts",
     "plane_labels",
     "plane_shares",

@@ -35,6 +35,7 @@ from kadv.geometry.camera import pixel_rays
 from kadv.geometry.pose import check_world_T_cam
 from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface
+from kadv.penalties.envelope import OUTSIDE_ENVELOPE, EnvelopeFigures
 from kadv.render.raycast import ExactRenderer, RenderOutput
 
 __all__ = [
@@ -84,6 +85,8 @@ class ViewValidity:
         distance: distance from the optical centre to the nearest surface, metres.
         plane_share: share of the pixels that hit a surface which lie on the most common plane.
         limits: what the figures are judged by.
+        envelope: the views' pose figures when a search bounds them: a view that is otherwise
+            valid but lies outside the envelope is "outside the envelope".
     """
 
     miss_fraction: torch.Tensor
@@ -94,10 +97,12 @@ class ViewValidity:
     distance: torch.Tensor
     plane_share: torch.Tensor
     limits: ValidityLimits = field(default_factory=ValidityLimits)
+    envelope: EnvelopeFigures | None = None
 
     @property
     def verdicts(self) -> list[str]:
-        """One of "valid", "inside an object", "outside the scene", "too close", "uninformative" per camera."""
+        """One of "valid", "inside an object", "outside the scene", "too close", "uninformative",
+        "outside the envelope" per camera."""
         return self._judged[0]
 
     @property
@@ -121,6 +126,7 @@ class ViewValidity:
         ]
         probe_miss, probe_back, distance, near_fraction, share = torch.stack(figures).cpu()  # one copy
         limits, verdicts, reasons = self.limits, [], []
+        outside_envelope = self.envelope.reasons() if self.envelope is not None else [None] * len(distance)
         for b in range(len(distance)):
             miss_frac, back_frac = float(probe_miss[b]), float(probe_back[b])
             if miss_frac > limits.outside_threshold:
@@ -140,6 +146,9 @@ class ViewValidity:
                 reasons.append(
                     f"one plane covers {share[b]:.0%} of the surface pixels (> {limits.max_plane_share:.0%})"
                 )
+            elif outside_envelope[b] is not None:
+                verdicts.append(OUTSIDE_ENVELOPE)
+                reasons.append(f"{outside_envelope[b]} ({self.envelope.envelope.describe()})")
             else:
                 verdicts.append(VALID)
                 reasons.append(

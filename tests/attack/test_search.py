@@ -31,8 +31,10 @@ from kadv.attack import (
     select_top_views,
     separated,
 )
+from kadv.attack.init_views import InitViewError, fit_into_envelope
 from kadv.attack.search import scaled_size
-from kadv.geometry import intrinsics_from_fov
+from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam
+from kadv.penalties import ENVELOPES, Envelope
 from kadv.render import DiffRenderConfig
 from kadv.report.run import _write_csv, read_trajectory, trajectory_rows
 
@@ -379,3 +381,32 @@ def test_trajectory_csv_reads_back_the_records_it_was_written_from(
     path = _write_csv(tmp_path / "trajectory.csv", trajectory_rows(result))
     written = [dataclasses.replace(r, seconds=math.nan) for r in result.views[0].records]
     assert repr(read_trajectory(path)) == repr({0: written})  # repr: NaN fields compare too
+
+
+@pytest.mark.parametrize("method", BUILT_IN)
+def test_every_method_keeps_its_chosen_views_inside_the_envelope(method, tiny_objective, differentiable, file_view):
+    robot = ENVELOPES["robot"]  # roll 2 degrees, pitch 15 degrees, height 0.3 to 1.5 m
+    result = _run(tiny_objective, differentiable, [file_view], (24, 32), method, budget_evaluations=12, envelope=robot)
+    view = result.views[0]
+    for record in view.records:
+        inside = abs(record.roll_deg) <= 2 + 1e-5 and abs(record.pitch_deg) <= 15 + 1e-5
+        assert inside or record.verdict in ("outside the envelope", "outside the scene", "inside an object")
+    centres = torch.tensor([r.centre for r in view.records if r.valid], dtype=torch.float64)
+    heights = robot.figures(tiny_objective.renderer, look_at(centres, centres + torch.tensor([1.0, 0.0, 0.0]))).height
+    assert ((heights >= 0.3 - 1e-5) & (heights <= 1.5 + 1e-5)).all()  # nothing but the floor below, in the box room
+    assert view.top and all(r.valid for r in view.top)
+
+
+def test_an_init_view_outside_the_envelope_is_moved_into_it_or_refused(tiny_objective, file_view) -> None:
+    renderer, margin = tiny_objective.renderer, PenaltyConfig().margin
+    tilted = perturb_world_T_cam(
+        file_view.world_T_cam[None], torch.tensor([[-0.9, 0.0, 0.3]]).double(), torch.zeros(1, 3)
+    )
+    init = dataclasses.replace(file_view, world_T_cam=tilted[0])
+    moved = fit_into_envelope(renderer, init, ENVELOPES["upright"], margin)
+    assert ENVELOPES["upright"].figures(renderer, moved.world_T_cam[None]).reasons() == [None]
+    assert "moved into the envelope upright" in moved.note
+    assert fit_into_envelope(renderer, moved, ENVELOPES["upright"], margin) is moved  # inside: left alone
+    stilts = Envelope("stilts", height=(5.0, 6.0))  # above the box room's 3 m ceiling
+    with pytest.raises(InitViewError, match=r"init view file0 lies outside the envelope stilts \(height 5 to 6 m\): "):
+        fit_into_envelope(renderer, file_view, stilts, margin)

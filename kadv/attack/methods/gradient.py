@@ -70,7 +70,7 @@ def gradient_ascent(
     batch = clock.allows(len(start))
     if batch == 0:
         return []
-    start = context.config.project(start[:batch].to(context.device, torch.float64, non_blocking=True))
+    start = context.project(start[:batch].to(context.device, torch.float64, non_blocking=True))
     reached, fraction = context.guard(torch.zeros_like(start[:, 3:]), start[:, 3:])
     omega = start[:, :3].clone().requires_grad_(True)
     delta = reached.clone().requires_grad_(True)
@@ -107,7 +107,7 @@ def gradient_ascent(
         previous = delta.detach().clone()
         optimiser.step()
         with torch.no_grad():
-            bounded = context.config.project(torch.cat([omega, delta], dim=1))
+            bounded = context.project(torch.cat([omega, delta], dim=1))
             reached, fraction = context.guard(previous, bounded[:, 3:])
             omega.copy_(bounded[:, :3])
             delta.copy_(reached)

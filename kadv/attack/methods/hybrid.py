@@ -107,9 +107,7 @@ def trust_region_refine(
     step = first_step
     while clock.allows(lanes) == lanes:
         started = time.perf_counter()
-        proposal = context.config.project(
-            current + torch.where(fresh[:, None], 0.0, _steps(gradient, radius, settings))
-        )
+        proposal = context.project(current + torch.where(fresh[:, None], 0.0, _steps(gradient, radius, settings)))
         reached, fraction = context.guard(current[:, 3:], proposal[:, 3:])
         # the lanes' bookkeeping stays on the host, where its decisions are made; the trial goes to the device
         trial = torch.cat([proposal[:, :3].to(context.device), reached], dim=1).requires_grad_(True)
