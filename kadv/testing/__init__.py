@@ -21,12 +21,15 @@ from kadv._lazy import lazy_exports
 _EXPORTS = {
     "DEFAULT_BUDGET": "kadv.testing.robustness",
     "CheckSettings": "kadv.testing.session",
+    "DEFAULT_RADII": "kadv.testing.profile",
     "InitViewOutcome": "kadv.testing.robustness",
+    "Profile": "kadv.testing.profile",
     "RobustnessInputError": "kadv.testing.inputs",
     "RobustnessResult": "kadv.testing.robustness",
     "Scorecard": "kadv.testing.card",
     "assert_viewpoint_robust": "kadv.testing.robustness",
     "current": "kadv.testing.session",
+    "robustness_profile": "kadv.testing.profile",
     "scene": "kadv.testing.inputs",
     "scorecard": "kadv.testing.card",
     "settings": "kadv.testing.session",
@@ -36,6 +39,7 @@ _EXPORTS = {
 if TYPE_CHECKING:  # the same names, for type checkers and the API reference
     from kadv.testing.card import Scorecard, scorecard
     from kadv.testing.inputs import RobustnessInputError, scene
+    from kadv.testing.profile import DEFAULT_RADII, Profile, robustness_profile
     from kadv.testing.robustness import (
         DEFAULT_BUDGET,
         InitViewOutcome,
@@ -47,13 +51,16 @@ if TYPE_CHECKING:  # the same names, for type checkers and the API reference
 
 __all__ = [
     "DEFAULT_BUDGET",
+    "DEFAULT_RADII",
     "CheckSettings",
     "InitViewOutcome",
+    "Profile",
     "RobustnessInputError",
     "RobustnessResult",
     "Scorecard",
     "assert_viewpoint_robust",
     "current",
+    "robustness_profile",
     "scene",
     "scorecard",
     "settings",

@@ -8,9 +8,8 @@ its four-panel picture. :func:`assert_viewpoint_robust` turns it into a test.
 
 from __future__ import annotations
 
-import math
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -21,10 +20,14 @@ from kadv.testing.session import current
 
 __all__ = [
     "DEFAULT_BUDGET",
+    "CheckOptions",
     "InitViewOutcome",
     "RobustnessResult",
+    "Setup",
     "assert_viewpoint_robust",
+    "setup",
     "viewpoint_robustness",
+    "worst_record",
 ]
 
 DEFAULT_BUDGET = 48  # model evaluations per init view, the init view's included
@@ -77,6 +80,8 @@ class RobustnessResult:
         seed: the search's seed.
         budget_evaluations: evaluations per init view (after ``--kadv-budget``'s factor).
         views: one outcome per init view.
+        envelope: the camera envelope's name.
+        radius: (degrees, metres) the camera could turn and move from each init view.
     """
 
     model: str
@@ -84,6 +89,12 @@ class RobustnessResult:
     seed: int
     budget_evaluations: int
     views: list[InitViewOutcome]
+    envelope: str = "free"
+    radius: tuple[float, float] = (45.0, 1.0)
+
+    def bounds_text(self) -> str:
+        """``within 45°, 1 m (envelope free)``."""
+        return f"within {self.radius[0]:g}°, {self.radius[1]:g} m (envelope {self.envelope})"
 
     @property
     def worst(self) -> InitViewOutcome:
@@ -109,43 +120,17 @@ class RobustnessResult:
         return "\n".join(lines)
 
 
-def _angles_deg(world_T_cam: torch.Tensor) -> tuple[float, float, float]:
-    """(yaw, pitch, roll) in degrees of an OpenCV camera pose (4, 4) in kadv's y-up world."""
-    rotation = world_T_cam[:3, :3].double()
-    forward, right, down = rotation[:, 2], rotation[:, 0], rotation[:, 1]
-    yaw = math.atan2(float(forward[0]), float(forward[2]))
-    pitch = math.asin(max(-1.0, min(1.0, float(forward[1]))))
-    roll = math.atan2(float(right[1]), -float(down[1]))
-    return tuple(math.degrees(a) for a in (yaw, pitch, roll))
-
-
-def _worst(records: list) -> object:
+def worst_record(records: list) -> object:
     """The valid full-size record of lowest delta1 (the highest loss among ties)."""
     rankable = [r for r in records if r.rankable] or records[:1]
     return min(rankable, key=lambda r: (r.delta1, -r.loss))
 
 
-def viewpoint_robustness(
-    model,
-    scene,
-    *,
-    init_count: int = 2,
-    budget_evaluations: int = DEFAULT_BUDGET,
-    seed: int = 0,
-    loss: str = "delta1",
-    size: tuple[int, int] = (96, 128),
-    method: str = "hybrid",
-    lighting: str = "baked",
-    artifacts: str | Path | None = None,
-    progress: bool = False,
-) -> RobustnessResult:
-    """Search for views near a scene's init views where ``model`` fails, deterministically for ``seed``.
+@dataclass(frozen=True)
+class CheckOptions:
+    """How a check searches (:func:`viewpoint_robustness`'s keyword arguments).
 
-    Args:
-        model: a preset name (``"kadv_tiny"``), a hub id, a ``save_pretrained`` folder, a
-            :class:`kadv.models.DepthModel`, or ``(torch module, output kind)``.
-        scene: a :class:`kadv.scenes.Scene`, or a name :func:`kadv.testing.scene` takes
-            (``"box_room"``, ``"probe/thin_structures"``, a file's path).
+    Attributes:
         init_count: init views: the scene's cameras first, then sampled views the model gets right.
         budget_evaluations: model evaluations per init view (scaled by ``--kadv-budget`` under pytest).
         seed: the seed of the init views and the search.
@@ -153,63 +138,165 @@ def viewpoint_robustness(
         size: (height, width) of the renders.
         method: the search method (:data:`kadv.attack.METHODS`).
         lighting: ``"baked"`` (the commands' default; baked once per scene and cached) or ``"direct"``.
+        radius: (degrees, metres): how far the camera may turn and move from each init view.
+        envelope: the poses the camera may take (:mod:`kadv.penalties.envelope`): a preset's name
+            (``free``, ``upright``, ``handheld``, ``robot``) or an :class:`kadv.penalties.Envelope`.
         artifacts: the folder for the worst views' pictures; None: the pytest plugin's folder for
             this test, else a new temporary folder.
         progress: show progress bars.
-
-    Raises:
-        RobustnessInputError: a bad model, scene or setting, in one line.
     """
+
+    init_count: int = 2
+    budget_evaluations: int = DEFAULT_BUDGET
+    seed: int = 0
+    loss: str = "delta1"
+    size: tuple[int, int] = (96, 128)
+    method: str = "hybrid"
+    lighting: str = "baked"
+    radius: tuple[float, float] = (45.0, 1.0)
+    envelope: object = "free"
+    artifacts: str | Path | None = None
+    progress: bool = False
+
+    @classmethod
+    def of(cls, options: dict, taker: str) -> CheckOptions:
+        """The options from keyword arguments, or :class:`RobustnessInputError` naming an unknown one."""
+        unknown = sorted(set(options) - {f.name for f in fields(cls)})
+        if unknown:
+            raise RobustnessInputError(f"{taker} takes no option {', '.join(unknown)}")
+        return cls(**options)
+
+
+@dataclass
+class Setup:
+    """What a robustness check searches with: the scene's renderers, the objective, the init views,
+    and where and how the worst views' pictures go."""
+
+    model_name: str
+    scene_name: str
+    renderer: object
+    differentiable: object
+    objective: object
+    penalty: object
+    views: list
+    size: tuple[int, int]
+    budget: int
+    folder: Path
+    stem: str
+    render: object
+
+
+def setup(model, scene, options: CheckOptions) -> Setup:
+    """The :class:`Setup` of a check, or :class:`RobustnessInputError` in one line."""
     from kadv.attack import (
-        AttackConfig,
         InitViewConfig,
         InitViewError,
         Objective,
         PenaltyConfig,
-        attack,
         check_init_views,
         file_init_views,
         sample_init_views,
     )
     from kadv.losses import depth_loss
     from kadv.render import DifferentiableRenderer, ExactRenderer, Shading
-    from kadv.report.run import ViewRenderer, save_view_picture
+    from kadv.report.run import ViewRenderer
 
+    init_count, budget_evaluations = options.init_count, options.budget_evaluations
     if isinstance(init_count, bool) or not isinstance(init_count, int) or init_count < 1:
         raise RobustnessInputError(f"init_count must be an integer >= 1, got {init_count!r}")
     if isinstance(budget_evaluations, bool) or not isinstance(budget_evaluations, int) or budget_evaluations < 2:
         raise RobustnessInputError(f"budget_evaluations must be an integer >= 2, got {budget_evaluations!r}")
     settings = current()
     budget = max(2, round(budget_evaluations * settings.budget_factor))
-    height, width = size
+    height, width = options.size
     depth_model = resolve_model(model)
     built = resolve_scene(scene)
     try:
-        renderer = ExactRenderer(built, Shading(lighting=lighting), progress=progress)
+        renderer = ExactRenderer(built, Shading(lighting=options.lighting), progress=options.progress)
         penalty = PenaltyConfig()
-        objective = Objective(depth_model, depth_loss(loss), renderer, penalty)
+        objective = Objective(depth_model, depth_loss(options.loss), renderer, penalty)
         views = file_init_views(renderer, penalty.margin)[:init_count]
         views += sample_init_views(
-            renderer, depth_model, init_count - len(views), seed, InitViewConfig(), penalty, height, width
+            renderer, depth_model, init_count - len(views), options.seed, InitViewConfig(), penalty, height, width
         )
         check_init_views(renderer, views, penalty, height, width)
-        config = AttackConfig(method, budget_evaluations=budget)
     except InitViewError as error:
         raise RobustnessInputError(f"scene {built.name!r}: {error}") from error
     except ValueError as error:
         raise RobustnessInputError(str(error)) from error
-    result = attack(objective, DifferentiableRenderer(renderer), views, height, width, config, seed, progress=progress)
-    folder = Path(artifacts) if artifacts is not None else settings.artifacts
+    folder = Path(options.artifacts) if options.artifacts is not None else settings.artifacts
     if folder is None:
         folder = Path(tempfile.mkdtemp(prefix="kadv-"))
-    stem = f"{_slug(depth_model.name)}-{_slug(built.name)}-seed{seed}"
-    render = ViewRenderer(objective, height, width, supersample=2)
+    return Setup(
+        depth_model.name,
+        built.name,
+        renderer,
+        DifferentiableRenderer(renderer),
+        objective,
+        penalty,
+        views,
+        (height, width),
+        budget,
+        folder,
+        f"{_slug(depth_model.name)}-{_slug(built.name)}-seed{options.seed}",
+        ViewRenderer(objective, height, width, supersample=2),
+    )
+
+
+def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
+    """Search for views near a scene's init views where ``model`` fails, deterministically for its seed.
+
+    Args:
+        model: a preset name (``"kadv_tiny"``), a hub id, a ``save_pretrained`` folder, a
+            :class:`kadv.models.DepthModel`, or ``(torch module, output kind)``.
+        scene: a :class:`kadv.scenes.Scene`, or a name :func:`kadv.testing.scene` takes
+            (``"box_room"``, ``"probe/thin_structures"``, a file's path).
+        options: :class:`CheckOptions`' fields (``init_count``, ``budget_evaluations``, ``seed``,
+            ``loss``, ``size``, ``method``, ``lighting``, ``radius``, ``envelope``, ``artifacts``,
+            ``progress``).
+
+    Raises:
+        RobustnessInputError: a bad model, scene or setting, in one line.
+    """
+    from kadv.attack import AttackConfig, InitViewError, attack
+    from kadv.geometry import yaw_pitch_roll
+    from kadv.report.run import save_view_picture
+    from kadv.testing.profile import check_radii
+
+    checked = CheckOptions.of(options, "viewpoint_robustness")
+    ((degrees, metres),) = check_radii([checked.radius])
+    built = setup(model, scene, checked)
+    try:
+        config = AttackConfig(
+            checked.method,
+            budget_evaluations=built.budget,
+            max_angle_deg=degrees,
+            max_distance=metres,
+            envelope=checked.envelope,
+        )
+        result = attack(
+            built.objective,
+            built.differentiable,
+            built.views,
+            *built.size,
+            config,
+            checked.seed,
+            progress=checked.progress,
+        )
+    except InitViewError as error:
+        raise RobustnessInputError(f"scene {built.scene_name!r}: {error}") from error
+    except ValueError as error:
+        raise RobustnessInputError(str(error)) from error
     outcomes = []
     for view in result.views:
-        init, worst = view.init_record, _worst(view.records)
+        init, worst = view.init_record, worst_record(view.records)
         pose = worst.world_T_cam(view.init.world_T_cam)
         picture = save_view_picture(
-            folder / f"{stem}-{view.init.name}-worst.png", render, view.init, worst, f"worst view from {view.init.name}"
+            built.folder / f"{built.stem}-{view.init.name}-worst.png",
+            built.render,
+            view.init,
+            worst,
+            f"worst view from {view.init.name}",
         )
         outcomes.append(
             InitViewOutcome(
@@ -219,13 +306,21 @@ def viewpoint_robustness(
                 delta1_worst=worst.delta1,
                 abs_rel_worst=worst.abs_rel,
                 centre=tuple(pose[:3, 3].tolist()),
-                angles_deg=_angles_deg(pose),
+                angles_deg=tuple(torch.rad2deg(yaw_pitch_roll(pose[:3, :3].double())).tolist()),
                 evaluations=len(view.records),
                 picture=picture,
                 world_T_cam=pose.tolist(),
             )
         )
-    return RobustnessResult(depth_model.name, built.name, seed, budget, outcomes)
+    return RobustnessResult(
+        built.model_name,
+        built.scene_name,
+        checked.seed,
+        built.budget,
+        outcomes,
+        config.envelope.name,
+        (degrees, metres),
+    )
 
 
 def _slug(name: str) -> str:
@@ -238,25 +333,60 @@ def assert_viewpoint_robust(
     *,
     min_delta1: float | None = None,
     max_delta1_drop: float | None = None,
+    min_score: float | None = None,
     **options,
-) -> RobustnessResult:
+):
     """Fail unless every init view's worst view keeps delta1 >= ``min_delta1`` and loses at most
-    ``max_delta1_drop`` of its init view's delta1.
+    ``max_delta1_drop`` of its init view's delta1, within one radius and envelope (``radius=``,
+    ``envelope=``; by default 45 degrees and 1 m, any pose); and, with ``min_score``, unless the
+    model's :func:`kadv.testing.robustness_profile` score reaches it.
 
-    Takes :func:`viewpoint_robustness`'s arguments (``init_count``, ``budget_evaluations``,
-    ``seed``, ``loss``, ``size``, ...); returns its result when the model passes.
+    Takes :func:`viewpoint_robustness`'s arguments (``radius``, ``envelope``, ``init_count``,
+    ``budget_evaluations``, ``seed``, ``loss``, ``size``, ...) and, with ``min_score``,
+    :func:`kadv.testing.robustness_profile`'s (``radii``, ``seeds``, ...). Returns the result of the
+    one-radius check, or the profile when ``min_score`` alone is set.
 
     Raises:
-        AssertionError: naming each failing init view, its delta1 init -> worst, the worst view's
-            pose and its picture.
-        RobustnessInputError: neither threshold set, or a bad model, scene or setting.
+        AssertionError: naming the radius and envelope, each failing init view, its delta1 init ->
+            worst, the worst view's pose and its picture; or the score, its spread and the profile.
+        RobustnessInputError: no threshold set, an option neither check takes, or a bad model,
+            scene or setting.
     """
     __tracebackhide__ = True  # pytest shows the user's line, not kadv's
-    if min_delta1 is None and max_delta1_drop is None:
-        raise RobustnessInputError("assert_viewpoint_robust needs min_delta1 or max_delta1_drop (both are unset)")
-    for name, value in (("min_delta1", min_delta1), ("max_delta1_drop", max_delta1_drop)):
+    from kadv.testing.profile import PROFILE_KEYS, robustness_profile
+
+    if min_delta1 is None and max_delta1_drop is None and min_score is None:
+        raise RobustnessInputError(
+            "assert_viewpoint_robust needs min_delta1, max_delta1_drop or min_score (all are unset)"
+        )
+    for name, value in (("min_delta1", min_delta1), ("max_delta1_drop", max_delta1_drop), ("min_score", min_score)):
         if value is not None and not (isinstance(value, (int, float)) and 0.0 <= value <= 1.0):
             raise RobustnessInputError(f"{name} must be a number in [0, 1], got {value!r}")
+    single = {f.name for f in fields(CheckOptions)}
+    profiled = (single - {"radius", "seed"}) | set(PROFILE_KEYS)
+    unknown = sorted(set(options) - single - (profiled if min_score is not None else set()))
+    if unknown:
+        raise RobustnessInputError(f"assert_viewpoint_robust takes no option {', '.join(unknown)}")
+    outcome = None
+    if min_delta1 is not None or max_delta1_drop is not None:
+        outcome = _check_radius(
+            model, scene, min_delta1, max_delta1_drop, {k: v for k, v in options.items() if k in single}
+        )
+    if min_score is not None:
+        profile = robustness_profile(model, scene, **{k: v for k, v in options.items() if k in profiled})
+        if profile.score < min_score:
+            radii = ", ".join(f"{d:g}°/{m:g} m" for d, m in profile.radii)
+            raise AssertionError(
+                f"{profile.model}'s viewpoint robustness score on {profile.scene} is {profile.score:.3f} "
+                f"(± {profile.score_spread:.3f} over seeds {list(profile.seeds)}), below min_score {min_score} "
+                f"(radii {radii}, envelope {profile.envelope}):\n{profile.markdown()}"
+            )
+        outcome = outcome or profile
+    return outcome
+
+
+def _check_radius(model, scene, min_delta1, max_delta1_drop, options: dict) -> RobustnessResult:
+    __tracebackhide__ = True
     result = viewpoint_robustness(model, scene, **options)
     failing = [
         view
@@ -274,7 +404,7 @@ def assert_viewpoint_robust(
             )
             if value is not None
         )
-        lines = [f"{result.model} is not viewpoint-robust on {result.scene} (wanted {wanted}):"]
+        lines = [f"{result.model} is not viewpoint-robust on {result.scene} {result.bounds_text()} (wanted {wanted}):"]
         for view in failing:
             lines.append(
                 f"  {view.name}: delta1 {view.delta1_init:.3f} -> {view.delta1_worst:.3f} at {view.pose_text()}; "

@@ -56,7 +56,10 @@ def test_a_user_file_passes_leniently_and_fails_strictly_naming_the_view_and_its
     assert failure is not None, output
     picture = Path(failure.group(3))
     assert picture.is_file() and picture.is_relative_to(pytester.path / "kept")
-    assert "kadv_tiny is not viewpoint-robust on box_room_3 (wanted delta1 >= 1.0)" in output
+    assert (
+        "kadv_tiny is not viewpoint-robust on box_room_3 within 45°, 1 m (envelope free) (wanted delta1 >= 1.0)"
+        in output
+    )
     # the session's summary: one line per model x scene checked, with its verdict
     summary = output.split("kadv viewpoint robustness", 1)[1]
     lines = [line for line in summary.splitlines() if line.startswith("kadv_tiny x box_room_3")]

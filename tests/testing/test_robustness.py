@@ -51,7 +51,9 @@ def test_a_failing_assertion_names_each_failing_view_its_pose_and_picture(tmp_pa
     with pytest.raises(AssertionError) as failure:
         assert_viewpoint_robust("kadv_tiny", "box_room", min_delta1=1.0, artifacts=tmp_path, **QUICK)
     message = str(failure.value)
-    assert message.startswith("kadv_tiny is not viewpoint-robust on box_room_0 (wanted delta1 >= 1.0):")
+    assert message.startswith(
+        "kadv_tiny is not viewpoint-robust on box_room_0 within 45°, 1 m (envelope free) (wanted delta1 >= 1.0):"
+    )
     assert "file0: delta1 " in message and " -> " in message and "centre (" in message and "yaw " in message
     picture = Path(message.rsplit("picture: ", 1)[1].strip())
     assert picture.is_file() and picture.parent == tmp_path

@@ -1,0 +1,343 @@
+"""Robustness against the size of the camera's move: how far must the camera move, within the poses
+a real camera takes, before the model fails?
+
+:func:`robustness_profile` searches nested radii (degrees, metres) around a scene's init views
+within a camera envelope, and reports per radius the worst view the default search finds and the
+typical view (uniform draws), then one score. Adversarial robustness reports accuracy over the
+perturbation's size in the same way; RoboDepth averages over severities.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from kadv.testing.inputs import RobustnessInputError
+from kadv.testing.robustness import CheckOptions, Setup, setup, worst_record
+
+__all__ = [
+    "DEFAULT_RADII",
+    "FAIL_BELOW",
+    "PROFILE_KEYS",
+    "TYPICAL_VIEWS",
+    "Profile",
+    "check_radii",
+    "robustness_profile",
+]
+
+DEFAULT_RADII = ((5.0, 0.1), (15.0, 0.3), (45.0, 1.0))  # (degrees, metres), nested
+# A view fails when fewer than half of its pixels are within delta1's factor 1.25 of the truth
+FAIL_BELOW = 0.5
+TYPICAL_VIEWS = 16  # uniform draws per init view and radius
+# what a profile takes beyond CheckOptions (whose radius and seed it replaces)
+PROFILE_KEYS = ("radii", "envelope", "seeds", "typical_views", "fail_below")
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A model's viewpoint robustness on one scene against the radius of the camera's move.
+
+    Attributes:
+        model, scene: their names.
+        envelope: the camera envelope the views kept to (:mod:`kadv.penalties.envelope`).
+        radii: the nested radii, (degrees, metres) each.
+        seeds: the seeds of the init views and searches.
+        delta1_init: mean delta1 at the init views, per seed.
+        worst_by_seed: (seeds, radii) mean over init views of the worst valid view's delta1 found
+            within each radius; never rising with the radius.
+        typical_by_seed: (seeds, radii) mean delta1 of views drawn uniformly from each radius.
+        failure_by_seed: (seeds, radii) share of those views whose delta1 is below ``fail_below``.
+        typical_interval, failure_interval: per radius, 95% intervals over all the draws (a normal
+            interval of the mean; Wilson's for the share).
+        fail_below: the delta1 under which a drawn view counts as failed.
+        pictures: per radius, the four-panel picture of the worst view found (first seed).
+    """
+
+    model: str
+    scene: str
+    envelope: str
+    radii: tuple[tuple[float, float], ...]
+    seeds: tuple[int, ...]
+    delta1_init: list[float]
+    worst_by_seed: list[list[float]]
+    typical_by_seed: list[list[float]]
+    failure_by_seed: list[list[float]]
+    typical_interval: list[tuple[float, float]]
+    failure_interval: list[tuple[float, float]]
+    fail_below: float
+    pictures: list[str]
+
+    @property
+    def worst(self) -> list[float]:
+        """Per radius, the worst delta1, mean over seeds."""
+        return np.mean(self.worst_by_seed, axis=0).tolist()
+
+    @property
+    def typical(self) -> list[float]:
+        """Per radius, the typical delta1, mean over seeds."""
+        return np.mean(self.typical_by_seed, axis=0).tolist()
+
+    @property
+    def failure_rate(self) -> list[float]:
+        """Per radius, the share of drawn views that fail, mean over seeds."""
+        return np.mean(self.failure_by_seed, axis=0).tolist()
+
+    @property
+    def scores(self) -> list[float]:
+        """The score under each seed (see :attr:`score`)."""
+        return [_area(init, worst) for init, worst in zip(self.delta1_init, self.worst_by_seed)]
+
+    @property
+    def score(self) -> float:
+        """In [0, 1]: the area under the worst-case curve, from the init views' delta1 at radius 0
+        through each radius, each step between radii weighing the same (as RoboDepth weighs
+        severities), mean over seeds. 1: no move within the radii costs the model anything."""
+        return float(np.mean(self.scores))
+
+    @property
+    def score_spread(self) -> float:
+        """max - min of the score over the seeds."""
+        return float(np.ptp(self.scores))
+
+    def markdown(self) -> str:
+        """A table: per radius, the worst and typical delta1, the failure rate; then the score."""
+        lines = [
+            f"{self.model} on {self.scene}, envelope {self.envelope}, seeds {list(self.seeds)}: "
+            f"delta1 {np.mean(self.delta1_init):.3f} at the init views",
+            "",
+            f"| radius | worst delta1 | typical delta1 (95%) | failure rate, delta1 < {self.fail_below:g} (95%) |",
+            "|---|---|---|---|",
+        ]
+        for k, (degrees, metres) in enumerate(self.radii):
+            lo, hi = self.typical_interval[k]
+            flo, fhi = self.failure_interval[k]
+            lines.append(
+                f"| {degrees:g}°, {metres:g} m | {self.worst[k]:.3f} | {self.typical[k]:.3f} ({lo:.3f}-{hi:.3f}) | "
+                f"{self.failure_rate[k]:.0%} ({flo:.0%}-{fhi:.0%}) |"
+            )
+        lines += ["", f"score {self.score:.3f} ± {self.score_spread:.3f} (spread over seeds)"]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """Everything, plus the means, the score and its spread, as plain JSON values."""
+        out = asdict(self)
+        out.update(
+            worst=self.worst,
+            typical=self.typical,
+            failure_rate=self.failure_rate,
+            score=self.score,
+            score_spread=self.score_spread,
+        )
+        return out
+
+    def save_png(self, path: str | Path) -> Path:
+        """delta1 against the radius, worst and typical, with bands over the seeds, and the worst
+        view's picture at each radius."""
+        import matplotlib.pyplot as plt
+        from PIL import Image
+
+        from kadv.report.figures import save_figure
+
+        count = len(self.radii)
+        # the curve on the left; the worst views' four-panel pictures stacked on the right, one a radius
+        figure = plt.figure(figsize=(13.0, max(4.2, 2.0 * count)))
+        grid = figure.add_gridspec(count, 2, width_ratios=[1.0, 1.9])
+        axis = figure.add_subplot(grid[:, 0])
+        steps = np.arange(count + 1)
+        for values, label, colour in (
+            (self.worst_by_seed, "worst", "tab:red"),
+            (self.typical_by_seed, "typical", "tab:blue"),
+        ):
+            curves = np.array([[init, *row] for init, row in zip(self.delta1_init, values)])
+            axis.plot(steps, curves.mean(axis=0), marker="o", color=colour, label=label)
+            axis.fill_between(steps, curves.min(axis=0), curves.max(axis=0), color=colour, alpha=0.2, linewidth=0)
+        axis.set_xticks(steps, ["init"] + [f"{d:g}°\n{m:g} m" for d, m in self.radii])
+        axis.set_ylim(0, 1.02)
+        axis.set_ylabel("delta1 (band: min to max over seeds)")
+        score = f"score {self.score:.3f} ± {self.score_spread:.3f}"
+        axis.set_title(f"{self.model} on {self.scene} ({self.envelope})\n{score}")
+        axis.legend(loc="lower left")
+        for k, picture in enumerate(self.pictures):
+            tile = figure.add_subplot(grid[k, 1])
+            with Image.open(picture) as image:
+                tile.imshow(np.asarray(image.convert("RGB")))
+            tile.set_title(f"worst within {self.radii[k][0]:g}°, {self.radii[k][1]:g} m", fontsize=9)
+            tile.set_axis_off()
+        figure.tight_layout()
+        return save_figure(Path(path), figure)
+
+
+def _area(init: float, worst: list[float]) -> float:
+    curve = [init, *worst]
+    return float(np.mean([(a + b) / 2 for a, b in itertools.pairwise(curve)]))
+
+
+def check_radii(radii) -> tuple[tuple[float, float], ...]:
+    """The radii as (degrees, metres) pairs, or :class:`RobustnessInputError` naming what is wrong:
+    each positive, both increasing (nested: each radius holds the one before)."""
+    try:
+        pairs = tuple((float(d), float(m)) for d, m in radii)
+    except (TypeError, ValueError):
+        raise RobustnessInputError(f"radii must be (degrees, metres) pairs, got {radii!r}") from None
+    if not pairs:
+        raise RobustnessInputError("radii is empty: give at least one (degrees, metres) pair")
+    for d, m in pairs:
+        if not (math.isfinite(d) and math.isfinite(m) and d > 0 and m > 0):
+            raise RobustnessInputError(f"radii: each radius must be positive, got ({d:g}, {m:g})")
+    for (d0, m0), (d1, m1) in itertools.pairwise(pairs):
+        if d1 < d0 or m1 < m0 or (d1, m1) == (d0, m0):
+            raise RobustnessInputError(
+                f"radii must increase (each holds the one before), got ({d0:g}, {m0:g}) then ({d1:g}, {m1:g})"
+            )
+    return pairs
+
+
+def _wilson(failures: int, count: int) -> tuple[float, float]:
+    if count == 0:
+        return (math.nan, math.nan)
+    z, p = 1.96, failures / count
+    centre = (p + z * z / (2 * count)) / (1 + z * z / count)
+    half = z * math.sqrt(p * (1 - p) / count + z * z / (4 * count * count)) / (1 + z * z / count)
+    return (max(0.0, centre - half), min(1.0, centre + half))
+
+
+def _mean_interval(values: list[float]) -> tuple[float, float]:
+    if len(values) < 2:
+        return (math.nan, math.nan)
+    mean, half = float(np.mean(values)), 1.96 * float(np.std(values, ddof=1)) / math.sqrt(len(values))
+    return (mean - half, mean + half)
+
+
+def _typical(built: Setup, init, config, seed: int, index: int, count: int) -> list[float]:
+    """delta1 of the valid views among ``count`` drawn uniformly (Sobol) from the radius and the
+    envelope around ``init``."""
+    from scipy.stats import qmc
+
+    from kadv.attack import SearchContext
+    from kadv.geometry import perturb_world_T_cam
+
+    context = SearchContext(built.objective, built.differentiable, init, *built.size, config)
+    unit = qmc.Sobol(6, scramble=True, seed=np.random.default_rng([seed, index, 7])).random(4 * count)
+    params = config.sample_ball(unit)
+    poses = perturb_world_T_cam(context.base(len(params)).cpu(), params[:, :3], params[:, 3:])
+    inside = [reason is None for reason in config.envelope.figures(built.renderer, poses).reasons()]
+    chosen = params[torch.tensor(inside)][:count]  # rejection keeps the draws uniform within the envelope
+    if len(chosen) == 0:
+        return []
+    return [r.delta1 for r in context.evaluate(0, chosen) if r.valid]
+
+
+def robustness_profile(
+    model,
+    scene,
+    *,
+    radii=DEFAULT_RADII,
+    envelope="upright",
+    seeds=(0,),
+    typical_views: int = TYPICAL_VIEWS,
+    fail_below: float = FAIL_BELOW,
+    **options,
+) -> Profile:
+    """The model's :class:`Profile` on ``scene``: per radius, the worst and typical delta1 within it
+    and the envelope, over the scene's init views and ``seeds``; deterministic for the seeds.
+
+    Args:
+        model, scene: as :func:`kadv.testing.viewpoint_robustness` takes them.
+        radii: nested (degrees, metres) bounds on the move from each init view, increasing.
+        envelope: a preset's name (``free``, ``upright``, ``handheld``, ``robot``) or an
+            :class:`kadv.penalties.Envelope`.
+        seeds: one profile run per seed (init views and searches); the score's spread is over them.
+        typical_views: views drawn per init view and radius for the typical case.
+        fail_below: a drawn view whose delta1 is below this counts as failed.
+        options: :class:`kadv.testing.CheckOptions`' other fields (``budget_evaluations``: per init
+            view and radius for the worst case; ``init_count``, ``size``, ``method``, ``loss``,
+            ``lighting``, ``artifacts``, ``progress``).
+
+    Raises:
+        RobustnessInputError: bad radii, seeds, envelope, model, scene or setting, in one line.
+    """
+    from kadv.attack import AttackConfig, attack
+    from kadv.attack.init_views import InitViewError, fit_into_envelope
+    from kadv.penalties import get_envelope
+    from kadv.report.run import save_view_picture
+
+    taken = sorted({"radius", "seed"} & set(options))
+    if taken:
+        raise RobustnessInputError(f"robustness_profile takes radii and seeds, not {' or '.join(taken)}")
+    checked = CheckOptions.of(options, "robustness_profile")
+    radii = check_radii(radii)
+    seeds = tuple(seeds)
+    if not seeds or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds):
+        raise RobustnessInputError(f"seeds must be one or more integers >= 0, got {list(seeds)}")
+    if not (isinstance(typical_views, int) and typical_views >= 2):
+        raise RobustnessInputError(f"typical_views must be an integer >= 2, got {typical_views!r}")
+    if not (isinstance(fail_below, (int, float)) and 0 < fail_below <= 1):
+        raise RobustnessInputError(f"fail_below must be in (0, 1], got {fail_below!r}")
+    try:
+        bounds = get_envelope(envelope)
+    except ValueError as error:
+        raise RobustnessInputError(str(error)) from None
+    delta1_init, worst_rows, typical_rows, failure_rows, pictures = [], [], [], [], []
+    draws: list[list[float]] = [[] for _ in radii]
+    for run, seed in enumerate(seeds):
+        built = setup(model, scene, dataclasses.replace(checked, seed=seed))
+        try:
+            views = [fit_into_envelope(built.renderer, v, bounds, built.penalty.margin) for v in built.views]
+        except InitViewError as error:
+            raise RobustnessInputError(f"scene {built.scene_name!r}: {error}") from None
+        carried = [1.0] * len(views)  # the worst delta1 so far per init view: the radii are nested
+        carried_records: list = [None] * len(views)
+        worst_row, typical_row, failure_row = [], [], []
+        for k, (degrees, metres) in enumerate(radii):
+            config = AttackConfig(
+                checked.method,
+                budget_evaluations=built.budget,
+                max_angle_deg=degrees,
+                max_distance=metres,
+                envelope=bounds,
+            )
+            result = attack(
+                built.objective, built.differentiable, views, *built.size, config, seed, progress=checked.progress
+            )
+            typical: list[float] = []
+            for i, view in enumerate(result.views):
+                worst = worst_record(view.records)
+                if worst.delta1 <= carried[i]:
+                    carried[i], carried_records[i] = worst.delta1, (view.init, worst)
+                typical += _typical(built, view.init, config, seed, i, typical_views)
+            if run == 0:
+                i = int(np.argmin(carried))
+                init, record = carried_records[i]
+                label = f"worst within {degrees:g}°, {metres:g} m"
+                path = built.folder / f"{built.stem}-{bounds.name}-radius{k}.png"
+                pictures.append(str(save_view_picture(path, built.render, init, record, label)))
+            if k == 0:
+                delta1_init.append(float(np.mean([v.init_record.delta1 for v in result.views])))
+            worst_row.append(float(np.mean(carried)))
+            typical_row.append(float(np.mean(typical)) if typical else math.nan)
+            failure_row.append(float(np.mean([d < fail_below for d in typical])) if typical else math.nan)
+            draws[k] += typical
+        worst_rows.append(worst_row)
+        typical_rows.append(typical_row)
+        failure_rows.append(failure_row)
+    return Profile(
+        model=built.model_name,
+        scene=built.scene_name,
+        envelope=bounds.name,
+        radii=radii,
+        seeds=seeds,
+        delta1_init=delta1_init,
+        worst_by_seed=worst_rows,
+        typical_by_seed=typical_rows,
+        failure_by_seed=failure_rows,
+        typical_interval=[_mean_interval(d) for d in draws],
+        failure_interval=[_wilson(sum(v < fail_below for v in d), len(d)) for d in draws],
+        fail_below=float(fail_below),
+        pictures=pictures,
+    )

@@ -1,0 +1,105 @@
+"""Robustness profiles: worst and typical delta1 against the radius of the camera's move, the score,
+and the checks that use them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from kadv.testing import Profile, RobustnessInputError, assert_viewpoint_robust, robustness_profile, scene
+from kadv.testing.profile import check_radii
+
+# two small radii, one init view, few views: the profile's arithmetic is the same at any budget
+QUICK = {
+    "radii": ((5.0, 0.1), (30.0, 0.6)),
+    "budget_evaluations": 6,
+    "typical_views": 4,
+    "init_count": 1,
+    "size": (24, 32),
+    "lighting": "direct",
+}
+
+
+def _profile(**changes) -> Profile:
+    fields = {
+        "model": "m",
+        "scene": "s",
+        "envelope": "upright",
+        "radii": ((5.0, 0.1), (15.0, 0.3), (45.0, 1.0)),
+        "seeds": (0, 1),
+        "delta1_init": [0.9, 0.8],
+        "worst_by_seed": [[0.7, 0.5, 0.1], [0.8, 0.4, 0.0]],
+        "typical_by_seed": [[0.9, 0.8, 0.7], [0.8, 0.8, 0.6]],
+        "failure_by_seed": [[0.0, 0.1, 0.2], [0.0, 0.0, 0.4]],
+        "typical_interval": [(0.7, 0.9)] * 3,
+        "failure_interval": [(0.0, 0.3)] * 3,
+        "fail_below": 0.5,
+        "pictures": [],
+    }
+    return Profile(**(fields | changes))
+
+
+def test_the_score_is_the_mean_trapezoid_under_the_worst_curve_from_the_init_views() -> None:
+    profile = _profile()
+    # seed 0: (0.9+0.7)/2, (0.7+0.5)/2, (0.5+0.1)/2 -> 1.7/3; seed 1: 0.8, 0.6, 0.2 -> 1.6/3
+    assert profile.scores == pytest.approx([1.7 / 3, 1.6 / 3])
+    assert profile.score == pytest.approx(0.55) and profile.score_spread == pytest.approx(0.1 / 3)
+    assert profile.worst == pytest.approx([0.75, 0.45, 0.05]) and profile.failure_rate == pytest.approx([0, 0.05, 0.3])
+    perfect = _profile(delta1_init=[1.0, 1.0], worst_by_seed=[[1.0] * 3] * 2)
+    assert perfect.score == 1.0 and perfect.score_spread == 0.0
+    table = profile.markdown()
+    assert "| 15°, 0.3 m | 0.450 | 0.800 (0.700-0.900) | 5% (0%-30%) |" in table
+    assert table.endswith("score 0.550 ± 0.033 (spread over seeds)")
+    assert profile.to_dict()["score"] == pytest.approx(profile.score)
+
+
+def test_a_profile_never_rises_with_the_radius_and_repeats_for_its_seed(tmp_path: Path) -> None:
+    room = scene("box_room", seed=3)
+    first = robustness_profile("kadv_tiny", room, artifacts=tmp_path / "a", **QUICK)
+    again = robustness_profile("kadv_tiny", room, artifacts=tmp_path / "b", **QUICK)
+    assert {**first.to_dict(), "pictures": []} == {**again.to_dict(), "pictures": []}
+    worst = first.worst_by_seed[0]
+    assert worst[1] <= worst[0] <= first.delta1_init[0]  # nested radii: the larger holds the smaller's worst
+    assert all(0 <= v <= 1 for v in [*first.typical, *first.failure_rate]) and 0 <= first.score <= 1
+    assert first.envelope == "upright" and len(first.pictures) == 2 and Path(first.pictures[1]).is_file()
+    assert first.save_png(tmp_path / "profile.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    "radii, message",
+    [
+        (((15, 0.3), (5, 0.1)), r"radii must increase \(each holds the one before\), got \(15, 0.3\) then \(5, 0.1\)"),
+        (((5, -0.1),), r"radii: each radius must be positive, got \(5, -0.1\)"),
+        ((), "radii is empty"),
+        ((5, 0.1), r"radii must be \(degrees, metres\) pairs"),
+    ],
+)
+def test_radii_that_are_not_nested_and_positive_are_refused(radii, message: str) -> None:
+    with pytest.raises(RobustnessInputError, match=message):
+        check_radii(radii)
+
+
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"seeds": ()}, r"seeds must be one or more integers >= 0, got \[\]"),
+        ({"envelope": "drone"}, "envelope 'drone' is not a preset"),
+        ({"radius": (5, 0.1)}, "robustness_profile takes radii and seeds, not radius"),
+        ({"colour": "red"}, "robustness_profile takes no option colour"),
+    ],
+)
+def test_bad_profile_settings_are_refused_in_one_line(options: dict, message: str) -> None:
+    with pytest.raises(RobustnessInputError, match=message):
+        robustness_profile("kadv_tiny", "box_room", **{**QUICK, **options})
+
+
+def test_the_assertion_checks_one_radius_and_envelope_or_the_score(tmp_path: Path) -> None:
+    quick = {k: v for k, v in QUICK.items() if k not in ("radii", "typical_views")}
+    with pytest.raises(AssertionError) as failure:
+        assert_viewpoint_robust(
+            "kadv_tiny", "box_room", min_delta1=1.0, radius=(5, 0.1), envelope="robot", artifacts=tmp_path, **quick
+        )
+    assert "within 5°, 0.1 m (envelope robot) (wanted delta1 >= 1.0)" in str(failure.value)
+    with pytest.raises(AssertionError, match=r"score on box_room_0 is 0\.\d{3} .*below min_score 1.0 \(radii 5°/0.1 m"):
+        assert_viewpoint_robust("kadv_tiny", "box_room", min_score=1.0, artifacts=tmp_path, **QUICK)
