@@ -1,12 +1,19 @@
-"""``kadv-probe``: the probe scorecard of one or more depth models.
+"""``kadv-probe``: the probe scorecard of one or more depth models, ranked.
 
     kadv-probe model=kadv_tiny
-    kadv-probe model=kadv_tiny,kadv_tiny_dpt probes=thin_structures,window budget=96
+    kadv-probe model=kadv_tiny,kadv_tiny_dpt seeds=0,1,2 envelope=upright
+    kadv-probe model=kadv_tiny probes=thin_structures,window budget=96 out=outputs/probe_tiny
 
-Each model is attacked on each probe scene (:mod:`kadv.probes`) from the probe's init views; the
-scorecard (delta1 at the init views -> at the worst view found, per probe and model) is printed as
-a Markdown table and written with a PNG of the worst views to ``out`` (``scorecard.md``,
-``scorecard.png``, ``views/``).
+Each model is profiled on each probe scene (:mod:`kadv.probes`), the probe built anew for each
+seed: the worst delta1 within each nested radius of the camera's move and the camera envelope,
+the failure rate of views drawn at the largest radius, and the score (mean ± spread over the
+seeds). The table ends with a ``ranking:`` line; it is printed as Markdown and written with a PNG of
+the profile curves to ``out`` (``scorecard.md``, ``scorecard.png``, ``views/``).
+
+A plain command rather than a Hydra app: a scorecard is one job over its models and probes (the
+sweep is inside it), so it needs neither launchers nor a run directory per override. Its keys are
+written as Hydra's are (``key=value``), and ``hydra.run.dir=`` names the output folder as ``out=``
+does, so that the commands' habits carry over.
 """
 
 from __future__ import annotations
@@ -27,10 +34,13 @@ __all__ = ["main"]
 _KEYS = {
     "model": "kadv_tiny",
     "probes": "all",
-    "seed": "0",
+    "seeds": "0",
+    "seed": None,
+    "envelope": "upright",
     "budget": None,
     "lighting": "baked",
     "out": "outputs/probe",
+    "hydra.run.dir": None,
 }
 
 
@@ -57,22 +67,34 @@ def _int(text: str, key: str, minimum: int) -> int:
     return config_int(number, key, minimum)
 
 
+def _seeds(values: dict[str, str | None]) -> tuple[int, ...]:
+    if values["seed"] is not None:  # one seed, as the other commands take it
+        return (_int(values["seed"], "seed", 0),)
+    seeds = tuple(_int(text, "seeds", 0) for text in (values["seeds"] or "").split(",") if text)
+    if not seeds:
+        raise ValueError("seeds is empty: give one or more integers >= 0, e.g. seeds=0,1,2")
+    return seeds
+
+
 def main(argv: list[str] | None = None) -> None:
+    from kadv.penalties import get_envelope
     from kadv.testing import DEFAULT_BUDGET, RobustnessInputError, scorecard
 
     try:
         values = _arguments(sys.argv[1:] if argv is None else argv)
         models = [name for name in values["model"].split(",") if name]
         probes = None if values["probes"] == "all" else [name for name in values["probes"].split(",") if name]
-        seed = _int(values["seed"], "seed", 0)
+        seeds = _seeds(values)
+        envelope = get_envelope(values["envelope"])
         budget = DEFAULT_BUDGET if values["budget"] is None else _int(values["budget"], "budget", 2)
         if values["lighting"] not in ("baked", "direct"):
             raise ValueError(f"lighting must be 'baked' or 'direct', got {values['lighting']!r}")
-        out = Path(values["out"])
+        out = Path(values["hydra.run.dir"] or values["out"])
         card = scorecard(
             models,
             probes,
-            seed=seed,
+            seeds=seeds,
+            envelope=envelope,
             budget_evaluations=budget,
             artifacts=out / "views",
             lighting=values["lighting"],

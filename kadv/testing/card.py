@@ -1,69 +1,106 @@
-"""The probe scorecard: every model on every probe scene, as one table and one picture."""
+"""The probe scorecard: every model's robustness profile on every probe scene, as one table, one
+ranking and one picture."""
 
 from __future__ import annotations
 
+import itertools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from kadv.testing.inputs import RobustnessInputError
-from kadv.testing.robustness import DEFAULT_BUDGET, RobustnessResult, viewpoint_robustness
+from kadv.testing.profile import DEFAULT_RADII, Profile, robustness_profile
 
 __all__ = ["Scorecard", "scorecard"]
 
 
 @dataclass(frozen=True)
 class Scorecard:
-    """Results by probe and model.
+    """Profiles by probe and model.
 
     Attributes:
-        models: the models' names, one column each.
-        probes: the probes' names, one row each.
-        results: ``results[probe][model]``.
+        models: the models' names.
+        probes: the probes' names.
+        results: ``results[probe][model]``, over all the seeds.
     """
 
     models: list[str]
     probes: list[str]
-    results: dict[str, dict[str, RobustnessResult]]
+    results: dict[str, dict[str, Profile]]
+
+    def seed_scores(self, model: str) -> list[float]:
+        """The model's score under each seed, the mean over the probes."""
+        return np.mean([self.results[probe][model].scores for probe in self.probes], axis=0).tolist()
+
+    def ranking(self) -> str:
+        """``ranking: a (0.61) > b (0.55)``: the models by mean score, highest first; ``=`` joins
+        neighbours whose bands over the seeds (min to max) overlap: tied."""
+        bands = {model: self.seed_scores(model) for model in self.models}
+        order = sorted(self.models, key=lambda model: -float(np.mean(bands[model])))
+        text = f"ranking: {order[0]} ({np.mean(bands[order[0]]):.3f})"
+        for better, worse in itertools.pairwise(order):
+            tied = min(bands[better]) <= max(bands[worse])
+            text += f" {'=' if tied else '>'} {worse} ({np.mean(bands[worse]):.3f})"
+        if len(order) > 1 and " = " in text:
+            text += "; '=': their scores' bands over the seeds overlap (tied)"
+        return text
 
     def markdown(self) -> str:
-        """The table: per probe and model, mean delta1 at the init views -> the worst view's delta1."""
+        """Per probe and model: the worst delta1 at each radius, the failure rate at the largest,
+        the score (mean ± spread over the seeds); the models' mean scores; the ranking."""
+        radii = self.results[self.probes[0]][self.models[0]].radii
+        largest = f"{radii[-1][0]:g}°/{radii[-1][1]:g} m"
         lines = [
-            "| probe | " + " | ".join(f"{model}: delta1 init -> worst" for model in self.models) + " |",
-            "|---|" + "---|" * len(self.models),
+            "| probe | model | "
+            + " | ".join(f"worst delta1 {d:g}°/{m:g} m" for d, m in radii)
+            + f" | failure rate {largest} | score |",
+            "|---|---|" + "---|" * (len(radii) + 2),
         ]
         for probe in self.probes:
-            cells = []
             for model in self.models:
-                result = self.results[probe][model]
-                cells.append(f"{result.delta1_init:.3f} -> {result.worst.delta1_worst:.3f}")
-            lines.append(f"| {probe} | " + " | ".join(cells) + " |")
-        means = [
-            np.mean([self.results[probe][model].worst.delta1_worst for probe in self.probes]) for model in self.models
-        ]
-        lines.append("| **mean worst** | " + " | ".join(f"**{mean:.3f}**" for mean in means) + " |")
-        return "\n".join(lines)
+                profile = self.results[probe][model]
+                worst = " | ".join(f"{v:.3f}" for v in profile.worst)
+                lines.append(
+                    f"| {probe} | {model} | {worst} | {profile.failure_rate[-1]:.0%} | "
+                    f"{profile.score:.3f} ± {profile.score_spread:.3f} |"
+                )
+        for model in self.models:
+            scores = self.seed_scores(model)
+            blank = " | ".join([""] * (len(radii) + 1))
+            lines.append(f"| **mean** | {model} | {blank} | **{np.mean(scores):.3f} ± {np.ptp(scores):.3f}** |")
+        return "\n".join(lines) + "\n\n" + self.ranking()
 
     def save_png(self, path: str | Path) -> Path:
-        """One thumbnail of each probe's worst view per model (rows: probes, columns: models)."""
+        """One panel per probe: each model's worst (solid) and typical (dashed) delta1 against the
+        radius, with bands over the seeds."""
         import matplotlib.pyplot as plt
-        from PIL import Image
 
         from kadv.report.figures import save_figure
 
-        rows, columns = len(self.probes), len(self.models)
-        # the pictures are four panels wide: tiles of their shape, titled above
-        figure, axes = plt.subplots(rows, columns, figsize=(6.4 * columns, 2.3 * rows), squeeze=False)
-        for r, probe in enumerate(self.probes):
-            for c, model in enumerate(self.models):
-                worst = self.results[probe][model].worst
-                with Image.open(worst.picture) as picture:
-                    axes[r, c].imshow(np.asarray(picture.convert("RGB")))
-                axes[r, c].set_title(
-                    f"{probe}, {model}\ndelta1 {worst.delta1_init:.2f} -> {worst.delta1_worst:.2f}", fontsize=9
-                )
-                axes[r, c].set_axis_off()
+        columns = min(4, len(self.probes))
+        rows = math.ceil(len(self.probes) / columns)
+        figure, axes = plt.subplots(rows, columns, figsize=(3.6 * columns, 3.0 * rows), squeeze=False)
+        colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+        for index, probe in enumerate(self.probes):
+            axis = axes[index // columns, index % columns]
+            for m, model in enumerate(self.models):
+                profile = self.results[probe][model]
+                steps = np.arange(len(profile.radii) + 1)
+                colour = colours[m % len(colours)]
+                for values, style in ((profile.worst_by_seed, "-"), (profile.typical_by_seed, "--")):
+                    curves = np.array([[init, *row] for init, row in zip(profile.delta1_init, values)])
+                    label = f"{model} {profile.score:.2f}" if style == "-" else None
+                    axis.plot(steps, curves.mean(axis=0), style, color=colour, marker="o", markersize=3, label=label)
+                    axis.fill_between(steps, curves.min(0), curves.max(0), color=colour, alpha=0.15, linewidth=0)
+                axis.set_xticks(steps, ["init"] + [f"{d:g}°\n{r:g} m" for d, r in profile.radii], fontsize=7)
+            axis.set_ylim(0, 1.02)
+            axis.set_title(probe, fontsize=9)
+            axis.legend(fontsize=7, loc="lower left")
+        for index in range(len(self.probes), rows * columns):
+            axes[index // columns, index % columns].set_axis_off()
+        figure.suptitle("delta1 against the camera's move: worst (solid) and typical (dashed); legend: score")
         figure.tight_layout()
         return save_figure(Path(path), figure)
 
@@ -72,29 +109,31 @@ def scorecard(
     models: list,
     probes: list[str] | None = None,
     *,
-    seed: int = 0,
-    budget_evaluations: int = DEFAULT_BUDGET,
-    artifacts: str | Path | None = None,
+    seeds=(0,),
+    envelope="upright",
+    radii=DEFAULT_RADII,
     progress: bool = False,
     **options,
 ) -> Scorecard:
-    """Run :func:`kadv.testing.viewpoint_robustness` for each model on each probe scene.
+    """Profile each model on each probe scene (:func:`kadv.testing.robustness_profile`), each probe
+    built anew for each seed.
 
     Args:
-        models: what :func:`kadv.testing.viewpoint_robustness` takes as a model, one per column.
+        models: what :func:`kadv.testing.viewpoint_robustness` takes as a model.
         probes: probe names (:data:`kadv.probes.PROBES`); None: all of them.
-        seed: the probes' and the searches' seed.
-        budget_evaluations: evaluations per init view.
-        artifacts: the folder for the worst views' pictures.
-        progress: print a line per probe and model as each finishes.
-        options: more of :func:`kadv.testing.viewpoint_robustness`'s arguments.
+        seeds: the probes' and the searches' seeds.
+        envelope, radii: as :func:`kadv.testing.robustness_profile` takes them.
+        progress: print a line per probe, model and seed as each finishes.
+        options: more of :func:`kadv.testing.robustness_profile`'s arguments (``budget_evaluations``,
+            ``artifacts``, ``lighting``, ...).
 
     Raises:
-        RobustnessInputError: an unknown probe (listing the probes), or a bad model.
+        RobustnessInputError: an unknown probe (listing the probes), no seeds, or a bad model.
     """
     from kadv.models import DepthModel
     from kadv.scenes.probes import PROBES, probe_scene
     from kadv.testing.inputs import resolve_model
+    from kadv.testing.profile import check_radii
 
     probes = list(PROBES) if probes is None else list(probes)
     unknown = [name for name in probes if name not in PROBES]
@@ -102,21 +141,26 @@ def scorecard(
         raise RobustnessInputError(f"no probe scene {unknown[0]!r}; the probes are: {', '.join(PROBES)}")
     if not models:
         raise RobustnessInputError("scorecard needs at least one model")
+    seeds = tuple(seeds)
+    if not seeds:
+        raise RobustnessInputError("seeds is empty: give at least one seed")
+    radii = check_radii(radii)
     loaded: list[DepthModel] = [resolve_model(model) for model in models]
     names = [model.name for model in loaded]
     if len(set(names)) != len(names):
         raise RobustnessInputError(f"models: each must have its own name, got {names}")
-    results: dict[str, dict[str, RobustnessResult]] = {}
+    results: dict[str, dict[str, Profile]] = {}
     for probe in probes:
-        built = probe_scene(probe, seed)
-        results[probe] = {}
-        for model in loaded:
-            result = viewpoint_robustness(
-                model, built, seed=seed, budget_evaluations=budget_evaluations, artifacts=artifacts, **options
-            )
-            results[probe][model.name] = result
-            if progress:
-                print(
-                    f"{probe} x {model.name}: {result.delta1_init:.3f} -> {result.worst.delta1_worst:.3f}", flush=True
+        runs: dict[str, list[Profile]] = {name: [] for name in names}
+        for seed in seeds:
+            built = probe_scene(probe, seed)
+            for model in loaded:
+                profile = robustness_profile(
+                    model, built, radii=radii, envelope=envelope, seeds=(seed,), progress=False, **options
                 )
+                runs[model.name].append(profile)
+                if progress:
+                    worst = " ".join(f"{v:.3f}" for v in profile.worst)
+                    print(f"{probe} x {model.name}, seed {seed}: worst {worst}, score {profile.score:.3f}", flush=True)
+        results[probe] = {name: Profile.merge(profiles) for name, profiles in runs.items()}
     return Scorecard(names, probes, results)

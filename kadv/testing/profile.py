@@ -53,8 +53,7 @@ class Profile:
             within each radius; never rising with the radius.
         typical_by_seed: (seeds, radii) mean delta1 of views drawn uniformly from each radius.
         failure_by_seed: (seeds, radii) share of those views whose delta1 is below ``fail_below``.
-        typical_interval, failure_interval: per radius, 95% intervals over all the draws (a normal
-            interval of the mean; Wilson's for the share).
+        draws: per radius, the delta1 of every valid drawn view, over init views and seeds.
         fail_below: the delta1 under which a drawn view counts as failed.
         pictures: per radius, the four-panel picture of the worst view found (first seed).
     """
@@ -68,8 +67,7 @@ class Profile:
     worst_by_seed: list[list[float]]
     typical_by_seed: list[list[float]]
     failure_by_seed: list[list[float]]
-    typical_interval: list[tuple[float, float]]
-    failure_interval: list[tuple[float, float]]
+    draws: list[list[float]]
     fail_below: float
     pictures: list[str]
 
@@ -87,6 +85,31 @@ class Profile:
     def failure_rate(self) -> list[float]:
         """Per radius, the share of drawn views that fail, mean over seeds."""
         return np.mean(self.failure_by_seed, axis=0).tolist()
+
+    @property
+    def typical_interval(self) -> list[tuple[float, float]]:
+        """Per radius, the 95% interval of the typical delta1 over all the draws (normal, of the mean)."""
+        return [_mean_interval(d) for d in self.draws]
+
+    @property
+    def failure_interval(self) -> list[tuple[float, float]]:
+        """Per radius, the 95% interval of the failure rate over all the draws (Wilson's)."""
+        return [_wilson(sum(v < self.fail_below for v in d), len(d)) for d in self.draws]
+
+    @classmethod
+    def merge(cls, profiles: list[Profile]) -> Profile:
+        """One profile of the same model, scene name, envelope and radii over all the profiles' seeds
+        (a scorecard builds its probe scene anew for each seed)."""
+        first = profiles[0]
+        return dataclasses.replace(
+            first,
+            seeds=tuple(seed for p in profiles for seed in p.seeds),
+            delta1_init=[v for p in profiles for v in p.delta1_init],
+            worst_by_seed=[row for p in profiles for row in p.worst_by_seed],
+            typical_by_seed=[row for p in profiles for row in p.typical_by_seed],
+            failure_by_seed=[row for p in profiles for row in p.failure_by_seed],
+            draws=[[v for p in profiles for v in p.draws[k]] for k in range(len(first.radii))],
+        )
 
     @property
     def scores(self) -> list[float]:
@@ -128,6 +151,8 @@ class Profile:
         """Everything, plus the means, the score and its spread, as plain JSON values."""
         out = asdict(self)
         out.update(
+            typical_interval=self.typical_interval,
+            failure_interval=self.failure_interval,
             worst=self.worst,
             typical=self.typical,
             failure_rate=self.failure_rate,
@@ -336,8 +361,7 @@ def robustness_profile(
         worst_by_seed=worst_rows,
         typical_by_seed=typical_rows,
         failure_by_seed=failure_rows,
-        typical_interval=[_mean_interval(d) for d in draws],
-        failure_interval=[_wilson(sum(v < fail_below for v in d), len(d)) for d in draws],
+        draws=draws,
         fail_below=float(fail_below),
         pictures=pictures,
     )

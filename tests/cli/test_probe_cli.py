@@ -9,14 +9,17 @@ import pytest
 from kadv.cli.probe import main
 
 
-def test_the_scorecard_prints_its_table_and_writes_its_files(tmp_path: Path, capsys) -> None:
-    main(["model=kadv_tiny", "probes=window,stairs", "budget=4", "lighting=direct", f"out={tmp_path}"])
+def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_path: Path, capsys) -> None:
+    """``hydra.run.dir=`` names the output folder as ``out=`` does."""
+    main(["model=kadv_tiny", "probes=window,stairs", "budget=4", "lighting=direct", f"hydra.run.dir={tmp_path}"])
     printed = capsys.readouterr().out
-    assert "| probe | kadv_tiny: delta1 init -> worst |" in printed
-    assert "| window | " in printed and "| stairs | " in printed
+    assert "| probe | model | worst delta1 5°/0.1 m | worst delta1 15°/0.3 m | worst delta1 45°/1 m |" in printed
+    assert "| window | kadv_tiny | " in printed and "| stairs | kadv_tiny | " in printed
+    assert "\nranking: kadv_tiny (" in printed
     assert (tmp_path / "scorecard.md").read_text().strip() in printed
     assert (tmp_path / "scorecard.png").stat().st_size > 10_000
-    assert len(list((tmp_path / "views").glob("*-worst.png"))) == 4  # two probes x two init views
+    # the worst view at each of the three radii, per probe, in the upright envelope by default
+    assert len(list((tmp_path / "views").glob("*-upright-radius*.png"))) == 6
 
 
 @pytest.mark.parametrize(
@@ -26,6 +29,9 @@ def test_the_scorecard_prints_its_table_and_writes_its_files(tmp_path: Path, cap
         ("model=", "scorecard needs at least one model"),
         ("budget=1", "budget must be an integer >= 2, got 1"),
         ("seed=x", "seed must be an integer >= 0, got 'x'"),
+        ("seeds=", "seeds is empty: give one or more integers >= 0"),
+        ("seeds=0,-1", "seeds must be an integer >= 0, got -1"),
+        ("envelope=drone", "envelope 'drone' is not a preset; choose one of free, upright, handheld, robot"),
         ("lighting=sun", "lighting must be 'baked' or 'direct', got 'sun'"),
         ("colour=red", "'colour=red': expected key=value with a key of model, probes"),
     ],

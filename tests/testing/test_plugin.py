@@ -109,7 +109,7 @@ def test_budget(kadv_scene, kadv_artifacts, request):
         ),
         (
             'assert_viewpoint_robust("kadv_tiny", kadv_scene("box_room"))',
-            "UsageError: assert_viewpoint_robust needs min_delta1 or max_delta1_drop (both are unset)",
+            "UsageError: assert_viewpoint_robust needs min_delta1, max_delta1_drop or min_score (all are unset)",
         ),
     ],
 )

@@ -32,8 +32,7 @@ def _profile(**changes) -> Profile:
         "worst_by_seed": [[0.7, 0.5, 0.1], [0.8, 0.4, 0.0]],
         "typical_by_seed": [[0.9, 0.8, 0.7], [0.8, 0.8, 0.6]],
         "failure_by_seed": [[0.0, 0.1, 0.2], [0.0, 0.0, 0.4]],
-        "typical_interval": [(0.7, 0.9)] * 3,
-        "failure_interval": [(0.0, 0.3)] * 3,
+        "draws": [[0.9, 0.8, 0.9, 0.8], [0.8, 0.8, 0.9, 0.7], [0.7, 0.4, 0.8, 0.6]],
         "fail_below": 0.5,
         "pictures": [],
     }
@@ -49,7 +48,12 @@ def test_the_score_is_the_mean_trapezoid_under_the_worst_curve_from_the_init_vie
     perfect = _profile(delta1_init=[1.0, 1.0], worst_by_seed=[[1.0] * 3] * 2)
     assert perfect.score == 1.0 and perfect.score_spread == 0.0
     table = profile.markdown()
-    assert "| 15°, 0.3 m | 0.450 | 0.800 (0.700-0.900) | 5% (0%-30%) |" in table
+    # the draws' intervals: 0.8 ± 1.96 * 0.0816 / 2; Wilson's for 0 of 4 and 1 of 4 failed
+    assert "| 15°, 0.3 m | 0.450 | 0.800 (0.720-0.880) | 5% (0%-49%) |" in table
+    assert profile.failure_interval[2] == pytest.approx((0.0456, 0.6994), abs=1e-4)
+    merged = Profile.merge([profile, profile])
+    assert merged.seeds == (0, 1, 0, 1) and merged.score == pytest.approx(profile.score)
+    assert len(merged.draws[0]) == 8
     assert table.endswith("score 0.550 ± 0.033 (spread over seeds)")
     assert profile.to_dict()["score"] == pytest.approx(profile.score)
 
@@ -103,3 +107,15 @@ def test_the_assertion_checks_one_radius_and_envelope_or_the_score(tmp_path: Pat
     assert "within 5°, 0.1 m (envelope robot) (wanted delta1 >= 1.0)" in str(failure.value)
     with pytest.raises(AssertionError, match=r"score on box_room_0 is 0\.\d{3} .*below min_score 1.0 \(radii 5°/0.1 m"):
         assert_viewpoint_robust("kadv_tiny", "box_room", min_score=1.0, artifacts=tmp_path, **QUICK)
+
+
+def test_the_ranking_ties_models_whose_seed_bands_overlap() -> None:
+    from kadv.testing import Scorecard
+
+    high = _profile(worst_by_seed=[[0.9, 0.8, 0.7], [0.8, 0.8, 0.7]])  # scores 0.833, 0.783
+    near = _profile(worst_by_seed=[[0.8, 0.7, 0.6], [0.8, 0.8, 0.7]])  # 0.75, 0.783: overlaps high's band
+    low = _profile()  # 0.567, 0.533: below near's band
+    card = Scorecard(["near", "low", "high"], ["p"], {"p": {"near": near, "low": low, "high": high}})
+    assert card.ranking() == (
+        "ranking: high (0.808) = near (0.767) > low (0.550); '=': their scores' bands over the seeds overlap (tied)"
+    )

@@ -82,7 +82,7 @@ def test_the_budget_factor_in_force_scales_the_evaluations(tmp_path: Path) -> No
 @pytest.mark.parametrize(
     ("call", "message"),
     [
-        (lambda: assert_viewpoint_robust("kadv_tiny", "box_room"), "needs min_delta1 or max_delta1_drop"),
+        (lambda: assert_viewpoint_robust("kadv_tiny", "box_room"), "needs min_delta1, max_delta1_drop or min_score"),
         (lambda: viewpoint_robustness("kadv_tiny", "probe/nope"), "no probe scene 'nope'; the probes are: photo_wall"),
         (lambda: viewpoint_robustness((WrongShape(), "depth"), "box_room"), r"must map rgb \(B, 3, H, W\) to \(B, 1"),
         (lambda: viewpoint_robustness(Constant(), "box_room"), "needs its output kind"),
@@ -100,15 +100,29 @@ def test_bad_input_is_one_line_naming_it(call, message: str) -> None:
     assert "\n" not in str(error.value)
 
 
-def test_the_scorecard_has_a_column_per_model_and_a_thumbnail_per_probe(tmp_path: Path) -> None:
-    card = scorecard(["kadv_tiny", (Constant(), "depth")], ["window", "stairs"], artifacts=tmp_path, **QUICK)
+def test_the_scorecard_profiles_each_model_on_each_probe_and_ranks_them(tmp_path: Path) -> None:
+    quick = {**QUICK, "budget_evaluations": 6, "size": (24, 32), "typical_views": 4, "radii": ((5, 0.1), (30, 0.6))}
+    card = scorecard(
+        ["kadv_tiny", (Constant(), "depth")], ["window", "stairs"], seeds=(0, 1), artifacts=tmp_path, **quick
+    )
     table = card.markdown().splitlines()
-    assert table[0] == "| probe | kadv_tiny: delta1 init -> worst | Constant: delta1 init -> worst |"
-    assert [row.split(" | ")[0] for row in table[2:]] == ["| window", "| stairs", "| **mean worst**"]
-    worst = card.results["window"]["Constant"].worst
-    assert f"{worst.delta1_init:.3f} -> {worst.delta1_worst:.3f}" in table[2]
+    assert table[0] == (
+        "| probe | model | worst delta1 5°/0.1 m | worst delta1 30°/0.6 m | failure rate 30°/0.6 m | score |"
+    )
+    assert [row.split(" | ")[:2] for row in table[2:8]] == [
+        ["| window", "kadv_tiny"],
+        ["| window", "Constant"],
+        ["| stairs", "kadv_tiny"],
+        ["| stairs", "Constant"],
+        ["| **mean**", "kadv_tiny"],
+        ["| **mean**", "Constant"],
+    ]
+    profile = card.results["window"]["Constant"]
+    assert profile.seeds == (0, 1) and f"{profile.score:.3f} ± {profile.score_spread:.3f}" in table[3]
+    # a model that sees nothing scores below one that sees, beyond the seeds' spread
+    assert table[-1].startswith("ranking: kadv_tiny (") and " > Constant (" in table[-1]
     png = card.save_png(tmp_path / "card.png")
     from PIL import Image
 
     with Image.open(png) as image:
-        assert image.width > 2 * 200 and image.height > 2 * 150
+        assert image.width > 2 * 200 and image.height > 150
