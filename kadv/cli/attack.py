@@ -8,6 +8,7 @@ from kadv.runtime import configure_runtime
 configure_runtime()
 
 import contextlib
+import dataclasses
 import functools
 import logging
 import os
@@ -48,7 +49,7 @@ from kadv.cli.common import (
 )
 from kadv.device import resolve_device
 from kadv.io import atomic_write, remove_temporaries
-from kadv.penalties import Envelope
+from kadv.penalties import ENVELOPES, Envelope
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
 from kadv.report.run import (
     SUMMARY,
@@ -72,7 +73,10 @@ def attack_settings(cfg: DictConfig, envelope: DictConfig | None = None) -> Atta
     keys are errors."""
     node = OmegaConf.to_container(cfg, resolve=True)
     if envelope is not None:
-        node["envelope"] = settings_from_node(Envelope, OmegaConf.to_container(envelope, resolve=True), "envelope")
+        bounds = settings_from_node(Envelope, OmegaConf.to_container(envelope, resolve=True), "envelope")
+        if bounds.name in ENVELOPES and bounds != ENVELOPES[bounds.name]:  # a preset with a bound overridden
+            bounds = dataclasses.replace(bounds, name="custom")
+        node["envelope"] = bounds
     method = get_method(node.pop("method", DEFAULT_METHOD))
     settings = settings_from_node(method.settings, node.pop(method.name, None), f"attack.{method.name}")
     for name in METHODS:  # the nodes of other methods (a preset may carry several) are not this run's

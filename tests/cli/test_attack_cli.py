@@ -1,5 +1,6 @@
 from __future__ import annotations
 
+import csv
 import json
 import os
 import shutil
@@ -18,6 +19,7 @@ from kadv import box_room
 from kadv.cli.attack import main as attack_main
 from kadv.cli.render import main as render_main
 from kadv.cli.train_tiny import main as train_tiny_main
+from kadv.geometry import axis_angle_to_matrix, yaw_pitch_roll
 from kadv.report.summary import SCHEMA_VERSION
 from tests.cli.in_process import call_main
 
@@ -119,6 +121,13 @@ def test_run_directory_holds_every_artefact(demo_runs: Path) -> None:
     assert (run / "trajectory.mp4").stat().st_size > 1000
     assert not (demo_runs / "second" / "trajectory.mp4").exists()
     assert "attack" in (run / "config.yaml").read_text()
+    # each row ends with the view's yaw, pitch and roll, the same as its rotation gives them
+    rows = list(csv.DictReader((run / "trajectory.csv").open()))
+    assert list(rows[0])[-3:] == ["yaw_deg", "pitch_deg", "roll_deg"]
+    theta = torch.tensor([[float(r[f"theta_{a}"]) for a in "xyz"] for r in rows], dtype=torch.float64)
+    angles = torch.rad2deg(yaw_pitch_roll(axis_angle_to_matrix(theta)))
+    written = torch.tensor([[float(r[k]) for k in ("yaw_deg", "pitch_deg", "roll_deg")] for r in rows])
+    assert torch.allclose(written.double(), angles, atol=1e-6)
 
 
 def test_the_video_is_h264_yuv420p_with_four_tall_panels_and_the_plan_per_step(demo_runs: Path) -> None:
@@ -236,6 +245,13 @@ BAD_INPUTS = [
     ("kadv-attack", ["init.params={inside}"], "inside an object"),
     ("kadv-attack", ["init.params=/no/such/init_params.json"], "/no/such/init_params.json"),
     ("kadv-attack", ["device=tpu"], "device='tpu'"),
+    ("kadv-attack", ["envelope=drone"], "envelope=drone: no such option in envelope/; one of: free, handheld"),
+    ("kadv-attack", ["envelope.pitch_deg=[30,-30]"], "envelope.pitch_deg [30, -30] is empty or leaves [-90.0, 90.0]"),
+    (
+        "kadv-attack",
+        ["envelope.height=[5,6]", "init.count=1"],
+        "init view file0 lies outside the envelope custom (height 5 to 6 m): height",
+    ),
     *([("kadv-attack", ["device=cuda"], "no CUDA device")] if not torch.cuda.is_available() else []),
     ("kadv-render", ["camera.eye=[1,1.5]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),
     ("kadv-render", ["camera.eye=[nan,1.5,1]", "camera.target=[3,1,3]", "camera.fov_x_deg=70"], "camera.eye"),
