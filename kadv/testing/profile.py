@@ -35,6 +35,7 @@ DEFAULT_RADII = ((5.0, 0.1), (15.0, 0.3), (45.0, 1.0))  # (degrees, metres), nes
 # A view fails when fewer than half of its pixels are within delta1's factor 1.25 of the truth
 FAIL_BELOW = 0.5
 TYPICAL_VIEWS = 16  # uniform draws per init view and radius
+_DRAW_ROUNDS = 32  # rounds of 4 x typical_views draws at most, for the envelope to keep enough
 # what a profile takes beyond CheckOptions (whose radius and seed it replaces)
 PROFILE_KEYS = ("radii", "envelope", "seeds", "typical_views", "fail_below")
 
@@ -79,12 +80,12 @@ class Profile:
     @property
     def typical(self) -> list[float]:
         """Per radius, the typical delta1, mean over seeds."""
-        return np.mean(self.typical_by_seed, axis=0).tolist()
+        return _nanmean(self.typical_by_seed)
 
     @property
     def failure_rate(self) -> list[float]:
         """Per radius, the share of drawn views that fail, mean over seeds."""
-        return np.mean(self.failure_by_seed, axis=0).tolist()
+        return _nanmean(self.failure_by_seed)
 
     @property
     def typical_interval(self) -> list[tuple[float, float]]:
@@ -198,6 +199,14 @@ class Profile:
         return save_figure(Path(path), figure)
 
 
+def _nanmean(rows: list[list[float]]) -> list[float]:
+    """Per column, the mean of the values that are not NaN (NaN where there are none)."""
+    values = np.array(rows, dtype=float)
+    counts = (~np.isnan(values)).sum(axis=0)
+    sums = np.nansum(values, axis=0)
+    return [float(t / n) if n else math.nan for t, n in zip(sums, counts)]
+
+
 def _area(init: float, worst: list[float]) -> float:
     curve = [init, *worst]
     return float(np.mean([(a + b) / 2 for a, b in itertools.pairwise(curve)]))
@@ -248,13 +257,20 @@ def _typical(built: Setup, init, config, seed: int, index: int, count: int) -> l
     from kadv.geometry import perturb_world_T_cam
 
     context = SearchContext(built.objective, built.differentiable, init, *built.size, config)
-    unit = qmc.Sobol(6, scramble=True, seed=np.random.default_rng([seed, index, 7])).random(4 * count)
-    params = config.sample_ball(unit)
-    poses = perturb_world_T_cam(context.base(len(params)).cpu(), params[:, :3], params[:, 3:])
-    inside = [reason is None for reason in config.envelope.figures(built.renderer, poses).reasons()]
-    chosen = params[torch.tensor(inside)][:count]  # rejection keeps the draws uniform within the envelope
-    if len(chosen) == 0:
+    sobol = qmc.Sobol(6, scramble=True, seed=np.random.default_rng([seed, index, 7]))
+    chosen = []
+    # rejection keeps the draws uniform within the envelope; a tight envelope (robot's roll of 2
+    # degrees in a 45-degree ball) keeps few of them, so the design is drawn on in rounds
+    for _ in range(_DRAW_ROUNDS):
+        params = config.sample_ball(sobol.random(4 * count))
+        poses = perturb_world_T_cam(context.base(len(params)).cpu(), params[:, :3], params[:, 3:])
+        inside = [reason is None for reason in config.envelope.figures(built.renderer, poses).reasons()]
+        chosen += list(params[torch.tensor(inside)])
+        if len(chosen) >= count:
+            break
+    if not chosen:
         return []
+    chosen = torch.stack(chosen[:count])
     return [r.delta1 for r in context.evaluate(0, chosen) if r.valid]
 
 

@@ -119,3 +119,11 @@ def test_the_ranking_ties_models_whose_seed_bands_overlap() -> None:
     assert card.ranking() == (
         "ranking: high (0.808) = near (0.767) > low (0.550); '=': their scores' bands over the seeds overlap (tied)"
     )
+
+
+def test_a_seed_without_valid_draws_leaves_the_others_mean() -> None:
+    nan = float("nan")
+    profile = _profile(typical_by_seed=[[0.9, nan, 0.7], [0.8, nan, nan]], failure_by_seed=[[0.0, nan, 0.2]] * 2)
+    typical = profile.typical
+    assert typical[0] == pytest.approx(0.85) and typical[2] == pytest.approx(0.7) and typical[1] != typical[1]
+    assert profile.failure_rate[2] == pytest.approx(0.2)
