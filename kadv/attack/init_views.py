@@ -16,7 +16,14 @@ import kornia
 import numpy as np
 import torch
 
-from kadv.geometry import axis_angle_to_matrix, check_world_T_cam, intrinsics_from_fov, look_at, perturb_world_T_cam
+from kadv.geometry import (
+    axis_angle_to_matrix,
+    check_world_T_cam,
+    intrinsics_from_fov,
+    look_at,
+    perturb_world_T_cam,
+    yaw_pitch_roll,
+)
 from kadv.io import write_json
 from kadv.losses import depth_metrics
 from kadv.models import DepthModel
@@ -452,6 +459,6 @@ def fit_into_envelope(renderer: ExactRenderer, init: InitView, envelope: Envelop
         raise InitViewError(f"init view {init.name} lies outside the envelope {envelope.describe()}: {reason}")
     if moved is base:
         return init
-    angles = [round(a, 1) for a in torch.rad2deg(envelope.figures(renderer, base).angles[0, 1:]).tolist()]
+    angles = [round(a, 1) for a in torch.rad2deg(yaw_pitch_roll(base[0, :3, :3])[1:]).tolist()]  # no height cast
     note = f"moved into the envelope {envelope.name} (it had pitch {angles[0]}°, roll {angles[1]}°)"
     return replace(init, world_T_cam=moved[0].cpu(), note=f"{init.note}; {note}" if init.note else note)
