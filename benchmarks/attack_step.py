@@ -2,15 +2,17 @@
 grey_white_room: the Depth Anything V2 Small architecture (random weights) with the perceptual loss
 (random VGG-16 weights), and kadv-tiny with SSIM.
 
-Every part is timed in this one run. A step is the time between two consecutive optimiser updates
-of a gradient run (step guard, differentiable render, objective, records, backward, update), the
-device's queued work included (a step on a GPU waits for nothing, so each update waits for it). The
+Every part is timed in this one run. A step is the time between the ends of two consecutive steps
+of a gradient run (differentiable render, objective, records, backward, update, step guard; on
+CUDA a replay of the captured step, :class:`~kadv.attack.capture.StepGraph`), the device's queued
+work included (a step on a GPU waits for nothing, so the end of each waits for it). The
 networks are the model's and the loss's forward passes and one backward pass through both, as a step
 runs them, timed as one call (as two separate forward+backward pairs they take about 3% less: a
 step's graph holds both networks' activations at once, and that memory comes as fresh pages). The
-machine's speed drifts by up to a third within minutes, so the two are measured side by side: each
-optimiser update's hook times one networks call, and every step is compared with the mean of the
-calls just before and just after it. overhead = the median over REPEATS x STEPS steps of
+machine's speed drifts by up to a third within minutes, so the two are measured side by side: the
+end of each step times one networks call, and every step is compared with the mean of the
+calls just before and just after it (the second step, which captures, is one of them: the median
+leaves it aside). overhead = the median over REPEATS x STEPS steps of
 (step - networks) / networks, for the first configuration; overhead_tiny the same for the second.
 The same ratio for runs whose render is replaced by one fixed output shows what the attack's own
 bookkeeping (objective terms, penalty, guard, records, optimiser) adds beside the render.
@@ -20,11 +22,14 @@ black-box search is paced by: evaluations per second (evals_per_s) of an exact r
 of EVAL_BATCH nearby views plus one forward pass of kadv-tiny on them, the fastest of three batches.
 
 Run: .venv/bin/python benchmarks/attack_step.py [--device cpu|cuda|auto] [--backend auto|open3d|warp]
+     [--edge-search auto|compact|every_pair] [--cuda-graphs on|off]
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
+import math
 import statistics
 import tempfile
 import time
@@ -32,10 +37,10 @@ from collections.abc import Callable
 
 import torch
 from common import device_and_backend, fastest_seconds, load_bench_scene, timings
-from torch.optim.optimizer import register_optimizer_step_post_hook
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
 from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
+from kadv.attack.capture import StepGraph
 from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam, pixel_rays
 from kadv.losses import VGG16_TAPS, PerceptualLoss, depth_loss, vgg16_features
 from kadv.models import DepthModel, load_model
@@ -103,11 +108,13 @@ def step_seconds(
     between: Callable[[], float] | None = None,
 ) -> tuple[list[float], list[float]]:
     """Seconds of each step but the first of a gradient run of ``steps`` steps of ``restarts`` batched
-    restarts from ``view`` (the times between consecutive optimiser updates, less what the hook
-    spent), and the seconds ``between()`` reports when the hook calls it after each update."""
+    restarts from ``view`` (the times between the ends of consecutive steps, less what the timing
+    spent), and the seconds ``between()`` reports when called at the end of each step."""
     updates, resumes, inside = [], [], []
+    run_step = StepGraph.__call__
 
-    def hook(*_) -> None:
+    def timed_step(graph: StepGraph):
+        outputs = run_step(graph)
         # a step queues its work on a GPU without waiting for it: the step ends when that work has run
         if torch.cuda.is_initialized():
             torch.cuda.synchronize()
@@ -115,13 +122,14 @@ def step_seconds(
         if between is not None:
             inside.append(between())
         resumes.append(time.perf_counter())
+        return outputs
 
-    handle = register_optimizer_step_post_hook(hook)
+    StepGraph.__call__ = timed_step  # each step of the run (all but its last evaluation) is a call
     try:
         config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=restarts), budget_evaluations=None)
         attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
     finally:
-        handle.remove()
+        StepGraph.__call__ = run_step
     return [update - resume for resume, update in zip(resumes, updates[1:])], inside
 
 
@@ -156,7 +164,7 @@ def paired_overheads(
     objective: Objective, differentiable, view, networks: Callable[[], float], rounds: int
 ) -> tuple[list[float], list[float], list[float]]:
     """Steps of ``rounds`` gradient runs of 1 + STEPS steps with a ``networks()`` call timed after every
-    optimiser update: the steps' and the calls' seconds, and each step's (step - networks) /
+    step: the steps' and the calls' seconds, and each step's (step - networks) /
     networks against the mean of the calls just before and just after it."""
     steps, calls, own = [], [], []
     for _ in range(rounds):
@@ -168,6 +176,22 @@ def paired_overheads(
     return steps, calls, own
 
 
+def kernel_share(objective: Objective, differentiable: DifferentiableRenderer, view) -> float:
+    """The share of a CUDA gradient run's wall time (STEPS steps of one restart, after a warm-up
+    run) that the GPU spends in kernels, from torch's profiler: 1 means the device never waits
+    for the host."""
+    config = AttackConfig("gradient", GradientSettings(steps=STEPS, restarts=1), budget_evaluations=None)
+    attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
+    activities = [torch.profiler.ProfilerActivity.CPU, torch.profiler.ProfilerActivity.CUDA]
+    with torch.profiler.profile(activities=activities) as profile:
+        started = time.perf_counter()
+        attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
+        torch.cuda.synchronize()
+        wall = time.perf_counter() - started
+    kernels = sum(event.self_device_time_total for event in profile.key_averages()) * 1e-6
+    return kernels / wall
+
+
 def per_restart_step(objective: Objective, differentiable: DifferentiableRenderer, view) -> dict[int, float]:
     """Seconds per restart per step of a gradient run, for batches of B restarts."""
     return {batch: min(step_seconds(objective, differentiable, view, 3, batch)[0]) / batch for batch in BATCHES}
@@ -175,7 +199,7 @@ def per_restart_step(objective: Objective, differentiable: DifferentiableRendere
 
 def measure(
     label: str, objective: Objective, differentiable: DifferentiableRenderer, view
-) -> tuple[dict[str, float], float]:
+) -> tuple[dict[str, float], float, float]:
     renderer, device = objective.renderer, objective.device
     K = intrinsics_from_fov(view.fov_x_deg, HEIGHT, WIDTH)
     base = view.world_T_cam[None]
@@ -259,12 +283,14 @@ def measure(
         f"  the same with the render's output fixed (median of {len(own_fixed)} steps): "
         f"{statistics.median(own_fixed):.3f}"
     )
+    share = kernel_share(objective, differentiable, view) if device.type == "cuda" else math.nan
+    print(f"  the GPU's kernels, share of a run's wall time: {share:.2f}")
     scaling = per_restart_step(objective, differentiable, view)
     print(
         "  per restart-step with B restarts batched: "
         + ", ".join(f"B={b} {seconds * 1e3:.0f} ms" for b, seconds in scaling.items())
     )
-    return parts, overhead
+    return parts, overhead, share
 
 
 def evaluations_per_second(
@@ -296,7 +322,11 @@ def evaluations_per_second(
 
 
 def main() -> None:
-    device, backend, _ = device_and_backend("Time one gradient attack step, part by part.")
+    parser = argparse.ArgumentParser(description="Time one gradient attack step, part by part.")
+    parser.add_argument("--edge-search", default="auto", choices=("auto", "compact", "every_pair"))
+    parser.add_argument("--cuda-graphs", default="on", choices=("on", "off"), help="capture the step on CUDA")
+    device, backend, args = device_and_backend(parser.description, parser)
+    render_config = DiffRenderConfig(edge_search=args.edge_search, cuda_graphs=args.cuda_graphs == "on")
     scene = load_bench_scene("grey_white_room")
     renderer = ExactRenderer(scene, backend=backend, device=device)
     penalty = PenaltyConfig()
@@ -312,10 +342,8 @@ def main() -> None:
         }
         for label, (model, loss) in configurations.items():
             objective = Objective(model, loss, renderer, penalty, device=device)
-            results[label] = measure(
-                label, objective, DifferentiableRenderer(renderer, DiffRenderConfig(), device), view
-            )
-    (parts, overhead), (_, overhead_tiny) = results.values()
+            results[label] = measure(label, objective, DifferentiableRenderer(renderer, render_config, device), view)
+    (parts, overhead, share), (_, overhead_tiny, share_tiny) = results.values()
     render, networks = parts["render fwd+bwd"], parts["networks"]
     evals_per_s, cast = evaluations_per_second(renderer, load_model("kadv_tiny").to(device), view, device)
     batch_ms = EVAL_BATCH / evals_per_s * 1e3
@@ -323,7 +351,8 @@ def main() -> None:
     print(
         f"\nattack_step overhead={overhead:.2f} render_ms={render * 1e3:.0f} networks_ms={networks * 1e3:.0f} "
         f"overhead_tiny={overhead_tiny:.2f} evals_per_s={evals_per_s:.1f} eval_cast_ms={cast * 1e3:.0f} "
-        f"device={device.type} backend={backend}"
+        f"kernel_share={share:.2f} kernel_share_tiny={share_tiny:.2f} "
+        f"device={device.type} backend={backend} edge_search={args.edge_search} cuda_graphs={args.cuda_graphs}"
     )
 
 

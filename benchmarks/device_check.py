@@ -2,18 +2,22 @@
 
 1. the CUDA tests: ``tests/test_device.py`` (render, objective and training on the device against
    the CPU), the Warp/Open3D equivalence of ``tests/render/test_casting.py`` on the device's
-   Warp caster against Open3D's CPU renders (box room, a generated room, grey_white_room), and the
-   host-round-trip guards of a render (``tests/render/``) and of whole attack steps (``tests/attack/``);
-2. ``benchmarks/attack_step.py --device <device> --backend warp``;
+   Warp caster against Open3D's CPU renders (box room, a generated room, grey_white_room), the
+   host-round-trip guards of a render (``tests/render/``) and of whole attack steps (``tests/attack/``),
+   and the captured step against the uncaptured one (``tests/attack/test_capture.py``);
+2. ``benchmarks/attack_step.py --device <device> --backend warp`` (with ``--baseline``, first the
+   step as it was before capture: ``--cuda-graphs off --edge-search compact``);
 3. a short ``kadv-attack device=<device> render.backend=warp`` on grey_white_room that writes its
    run directory, pictures included;
 4. the peak memory: of the GPU (sampled with nvidia-smi) on CUDA, of the largest process on the CPU.
 
 Its last line: ``device_check overhead= overhead_tiny= evals_per_s= equivalence=ok|fail peak_gib=
-device=<name>``. ``--device cuda`` on a machine without CUDA is refused in one line (exit status 2);
-``--device cpu`` runs the same path on the CPU (Warp's CPU device).
+device=<name>``. Each part's last line is appended to ``figures.txt`` in the output folder as soon as
+it ends, so that a call cut short still brings back what ran. ``--device cuda`` on a machine without
+CUDA is refused in one line (exit status 2); ``--device cpu`` runs the same path on the CPU (Warp's CPU device).
 
-Run: benchmarks/device_check.sh --device cuda|cpu [--out DIR]   (the .sh installs carried wheels first)
+Run: benchmarks/device_check.sh --device cuda|cpu [--out DIR] [--attack-dir DIR] [--baseline] [--capture-only]
+(the .sh unpacks what was carried first)
 """
 
 from __future__ import annotations
@@ -32,6 +36,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 # the shared scenes a device check carries: grey_white_room alone (benchmarks/device_pack.sh)
 CARRIED = "not modern_hall and not japanese_classroom"
+TEST_FILES = (
+    "tests/test_device.py",
+    "tests/render/test_casting.py",
+    "tests/render/test_host_round_trips.py",
+    "tests/attack/test_host_round_trips.py",
+    "tests/attack/test_capture.py",
+)
 
 
 class GpuMemory:
@@ -67,7 +78,8 @@ class GpuMemory:
 def _run(
     label: str, command: list[str], env: dict[str, str], log: Path, cwd: Path = ROOT
 ) -> subprocess.CompletedProcess:
-    """Run ``command``, echo its output to the log and the console's tail, and time it."""
+    """Run ``command``, echo its output to the log and the console's tail, time it, and append its
+    last line to ``figures.txt`` beside the log."""
     start = time.perf_counter()
     result = subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, check=False)
     seconds = time.perf_counter() - start
@@ -75,6 +87,8 @@ def _run(
         handle.write(f"\n$ {' '.join(command)}\n{result.stdout}{result.stderr}\n")
         handle.write(f"[exit {result.returncode}, {seconds:.0f} s]\n")
     tail = (result.stdout + result.stderr).strip().splitlines()[-3:]
+    with (log.parent / "figures.txt").open("a") as handle:
+        handle.write(f"{label}: exit {result.returncode} in {seconds:.0f} s: {tail[-1] if tail else ''}\n")
     print(f"{label}: exit {result.returncode} in {seconds:.0f} s", *(f"  {line}" for line in tail), sep="\n")
     sys.stdout.flush()
     return result
@@ -83,7 +97,12 @@ def _run(
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cuda", choices=["cuda", "cpu"])
-    parser.add_argument("--out", default=str(ROOT / "outputs" / "device_check"), help="folder for the log and the run")
+    parser.add_argument("--out", default=str(ROOT / "outputs" / "device_check"), help="folder for the log and figures")
+    parser.add_argument("--attack-dir", default=None, help="the short attack's run directory (default: OUT/attack)")
+    parser.add_argument("--baseline", action="store_true", help="also time the step uncaptured, edges compacted")
+    parser.add_argument(
+        "--capture-only", action="store_true", help="run only tests/attack/test_capture.py: whether the step captures"
+    )
     args = parser.parse_args()
     import torch
 
@@ -91,7 +110,9 @@ def main() -> None:
         parser.exit(2, f"{parser.prog}: error: --device cuda, but this machine has no CUDA device (use --device cpu)\n")
     name = torch.cuda.get_device_name(0) if args.device == "cuda" else "cpu"
     out = Path(args.out)
+    attack_dir = Path(args.attack_dir) if args.attack_dir else out / "attack"
     shutil.rmtree(out, ignore_errors=True)
+    shutil.rmtree(attack_dir, ignore_errors=True)
     out.mkdir(parents=True)
     log = out / "device_check.log"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
@@ -109,22 +130,21 @@ def main() -> None:
                 "no:cacheprovider",
                 "-o",
                 "addopts=",
-                "tests/test_device.py",
-                "tests/render/test_casting.py",
-                "tests/render/test_host_round_trips.py",
-                "tests/attack/test_host_round_trips.py",
+                *(TEST_FILES[-1:] if args.capture_only else TEST_FILES),
                 "-k",
                 CARRIED,
             ],
             env,
             log,
         )
-        step = _run(
-            "attack_step",
-            [python, "benchmarks/attack_step.py", "--device", args.device, "--backend", "warp"],
-            env,
-            log,
-        )
+        if args.capture_only:
+            print(f"tests {'passed' if tests.returncode == 0 else 'FAILED'}; log: {log}")
+            return
+        step_command = [python, "benchmarks/attack_step.py", "--device", args.device, "--backend", "warp"]
+        if args.baseline:
+            before = [*step_command, "--cuda-graphs", "off", "--edge-search", "compact"]
+            _run("attack_step uncaptured", before, env, log)
+        step = _run("attack_step", step_command, env, log)
         # kadv-attack as installed (its configs ship as kadv.conf), run outside the checkout
         overrides = [
             f"device={args.device}",
@@ -135,20 +155,23 @@ def main() -> None:
             "attack.budget_evaluations=24",
             "video=false",
             "progress=false",
-            f"hydra.run.dir={out / 'attack'}",
+            f"hydra.run.dir={attack_dir}",
         ]
         attack = _run(
             "kadv-attack", [python, "-c", "from kadv.cli.attack import main; main()", *overrides], env, log, cwd=out
         )
     peak = memory.gib if args.device == "cuda" else resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2**20
     figures = dict(re.findall(r"(\w+)=(\S+)", (step.stdout.strip().splitlines() or [""])[-1]))
-    pictures = sorted((out / "attack" / "views").glob("*.png")) if attack.returncode == 0 else []
+    pictures = sorted((attack_dir / "views").glob("*.png")) if attack.returncode == 0 else []
     print(f"tests {'passed' if tests.returncode == 0 else 'FAILED'}; attack pictures: {len(pictures)}; log: {log}")
-    print(
+    line = (
         f"device_check overhead={figures.get('overhead', 'nan')} overhead_tiny={figures.get('overhead_tiny', 'nan')} "
         f"evals_per_s={figures.get('evals_per_s', 'nan')} equivalence={'ok' if tests.returncode == 0 else 'fail'} "
         f"peak_gib={peak:.1f} device={name.replace(' ', '_')}"
     )
+    with (out / "figures.txt").open("a") as handle:
+        handle.write(line + "\n")
+    print(line)
 
 
 class _NoMemory:

@@ -8,7 +8,7 @@ the records). Then torch's profiler lists the operators that took the most time 
 gradient step (device time on CUDA, CPU time on the CPU).
 
 Run: .venv/bin/python benchmarks/profile_step.py [--device cpu|cuda|auto] [--backend auto|open3d|warp]
-     [--edge-search compact|every_pair]
+     [--edge-search auto|compact|every_pair]
 """
 
 from __future__ import annotations
@@ -102,7 +102,7 @@ def tiny_attack(description: str) -> tuple[torch.device, str, argparse.Namespace
     grey_white_room's file view needs: the device, the backend, the options, the renderer, the
     view, the objective; a bad option ends the script in one line with exit status 2."""
     parser = argparse.ArgumentParser(description=description)
-    parser.add_argument("--edge-search", default="compact", choices=("compact", "every_pair"))
+    parser.add_argument("--edge-search", default="auto", choices=("auto", "compact", "every_pair"))
     device, backend, args = device_and_backend(description, parser)
     renderer = ExactRenderer(load_bench_scene("grey_white_room"), backend=backend, device=device)
     penalty = PenaltyConfig()

@@ -49,7 +49,10 @@ class DiffRenderConfig:
         edge_search: how the silhouette term finds its edges (:func:`~kadv.render.find_edge_pairs`):
             "compact" keeps only the candidate pairs at each stage (the fewest rays and operations;
             on a GPU each stage waits for its count), "every_pair" computes every neighbour pair and
-            marks the candidates (nothing waits; the arithmetic grows with the pixels).
+            marks the candidates (nothing waits, and every shape is fixed; the arithmetic grows
+            with the pixels), "auto" every_pair where the step is captured, else compact.
+        cuda_graphs: on CUDA, capture the gradient step in a CUDA graph and replay it
+            (:class:`~kadv.attack.capture.StepGraph`); off for debugging.
         depth_tolerance: relative warped-vs-exact depth disagreement that invalidates a pixel.
         plane_tolerance: relative distance from a tap's surface plane above which the warp takes
             the tap to belong to another surface.
@@ -65,7 +68,8 @@ class DiffRenderConfig:
     guard_band: int = 16
     supersample: int = 2
     silhouette: bool = True
-    edge_search: str = "compact"
+    edge_search: str = "auto"
+    cuda_graphs: bool = True
     depth_tolerance: float = 0.01
     plane_tolerance: float = 0.02
 
@@ -74,9 +78,9 @@ class DiffRenderConfig:
             raise ValueError(f"render.values must be 'exact' or 'warp', got {self.values!r}")
         if self.refresh not in ("always", "on_drift", "every_k"):
             raise ValueError(f"render.refresh must be 'always', 'on_drift' or 'every_k', got {self.refresh!r}")
-        if self.edge_search not in ("compact", "every_pair"):
+        if self.edge_search not in ("auto", "compact", "every_pair"):
             raise ValueError(
-                f"render.differentiable.edge_search must be 'compact' or 'every_pair', got {self.edge_search!r}"
+                f"render.differentiable.edge_search must be 'auto', 'compact' or 'every_pair', got {self.edge_search!r}"
             )
         if self.layers < 1 or self.supersample < 1 or self.guard_band < 0 or self.every_k < 1:
             raise ValueError("render.layers, supersample and every_k must be >= 1 and guard_band >= 0")
@@ -152,6 +156,14 @@ class DifferentiableRenderer:
         self._steps_since_refresh = 0
 
     @property
+    def compact_edges(self) -> bool:
+        """Whether the edge search compacts its candidates: ``auto`` does but where the gradient
+        step is captured (CUDA with ``cuda_graphs``: a captured step waits for no count)."""
+        if self.config.edge_search == "auto":
+            return not (self.config.cuda_graphs and self.device.type == "cuda")
+        return self.config.edge_search == "compact"
+
+    @property
     def _guard_band(self) -> int:
         return min(self.config.guard_band, 1) if self.config.refresh == "always" else self.config.guard_band
 
@@ -200,8 +212,7 @@ class DifferentiableRenderer:
         self._steps_since_refresh += 1
         rgb, depth = self._values(frame, warp)
         if self.config.silhouette:
-            compact = self.config.edge_search == "compact"
-            pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K, compact)
+            pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K, self.compact_edges)
             term = silhouette_term(
                 self.renderer, pairs, world_T_cam, frame.K, torch.cat([frame.rgb_rendered, frame.depth_rendered], dim=1)
             )[frame.inside]

@@ -51,6 +51,8 @@ class EdgePairs:
         t: (N,) float64 crossing position found by bisection (no gradient).
         keep: (N,) bool, the pairs that are occlusion edges, where the search kept every neighbour pair
             (on a GPU, which computes them all sooner than it would wait for their count); None: all.
+        blocks: where every pair was kept, the pairs per view of each block (horizontal, vertical):
+            the pairs are laid out block by block, each view by view; None: compacted.
     """
 
     batch: torch.Tensor
@@ -60,9 +62,12 @@ class EdgePairs:
     edge: torch.Tensor
     t: torch.Tensor
     keep: torch.Tensor | None = None
+    blocks: tuple[int, ...] | None = None
 
     def to(self, device: torch.device | str) -> EdgePairs:
-        return EdgePairs(*(None if (v := getattr(self, f.name)) is None else v.to(device) for f in fields(self)))
+        return EdgePairs(
+            *(v.to(device) if isinstance(v := getattr(self, f.name), torch.Tensor) else v for f in fields(self))
+        )
 
 
 def _rays(K_inv: torch.Tensor, batch: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
@@ -359,9 +364,24 @@ def find_edge_pairs(
     keep = pairs.live & occlusion & (error < _MAX_CROSSING_ERROR) & (steep == pairs.horizontal)
     found = (pairs.batch, pairs.a, pairs.b, pairs.horizontal, chosen, t_star)
     if not compact:
-        return EdgePairs(*found, keep=keep)
+        height, width = z.shape[1:]
+        return EdgePairs(*found, keep=keep, blocks=(height * (width - 1), (height - 1) * width))
     rows = torch.nonzero(keep)[:, 0]
     return EdgePairs(*(values.index_select(0, rows) for values in found))
+
+
+def _pair_poses(world_T_cam: torch.Tensor, pairs: EdgePairs) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each pair's view's rotation (N, 3, 3) and centre (N, 3), float64, differentiable.
+
+    Pairs laid out view by view (every pair kept) take their view's pose by broadcasting on a GPU,
+    so that the backward pass sums each view's pairs, a reduction; gathered, it would scatter N
+    pairs into B poses, and a GPU serialises the many additions into one pose (twice the step, with
+    155k pairs). The CPU gathers: its scatter is ordered, and gives a compacted search's sums.
+    """
+    if pairs.blocks is None or world_T_cam.device.type == "cpu":
+        return world_T_cam[pairs.batch, :3, :3].double(), world_T_cam[pairs.batch, :3, 3].double()
+    rows = torch.cat([world_T_cam.double()[:, None].expand(-1, n, 4, 4).reshape(-1, 4, 4) for n in pairs.blocks])
+    return rows[:, :3, :3], rows[:, :3, 3]
 
 
 def silhouette_term(
@@ -388,7 +408,7 @@ def silhouette_term(
     pairs = pairs.to(pose_device)
     K = batched_intrinsics(K, batch).to(pose_device, non_blocking=True)
     bi = pairs.batch
-    R, c = world_T_cam[bi, :3, :3].double(), world_T_cam[bi, :3, 3].double()
+    R, c = _pair_poses(world_T_cam, pairs)
     vertices = renderer.surfaces.vertices.to(pose_device)[pairs.edge]  # (N, 2, 3) world
     vertices_cam = (vertices - c[:, None]) @ R  # R^T (v - c), row-vector form
     ya, xa = pairs.a.div(width, rounding_mode="floor"), pairs.a.remainder(width)

@@ -8,7 +8,6 @@ imports it only when a Warp caster is built. Kernels compile on first use and ar
 
 from __future__ import annotations
 
-import contextlib
 from dataclasses import fields
 
 import numpy as np
@@ -193,6 +192,7 @@ class WarpCaster(RayCaster):
         self._wp_device = wp.device_from_torch(device)
         self._empty = len(faces) == 0
         self._masks_of: AlphaMasks | None = None
+        self._streams: dict[int, wp.Stream] = {}
         if self._empty:
             return
         _check_fits(len(vertices), len(faces), device)
@@ -202,6 +202,8 @@ class WarpCaster(RayCaster):
         self._points = wp.from_torch(points, dtype=wp.vec3)
         self._indices = wp.from_torch(indices, dtype=wp.int32)
         self.mesh = wp.Mesh(points=self._points, indices=self._indices)
+        # the BVH is built on Warp's stream, the casts run on torch's (:meth:`_stream`)
+        wp.synchronize_device(self._wp_device)
 
     def _launch(self, kernel, count: int, inputs: list) -> None:
         """Launch ``kernel`` over ``count`` threads on torch's current stream; torch tensors in
@@ -209,9 +211,19 @@ class WarpCaster(RayCaster):
         if count == 0 or self._empty:
             return
         arrays = [_array(x) if isinstance(x, torch.Tensor) else x for x in inputs]
-        stream = wp.stream_from_torch(self.device) if self.device.type == "cuda" else None
-        with wp.ScopedStream(stream) if stream is not None else contextlib.nullcontext():
-            wp.launch(kernel, dim=count, inputs=[self.mesh.id, *arrays], device=self._wp_device)
+        wp.launch(kernel, dim=count, inputs=[self.mesh.id, *arrays], device=self._wp_device, stream=self._stream())
+
+    def _stream(self) -> wp.Stream | None:
+        """Torch's current stream on the caster's CUDA device, as Warp's (None on the CPU). A launch
+        goes straight onto it: a ``wp.ScopedStream`` would first make it wait for Warp's own stream,
+        a dependency a CUDA graph capture refuses."""
+        if self.device.type != "cuda":
+            return None
+        current = torch.cuda.current_stream(self.device)
+        stream = self._streams.get(current.cuda_stream)
+        if stream is None:
+            stream = self._streams[current.cuda_stream] = wp.stream_from_torch(current)
+        return stream
 
     def _rays(self, *rays: torch.Tensor) -> list[torch.Tensor]:
         return [x.to(self.device, torch.float32).contiguous() for x in rays]

@@ -24,7 +24,11 @@ def test_gradient_attack_steps_read_nothing_back_to_the_host(device: str, tmp_pa
     # edges found without compacting: a compacted search waits for its counts on a GPU. Adam keeps
     # its step count on the host (torch's design, on every device): its reads wait for no device
     guard = no_host_round_trips(device, allow=((torch.optim.Adam, "step"),))
-    runs = [gradient_measures(objective, view, start, STEPS, (H, W), "every_pair", around) for around in (None, guard)]
+    # uncaptured: a captured step's replays run no Python at all (tests/attack/test_capture.py)
+    runs = [
+        gradient_measures(objective, view, start, STEPS, (H, W), "every_pair", around, cuda_graphs=False)
+        for around in (None, guard)
+    ]
     # the records are read once the runs have ended; the clock's seconds differ, everything else must not
     reference, records = ([replace(r, seconds=0.0) for step in run for r in step.records()] for run in runs)
     if device == "cpu":

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -10,6 +11,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from kadv.attack.capture import StepGraph
 from kadv.attack.records import InitViewResult, ViewRecord
 from kadv.attack.registry import register_method
 from kadv.attack.search import Measures, SearchContext
@@ -74,43 +76,58 @@ def gradient_ascent(
     reached, fraction = context.guard(torch.zeros_like(start[:, 3:]), start[:, 3:])
     omega = start[:, :3].clone().requires_grad_(True)
     delta = reached.clone().requires_grad_(True)
+    captured = StepGraph.available(context.device, context.differentiable.config.cuda_graphs)
+    # a captured step keeps Adam's step count on the device
     optimiser = torch.optim.Adam(
-        [{"params": [omega], "lr": lr_rotation}, {"params": [delta], "lr": lr_translation}], maximize=True
+        [{"params": [omega], "lr": lr_rotation}, {"params": [delta], "lr": lr_translation}],
+        maximize=True,
+        capturable=captured,
     )
     base = context.base(batch)
+    step = 0
+
+    def evaluate() -> tuple[Measures, torch.Tensor]:
+        params = torch.cat([omega, delta], dim=1)
+        out = context.differentiable(params, base, context.K, context.height, context.width)
+        terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
+        stats = (out.coverage, out.rgb_error, out.depth_error)
+        measured = context.measure(
+            first_step + step, params, out.world_T_cam, terms, fraction, stats, out.refreshed, render=out.exact
+        )
+        return measured, terms.objective
+
+    def ascend() -> Measures:
+        """One Adam step from the current poses (it updates omega, delta and fraction in place) and
+        the measures of the views it started from."""
+        measured, objective = evaluate()
+        optimiser.zero_grad()
+        objective.sum().backward()
+        previous = delta.detach().clone()
+        optimiser.step()
+        with torch.no_grad():
+            bounded = context.project(torch.cat([omega, delta], dim=1))
+            reached, moved = context.guard(previous, bounded[:, 3:])
+            omega.copy_(bounded[:, :3])
+            delta.copy_(reached)
+            fraction.copy_(moved)
+        return measured
+
+    graph = StepGraph(ascend, context.device, captured)
     measures: list[Measures] = []
     for step in range(steps + 1):
         if step > 0 and clock.allows(batch) < batch:
             break
         started = time.perf_counter()
-        params = torch.cat([omega, delta], dim=1)
-        out = context.differentiable(params, base, context.K, context.height, context.width)
-        terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
-        measures.append(
-            context.measure(
-                first_step + step,
-                params,
-                out.world_T_cam,
-                terms,
-                fraction,
-                (out.coverage, out.rgb_error, out.depth_error),
-                out.refreshed,
-                render=out.exact,
-            )
-        )
-        bar.update(batch)
         if step == steps:
+            measures.append(evaluate()[0])
+            bar.update(batch)
             clock.spent(batch, time.perf_counter() - started)
             break
-        optimiser.zero_grad()
-        terms.objective.sum().backward()
-        previous = delta.detach().clone()
-        optimiser.step()
-        with torch.no_grad():
-            bounded = context.project(torch.cat([omega, delta], dim=1))
-            reached, fraction = context.guard(previous, bounded[:, 3:])
-            omega.copy_(bounded[:, :3])
-            delta.copy_(reached)
+        measured = graph()
+        if graph.captured:  # a replay returns what the capture measured, but for the host's numbers
+            measured = dataclasses.replace(measured, step=first_step + step, seconds=clock.elapsed())
+        measures.append(measured)
+        bar.update(batch)
         clock.spent(batch, time.perf_counter() - started, backward=batch)
     return measures
 
