@@ -23,11 +23,12 @@ from pathlib import Path
 
 from filelock import FileLock, Timeout
 
-__all__ = ["Interrupted", "RunDirectoryBusy", "deferred_interrupts", "interruptible", "run_lock"]
+__all__ = ["LOCK_FILES", "Interrupted", "RunDirectoryBusy", "deferred_interrupts", "interruptible", "run_lock"]
 
 log = logging.getLogger(__name__)
 _LOCK = ".kadv.lock"
 _HOLDER = ".kadv.lock.json"
+LOCK_FILES = (_LOCK, _HOLDER)  # what :func:`run_lock` leaves in a run directory
 
 
 class RunDirectoryBusy(RuntimeError):

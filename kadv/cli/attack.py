@@ -61,6 +61,7 @@ from kadv.report.run import (
 )
 from kadv.report.summary import RunInfo, RunSummary
 from kadv.runs import Interrupted, interruptible, run_lock
+from kadv.testing.profile import Profile, check_radii, profile_views
 
 log = logging.getLogger(__name__)
 
@@ -77,11 +78,23 @@ def attack_settings(cfg: DictConfig, envelope: DictConfig | None = None) -> Atta
         if bounds.name in ENVELOPES and bounds != ENVELOPES[bounds.name]:  # a preset with a bound overridden
             bounds = dataclasses.replace(bounds, name="custom")
         node["envelope"] = bounds
+    node.pop("radii", None)  # a profile run's radii: attack_radii
     method = get_method(node.pop("method", DEFAULT_METHOD))
     settings = settings_from_node(method.settings, node.pop(method.name, None), f"attack.{method.name}")
     for name in METHODS:  # the nodes of other methods (a preset may carry several) are not this run's
         node.pop(name, None)
     return settings_from_node(AttackConfig, {"method": method.name, "settings": settings, **node}, "attack")
+
+
+def attack_radii(cfg: DictConfig) -> tuple[tuple[float, float], ...] | None:
+    """``attack.radii``: the nested (degrees, metres) radii of a profile run, or None for none."""
+    radii = cfg.get("radii")
+    if radii is None:
+        return None
+    try:
+        return check_radii(OmegaConf.to_container(radii, resolve=True) if OmegaConf.is_config(radii) else radii)
+    except ValueError as error:
+        raise ValueError(f"attack.{error}") from None
 
 
 def _init_views(
@@ -183,6 +196,9 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     seed = config_int(cfg.seed, "seed")
     height, width, supersample = check_render_config(cfg.render)
     attack_config = attack_settings(cfg.attack, cfg.get("envelope"))
+    radii = attack_radii(cfg.attack)
+    if radii is not None:  # a profile run: the run itself searches the largest radius
+        attack_config = dataclasses.replace(attack_config, max_angle_deg=radii[-1][0], max_distance=radii[-1][1])
     init_config = settings_from_node(InitViewConfig, OmegaConf.to_container(cfg.init, resolve=True), "init")
     penalty = settings_from_node(PenaltyConfig, OmegaConf.to_container(cfg.penalty, resolve=True), "penalty")
     diff_config = DiffRenderConfig(
@@ -205,9 +221,10 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
         save_partial_result(run_dir, index, view)
         progress["done"] += 1
 
+    differentiable = DifferentiableRenderer(renderer, diff_config, device)
     result = attack(
         objective,
-        DifferentiableRenderer(renderer, diff_config, device),
+        differentiable,
         views,
         height,
         width,
@@ -217,9 +234,19 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
         on_result=on_result,
         progress=cfg.progress,
     )
+    profile = None
+    if radii is not None:  # the smaller radii, then the profile of all of them
+        searched = {len(radii) - 1: result}
+        seeded = profile_views(
+            objective, differentiable, views, (height, width), attack_config, radii, seed, progress=cfg.progress,
+            searched=searched,
+        )  # fmt: skip
+        profile = Profile.of(model.name, scene.name, attack_config.envelope.name, radii, (seed,), [seeded])
     info = RunInfo(scene.name, model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed))
-    summary = write_run(run_dir, result, objective, info, supersample, video=cfg.video)
+    summary = write_run(run_dir, result, objective, info, supersample, video=cfg.video, profile=profile)
     print(f"run directory: {run_dir}\n{_table(summary)}")
+    if profile is not None:
+        print(profile.markdown())
     return summary.adversarial_l_depth
 
 

@@ -13,6 +13,7 @@ import logging
 import math
 import os
 import re
+import shutil
 import sys
 import tempfile
 from collections.abc import Callable
@@ -35,7 +36,7 @@ from kadv.losses import DELTA1_TEMPERATURE, AlignedLoss, depth_loss
 from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
 from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.render.raycast import DEFAULT_MAX_RAYS
-from kadv.runs import RunDirectoryBusy
+from kadv.runs import LOCK_FILES, RunDirectoryBusy
 from kadv.scenes import Scene, scene_from_node
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, ROOM_FEATURES, check_shares
 
@@ -89,8 +90,10 @@ def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]],
         def wrapped(cfg: DictConfig) -> Any:
             hydra_config = HydraConfig.get()
             multirun = hydra_config.mode == RunMode.MULTIRUN
-            failure = Path(hydra_config.runtime.output_dir) / FAILURE
+            run_dir = Path(hydra_config.runtime.output_dir)
+            failure = run_dir / FAILURE
             failure.unlink(missing_ok=True)
+            before = {p.name for p in run_dir.iterdir()} if run_dir.is_dir() else set()
             try:
                 return task(cfg)
             except Exception as error:
@@ -100,6 +103,8 @@ def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]],
                 message = f"{command}: error: {_one_line(error)}"
                 print(message, file=sys.stderr)
                 if not multirun:
+                    if isinstance(error, USER_ERRORS):
+                        _discard_written(run_dir, before)
                     sys.exit(1 if isinstance(error, ENVIRONMENT_ERRORS) else 2)
                 logging.getLogger(command).error("job failed", exc_info=error)
                 write_json(
@@ -111,6 +116,28 @@ def reports_user_errors(command: str) -> Callable[[Callable[[DictConfig], Any]],
         return wrapped
 
     return decorate
+
+
+# what a run directory holds once Hydra has started a job in it, before the task writes anything
+_STARTED = (".hydra", *LOCK_FILES)
+
+
+def _discard_written(run_dir: Path, before: set[str]) -> None:
+    """Undo what a job refused for its input wrote in ``run_dir``: the entries it added since
+    ``before`` (the names there when the task began), and the directory itself if what is left is
+    only what starting the job put there (Hydra's ``.hydra`` and log, the run lock). A run that
+    was there before (one to resume, a user's files) keeps everything it had."""
+    if not run_dir.is_dir():
+        return
+    for path in run_dir.iterdir():
+        if path.name in before:
+            continue
+        if path.is_dir():
+            shutil.rmtree(path)
+        else:
+            path.unlink()
+    if all(p.name in _STARTED or p.suffix == ".log" for p in run_dir.iterdir()):
+        shutil.rmtree(run_dir, ignore_errors=True)
 
 
 def _unknown_group_option(command: str, arguments: list[str]) -> str | None:

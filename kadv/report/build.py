@@ -8,8 +8,17 @@ from pathlib import Path
 from kadv.losses import DELTA1_TEMPERATURE, depth_loss
 from kadv.models import DepthModel
 from kadv.render import ExactRenderer
-from kadv.report.html import save_mean_curves, write_html
-from kadv.report.sweep import RunRecord, collect_runs, method_table, methods_of, table2, table3
+from kadv.report.html import save_mean_curves, save_profile_curves, write_html
+from kadv.report.sweep import (
+    RunRecord,
+    collect_runs,
+    method_table,
+    methods_of,
+    profile_tables,
+    profiles_of,
+    table2,
+    table3,
+)
 from kadv.report.transfer import transfer_tables
 
 __all__ = ["write_report"]
@@ -22,8 +31,9 @@ def write_report(
     model_of: Callable[[RunRecord], DepthModel] | None = None,
     progress: bool = True,
 ) -> list[Path]:
-    """Write Tables 2 and 3 per method, the method table, the transfer matrix, ``curves.png`` and
-    ``report.html`` for the complete runs under ``paths``; returns the files written.
+    """Write Tables 2 and 3 per method, the method table, the profile tables and ``profiles.png``
+    (profile runs), the transfer matrix, ``curves.png`` and ``report.html`` for the complete runs
+    under ``paths``; returns the files written.
 
     Args:
         paths: sweep or run directories.
@@ -43,6 +53,9 @@ def write_report(
     if methods is not None:
         tables.append(methods)
         stems.append("methods")
+    for k, table in enumerate(profile_tables(runs)):
+        tables.append(table)
+        stems.append(f"profiles{k if k else ''}")
     if renderer_of is not None and model_of is not None:
         loss_config = runs[0].config["loss"]
         loss = depth_loss(
@@ -55,4 +68,7 @@ def write_report(
         stems += ["transfer_delta1", "transfer_l_depth"]
     written = [path for table, stem in zip(tables, stems) for path in table.write(out, stem)]
     curves = save_mean_curves(out / "curves.png", runs)
-    return [*written, curves, write_html(out / "report.html", tables, curves, runs)]
+    profiles = profiles_of(runs)
+    drawn = save_profile_curves(out / "profiles.png", profiles) if profiles else None
+    extra = [drawn] if drawn is not None else []
+    return [*written, curves, *extra, write_html(out / "report.html", tables, curves, runs, drawn)]

@@ -15,8 +15,9 @@ from kadv.io import atomic_write
 from kadv.report.figures import loss_label
 from kadv.report.summary import ViewMetrics
 from kadv.report.sweep import RunRecord, Table
+from kadv.testing.profile import Profile
 
-__all__ = ["save_mean_curves", "write_html"]
+__all__ = ["save_mean_curves", "save_profile_curves", "write_html"]
 
 
 def _anytime_gains(run: RunRecord, seconds: np.ndarray) -> list[np.ndarray]:
@@ -47,6 +48,30 @@ def save_mean_curves(path: Path, runs: list[RunRecord]) -> Path:
     axis.set_ylabel("attacked loss of the best view so far,\nless the init view's")
     axis.set_title("Anytime search: mean gain, 25-75% band")
     axis.legend(fontsize=8)
+    try:
+        return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100, bbox_inches="tight"))
+    finally:
+        plt.close(figure)
+
+
+def save_profile_curves(path: Path, profiles: dict[tuple[str, str, str], Profile]) -> Path:
+    """One panel per scene: each model's (and method's) worst delta1 against the radius, the band
+    over its seeds, and its typical delta1 dashed."""
+    scenes = sorted({scene for _, scene, _ in profiles})
+    figure, axes = plt.subplots(1, len(scenes), figsize=(4.6 * len(scenes), 4.0), squeeze=False)
+    for axis, scene in zip(axes[0], scenes):
+        for (model, _, method), profile in sorted((k, v) for k, v in profiles.items() if k[1] == scene):
+            steps = np.arange(len(profile.radii) + 1)
+            worst = np.array([[init, *row] for init, row in zip(profile.delta1_init, profile.worst_by_seed)])
+            line = axis.plot(steps, worst.mean(axis=0), marker="o", label=f"{model} ({method}): {profile.score:.3f}")
+            axis.fill_between(steps, worst.min(axis=0), worst.max(axis=0), alpha=0.2, color=line[0].get_color())
+            typical = [float(np.mean(profile.delta1_init)), *profile.typical]
+            axis.plot(steps, typical, linestyle="--", color=line[0].get_color(), alpha=0.7)
+            axis.set_xticks(steps, ["init"] + [f"{d:g}°\n{m:g} m" for d, m in profile.radii])
+        axis.set_ylim(0, 1.02)
+        axis.set_title(f"{scene}: worst (solid) and typical (dashed)", fontsize=10)
+        axis.set_ylabel("delta1")
+        axis.legend(fontsize=8, title="model (method): score", title_fontsize=8, loc="lower left")
     try:
         return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100, bbox_inches="tight"))
     finally:
@@ -107,16 +132,20 @@ def _gallery(runs: list[RunRecord], out_dir: Path) -> list[dict]:
     ]
 
 
-def write_html(path: Path, tables: list[Table], curves: Path, runs: list[RunRecord]) -> Path:
-    """Render ``report.html``: every table (sortable by clicking a header), the curves, the gallery of
-    the worst adversarial views linking to their run folders, the worst failure's video and the
-    scene maps; images and the video embedded."""
+def write_html(
+    path: Path, tables: list[Table], curves: Path, runs: list[RunRecord], profiles: Path | None = None
+) -> Path:
+    """Render ``report.html``: every table (sortable by clicking a header), the curves, the profile
+    curves (``profiles``, when profile runs are among the runs), the gallery of the worst adversarial
+    views linking to their run folders, the worst failure's video and the scene maps; images and the
+    video embedded."""
     environment = jinja2.Environment(
         loader=jinja2.PackageLoader("kadv.report", "templates"), autoescape=jinja2.select_autoescape(["html", "j2"])
     )
     html = environment.get_template("report.html.j2").render(
         tables=tables,
         curves=_data_uri(curves),
+        profiles=None if profiles is None else _data_uri(profiles),
         gallery=_gallery(runs, path.parent),
         worst=_worst_video(runs, path.parent),
         runs=len(runs),

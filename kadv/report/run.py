@@ -49,6 +49,7 @@ from kadv.report.summary import (
 )
 
 __all__ = [
+    "PROFILE_PNG",
     "SUMMARY",
     "TRAJECTORY",
     "ViewRenderer",
@@ -64,6 +65,7 @@ __all__ = [
 
 SUMMARY = "summary.json"
 TRAJECTORY = "trajectory.csv"
+PROFILE_PNG = "profile.png"
 _PARTIAL = "partial"
 log = logging.getLogger(__name__)
 _PACKAGES = ("kadv", "torch", "kornia", "open3d-cpu", "trimesh", "transformers", "numpy", "cma", "nevergrad")
@@ -262,7 +264,13 @@ def _versions() -> dict[str, str]:
 
 
 def write_run(
-    run_dir: str | Path, result: AttackResult, objective: Objective, info: RunInfo, supersample: int, video: bool = True
+    run_dir: str | Path,
+    result: AttackResult,
+    objective: Objective,
+    info: RunInfo,
+    supersample: int,
+    video: bool = True,
+    profile=None,
 ) -> RunSummary:
     """Write the run's artefacts and, last, ``summary.json``; returns the summary.
 
@@ -273,6 +281,8 @@ def write_run(
         info: what the run was; its image size is the attack's.
         supersample: the attack's supersampling.
         video: also write ``trajectory.mp4`` of the run with the largest gain.
+        profile: a :class:`kadv.testing.Profile` of the run (``attack.radii``): kept in the summary
+            and drawn in ``profile.png``.
     """
     run_dir = Path(run_dir)
     render = ViewRenderer(objective, info.height, info.width, supersample)
@@ -301,7 +311,10 @@ def write_run(
         budget=sum((v.budget for v in per_view), Budget()),
         versions=_versions(),
         init_views=per_view,
+        profile=None if profile is None else profile.to_dict(),
     )
+    if profile is not None:
+        profile.save_png(run_dir / PROFILE_PNG)
     summary.write(run_dir / SUMMARY)
     # after the summary: a run cut short before it still finds every finished init view there
     remove_partial_results(run_dir)

@@ -143,6 +143,7 @@ class RunSummary(RunInfo):
     """``summary.json``: a finished run. Written last, so a run directory holding it is complete.
 
     The means are over the init views that kept an adversarial view; ``budget`` is the run's total.
+    ``profile``: a profile run's (``attack.radii``) :meth:`kadv.testing.Profile.to_dict`, else None.
     """
 
     method: str
@@ -155,6 +156,7 @@ class RunSummary(RunInfo):
     init_views: list[InitViewSummary]
     complete: bool = True
     schema: int = SCHEMA_VERSION
+    profile: dict | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -2,7 +2,8 @@
 
 Table 2: adversarial L_depth and delta1 per model x scene with averages; Table 3: the change from
 the init views (adversarial - init for L_depth, init - adversarial for delta1); the method table
-(each method's gain, evaluations and seconds per model x scene); the transfer matrix.
+(each method's gain, evaluations and seconds per model x scene); the profile tables of profile runs
+(``attack.radii``: Table 2's delta1 at each radius); the transfer matrix.
 """
 
 from __future__ import annotations
@@ -19,8 +20,20 @@ import yaml
 from kadv.io import atomic_write
 from kadv.report.run import SUMMARY
 from kadv.report.summary import RunSummary
+from kadv.testing.profile import Profile
 
-__all__ = ["RunRecord", "Table", "collect_runs", "main_method", "method_table", "methods_of", "table2", "table3"]
+__all__ = [
+    "RunRecord",
+    "Table",
+    "collect_runs",
+    "main_method",
+    "method_table",
+    "methods_of",
+    "profile_tables",
+    "profiles_of",
+    "table2",
+    "table3",
+]
 
 
 @dataclass
@@ -200,3 +213,47 @@ def method_table(runs: list[RunRecord]) -> Table | None:
             ]
         )
     return table
+
+
+def profiles_of(runs: list[RunRecord]) -> dict[tuple[str, str, str], Profile]:
+    """The profile runs' profiles, merged over seeds per (model, scene, method) and the same radii
+    and envelope (the first such group wins a key; the key names the method)."""
+    groups: dict[tuple, list[Profile]] = defaultdict(list)
+    for run in runs:
+        if run.summary.profile is not None:
+            profile = Profile.from_dict(run.summary.profile)
+            groups[run.model, run.scene, run.method, profile.radii, profile.envelope].append(profile)
+    merged: dict[tuple[str, str, str], Profile] = {}
+    for (model, scene, method, _, _), profiles in sorted(groups.items(), key=lambda item: item[0][:3]):
+        merged.setdefault((model, scene, method), Profile.merge(profiles))
+    return merged
+
+
+def profile_tables(runs: list[RunRecord]) -> list[Table]:
+    """Per set of radii and envelope, one table of the profile runs: per model x scene x method, the
+    delta1 at the init views, the worst delta1 at each radius (Table 2's delta1, radius by radius),
+    the failure rate of drawn views at the largest radius, and the score with its spread over seeds."""
+    tables: dict[tuple, Table] = {}
+    for (model, scene, method), profile in profiles_of(runs).items():
+        key = (profile.radii, profile.envelope)
+        if key not in tables:
+            radii = [f"{d:g}°/{m:g} m" for d, m in profile.radii]
+            tables[key] = Table(
+                f"Profiles: worst delta1 per radius (envelope {profile.envelope})",
+                ["model", "scene", "method", "seeds", "delta1 init", *(f"worst {r}" for r in radii)]
+                + [f"failure rate {radii[-1]}", "score", "score spread"],
+            )
+        tables[key].rows.append(
+            [
+                model,
+                scene,
+                method,
+                len(profile.seeds),
+                float(statistics.mean(profile.delta1_init)),
+                *profile.worst,
+                profile.failure_rate[-1],
+                profile.score,
+                profile.score_spread,
+            ]
+        )
+    return list(tables.values())

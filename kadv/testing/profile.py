@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from kadv.testing.inputs import RobustnessInputError
-from kadv.testing.robustness import CheckOptions, Setup, setup, worst_record
+from kadv.testing.robustness import CheckOptions, setup, worst_record
 
 __all__ = [
     "DEFAULT_RADII",
@@ -27,7 +27,9 @@ __all__ = [
     "PROFILE_KEYS",
     "TYPICAL_VIEWS",
     "Profile",
+    "SeedProfile",
     "check_radii",
+    "profile_views",
     "robustness_profile",
 ]
 
@@ -96,6 +98,41 @@ class Profile:
     def failure_interval(self) -> list[tuple[float, float]]:
         """Per radius, the 95% interval of the failure rate over all the draws (Wilson's)."""
         return [_wilson(sum(v < self.fail_below for v in d), len(d)) for d in self.draws]
+
+    @classmethod
+    def of(
+        cls,
+        model: str,
+        scene: str,
+        envelope: str,
+        radii: tuple[tuple[float, float], ...],
+        seeds: tuple[int, ...],
+        seed_profiles: list[SeedProfile],
+        fail_below: float = FAIL_BELOW,
+        pictures: list[str] | None = None,
+    ) -> Profile:
+        """The profile of ``seed_profiles`` (one per seed, :func:`profile_views`)."""
+        return cls(
+            model=model,
+            scene=scene,
+            envelope=envelope,
+            radii=radii,
+            seeds=tuple(seeds),
+            delta1_init=[p.delta1_init for p in seed_profiles],
+            worst_by_seed=[p.worst for p in seed_profiles],
+            typical_by_seed=[p.typical for p in seed_profiles],
+            failure_by_seed=[p.failure for p in seed_profiles],
+            draws=[[v for p in seed_profiles for v in p.draws[k]] for k in range(len(radii))],
+            fail_below=float(fail_below),
+            pictures=list(pictures or []),
+        )
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Profile:
+        """The profile :meth:`to_dict` wrote (its derived figures are computed again)."""
+        fields = {f.name for f in dataclasses.fields(cls)}
+        values = {k: v for k, v in data.items() if k in fields}
+        return cls(**values | {"radii": tuple(tuple(r) for r in values["radii"]), "seeds": tuple(values["seeds"])})
 
     @classmethod
     def merge(cls, profiles: list[Profile]) -> Profile:
@@ -172,8 +209,12 @@ class Profile:
 
         count = len(self.radii)
         # the curve on the left; the worst views' four-panel pictures stacked on the right, one a radius
-        figure = plt.figure(figsize=(13.0, max(4.2, 2.0 * count)))
-        grid = figure.add_gridspec(count, 2, width_ratios=[1.0, 1.9])
+        if self.pictures:
+            figure = plt.figure(figsize=(13.0, max(4.2, 2.0 * count)))
+            grid = figure.add_gridspec(count, 2, width_ratios=[1.0, 1.9])
+        else:
+            figure = plt.figure(figsize=(5.0, 4.2))
+            grid = figure.add_gridspec(count, 1)
         axis = figure.add_subplot(grid[:, 0])
         steps = np.arange(count + 1)
         for values, label, colour in (
@@ -248,7 +289,7 @@ def _mean_interval(values: list[float]) -> tuple[float, float]:
     return (mean - half, mean + half)
 
 
-def _typical(built: Setup, init, config, seed: int, index: int, count: int) -> list[float]:
+def _typical(objective, differentiable, init, size, config, seed: int, index: int, count: int) -> list[float]:
     """delta1 of the valid views among ``count`` drawn uniformly (Sobol) from the radius and the
     envelope around ``init``."""
     from scipy.stats import qmc
@@ -256,7 +297,7 @@ def _typical(built: Setup, init, config, seed: int, index: int, count: int) -> l
     from kadv.attack import SearchContext
     from kadv.geometry import perturb_world_T_cam
 
-    context = SearchContext(built.objective, built.differentiable, init, *built.size, config)
+    context = SearchContext(objective, differentiable, init, *size, config)
     sobol = qmc.Sobol(6, scramble=True, seed=np.random.default_rng([seed, index, 7]))
     chosen = []
     # rejection keeps the draws uniform within the envelope; a tight envelope (robot's roll of 2
@@ -264,7 +305,7 @@ def _typical(built: Setup, init, config, seed: int, index: int, count: int) -> l
     for _ in range(_DRAW_ROUNDS):
         params = config.sample_ball(sobol.random(4 * count))
         poses = perturb_world_T_cam(context.base(len(params)).cpu(), params[:, :3], params[:, 3:])
-        inside = [reason is None for reason in config.envelope.figures(built.renderer, poses).reasons()]
+        inside = [reason is None for reason in config.envelope.figures(objective.renderer, poses).reasons()]
         chosen += list(params[torch.tensor(inside)])
         if len(chosen) >= count:
             break
@@ -272,6 +313,71 @@ def _typical(built: Setup, init, config, seed: int, index: int, count: int) -> l
         return []
     chosen = torch.stack(chosen[:count])
     return [r.delta1 for r in context.evaluate(0, chosen) if r.valid]
+
+
+@dataclass
+class SeedProfile:
+    """One seed's share of a :class:`Profile` (what :func:`profile_views` returns).
+
+    Attributes:
+        delta1_init: mean delta1 at the init views.
+        worst, typical, failure: per radius, as :class:`Profile`'s ``*_by_seed`` rows.
+        draws: per radius, the delta1 of every valid drawn view.
+        worst_views: per radius, the (init view, record) of the worst view found so far.
+        results: per radius, the attack's result within it.
+    """
+
+    delta1_init: float
+    worst: list[float]
+    typical: list[float]
+    failure: list[float]
+    draws: list[list[float]]
+    worst_views: list[tuple]
+    results: list
+
+
+def profile_views(
+    objective,
+    differentiable,
+    views: list,
+    size: tuple[int, int],
+    config,
+    radii: tuple[tuple[float, float], ...],
+    seed: int,
+    typical_views: int = TYPICAL_VIEWS,
+    fail_below: float = FAIL_BELOW,
+    progress: bool = False,
+    searched: dict[int, object] | None = None,
+) -> SeedProfile:
+    """One seed's profile of the init ``views``: per radius, the search ``config`` (its bounds set to
+    the radius) and ``typical_views`` uniform draws per init view; the worst view carried from
+    radius to radius (the radii are nested). ``searched`` holds results already found at some radii
+    (by index), which are used instead of searching again."""
+    from kadv.attack import attack
+
+    carried = [1.0] * len(views)  # the worst delta1 so far per init view: the radii are nested
+    carried_views: list = [None] * len(views)
+    out = SeedProfile(math.nan, [], [], [], [[] for _ in radii], [], [])
+    for k, (degrees, metres) in enumerate(radii):
+        within = dataclasses.replace(config, max_angle_deg=degrees, max_distance=metres)
+        result = (searched or {}).get(k)
+        if result is None:
+            result = attack(objective, differentiable, views, *size, within, seed, progress=progress)
+        typical: list[float] = []
+        for i, view in enumerate(result.views):
+            worst = worst_record(view.records)
+            if worst.delta1 <= carried[i]:
+                carried[i], carried_views[i] = worst.delta1, (view.init, worst)
+            typical += _typical(objective, differentiable, view.init, size, within, seed, i, typical_views)
+        if k == 0:
+            out.delta1_init = float(np.mean([v.init_record.delta1 for v in result.views]))
+        out.worst.append(float(np.mean(carried)))
+        out.typical.append(float(np.mean(typical)) if typical else math.nan)
+        out.failure.append(float(np.mean([d < fail_below for d in typical])) if typical else math.nan)
+        out.draws[k] = typical
+        out.worst_views.append(carried_views[int(np.argmin(carried))])
+        out.results.append(result)
+    return out
 
 
 def robustness_profile(
@@ -303,7 +409,7 @@ def robustness_profile(
     Raises:
         RobustnessInputError: bad radii, seeds, envelope, model, scene or setting, in one line.
     """
-    from kadv.attack import AttackConfig, attack
+    from kadv.attack import AttackConfig
     from kadv.attack.init_views import InitViewError, fit_into_envelope
     from kadv.penalties import get_envelope
     from kadv.report.run import save_view_picture
@@ -324,60 +430,31 @@ def robustness_profile(
         bounds = get_envelope(envelope)
     except ValueError as error:
         raise RobustnessInputError(str(error)) from None
-    delta1_init, worst_rows, typical_rows, failure_rows, pictures = [], [], [], [], []
-    draws: list[list[float]] = [[] for _ in radii]
+    config = AttackConfig(checked.method, envelope=bounds)
+    seed_profiles, pictures = [], []
     for run, seed in enumerate(seeds):
         built = setup(model, scene, dataclasses.replace(checked, seed=seed))
         try:
             views = [fit_into_envelope(built.renderer, v, bounds, built.penalty.margin) for v in built.views]
         except InitViewError as error:
             raise RobustnessInputError(f"scene {built.scene_name!r}: {error}") from None
-        carried = [1.0] * len(views)  # the worst delta1 so far per init view: the radii are nested
-        carried_records: list = [None] * len(views)
-        worst_row, typical_row, failure_row = [], [], []
-        for k, (degrees, metres) in enumerate(radii):
-            config = AttackConfig(
-                checked.method,
-                budget_evaluations=built.budget,
-                max_angle_deg=degrees,
-                max_distance=metres,
-                envelope=bounds,
-            )
-            result = attack(
-                built.objective, built.differentiable, views, *built.size, config, seed, progress=checked.progress
-            )
-            typical: list[float] = []
-            for i, view in enumerate(result.views):
-                worst = worst_record(view.records)
-                if worst.delta1 <= carried[i]:
-                    carried[i], carried_records[i] = worst.delta1, (view.init, worst)
-                typical += _typical(built, view.init, config, seed, i, typical_views)
-            if run == 0:
-                i = int(np.argmin(carried))
-                init, record = carried_records[i]
+        seeded = profile_views(
+            built.objective,
+            built.differentiable,
+            views,
+            built.size,
+            dataclasses.replace(config, budget_evaluations=built.budget),
+            radii,
+            seed,
+            typical_views,
+            fail_below,
+            checked.progress,
+        )
+        seed_profiles.append(seeded)
+        if run == 0:
+            for k, ((degrees, metres), (init, record)) in enumerate(zip(radii, seeded.worst_views)):
                 label = f"worst within {degrees:g}°, {metres:g} m"
                 path = built.folder / f"{built.stem}-{bounds.name}-radius{k}.png"
                 pictures.append(str(save_view_picture(path, built.render, init, record, label)))
-            if k == 0:
-                delta1_init.append(float(np.mean([v.init_record.delta1 for v in result.views])))
-            worst_row.append(float(np.mean(carried)))
-            typical_row.append(float(np.mean(typical)) if typical else math.nan)
-            failure_row.append(float(np.mean([d < fail_below for d in typical])) if typical else math.nan)
-            draws[k] += typical
-        worst_rows.append(worst_row)
-        typical_rows.append(typical_row)
-        failure_rows.append(failure_row)
-    return Profile(
-        model=built.model_name,
-        scene=built.scene_name,
-        envelope=bounds.name,
-        radii=radii,
-        seeds=seeds,
-        delta1_init=delta1_init,
-        worst_by_seed=worst_rows,
-        typical_by_seed=typical_rows,
-        failure_by_seed=failure_rows,
-        draws=draws,
-        fail_below=float(fail_below),
-        pictures=pictures,
-    )
+    names = (built.model_name, built.scene_name, bounds.name)
+    return Profile.of(*names, radii, seeds, seed_profiles, fail_below, pictures)

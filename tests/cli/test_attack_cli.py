@@ -20,7 +20,8 @@ from kadv.cli.attack import main as attack_main
 from kadv.cli.render import main as render_main
 from kadv.cli.train_tiny import main as train_tiny_main
 from kadv.geometry import axis_angle_to_matrix, yaw_pitch_roll
-from kadv.report.summary import SCHEMA_VERSION
+from kadv.report.run import read_trajectory
+from kadv.report.summary import SCHEMA_VERSION, RunSummary
 from tests.cli.in_process import call_main
 
 BIN = Path(sys.executable).parent
@@ -246,6 +247,8 @@ BAD_INPUTS = [
     ("kadv-attack", ["init.params=/no/such/init_params.json"], "/no/such/init_params.json"),
     ("kadv-attack", ["device=tpu"], "device='tpu'"),
     ("kadv-attack", ["envelope=drone"], "envelope=drone: no such option in envelope/; one of: free, handheld"),
+    ("kadv-attack", ["attack.radii=[[15,0.3],[5,0.1]]"], "attack.radii must increase (each holds the one before)"),
+    ("kadv-attack", ["attack.radii=[[-5,0.1]]"], "attack.radii: each radius must be positive, got (-5, 0.1)"),
     ("kadv-attack", ["envelope.pitch_deg=[30,-30]"], "envelope.pitch_deg [30, -30] is empty or leaves [-90.0, 90.0]"),
     (
         "kadv-attack",
@@ -335,10 +338,29 @@ def test_bad_input_through_the_installed_script_gives_one_line_and_exit_status_2
 
 
 @pytest.mark.parametrize("case", range(len(BAD_INPUTS)), ids=[" ".join(o) for _, o, _ in BAD_INPUTS])
-def test_bad_input_gives_one_line_and_exit_status_2(case: int, bad_input_results) -> None:
+def test_bad_input_gives_one_line_and_exit_status_2(case: int, bad_input_results, bad_input_values) -> None:
     tool, _, named = BAD_INPUTS[case]
     result = bad_input_results[case]
     assert result.returncode == 2, result.stderr
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in result.stderr, result.stderr
     assert lines[0].startswith(f"{tool}: error: ") and named in lines[0], lines[0]
+    assert not (bad_input_values[0] / f"run{case}").exists()  # nothing is written, no run directory
+
+
+def test_a_profile_run_records_its_profile_in_the_summary(tmp_path: Path) -> None:
+    radii = "attack.radii=[[5,0.1],[15,0.3]]"
+    result = _run_in_process(
+        "kadv-attack", tmp_path / "run", *SMALL, "render.lighting=direct", "init.count=1", "envelope=upright", radii
+    )
+    assert result.returncode == 0, result.stderr
+    summary = RunSummary.read(tmp_path / "run" / "summary.json")
+    profile = summary.profile
+    assert profile["radii"] == [[5.0, 0.1], [15.0, 0.3]] and profile["envelope"] == "upright"
+    assert profile["worst"][1] <= profile["worst"][0] <= profile["delta1_init"][0]  # nested: never rising
+    assert 0.0 <= profile["score"] <= 1.0 and profile["score_spread"] == 0.0
+    # the run itself searched the largest radius: no record moved further
+    records = [r for view in read_trajectory(tmp_path / "run" / "trajectory.csv").values() for r in view]
+    assert max(np.linalg.norm(r.params[3:]) for r in records) <= 0.3 + 1e-6
+    assert "score " in result.stdout and "| 15°, 0.3 m |" in result.stdout
+    assert (tmp_path / "run" / "profile.png").stat().st_size > 5_000

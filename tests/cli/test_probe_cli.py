@@ -27,6 +27,7 @@ def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_pat
     [
         ("probes=nope", "no probe scene 'nope'; the probes are: photo_wall, grazing_floor, thin_structures"),
         ("model=", "scorecard needs at least one model"),
+        ("model=no_such_model", "unknown model 'no_such_model': not a preset"),
         ("budget=1", "budget must be an integer >= 2, got 1"),
         ("seed=x", "seed must be an integer >= 0, got 'x'"),
         ("seeds=", "seeds is empty: give one or more integers >= 0"),
@@ -36,9 +37,10 @@ def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_pat
         ("colour=red", "'colour=red': expected key=value with a key of model, probes"),
     ],
 )
-def test_bad_input_is_one_line_and_exit_status_2(argument: str, message: str, capsys) -> None:
+def test_bad_input_is_one_line_and_exit_status_2(argument: str, message: str, capsys, tmp_path: Path) -> None:
     with pytest.raises(SystemExit) as exit_info:
-        main([argument])
+        main([argument, f"out={tmp_path / 'out'}"])
     assert exit_info.value.code == 2
     error = capsys.readouterr().err
     assert error.startswith("kadv-probe: error: ") and message in error and error.count("\n") == 1
+    assert not (tmp_path / "out").exists()  # nothing is written

@@ -13,6 +13,7 @@ from PIL import Image
 from kadv.attack.records import Budget
 from kadv.report import write_report
 from kadv.report.summary import SCHEMA_VERSION, AnytimePoint, InitViewSummary, RunSummary, ViewMetrics
+from kadv.testing.profile import Profile
 
 
 def _metrics(l_depth: float, delta1: float, png: str) -> ViewMetrics:
@@ -157,3 +158,44 @@ def test_a_scene_or_run_named_like_markup_is_escaped_in_the_page(tmp_path: Path)
     assert "&lt;script&gt;alert(1)&lt;/script&gt;" in html and "&lt;script&gt;run" in html
     assert hostile not in html and "<script>run" not in html
     assert html.count("<script>") == 1  # the page's own: sorting the tables
+
+
+def _profile(model: str, seed: int, worst: list[float]) -> dict:
+    return Profile(
+        model=model,
+        scene="box_room_0",
+        envelope="upright",
+        radii=((5.0, 0.1), (15.0, 0.3)),
+        seeds=(seed,),
+        delta1_init=[0.9],
+        worst_by_seed=[worst],
+        typical_by_seed=[[0.85, 0.8]],
+        failure_by_seed=[[0.0, 0.25]],
+        draws=[[0.85] * 4, [0.8, 0.8, 0.8, 0.4]],
+        fail_below=0.5,
+        pictures=[],
+    ).to_dict()
+
+
+def test_profile_runs_get_a_table_per_model_and_scene_and_curves_on_the_page(tmp_path: Path) -> None:
+    worst = {("kadv_tiny", 0): [0.7, 0.3], ("kadv_tiny", 1): [0.5, 0.1], ("other", 0): [0.9, 0.8]}
+    for (model, seed), values in worst.items():
+        folder = tmp_path / f"{model}-{seed}"
+        summary = _run(folder, "hybrid", 0.05, 0.35, (0.9, 0.4))
+        summary.model, summary.seed, summary.profile = model, seed, _profile(model, seed, values)
+        summary.write(folder / "summary.json")
+    # a run without a profile is in Table 2 but not in the profiles
+    _run(tmp_path / "plain", "hybrid", 0.05, 0.35, (0.9, 0.4))
+    written = write_report([tmp_path], tmp_path / "report", progress=False)
+    assert tmp_path / "report" / "profiles.png" in written
+    rows = [line.split(" | ") for line in (tmp_path / "report" / "profiles.md").read_text().splitlines()[4:]]
+    assert [row[0].strip("| ") for row in rows] == ["kadv_tiny", "other"]
+    tiny = [float(cell.strip(" |")) for cell in rows[0][3:]]
+    # seeds, init, the worst per radius averaged over the seeds, the failure rate at the largest,
+    # the score (the area under init -> worst: mean of the trapezoids) and its spread over seeds
+    scores = [((0.9 + 0.7) / 2 + (0.7 + 0.3) / 2) / 2, ((0.9 + 0.5) / 2 + (0.5 + 0.1) / 2) / 2]
+    expected = [2, 0.9, 0.6, 0.2, 0.25, sum(scores) / 2, scores[0] - scores[1]]
+    assert tiny == pytest.approx(expected, abs=1e-4)
+    html = (tmp_path / "report" / "report.html").read_text()
+    assert "Profiles: worst delta1 per radius (envelope upright)" in html
+    assert "<h2>Profiles: delta1 against the radius of the camera's move</h2>" in html
