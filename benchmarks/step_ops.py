@@ -72,6 +72,18 @@ class _Counter(TorchDispatchMode):
 
         return run
 
+    def attributed(self, fn: Callable, phase: str) -> Callable:
+        """A :func:`~profile_step.wrap_phases` wrapper: what ``fn`` dispatches counts under ``phase``."""
+
+        def run(*args, **kwargs):
+            self.phases.append(phase)
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.phases.pop()
+
+        return run
+
 
 def _tensors(value) -> int:
     """How many tensors ``value`` holds (in dataclasses, lists, tuples and dicts)."""
@@ -84,18 +96,6 @@ def _tensors(value) -> int:
     if isinstance(value, dict):
         return sum(_tensors(v) for v in value.values())
     return 0
-
-    def attributed(self, fn: Callable, phase: str) -> Callable:
-        """A :func:`~profile_step.wrap_phases` wrapper: what ``fn`` dispatches counts under ``phase``."""
-
-        def run(*args, **kwargs):
-            self.phases.append(phase)
-            try:
-                return fn(*args, **kwargs)
-            finally:
-                self.phases.pop()
-
-        return run
 
 
 def main() -> None:
