@@ -29,6 +29,7 @@ __all__ = [
     "Profile",
     "SeedProfile",
     "check_radii",
+    "curve_area",
     "profile_views",
     "robustness_profile",
 ]
@@ -152,7 +153,7 @@ class Profile:
     @property
     def scores(self) -> list[float]:
         """The score under each seed (see :attr:`score`)."""
-        return [_area(init, worst) for init, worst in zip(self.delta1_init, self.worst_by_seed)]
+        return [curve_area(init, worst) for init, worst in zip(self.delta1_init, self.worst_by_seed)]
 
     @property
     def score(self) -> float:
@@ -248,8 +249,11 @@ def _nanmean(rows: list[list[float]]) -> list[float]:
     return [float(t / n) if n else math.nan for t, n in zip(sums, counts)]
 
 
-def _area(init: float, worst: list[float]) -> float:
-    curve = [init, *worst]
+def curve_area(init: float, values: list[float]) -> float:
+    """The area under the curve from ``init`` (radius 0) through ``values`` (one per radius), each
+    step between radii weighing the same, in [0, 1] for delta1 values: a profile's score when the
+    values are the worst case."""
+    curve = [init, *values]
     return float(np.mean([(a + b) / 2 for a, b in itertools.pairwise(curve)]))
 
 
