@@ -21,7 +21,6 @@ Run: .venv/bin/python benchmarks/step_ops.py [--backend auto|open3d|warp] [--edg
 
 from __future__ import annotations
 
-import dataclasses
 from collections import Counter
 from collections.abc import Callable
 
@@ -31,7 +30,7 @@ from torch.optim.optimizer import register_optimizer_step_post_hook
 from torch.utils._python_dispatch import TorchDispatchMode
 
 from kadv.attack import AttackConfig, GradientSettings, attack
-from kadv.attack.capture import StepGraph
+from kadv.attack.capture import StepGraph, map_tensors
 from kadv.render import DifferentiableRenderer, DiffRenderConfig
 
 STEPS = 4
@@ -67,10 +66,15 @@ class _Counter(TorchDispatchMode):
                 outputs = call(graph)
             finally:
                 self.in_graph -= 1
-            self.outputs = _tensors(outputs)
+            self.outputs = 0
+            map_tensors(self._count_output, outputs)
             return outputs
 
         return run
+
+    def _count_output(self, tensor: torch.Tensor) -> torch.Tensor:
+        self.outputs += 1
+        return tensor
 
     def attributed(self, fn: Callable, phase: str) -> Callable:
         """A :func:`~profile_step.wrap_phases` wrapper: what ``fn`` dispatches counts under ``phase``."""
@@ -83,19 +87,6 @@ class _Counter(TorchDispatchMode):
                 self.phases.pop()
 
         return run
-
-
-def _tensors(value) -> int:
-    """How many tensors ``value`` holds (in dataclasses, lists, tuples and dicts)."""
-    if isinstance(value, torch.Tensor):
-        return 1
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return sum(_tensors(getattr(value, f.name)) for f in dataclasses.fields(value))
-    if isinstance(value, (list, tuple)):
-        return sum(_tensors(v) for v in value)
-    if isinstance(value, dict):
-        return sum(_tensors(v) for v in value.values())
-    return 0
 
 
 def main() -> None:

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 from torch.overrides import TorchFunctionMode
 
-__all__ = ["HostUploads", "StepGraph"]
+__all__ = ["HostUploads", "StepGraph", "map_tensors"]
 
 
 def _upload_target(func, args: tuple, kwargs: dict) -> tuple[torch.device, torch.dtype | None] | None:
@@ -101,21 +101,26 @@ class HostUploads(TorchFunctionMode):
         return func(*args, **kwargs) if stored is None else stored.clone()
 
 
-def _copied(value: Any) -> Any:
-    """``value`` with every tensor in it (in dataclasses, lists, tuples and dicts) cloned: a graph's
-    outputs are overwritten by its next replay."""
+def map_tensors(fn: Callable[[torch.Tensor], Any], value: Any) -> Any:
+    """``value`` with ``fn`` applied to every tensor in it (in dataclasses, lists, tuples and dicts),
+    the rest kept as it is."""
     if isinstance(value, torch.Tensor):
-        return value.clone()
+        return fn(value)
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
         result = copy.copy(value)
         for field in dataclasses.fields(value):
-            object.__setattr__(result, field.name, _copied(getattr(value, field.name)))
+            object.__setattr__(result, field.name, map_tensors(fn, getattr(value, field.name)))
         return result
     if isinstance(value, (list, tuple)):
-        return type(value)(_copied(v) for v in value)
+        return type(value)(map_tensors(fn, v) for v in value)
     if isinstance(value, dict):
-        return {k: _copied(v) for k, v in value.items()}
+        return {k: map_tensors(fn, v) for k, v in value.items()}
     return value
+
+
+def _copied(value: Any) -> Any:
+    """``value`` with every tensor in it cloned: a graph's outputs are overwritten by its next replay."""
+    return map_tensors(torch.Tensor.clone, value)
 
 
 def _reason(error: BaseException) -> str:
@@ -180,7 +185,7 @@ class StepGraph:
             try:
                 self._capture()
             except Exception as error:  # any failure to capture leaves the eager step, which is correct
-                self.enabled, self._graph = False, None
+                self.enabled = False
                 self.failure = _reason(error)
                 warnings.warn(
                     f"render.differentiable.cuda_graphs: the gradient step could not be captured ({self.failure}); "

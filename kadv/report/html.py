@@ -15,7 +15,7 @@ from kadv.io import atomic_write
 from kadv.report.figures import loss_label
 from kadv.report.summary import ViewMetrics
 from kadv.report.sweep import RunRecord, Table
-from kadv.testing.profile import Profile
+from kadv.testing.profile import Profile, save_profile_panels
 
 __all__ = ["save_mean_curves", "save_profile_curves", "write_html"]
 
@@ -55,27 +55,13 @@ def save_mean_curves(path: Path, runs: list[RunRecord]) -> Path:
 
 
 def save_profile_curves(path: Path, profiles: dict[tuple[str, str, str], Profile]) -> Path:
-    """One panel per scene: each model's (and method's) worst delta1 against the radius, the band
-    over its seeds, and its typical delta1 dashed."""
-    scenes = sorted({scene for _, scene, _ in profiles})
-    figure, axes = plt.subplots(1, len(scenes), figsize=(4.6 * len(scenes), 4.0), squeeze=False)
-    for axis, scene in zip(axes[0], scenes):
-        for (model, _, method), profile in sorted((k, v) for k, v in profiles.items() if k[1] == scene):
-            steps = np.arange(len(profile.radii) + 1)
-            worst = np.array([[init, *row] for init, row in zip(profile.delta1_init, profile.worst_by_seed)])
-            line = axis.plot(steps, worst.mean(axis=0), marker="o", label=f"{model} ({method}): {profile.score:.3f}")
-            axis.fill_between(steps, worst.min(axis=0), worst.max(axis=0), alpha=0.2, color=line[0].get_color())
-            typical = [float(np.mean(profile.delta1_init)), *profile.typical]
-            axis.plot(steps, typical, linestyle="--", color=line[0].get_color(), alpha=0.7)
-            axis.set_xticks(steps, ["init"] + [f"{d:g}°\n{m:g} m" for d, m in profile.radii])
-        axis.set_ylim(0, 1.02)
-        axis.set_title(f"{scene}: worst (solid) and typical (dashed)", fontsize=10)
-        axis.set_ylabel("delta1")
-        axis.legend(fontsize=8, title="model (method): score", title_fontsize=8, loc="lower left")
-    try:
-        return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100, bbox_inches="tight"))
-    finally:
-        plt.close(figure)
+    """One panel per scene: each model's (and method's) worst (solid) and typical (dashed) delta1
+    against the radius, with bands over its seeds (:func:`kadv.testing.profile.save_profile_panels`)."""
+    panels: dict[str, dict[str, Profile]] = defaultdict(dict)
+    for (model, scene, method), profile in sorted(profiles.items()):
+        panels[scene][f"{model} ({method}) {profile.score:.2f}"] = profile
+    title = "delta1 against the camera's move: worst (solid) and typical (dashed); legend: score"
+    return save_profile_panels(path, dict(panels), title)
 
 
 def _data_uri(path: Path, kind: str = "image/png") -> str:

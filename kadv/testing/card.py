@@ -4,14 +4,13 @@ ranking and one picture."""
 from __future__ import annotations
 
 import itertools
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from kadv.testing.inputs import RobustnessInputError
-from kadv.testing.profile import DEFAULT_RADII, Profile, robustness_profile
+from kadv.testing.profile import DEFAULT_RADII, Profile, robustness_profile, save_profile_panels
 
 __all__ = ["Scorecard", "scorecard"]
 
@@ -75,34 +74,12 @@ class Scorecard:
     def save_png(self, path: str | Path) -> Path:
         """One panel per probe: each model's worst (solid) and typical (dashed) delta1 against the
         radius, with bands over the seeds."""
-        import matplotlib.pyplot as plt
-
-        from kadv.report.figures import save_figure
-
-        columns = min(4, len(self.probes))
-        rows = math.ceil(len(self.probes) / columns)
-        figure, axes = plt.subplots(rows, columns, figsize=(3.6 * columns, 3.0 * rows), squeeze=False)
-        colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-        for index, probe in enumerate(self.probes):
-            axis = axes[index // columns, index % columns]
-            for m, model in enumerate(self.models):
-                profile = self.results[probe][model]
-                steps = np.arange(len(profile.radii) + 1)
-                colour = colours[m % len(colours)]
-                for values, style in ((profile.worst_by_seed, "-"), (profile.typical_by_seed, "--")):
-                    curves = np.array([[init, *row] for init, row in zip(profile.delta1_init, values)])
-                    label = f"{model} {profile.score:.2f}" if style == "-" else None
-                    axis.plot(steps, curves.mean(axis=0), style, color=colour, marker="o", markersize=3, label=label)
-                    axis.fill_between(steps, curves.min(0), curves.max(0), color=colour, alpha=0.15, linewidth=0)
-                axis.set_xticks(steps, ["init"] + [f"{d:g}°\n{r:g} m" for d, r in profile.radii], fontsize=7)
-            axis.set_ylim(0, 1.02)
-            axis.set_title(probe, fontsize=9)
-            axis.legend(fontsize=7, loc="lower left")
-        for index in range(len(self.probes), rows * columns):
-            axes[index // columns, index % columns].set_axis_off()
-        figure.suptitle("delta1 against the camera's move: worst (solid) and typical (dashed); legend: score")
-        figure.tight_layout()
-        return save_figure(Path(path), figure)
+        panels = {
+            probe: {f"{model} {profile.score:.2f}": profile for model, profile in self.results[probe].items()}
+            for probe in self.probes
+        }
+        title = "delta1 against the camera's move: worst (solid) and typical (dashed); legend: score"
+        return save_profile_panels(path, panels, title)
 
 
 def scorecard(

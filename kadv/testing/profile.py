@@ -32,6 +32,7 @@ __all__ = [
     "curve_area",
     "profile_views",
     "robustness_profile",
+    "save_profile_panels",
 ]
 
 DEFAULT_RADII = ((5.0, 0.1), (15.0, 0.3), (45.0, 1.0))  # (degrees, metres), nested
@@ -239,6 +240,39 @@ class Profile:
             tile.set_axis_off()
         figure.tight_layout()
         return save_figure(Path(path), figure)
+
+
+def save_profile_panels(path: str | Path, panels: dict[str, dict[str, Profile]], title: str) -> Path:
+    """One panel per key of ``panels`` (a probe, a scene): each of its profiles' worst (solid) and
+    typical (dashed) delta1 against the radius, with bands over the seeds, labelled by its key.
+    The scorecard's and the report's pictures."""
+    import matplotlib.pyplot as plt
+
+    from kadv.report.figures import save_figure
+
+    columns = min(4, len(panels))
+    rows = math.ceil(len(panels) / columns)
+    figure, axes = plt.subplots(rows, columns, figsize=(3.6 * columns, 3.0 * rows), squeeze=False)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for index, (name, profiles) in enumerate(panels.items()):
+        axis = axes[index // columns, index % columns]
+        for m, (label, profile) in enumerate(profiles.items()):
+            steps = np.arange(len(profile.radii) + 1)
+            colour = colours[m % len(colours)]
+            for values, style in ((profile.worst_by_seed, "-"), (profile.typical_by_seed, "--")):
+                curves = np.array([[init, *row] for init, row in zip(profile.delta1_init, values)])
+                shown = label if style == "-" else None
+                axis.plot(steps, curves.mean(axis=0), style, color=colour, marker="o", markersize=3, label=shown)
+                axis.fill_between(steps, curves.min(0), curves.max(0), color=colour, alpha=0.15, linewidth=0)
+            axis.set_xticks(steps, ["init"] + [f"{d:g}°\n{r:g} m" for d, r in profile.radii], fontsize=7)
+        axis.set_ylim(0, 1.02)
+        axis.set_title(name, fontsize=9)
+        axis.legend(fontsize=7, loc="lower left")
+    for index in range(len(panels), rows * columns):
+        axes[index // columns, index % columns].set_axis_off()
+    figure.suptitle(title)
+    figure.tight_layout()
+    return save_figure(Path(path), figure)
 
 
 def _nanmean(rows: list[list[float]]) -> list[float]:

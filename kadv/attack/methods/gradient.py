@@ -76,12 +76,12 @@ def gradient_ascent(
     reached, fraction = context.guard(torch.zeros_like(start[:, 3:]), start[:, 3:])
     omega = start[:, :3].clone().requires_grad_(True)
     delta = reached.clone().requires_grad_(True)
-    captured = StepGraph.available(context.device, context.differentiable.config.cuda_graphs)
+    capture = StepGraph.available(context.device, context.differentiable.config.cuda_graphs)
     # a captured step keeps Adam's step count on the device
     optimiser = torch.optim.Adam(
         [{"params": [omega], "lr": lr_rotation}, {"params": [delta], "lr": lr_translation}],
         maximize=True,
-        capturable=captured,
+        capturable=capture,
     )
     base = context.base(batch)
     step = 0
@@ -112,7 +112,7 @@ def gradient_ascent(
             fraction.copy_(moved)
         return measured
 
-    graph = StepGraph(ascend, context.device, captured)
+    graph = StepGraph(ascend, context.device, capture)
     measures: list[Measures] = []
     for step in range(steps + 1):
         if step > 0 and clock.allows(batch) < batch:
