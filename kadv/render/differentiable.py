@@ -82,6 +82,8 @@ class DiffRenderConfig:
             raise ValueError(
                 f"render.differentiable.edge_search must be 'auto', 'compact' or 'every_pair', got {self.edge_search!r}"
             )
+        if not isinstance(self.cuda_graphs, bool):
+            raise ValueError(f"render.differentiable.cuda_graphs must be true or false, got {self.cuda_graphs!r}")
         if self.layers < 1 or self.supersample < 1 or self.guard_band < 0 or self.every_k < 1:
             raise ValueError("render.layers, supersample and every_k must be >= 1 and guard_band >= 0")
         if not (self.depth_tolerance > 0 and self.plane_tolerance > 0):

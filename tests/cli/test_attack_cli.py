@@ -249,6 +249,11 @@ BAD_INPUTS = [
     ("kadv-attack", ["envelope=drone"], "envelope=drone: no such option in envelope/; one of: free, handheld"),
     ("kadv-attack", ["attack.radii=[[15,0.3],[5,0.1]]"], "attack.radii must increase (each holds the one before)"),
     ("kadv-attack", ["attack.radii=[[-5,0.1]]"], "attack.radii: each radius must be positive, got (-5, 0.1)"),
+    (
+        "kadv-attack",
+        ["render.differentiable.cuda_graphs=maybe"],
+        "render.differentiable.cuda_graphs must be true or false, got 'maybe'",
+    ),
     ("kadv-attack", ["envelope.pitch_deg=[30,-30]"], "envelope.pitch_deg [30, -30] is empty or leaves [-90.0, 90.0]"),
     (
         "kadv-attack",
