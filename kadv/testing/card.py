@@ -54,7 +54,7 @@ class Scorecard:
         lines = [
             "| probe | model | "
             + " | ".join(f"worst delta1 {d:g}°/{m:g} m" for d, m in radii)
-            + f" | failure rate {largest} | score |",
+            + f" | failure rate {largest} | score (typical area) |",
             "|---|---|" + "---|" * (len(radii) + 2),
         ]
         for probe in self.probes:

@@ -114,12 +114,24 @@ def pytest_terminal_summary(terminalreporter, config: pytest.Config) -> None:
         return
     terminalreporter.section("kadv viewpoint robustness")
     for result, passed in checks:
-        worst = result.worst
-        terminalreporter.write_line(
-            f"{result.model} x {result.scene}: delta1 {result.delta1_init:.3f} -> {worst.delta1_worst:.3f} "
-            f"(worst of {len(result.views)} init views, {result.budget_evaluations} evaluations each): "
-            f"{'pass' if passed else 'FAIL'}"
+        terminalreporter.write_line(f"{_summary_line(result)}: {'pass' if passed else 'FAIL'}")
+
+
+def _summary_line(result) -> str:
+    """One check's line in the session summary: a one-radius check's delta1 init -> worst, or a
+    profile's score (``min_score``)."""
+    from kadv.testing.profile import Profile
+
+    if isinstance(result, Profile):
+        radii = ", ".join(f"{d:g}°/{m:g} m" for d, m in result.radii)
+        return (
+            f"{result.model} x {result.scene}: score {result.score:.3f} ± {result.score_spread:.3f} "
+            f"(radii {radii}, envelope {result.envelope})"
         )
+    return (
+        f"{result.model} x {result.scene}: delta1 {result.delta1_init:.3f} -> {result.worst.delta1_worst:.3f} "
+        f"(worst of {len(result.views)} init views, {result.budget_evaluations} evaluations each)"
+    )
 
 
 @pytest.fixture

@@ -3,8 +3,10 @@ a real camera takes, before the model fails?
 
 :func:`robustness_profile` searches nested radii (degrees, metres) around a scene's init views
 within a camera envelope, and reports per radius the worst view the default search finds and the
-typical view (uniform draws), then one score. Adversarial robustness reports accuracy over the
-perturbation's size in the same way; RoboDepth averages over severities.
+typical view (uniform draws), then one score: the area under the typical curve, which ranks models
+because every model is scored on the same drawn views (the worst view is each model's own search's,
+and its area varies with the search; docs/testing.md measures both). Adversarial robustness reports
+accuracy over the perturbation's size in the same way; RoboDepth averages over severities.
 """
 
 from __future__ import annotations
@@ -36,8 +38,9 @@ __all__ = [
 ]
 
 DEFAULT_RADII = ((5.0, 0.1), (15.0, 0.3), (45.0, 1.0))  # (degrees, metres), nested
-# A view fails when fewer than half of its pixels are within delta1's factor 1.25 of the truth
-FAIL_BELOW = 0.5
+# A drawn view fails below this delta1: the highest threshold that the init views' delta1 stays above
+# and under which a noisier model never fails less (benchmarks/ranking.py --parts threshold)
+FAIL_BELOW = 0.6
 TYPICAL_VIEWS = 16  # uniform draws per init view and radius
 _DRAW_ROUNDS = 32  # rounds of 4 x typical_views draws at most, for the envelope to keep enough
 # what a profile takes beyond CheckOptions (whose radius and seed it replaces)
@@ -154,14 +157,21 @@ class Profile:
     @property
     def scores(self) -> list[float]:
         """The score under each seed (see :attr:`score`)."""
-        return [curve_area(init, worst) for init, worst in zip(self.delta1_init, self.worst_by_seed)]
+        return [curve_area(init, typical) for init, typical in zip(self.delta1_init, self.typical_by_seed)]
 
     @property
     def score(self) -> float:
-        """In [0, 1]: the area under the worst-case curve, from the init views' delta1 at radius 0
-        through each radius, each step between radii weighing the same (as RoboDepth weighs
-        severities), mean over seeds. 1: no move within the radii costs the model anything."""
+        """In [0, 1]: the area under the typical curve, from the init views' delta1 at radius 0 through
+        the mean delta1 of the views drawn at each radius, each step between radii weighing the same
+        (as RoboDepth weighs severities), mean over seeds. 1: no move within the radii costs the model
+        anything. NaN where a radius kept no drawn view."""
         return float(np.mean(self.scores))
+
+    @property
+    def worst_score(self) -> float:
+        """The same area under the worst-case curve, mean over seeds: the study's adversarial figure,
+        which falls to the floor for most models and varies with the search."""
+        return float(np.mean([curve_area(i, w) for i, w in zip(self.delta1_init, self.worst_by_seed)]))
 
     @property
     def score_spread(self) -> float:
@@ -184,7 +194,11 @@ class Profile:
                 f"| {degrees:g}°, {metres:g} m | {self.worst[k]:.3f} | {self.typical[k]:.3f} ({lo:.3f}-{hi:.3f}) | "
                 f"{self.failure_rate[k]:.0%} ({flo:.0%}-{fhi:.0%}) |"
             )
-        lines += ["", f"score {self.score:.3f} ± {self.score_spread:.3f} (spread over seeds)"]
+        lines += [
+            "",
+            f"worst-case area {self.worst_score:.3f}",
+            f"score {self.score:.3f} ± {self.score_spread:.3f} (typical area; spread over seeds)",
+        ]
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -198,6 +212,7 @@ class Profile:
             failure_rate=self.failure_rate,
             score=self.score,
             score_spread=self.score_spread,
+            worst_score=self.worst_score,
         )
         return out
 

@@ -374,7 +374,9 @@ def assert_viewpoint_robust(
         )
     if min_score is not None:
         profile = robustness_profile(model, scene, **{k: v for k, v in options.items() if k in profiled})
-        if profile.score < min_score:
+        passed = profile.score >= min_score  # a NaN score (a radius kept no drawn view) fails too
+        current().report(profile, passed)
+        if not passed:
             radii = ", ".join(f"{d:g}°/{m:g} m" for d, m in profile.radii)
             raise AssertionError(
                 f"{profile.model}'s viewpoint robustness score on {profile.scene} is {profile.score:.3f} "

@@ -169,7 +169,7 @@ def _profile(model: str, seed: int, worst: list[float]) -> dict:
         seeds=(seed,),
         delta1_init=[0.9],
         worst_by_seed=[worst],
-        typical_by_seed=[[0.85, 0.8]],
+        typical_by_seed=[[w + 0.1 for w in worst]],
         failure_by_seed=[[0.0, 0.25]],
         draws=[[0.85] * 4, [0.8, 0.8, 0.8, 0.4]],
         fail_below=0.5,
@@ -192,8 +192,8 @@ def test_profile_runs_get_a_table_per_model_and_scene_and_curves_on_the_page(tmp
     assert [row[0].strip("| ") for row in rows] == ["kadv_tiny", "other"]
     tiny = [float(cell.strip(" |")) for cell in rows[0][3:]]
     # seeds, init, the worst per radius averaged over the seeds, the failure rate at the largest,
-    # the score (the area under init -> worst: mean of the trapezoids) and its spread over seeds
-    scores = [((0.9 + 0.7) / 2 + (0.7 + 0.3) / 2) / 2, ((0.9 + 0.5) / 2 + (0.5 + 0.1) / 2) / 2]
+    # the score (the area under init -> typical: mean of the trapezoids) and its spread over seeds
+    scores = [((0.9 + 0.8) / 2 + (0.8 + 0.4) / 2) / 2, ((0.9 + 0.6) / 2 + (0.6 + 0.2) / 2) / 2]
     expected = [2, 0.9, 0.6, 0.2, 0.25, sum(scores) / 2, scores[0] - scores[1]]
     assert tiny == pytest.approx(expected, abs=1e-4)
     html = (tmp_path / "report" / "report.html").read_text()

@@ -8,7 +8,9 @@ from pathlib import Path
 import pytest
 
 from kadv.testing import Profile, RobustnessInputError, assert_viewpoint_robust, robustness_profile, scene
+from kadv.testing.plugin import _summary_line
 from kadv.testing.profile import check_radii
+from kadv.testing.session import settings
 
 # two small radii, one init view, few views: the profile's arithmetic is the same at any budget
 QUICK = {
@@ -39,13 +41,15 @@ def _profile(**changes) -> Profile:
     return Profile(**(fields | changes))
 
 
-def test_the_score_is_the_mean_trapezoid_under_the_worst_curve_from_the_init_views() -> None:
+def test_the_score_is_the_mean_trapezoid_under_the_typical_curve_from_the_init_views() -> None:
     profile = _profile()
-    # seed 0: (0.9+0.7)/2, (0.7+0.5)/2, (0.5+0.1)/2 -> 1.7/3; seed 1: 0.8, 0.6, 0.2 -> 1.6/3
-    assert profile.scores == pytest.approx([1.7 / 3, 1.6 / 3])
-    assert profile.score == pytest.approx(0.55) and profile.score_spread == pytest.approx(0.1 / 3)
+    # seed 0: (0.9+0.9)/2, (0.9+0.8)/2, (0.8+0.7)/2 -> 2.5/3; seed 1: 0.8, 0.8, 0.7 -> 2.3/3
+    assert profile.scores == pytest.approx([2.5 / 3, 2.3 / 3])
+    assert profile.score == pytest.approx(0.8) and profile.score_spread == pytest.approx(0.2 / 3)
+    # the worst curve's area: seed 0: (0.9+0.7)/2, (0.7+0.5)/2, (0.5+0.1)/2 -> 1.7/3; seed 1: 1.6/3
+    assert profile.worst_score == pytest.approx(0.55)
     assert profile.worst == pytest.approx([0.75, 0.45, 0.05]) and profile.failure_rate == pytest.approx([0, 0.05, 0.3])
-    perfect = _profile(delta1_init=[1.0, 1.0], worst_by_seed=[[1.0] * 3] * 2)
+    perfect = _profile(delta1_init=[1.0, 1.0], typical_by_seed=[[1.0] * 3] * 2)
     assert perfect.score == 1.0 and perfect.score_spread == 0.0
     table = profile.markdown()
     # the draws' intervals: 0.8 ± 1.96 * 0.0816 / 2; Wilson's for 0 of 4 and 1 of 4 failed
@@ -54,7 +58,7 @@ def test_the_score_is_the_mean_trapezoid_under_the_worst_curve_from_the_init_vie
     merged = Profile.merge([profile, profile])
     assert merged.seeds == (0, 1, 0, 1) and merged.score == pytest.approx(profile.score)
     assert len(merged.draws[0]) == 8
-    assert table.endswith("score 0.550 ± 0.033 (spread over seeds)")
+    assert table.endswith("worst-case area 0.550\nscore 0.800 ± 0.067 (typical area; spread over seeds)")
     assert profile.to_dict()["score"] == pytest.approx(profile.score)
 
 
@@ -105,19 +109,28 @@ def test_the_assertion_checks_one_radius_and_envelope_or_the_score(tmp_path: Pat
             "kadv_tiny", "box_room", min_delta1=1.0, radius=(5, 0.1), envelope="robot", artifacts=tmp_path, **quick
         )
     assert "within 5°, 0.1 m (envelope robot) (wanted delta1 >= 1.0)" in str(failure.value)
-    with pytest.raises(AssertionError, match=r"score on box_room_0 is 0\.\d{3} .*below min_score 1.0 \(radii 5°/0.1 m"):
-        assert_viewpoint_robust("kadv_tiny", "box_room", min_score=1.0, artifacts=tmp_path, **QUICK)
+    reports = []
+    below = r"score on box_room_0 is 0\.\d{3} .*below min_score 1.0 \(radii 5°/0.1 m"
+    with settings(observer=lambda result, passed: reports.append((result, passed))):
+        with pytest.raises(AssertionError, match=below):
+            assert_viewpoint_robust("kadv_tiny", "box_room", min_score=1.0, artifacts=tmp_path, **QUICK)
+    # the plugin's session summary gets the score check too
+    ((profile, passed),) = reports
+    assert isinstance(profile, Profile) and not passed
+    assert _summary_line(profile) == (
+        f"kadv_tiny x box_room_0: score {profile.score:.3f} ± 0.000 (radii 5°/0.1 m, 30°/0.6 m, envelope upright)"
+    )
 
 
 def test_the_ranking_ties_models_whose_seed_bands_overlap() -> None:
     from kadv.testing import Scorecard
 
-    high = _profile(worst_by_seed=[[0.9, 0.8, 0.7], [0.8, 0.8, 0.7]])  # scores 0.833, 0.783
-    near = _profile(worst_by_seed=[[0.8, 0.7, 0.6], [0.8, 0.8, 0.7]])  # 0.75, 0.783: overlaps high's band
-    low = _profile()  # 0.567, 0.533: below near's band
+    high = _profile(typical_by_seed=[[1.0, 1.0, 0.9], [1.0, 0.9, 0.9]])  # scores 0.967, 0.917
+    near = _profile(typical_by_seed=[[0.9, 0.9, 0.9], [1.0, 1.0, 1.0]])  # 0.9, 0.967: overlaps high's band
+    low = _profile()  # 0.833, 0.767: below near's band
     card = Scorecard(["near", "low", "high"], ["p"], {"p": {"near": near, "low": low, "high": high}})
     assert card.ranking() == (
-        "ranking: high (0.808) = near (0.767) > low (0.550); '=': their scores' bands over the seeds overlap (tied)"
+        "ranking: high (0.942) = near (0.933) > low (0.800); '=': their scores' bands over the seeds overlap (tied)"
     )
 
 

@@ -107,7 +107,8 @@ def test_the_scorecard_profiles_each_model_on_each_probe_and_ranks_them(tmp_path
     )
     table = card.markdown().splitlines()
     assert table[0] == (
-        "| probe | model | worst delta1 5°/0.1 m | worst delta1 30°/0.6 m | failure rate 30°/0.6 m | score |"
+        "| probe | model | worst delta1 5°/0.1 m | worst delta1 30°/0.6 m | failure rate 30°/0.6 m "
+        "| score (typical area) |"
     )
     assert [row.split(" | ")[:2] for row in table[2:8]] == [
         ["| window", "kadv_tiny"],
