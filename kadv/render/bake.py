@@ -39,7 +39,7 @@ from tqdm import tqdm
 from kadv.device import free_memory
 from kadv.io import atomic_write
 from kadv.render.colour import LUMINANCE, exposed
-from kadv.render.irradiance import BakedLighting, lattice_ij, lattice_taps
+from kadv.render.irradiance import BakedLighting, lattice_ij, nearest_tap
 from kadv.render.lights import SURFACE_OFFSET, DeltaLights, Sky, area_irradiance, scene_lights
 from kadv.render.surface import RayHits, Surfaces
 from kadv.scenes.emitters import DEFAULT_CEILING_LIGHT_SIZE, DEFAULT_LAMP_RADIANCE, MISSING_ENVMAP_RADIANCE, Emitters
@@ -47,12 +47,15 @@ from kadv.scenes.scene import Scene
 
 __all__ = ["BakeConfig", "bake_bytes", "bake_lighting", "default_emitters", "load_or_bake"]
 
-_BAKE_VERSION = 7  # part of the cache key: raise it when the bake's arithmetic changes
+_BAKE_VERSION = 8  # part of the cache key: raise it when the bake's arithmetic changes
 _SLIVER = 8.0
 _CLOSED_ESCAPE_SHARE = 1e-3  # a room whose meter rays escape less than this sees no sky
-# a lattice point whose gather rays meet the back of surfaces this often lies inside geometry or
-# beyond a seam (an overlapping wall's rim): its own estimate is discarded and filled from neighbours
+# a lattice point whose gather rays meet surfaces' hidden sides this often sits in a crevice or at a
+# seam: its own estimate is discarded and filled from neighbours
 _BURIED_SHARE = 0.25
+# gather rays from the free space that must meet a lattice point for its side to join it: one ray
+# through a seam's crack does not carry the flood beyond a wall
+_FLOOD_HITS = 2
 # bytes of one block of the bake's per-point work (its (points, neighbours or rays, 3) intermediates)
 _BLOCK_BYTES = 64 * 2**20
 
@@ -231,14 +234,13 @@ def _meter(surfaces: Surfaces, rng: np.random.Generator, count: int = 4096) -> t
 
 def _nearest(lattice: _Lattice, surfaces: Surfaces, hits: RayHits, directions: np.ndarray) -> np.ndarray:
     """(N,) the lattice point nearest each hit (-1 on a miss), on the side the ray arrived from."""
-    taps, weights = lattice_taps(
+    nearest = nearest_tap(
         torch.from_numpy(lattice.resolution),
         torch.from_numpy(lattice.offsets),
         hits.triangle_ids.clamp_min(0).cpu(),
         hits.barycentrics.double().cpu(),
         surfaces.back_facing(hits, directions).cpu(),
     )
-    nearest = taps.gather(1, weights.argmax(dim=1, keepdim=True))[:, 0]
     return torch.where(hits.hit.cpu(), nearest, -1).numpy()
 
 
@@ -295,29 +297,62 @@ def _gather(leaving: np.ndarray, hit_point: np.ndarray) -> np.ndarray:
     return out
 
 
-def _buried(lattice: _Lattice, hit_point: np.ndarray) -> np.ndarray:
-    """(N,) whether each lattice point lies inside geometry or beyond a seam: more than
-    ``_BURIED_SHARE`` of its gather rays (``hit_point`` (N, rays): the lattice point each met, -1 on
-    a miss) met a triangle on the side from which the fewest rays meet it.
+def _free(
+    lattice: _Lattice, surfaces: Surfaces, hit_point: np.ndarray, seen: np.ndarray, eyes: np.ndarray
+) -> np.ndarray:
+    """(N,) whether each lattice point faces the free space the cameras stand in: a flood fill over
+    the gather rays (``hit_point`` (N, rays): the lattice point each met, -1 on a miss) from the
+    points that rays from the cameras meet (``seen`` (M,), the rays from ``eyes`` (M, 3)).
 
-    A triangle's visible side is the side most rays meet, not its winding's front: files leave
-    windings to chance on two-sided materials (a wall wound outwards is one surface seen from the
-    room), while from a point inside an object or past an overlapping wall's rim most rays meet
-    surfaces from behind."""
-    per_side = len(lattice.points) // 2
-    triangles = len(lattice.resolution)
-    # the lattice point a ray met lies on the side the ray arrived from: its index says which
-    from_front, from_back = np.zeros(triangles, np.int64), np.zeros(triangles, np.int64)
-    for rows in _blocks(len(hit_point), hit_point.shape[1]):
-        met = hit_point[rows][hit_point[rows] >= 0]
-        from_front += np.bincount(lattice.triangle_ids[met[met < per_side]], minlength=triangles)
-        from_back += np.bincount(lattice.triangle_ids[met[met >= per_side]], minlength=triangles)
-    back_hidden = from_back <= from_front  # a tie: the winding's front is the visible side
-    buried = np.empty(len(hit_point), bool)
+    A ray meets a lattice point on the side it arrives from, so the fill does not cross a surface:
+    the insides of closed meshes (a desk, a window frame) and a wall's rim beyond the wall it meets
+    stay out, whatever the windings (files leave them to chance on two-sided materials). A point
+    joins once ``_FLOOD_HITS`` rays from the free space met it and it sees where one of them came
+    from: a lattice point stands for a patch, and a ray that meets the floor beside a box would
+    otherwise carry the fill to the point under the box that lies nearest."""
+    count, rays = hit_point.shape
+    origins = lattice.points + SURFACE_OFFSET * lattice.normals
+    free, met = np.zeros(count, bool), np.zeros(count, np.int64)
+    source = np.zeros((count, 3))  # where a ray that met the point came from
+    renewed = np.zeros(count, bool)  # whose source changed since its last check
+    met[seen[seen >= 0]] = _FLOOD_HITS  # a camera sees them: as if enough rays met them
+    source[seen[seen >= 0]] = eyes[seen >= 0]
+    renewed[seen[seen >= 0]] = True
+    while True:
+        check = np.flatnonzero(renewed & ~free & (met >= _FLOOD_HITS))
+        renewed[:] = False
+        if not len(check):
+            return free
+        joined = check[_sees(surfaces, origins[check], source[check])]
+        free[joined] = True
+        for rows in _blocks(len(joined), rays):
+            block = hit_point[joined[rows]]
+            reached = block >= 0
+            met += np.bincount(block[reached], minlength=count)
+            source[block[reached]] = np.repeat(origins[joined[rows]], rays, axis=0)[reached.reshape(-1)]
+            renewed[block[reached]] = True
+
+
+def _sees(surfaces: Surfaces, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """(N,) whether nothing lies between each of ``origins`` (N, 3) and its target (N, 3)."""
+    offset = targets - origins
+    length = np.linalg.norm(offset, axis=1)
+    directions = offset / np.maximum(length, 1e-12)[:, None]
+    distance = surfaces.cast(origins, directions).t.double().cpu().numpy()
+    # a tenth of a millimetre for float32's rounding: a point at a box's edge may sit that little
+    # outside the face it meets, and a looser check lets the fill through the edge
+    return distance >= length - 1e-4
+
+
+def _buried(hit_point: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """(N,) whether each lattice point's own estimate is discarded: it does not face the free space
+    (:func:`_free`), or more than ``_BURIED_SHARE`` of its gather rays meet sides that do not (a
+    point in a crevice or at a seam, whose rays leave the room through the crack)."""
+    buried = ~free
     for rows in _blocks(len(hit_point), hit_point.shape[1]):
         block = hit_point[rows]
-        met_hidden = (block >= 0) & ((block >= per_side) == back_hidden[lattice.triangle_ids[block]])
-        buried[rows] = met_hidden.mean(axis=1) > _BURIED_SHARE
+        hidden = (block >= 0) & ~free[np.maximum(block, 0)]
+        buried[rows] |= hidden.mean(axis=1) > _BURIED_SHARE
     return buried
 
 
@@ -385,7 +420,10 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
         sky[begin:end] = np.pi * sky_seen.reshape(end - begin, config.rays, 3).mean(axis=1)
         nearest = _nearest(lattice, surfaces, hits, directions)
         hit_point[begin:end] = nearest.reshape(end - begin, config.rays)
-    index, weights = _filter_weights(lattice, config.neighbours, ~_buried(lattice, hit_point))
+    meter = surfaces.cast(eyes, meter_directions)
+    seen = _nearest(lattice, surfaces, meter, meter_directions)
+    buried = _buried(hit_point, _free(lattice, surfaces, hit_point, seen, eyes))
+    index, weights = _filter_weights(lattice, config.neighbours, ~buried)
     smooth = lambda values: _smooth(index, weights, values)
     # the delta lights' own term is shaded per hit, with sharp shadows (a lattice point may stand
     # metres apart on a large floor); the light they bounce is baked
@@ -396,8 +434,6 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
         baked = smooth(direct + sky + _gather(leaving, hit_point))
     irradiance = baked + delta
     # exposure: the median radiance the scene's cameras see, mapped to the key grey
-    meter = surfaces.cast(eyes, meter_directions)
-    seen = _nearest(lattice, surfaces, meter, meter_directions)
     seen = seen[seen >= 0]
     radiance = (albedo[seen] * irradiance[seen] / np.pi) @ LUMINANCE if len(seen) else np.zeros(1)
     median = float(np.median(radiance))
@@ -407,6 +443,7 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
         offsets=lattice.offsets,
         irradiance=baked.astype(np.float32),
         exposure=exposure,
+        buried=buried,
         seconds=time.perf_counter() - start,
     )
 
@@ -440,12 +477,14 @@ def _read(path: Path, digest: str, num_triangles: int) -> BakedLighting:
             offsets=data["offsets"],
             irradiance=data["irradiance"],
             exposure=float(data["exposure"]),
+            buried=data["buried"],
         )
     counts = (baked.resolution + 1) * (baked.resolution + 2) // 2
     if (
         baked.resolution.shape != (num_triangles,)
         or baked.offsets.shape != (2, num_triangles)
         or baked.irradiance.shape != (2 * int(counts.sum()), 3)
+        or baked.buried.shape != baked.irradiance.shape[:1]
         or not np.isfinite(baked.irradiance).all()
         or not (np.isfinite(baked.exposure) and baked.exposure > 0)
     ):
@@ -491,6 +530,7 @@ def _load_or_bake(surfaces: Surfaces, config: BakeConfig, progress: bool, path: 
                 offsets=baked.offsets,
                 irradiance=baked.irradiance,
                 exposure=np.array(baked.exposure),
+                buried=baked.buried,
             )
 
     atomic_write(path, write)

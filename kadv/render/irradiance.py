@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-__all__ = ["BakedLighting", "lattice_ij", "lattice_taps"]
+__all__ = ["BakedLighting", "lattice_ij", "lattice_taps", "nearest_tap"]
 
 
 @dataclass
@@ -21,6 +21,8 @@ class BakedLighting:
         offsets: (2, F) int64 index of each triangle's first lattice point, front side then back.
         irradiance: (N, 3) float32 linear irradiance at the lattice points.
         exposure: the scene's one scale from radiance to display values.
+        buried: (N,) bool, the lattice points whose own estimate was discarded and filled from their
+            neighbours' (inside closed meshes, beyond a wall, in crevices).
         seconds: how long the bake took (0 when read from the cache).
     """
 
@@ -28,6 +30,7 @@ class BakedLighting:
     offsets: np.ndarray
     irradiance: np.ndarray
     exposure: float
+    buried: np.ndarray
     seconds: float = 0.0
 
     def irradiance_at(self, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor) -> torch.Tensor:
@@ -37,6 +40,13 @@ class BakedLighting:
         taps, weights = lattice_taps(resolution, offsets, triangle_ids, bary, back)
         values = irradiance.index_select(0, taps.reshape(-1)).reshape(*taps.shape, 3)
         return (values * weights[..., None].float()).sum(dim=1)
+
+    def buried_at(self, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor) -> torch.Tensor:
+        """(N,) bool: whether the lattice point nearest each hit (as :meth:`irradiance_at` takes them)
+        had its own estimate discarded (:attr:`buried`)."""
+        resolution, offsets, _ = self._tables(triangle_ids.device)
+        nearest = nearest_tap(resolution, offsets, triangle_ids, bary, back)
+        return torch.from_numpy(self.buried).to(triangle_ids.device)[nearest]
 
     def _tables(self, device: torch.device) -> tuple[torch.Tensor, ...]:
         """resolution, offsets and irradiance as tensors on ``device``, made on first use."""
@@ -93,3 +103,11 @@ def lattice_taps(
     first = torch.arange(3, device=weights.device) == 0
     weights = torch.where(centroid[:, None], first.to(weights.dtype), weights)
     return taps, weights / weights.sum(dim=1, keepdim=True)
+
+
+def nearest_tap(
+    resolution: torch.Tensor, offsets: torch.Tensor, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor
+) -> torch.Tensor:
+    """(N,) the lattice point nearest each hit: the heaviest of its :func:`lattice_taps`."""
+    taps, weights = lattice_taps(resolution, offsets, triangle_ids, bary, back)
+    return taps.gather(1, weights.argmax(dim=1, keepdim=True))[:, 0]
