@@ -311,25 +311,30 @@ def _free(
     from: a lattice point stands for a patch, and a ray that meets the floor beside a box would
     otherwise carry the fill to the point under the box that lies nearest."""
     count, rays = hit_point.shape
-    origins = lattice.points + SURFACE_OFFSET * lattice.normals
+    origin = lambda index: lattice.points[index] + SURFACE_OFFSET * lattice.normals[index]
     free, met = np.zeros(count, bool), np.zeros(count, np.int64)
-    source = np.zeros((count, 3))  # where a ray that met the point came from
+    # where a ray that met the point came from: a lattice point's index, or -1 - the eye's index
+    source = np.zeros(count, np.int32)
     renewed = np.zeros(count, bool)  # whose source changed since its last check
     met[seen[seen >= 0]] = _FLOOD_HITS  # a camera sees them: as if enough rays met them
-    source[seen[seen >= 0]] = eyes[seen >= 0]
+    source[seen[seen >= 0]] = -1 - np.flatnonzero(seen >= 0)
     renewed[seen[seen >= 0]] = True
     while True:
         check = np.flatnonzero(renewed & ~free & (met >= _FLOOD_HITS))
         renewed[:] = False
         if not len(check):
             return free
-        joined = check[_sees(surfaces, origins[check], source[check])]
+        came_from = source[check]
+        targets = np.where(
+            (came_from >= 0)[:, None], origin(np.maximum(came_from, 0)), eyes[np.maximum(-1 - came_from, 0)]
+        )
+        joined = check[_sees(surfaces, origin(check), targets)]
         free[joined] = True
         for rows in _blocks(len(joined), rays):
             block = hit_point[joined[rows]]
             reached = block >= 0
             met += np.bincount(block[reached], minlength=count)
-            source[block[reached]] = np.repeat(origins[joined[rows]], rays, axis=0)[reached.reshape(-1)]
+            source[block[reached]] = np.repeat(joined[rows], rays)[reached.reshape(-1)]
             renewed[block[reached]] = True
 
 
