@@ -11,11 +11,14 @@ against each other. Writes Markdown/CSV tables and a side-by-side PNG per view u
 
 Needs the ``reference`` extra (Mitsuba 3, Open Image Denoise). Run:
 .venv/bin/python benchmarks/reference_render.py
+.venv/bin/python benchmarks/reference_render.py --scenes japanese_classroom --sampled 0 --views-only
+    # no attack: docs/lighting_three_ways.png is its reference_out/japanese_classroom/file0.png
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import subprocess
 import sys
@@ -110,6 +113,9 @@ def main() -> None:
     parser.add_argument("--sampled", type=int, default=4, help="sampled init views per scene")
     parser.add_argument("--out", type=Path, default=Path("reference_out"))
     parser.add_argument("--survival-spp", type=int, default=64, help="spp of the adversarial views' renders")
+    parser.add_argument(
+        "--views-only", action="store_true", help="compare the views only, no attack (the pictures, as in the docs)"
+    )
     args = parser.parse_args()
     for name in args.scenes.split(","):
         if not (scene_file(name).is_file() and scene_file(name).suffix.lower() == ".xml"):
@@ -146,15 +152,15 @@ def main() -> None:
             for metric, value in zip(metrics, summary):
                 scene_summary[lighting][metric].append(value)
             row += summary
-        for lighting in lightings:
+        for lighting in lightings if not args.views_only else []:
             kadv_drop, mitsuba_drop = _survive(args, scene.name, path, lighting, renderers[lighting], model)
             survive[lighting].append((kadv_drop, mitsuba_drop))
             row += [kadv_drop, mitsuba_drop]
-        overall.rows.append(row)
+        overall.rows.append(row + ["-", "-"] * len(lightings) * args.views_only)
     overall.write(args.out, "reference")
     print(overall.markdown())
     ratio = {
-        lighting: statistics.mean(m for _, m in drops) / statistics.mean(k for k, _ in drops)
+        lighting: statistics.mean(m for _, m in drops) / statistics.mean(k for k, _ in drops) if drops else math.nan
         for lighting, drops in survive.items()
     }
     for lighting in lightings:

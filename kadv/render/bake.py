@@ -324,11 +324,14 @@ def _free(
         renewed[:] = False
         if not len(check):
             return free
-        came_from = source[check]
-        targets = np.where(
-            (came_from >= 0)[:, None], origin(np.maximum(came_from, 0)), eyes[np.maximum(-1 - came_from, 0)]
-        )
-        joined = check[_sees(surfaces, origin(check), targets)]
+        sees = np.empty(len(check), bool)
+        for rows in _blocks(len(check), 8):  # the positions and rays of a block, not of every point at once
+            came_from = source[check[rows]]
+            targets = np.where(
+                (came_from >= 0)[:, None], origin(np.maximum(came_from, 0)), eyes[np.maximum(-1 - came_from, 0)]
+            )
+            sees[rows] = _sees(surfaces, origin(check[rows]), targets)
+        joined = check[sees]
         free[joined] = True
         for rows in _blocks(len(joined), rays):
             block = hit_point[joined[rows]]
