@@ -27,15 +27,12 @@ _CHILD = """
 import json, resource, sys, time
 import numpy as np, torch
 sys.path.insert(0, {here!r})
-from common import load_bench_scene, scene_file
+from common import load_bench_scene
 from kadv.render import BakeConfig, ExactRenderer, Shading
-from kadv.scenes import load_scene, procedural_room
+from kadv.scenes import procedural_room
 
 name, cache = sys.argv[1], sys.argv[2]
-if name in ("procedural", "box_room"):
-    scene = procedural_room(seed=0) if name == "procedural" else load_bench_scene(name)
-else:
-    scene = load_scene(scene_file(name))
+scene = procedural_room(seed=0) if name == "procedural" else load_bench_scene(name)
 shading = Shading(lighting="baked", bake=BakeConfig(cache=cache))
 start = time.perf_counter()
 renderer = ExactRenderer(scene, shading, progress=False)

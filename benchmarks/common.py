@@ -98,5 +98,5 @@ def scene_file(name: str) -> Path:
 
 
 def load_bench_scene(name: str) -> Scene:
-    """A real scene by name, or the procedural box room for "box_room"."""
-    return box_room(seed=0) if name == "box_room" else load_scene(scenes_root() / name / "scene.xml")
+    """A real scene by name or path (:func:`scene_file`), or the procedural box room for "box_room"."""
+    return box_room(seed=0) if name == "box_room" else load_scene(scene_file(name))

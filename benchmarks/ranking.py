@@ -199,17 +199,21 @@ def main() -> None:
         return {(p, s): profile_cell(out, model, p, s, method, args.budget) for p in probes for s in seeds}
 
     figures: dict[str, str] = {}
+    family = (
+        {s: cells(NoisyDepth(tiny, s) if s else tiny) for s in SIGMAS} if {"family", "threshold"} & set(parts) else {}
+    )
+    uses_embedded = {"stability", "embedded", "saturation", "threshold"} & set(parts)
+    embedded = {m.name: cells(m) for m in (tiny, dpt)} if uses_embedded else {}
     if "family" in parts:
-        figures |= family_part({s: cells(NoisyDepth(tiny, s) if s else tiny) for s in SIGMAS}, probes, seeds)
+        figures |= family_part(family, probes, seeds)
     if {"stability", "embedded"} & set(parts):
-        figures |= embedded_part({m.name: cells(m) for m in (tiny, dpt)}, probes, seeds)
+        figures |= embedded_part(embedded, probes, seeds)
     if "saturation" in parts:
-        figures |= saturation_part({m.name: cells(m) for m in (tiny, dpt)})
+        figures |= saturation_part(embedded)
     if "search" in parts:
         figures |= search_part(cells(tiny), cells(tiny, "random"))
     if "threshold" in parts:
-        family = {s: cells(NoisyDepth(tiny, s) if s else tiny) for s in SIGMAS}
-        figures |= threshold_part(family, {m.name: cells(m) for m in (tiny, dpt)})
+        figures |= threshold_part(family, embedded)
     print("ranking " + " ".join(f"{k}={v}" for k, v in figures.items()))
 
 

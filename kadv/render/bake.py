@@ -316,9 +316,10 @@ def _free(
     # where a ray that met the point came from: a lattice point's index, or -1 - the eye's index
     source = np.zeros(count, np.int32)
     renewed = np.zeros(count, bool)  # whose source changed since its last check
-    met[seen[seen >= 0]] = _FLOOD_HITS  # a camera sees them: as if enough rays met them
-    source[seen[seen >= 0]] = -1 - np.flatnonzero(seen >= 0)
-    renewed[seen[seen >= 0]] = True
+    met_by_eye = np.flatnonzero(seen >= 0)
+    met[seen[met_by_eye]] = _FLOOD_HITS  # a camera sees them: as if enough rays met them
+    source[seen[met_by_eye]] = -1 - met_by_eye
+    renewed[seen[met_by_eye]] = True
     while True:
         check = np.flatnonzero(renewed & ~free & (met >= _FLOOD_HITS))
         renewed[:] = False
@@ -399,9 +400,10 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
     rng = np.random.default_rng(config.seed)
     scene = surfaces.scene
     eyes, meter_directions = _meter(surfaces, rng)
+    meter = surfaces.cast(eyes, meter_directions)
     emitters = scene.emitters
     if emitters.empty:
-        escape_share = float((~surfaces.cast(eyes, meter_directions).hit).double().mean())
+        escape_share = float((~meter.hit).double().mean())
         emitters = default_emitters(scene, escape_share)
     lattice = _build_lattice(scene, config)
     count = len(lattice.points)
@@ -428,7 +430,6 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
         sky[begin:end] = np.pi * sky_seen.reshape(end - begin, config.rays, 3).mean(axis=1)
         nearest = _nearest(lattice, surfaces, hits, directions)
         hit_point[begin:end] = nearest.reshape(end - begin, config.rays)
-    meter = surfaces.cast(eyes, meter_directions)
     seen = _nearest(lattice, surfaces, meter, meter_directions)
     buried = _buried(hit_point, _free(lattice, surfaces, hit_point, seen, eyes))
     index, weights = _filter_weights(lattice, config.neighbours, ~buried)

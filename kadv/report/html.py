@@ -60,8 +60,7 @@ def save_profile_curves(path: Path, profiles: dict[tuple[str, str, str], Profile
     panels: dict[str, dict[str, Profile]] = defaultdict(dict)
     for (model, scene, method), profile in sorted(profiles.items()):
         panels[scene][f"{model} ({method}) {profile.score:.2f}"] = profile
-    title = "delta1 against the camera's move: worst (solid) and typical (dashed); legend: score"
-    return save_profile_panels(path, dict(panels), title)
+    return save_profile_panels(path, dict(panels))
 
 
 def _data_uri(path: Path, kind: str = "image/png") -> str:

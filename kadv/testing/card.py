@@ -78,8 +78,7 @@ class Scorecard:
             probe: {f"{model} {profile.score:.2f}": profile for model, profile in self.results[probe].items()}
             for probe in self.probes
         }
-        title = "delta1 against the camera's move: worst (solid) and typical (dashed); legend: score"
-        return save_profile_panels(path, panels, title)
+        return save_profile_panels(path, panels)
 
 
 def scorecard(

@@ -123,10 +123,9 @@ def _summary_line(result) -> str:
     from kadv.testing.profile import Profile
 
     if isinstance(result, Profile):
-        radii = ", ".join(f"{d:g}°/{m:g} m" for d, m in result.radii)
         return (
             f"{result.model} x {result.scene}: score {result.score:.3f} ± {result.score_spread:.3f} "
-            f"(radii {radii}, envelope {result.envelope})"
+            f"(radii {result.radii_text}, envelope {result.envelope})"
         )
     return (
         f"{result.model} x {result.scene}: delta1 {result.delta1_init:.3f} -> {result.worst.delta1_worst:.3f} "

@@ -155,6 +155,11 @@ class Profile:
         )
 
     @property
+    def radii_text(self) -> str:
+        """The radii as text: ``5°/0.1 m, 15°/0.3 m, 45°/1 m``."""
+        return ", ".join(f"{d:g}°/{m:g} m" for d, m in self.radii)
+
+    @property
     def scores(self) -> list[float]:
         """The score under each seed (see :attr:`score`)."""
         return [curve_area(init, typical) for init, typical in zip(self.delta1_init, self.typical_by_seed)]
@@ -257,10 +262,10 @@ class Profile:
         return save_figure(Path(path), figure)
 
 
-def save_profile_panels(path: str | Path, panels: dict[str, dict[str, Profile]], title: str) -> Path:
+def save_profile_panels(path: str | Path, panels: dict[str, dict[str, Profile]]) -> Path:
     """One panel per key of ``panels`` (a probe, a scene): each of its profiles' worst (solid) and
-    typical (dashed) delta1 against the radius, with bands over the seeds, labelled by its key.
-    The scorecard's and the report's pictures."""
+    typical (dashed) delta1 against the radius, with bands over the seeds, labelled by its key
+    (which names its score). The scorecard's and the report's pictures."""
     import matplotlib.pyplot as plt
 
     from kadv.report.figures import save_figure
@@ -285,7 +290,7 @@ def save_profile_panels(path: str | Path, panels: dict[str, dict[str, Profile]],
         axis.legend(fontsize=7, loc="lower left")
     for index in range(len(panels), rows * columns):
         axes[index // columns, index % columns].set_axis_off()
-    figure.suptitle(title)
+    figure.suptitle("delta1 against the camera's move: worst (solid) and typical (dashed); legend: score")
     figure.tight_layout()
     return save_figure(Path(path), figure)
 
@@ -301,7 +306,7 @@ def _nanmean(rows: list[list[float]]) -> list[float]:
 def curve_area(init: float, values: list[float]) -> float:
     """The area under the curve from ``init`` (radius 0) through ``values`` (one per radius), each
     step between radii weighing the same, in [0, 1] for delta1 values: a profile's score when the
-    values are the worst case."""
+    values are the typical curve, its worst_score when they are the worst."""
     curve = [init, *values]
     return float(np.mean([(a + b) / 2 for a, b in itertools.pairwise(curve)]))
 

@@ -377,11 +377,10 @@ def assert_viewpoint_robust(
         passed = profile.score >= min_score  # a NaN score (a radius kept no drawn view) fails too
         current().report(profile, passed)
         if not passed:
-            radii = ", ".join(f"{d:g}°/{m:g} m" for d, m in profile.radii)
             raise AssertionError(
                 f"{profile.model}'s viewpoint robustness score on {profile.scene} is {profile.score:.3f} "
                 f"(± {profile.score_spread:.3f} over seeds {list(profile.seeds)}), below min_score {min_score} "
-                f"(radii {radii}, envelope {profile.envelope}):\n{profile.markdown()}"
+                f"(radii {profile.radii_text}, envelope {profile.envelope}):\n{profile.markdown()}"
             )
         outcome = outcome or profile
     return outcome
