@@ -192,6 +192,9 @@ def main() -> None:
     args = parser.parse_args()
     out, parts = Path(args.out), args.parts.split(",")
     probes = list(PROBES) if args.probes == "all" else args.probes.split(",")
+    for option, names, known in (("--parts", parts, PARTS), ("--probes", probes, PROBES)):
+        if set(names) - set(known):
+            parser.error(f"{option}: no {', '.join(sorted(set(names) - set(known)))}; choose from {', '.join(known)}")
     seeds = [int(s) for s in args.seeds.split(",")]
     tiny, dpt = load_model("kadv_tiny"), load_model("kadv_tiny_dpt")
 
