@@ -9,10 +9,16 @@ and SSIM of the images after exposure matching, and delta1 between kadv-tiny's p
 two images. The reference's noise floor is two independent Mitsuba renders of the file camera
 against each other. Writes Markdown/CSV tables and a side-by-side PNG per view under ``--out``.
 
+With ``--budget``, each view's error budget against Mitsuba under baked lighting
+(:mod:`kadv.diagnostics.budget`: the dB each light term, the albedo, the exposure and each pixel
+class would gain were it exact) goes into ``budget_terms`` and ``budget_classes`` tables, per scene
+and over scenes, with an error-map PNG per view.
+
 Needs the ``reference`` extra (Mitsuba 3, Open Image Denoise). Run:
 .venv/bin/python benchmarks/reference_render.py
 .venv/bin/python benchmarks/reference_render.py --scenes japanese_classroom --sampled 0 --views-only
     # no attack: docs/lighting_three_ways.png is its reference_out/japanese_classroom/file0.png
+.venv/bin/python benchmarks/reference_render.py --lightings baked --views-only --budget
 """
 
 from __future__ import annotations
@@ -28,7 +34,9 @@ from common import REAL_SCENES, default_lighting, scene_file
 from tqdm import tqdm
 
 from kadv.attack import InitViewConfig, PenaltyConfig, file_init_views, sample_init_views
+from kadv.diagnostics.budget import TERMS, KadvTerms, MitsubaTerms, ViewBudget, error_budget, save_budget_figure
 from kadv.diagnostics.reference import (
+    PIXEL_CLASSES,
     compare_view,
     load_mitsuba_scene,
     noise_floor,
@@ -37,6 +45,7 @@ from kadv.diagnostics.reference import (
     survival,
     survival_table,
 )
+from kadv.geometry import intrinsics_from_fov
 from kadv.models import load_model
 from kadv.render import ExactRenderer, Shading
 from kadv.report.summary import RunSummary
@@ -58,21 +67,35 @@ def _attack(path: Path, lighting: str, out: Path) -> RunSummary:
     return RunSummary.read(out / "summary.json")
 
 
-def _compare(args, scene, path: Path, renderers: dict, model, header: list[str]) -> tuple[Table, float, float]:
+def _compare(
+    args, scene, path: Path, renderers: dict, model, header: list[str]
+) -> tuple[Table, float, float, list[ViewBudget]]:
     """The file camera and sampled init views rendered by Mitsuba and by kadv under each lighting:
-    their table (one row per view), a side-by-side PNG per view, and the reference's noise floor."""
+    their table (one row per view), a side-by-side PNG per view, the reference's noise floor, and
+    with ``--budget`` each view's error budget under baked lighting."""
     penalty = PenaltyConfig()
     direct = renderers.get("direct") or ExactRenderer(scene)
     views = file_init_views(direct, penalty.margin)[:1]
     views += sample_init_views(direct, model, args.sampled, 0, InitViewConfig(), penalty, args.height, args.width)
-    mitsuba = load_mitsuba_scene(
-        path, [(v.world_T_cam.numpy(), v.fov_x_deg) for v in views], args.height, args.width, args.spp
-    )
+    poses = [(v.world_T_cam.numpy(), v.fov_x_deg) for v in views]
+    if args.budget:
+        mitsuba_terms = MitsubaTerms(path, poses, args.height, args.width, args.spp)
+        kadv_terms = KadvTerms(renderers["baked"])
+        mitsuba = mitsuba_terms.full
+    else:
+        mitsuba = load_mitsuba_scene(path, poses, args.height, args.width, args.spp)
     floor_psnr, floor_ssim = noise_floor(mitsuba, 0, args.spp)
     title = f"{scene.name}: Mitsuba 3 ({args.spp} spp, denoised) against kadv, {args.height}x{args.width}, kadv-tiny"
     table = Table(title, header)
+    budgets = []
     for index, view in enumerate(tqdm(views, desc=scene.name)):
-        reference = render_reference(mitsuba, index, args.spp)
+        if args.budget:
+            theirs = mitsuba_terms.render(index)
+            reference = theirs["full"]
+            K = intrinsics_from_fov(view.fov_x_deg, args.height, args.width)
+            budgets.append(error_budget(kadv_terms.render(view.world_T_cam, K, args.height, args.width), theirs))
+        else:
+            reference = render_reference(mitsuba, index, args.spp)
         comparisons = {
             lighting: compare_view(
                 mitsuba, index, renderer, model, view.world_T_cam, view.fov_x_deg,
@@ -80,6 +103,12 @@ def _compare(args, scene, path: Path, renderers: dict, model, header: list[str])
             )
             for lighting, renderer in renderers.items()
         }  # fmt: skip
+        if args.budget:
+            budget = budgets[-1]
+            save_budget_figure(
+                args.out / scene.name / f"budget_{view.name}.png", budget, comparisons["baked"].mitsuba_rgb,
+                f"{scene.name} {view.name}: error budget against Mitsuba 3, baked lighting",
+            )  # fmt: skip
         depth_error = max(c.depth_rel_err for c in comparisons.values())
         table.rows.append(
             [view.name, f"{depth_error:.1e}", *(getattr(c, m) for c in comparisons.values() for m in _METRICS)]
@@ -91,7 +120,24 @@ def _compare(args, scene, path: Path, renderers: dict, model, header: list[str])
         save_comparison(args.out / scene.name / f"{view.name}.png", comparisons, f"{scene.name} {view.name}: {scores}")
     table.write(args.out / scene.name, "reference")
     print(f"\n{table.markdown()}")
-    return table, floor_psnr, floor_ssim
+    return table, floor_psnr, floor_ssim, budgets
+
+
+def _budget_rows(name: str, budgets: list[ViewBudget]) -> tuple[list, list]:
+    """A scene's rows of the two budget tables: by term (mean dB gained over its views) and by pixel
+    class (mean share of the pixels and of the squared error, mean dB gained)."""
+    mean = lambda values: statistics.mean(values)
+    psnr = statistics.median(b.psnr for b in budgets)
+    terms = [name, psnr, *(mean(b.gains[t] for b in budgets) for t in (*TERMS, "albedo", "exposure"))]
+    terms.append(mean(b.best_exposure for b in budgets))
+    classes = [name, psnr]
+    for c in PIXEL_CLASSES:
+        classes += [
+            f"{100 * mean(b.class_pixels[c] for b in budgets):.0f}%",
+            f"{100 * mean(b.class_error[c] for b in budgets):.0f}%",
+            mean(b.class_gains[c] for b in budgets),
+        ]
+    return terms, classes
 
 
 def _survive(args, name: str, path: Path, lighting: str, renderer: ExactRenderer, model) -> tuple[float, float]:
@@ -116,6 +162,7 @@ def main() -> None:
     parser.add_argument(
         "--views-only", action="store_true", help="compare the views only, no attack (the pictures, as in the docs)"
     )
+    parser.add_argument("--budget", action="store_true", help="each view's error budget under baked lighting")
     args = parser.parse_args()
     for name in args.scenes.split(","):
         if not (scene_file(name).is_file() and scene_file(name).suffix.lower() == ".xml"):
@@ -123,6 +170,8 @@ def main() -> None:
     lightings = args.lightings.split(",")
     if not set(lightings) <= {"direct", "baked"}:
         parser.error(f"--lightings: each must be direct or baked, got {args.lightings!r}")
+    if args.budget and "baked" not in lightings:
+        parser.error(f"--budget: the budget is of baked lighting, and --lightings is {args.lightings!r}")
     default = default_lighting()
     model = load_model("kadv_tiny")
     metrics = _METRICS
@@ -131,6 +180,15 @@ def main() -> None:
         "Reference comparison per scene: median PSNR, SSIM over views, mean prediction delta1; depth error: max",
         ["scene", "noise floor psnr", "noise floor ssim", "bake s", *header[2:]]
         + [f"delta1 drop {lighting} on {renderer}" for lighting in lightings for renderer in ("kadv", "Mitsuba")],
+    )
+    gains = [f"{part} dB" for part in (*TERMS, "albedo", "exposure")]
+    budget_terms = Table(
+        "Error budget by term: median PSNR, mean dB gained over views were one part exact (Mitsuba's)",
+        ["scene", "psnr", *gains, "best exposure x"],
+    )
+    budget_classes = Table(
+        "Error budget by pixel class: share of the pixels, share of the squared error, dB gained were its pixels exact",
+        ["scene", "psnr", *(f"{c} {k}" for c in PIXEL_CLASSES for k in ("pixels", "error", "dB"))],
     )
     survive: dict[str, list[tuple[float, float]]] = {lighting: [] for lighting in lightings}
     depth_errors: list[float] = []
@@ -143,7 +201,11 @@ def main() -> None:
             renderers[lighting] = ExactRenderer(scene, Shading(lighting=lighting))
             if lighting == "baked":  # 0 s: read from the cache (benchmarks/bake.py measures a bake)
                 bake = f"{renderers[lighting].baked.seconds:.0f}" if renderers[lighting].baked.seconds else "cached"
-        table, floor_psnr, floor_ssim = _compare(args, scene, path, renderers, model, header)
+        table, floor_psnr, floor_ssim, budgets = _compare(args, scene, path, renderers, model, header)
+        if budgets:
+            for summary, rows in zip((budget_terms, budget_classes), _budget_rows(scene.name, budgets)):
+                summary.rows.append(rows)
+                summary.write(args.out, summary.title.split(":")[0].lower().replace(" ", "_"))
         depth_errors += [float(r[1]) for r in table.rows]
         row = [scene.name, floor_psnr, floor_ssim, bake]
         for offset, lighting in enumerate(lightings):
@@ -158,6 +220,8 @@ def main() -> None:
             row += [kadv_drop, mitsuba_drop]
         overall.rows.append(row + ["-", "-"] * len(lightings) * args.views_only)
     overall.write(args.out, "reference")
+    for summary in (budget_terms, budget_classes) if args.budget else ():
+        print(summary.markdown())
     print(overall.markdown())
     ratio = {
         lighting: statistics.mean(m for _, m in drops) / statistics.mean(k for k, _ in drops) if drops else math.nan

@@ -32,17 +32,22 @@ from kadv.render import ExactRenderer, RenderOutput
 from kadv.render.colour import exposed, tone_map
 from kadv.report.figures import depth_colour_map, depth_range, save_figure
 from kadv.report.sweep import Table
-from kadv.scenes.mitsuba_sanitiser import sanitised_scene_root
+from kadv.scenes.mitsuba_sanitiser import MAX_DEPTH, sanitised_scene_root
 from kadv.scenes.textures import srgb_to_linear
 
 __all__ = [
+    "PIXEL_CLASSES",
     "ReferenceComparison",
     "Survival",
     "compare_view",
+    "display_image",
     "load_mitsuba_scene",
+    "matched_exposure",
     "mitsuba_depth",
+    "mitsuba_hits",
     "noise_floor",
     "render_reference",
+    "render_reference_and_albedo",
     "save_comparison",
     "survival",
     "survival_table",
@@ -74,19 +79,36 @@ def _snake(name: str) -> str:
     return re.sub(r"(?<=[a-z0-9])([A-Z])", r"_\1", name).lower()
 
 
-def load_mitsuba_scene(path: str | Path, views: list[tuple[np.ndarray, float]], height: int, width: int, spp: int):
+def load_mitsuba_scene(
+    path: str | Path,
+    views: list[tuple[np.ndarray, float]],
+    height: int,
+    width: int,
+    spp: int,
+    max_depth: int = MAX_DEPTH,
+    suns_only: bool = False,
+):
     """Load the sanitised scene in Mitsuba (textures and meshes resolve relative to the file), its
     path tracer also writing the albedo and normals that :func:`render_reference`'s denoiser reads.
 
     Older files carry properties Mitsuba 3 no longer knows (a rough conductor's ``extEta``); each one
     Mitsuba names as unreferenced is dropped from every plugin of that type, with a log line.
+
+    Args:
+        max_depth: the path tracer's longest path (2: direct light only).
+        suns_only: keep the directional emitters (suns) only.
     """
     mi = _mitsuba()
     resolver = mi.file_resolver()
     folder = str(Path(path).resolve().parent)
     if folder not in [str(p) for p in resolver]:
         resolver.prepend(folder)
-    root = sanitised_scene_root(Path(path), views, height, width, spp, aovs=True)
+    root = sanitised_scene_root(Path(path), views, height, width, spp, max_depth, aovs=True)
+    if suns_only:
+        for parent in list(root.iter()):
+            for emitter in parent.findall("emitter"):
+                if emitter.get("type") != "directional":
+                    parent.remove(emitter)
     while True:
         try:
             return mi.load_string(ET.tostring(root, encoding="unicode"))
@@ -103,8 +125,26 @@ def load_mitsuba_scene(path: str | Path, views: list[tuple[np.ndarray, float]], 
                         plugin.remove(child)
 
 
-def mitsuba_depth(scene, sensor: int, height: int, width: int) -> np.ndarray:
-    """(H, W) z-depth seen by one of the scene's sensors at pixel centres; 0 where the ray misses.
+# what a camera ray meets first, as the error budget splits pixels (kadv.diagnostics.budget)
+PIXEL_CLASSES = ("diffuse", "coated or glossy", "glass", "emitter", "sky")
+
+
+def _bsdf_class(description: str) -> int:
+    """Index into :data:`PIXEL_CLASSES` of a Mitsuba BSDF from its description (the first named
+    material under wrappers such as ``TwoSided`` and ``Mask``)."""
+    for name in re.findall(r"(\w+)\[", description):
+        if name.endswith("Diffuse"):
+            return 0
+        if "Dielectric" in name:
+            return 2
+        if name.endswith(("Plastic", "Conductor")) or name.startswith("Principled"):
+            return 1
+    return 1
+
+
+def mitsuba_hits(scene, sensor: int, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """What one of the scene's sensors sees at pixel centres: z-depth (H, W), 0 where the ray
+    misses, and the class (H, W) int of what it meets, an index into :data:`PIXEL_CLASSES`.
 
     The rays come from Mitsuba's own sensor (its pose and field of view as the XML gave them), and
     the hits from ``scene.ray_intersect``, so no pixel jitter or reconstruction filter enters and
@@ -117,6 +157,7 @@ def mitsuba_depth(scene, sensor: int, height: int, width: int) -> np.ndarray:
     axis = np.array(to_world @ mi.Vector3f(0.0, 0.0, 1.0))
     axis /= np.linalg.norm(axis)
     depth = np.zeros((height, width))
+    classes = np.full((height, width), PIXEL_CLASSES.index("sky"))
     for row in range(height):
         for column in range(width):
             ray, _ = camera.sample_ray(
@@ -125,10 +166,19 @@ def mitsuba_depth(scene, sensor: int, height: int, width: int) -> np.ndarray:
             hit = scene.ray_intersect(ray)
             if hit.is_valid():
                 depth[row, column] = float(np.dot(np.array(hit.p) - eye, axis))
-    return depth
+                shape = hit.shape
+                emitter = shape.is_emitter()
+                classes[row, column] = PIXEL_CLASSES.index("emitter") if emitter else _bsdf_class(str(shape.bsdf()))
+    return depth, classes
 
 
-def _exposure(linear: np.ndarray, target_srgb: np.ndarray) -> float:
+def mitsuba_depth(scene, sensor: int, height: int, width: int) -> np.ndarray:
+    """(H, W) z-depth seen by one of the scene's sensors at pixel centres; 0 where the ray misses
+    (:func:`mitsuba_hits`)."""
+    return mitsuba_hits(scene, sensor, height, width)[0]
+
+
+def matched_exposure(linear: np.ndarray, target_srgb: np.ndarray) -> float:
     """One scale on linear radiance so that, tone-mapped as kadv tone-maps its baked renders
     (:func:`kadv.render.colour.tone_map`), its median brightness matches the target's.
 
@@ -140,7 +190,7 @@ def _exposure(linear: np.ndarray, target_srgb: np.ndarray) -> float:
     return float(target / max(brightness, 1e-12))
 
 
-def _display(linear: np.ndarray) -> np.ndarray:
+def display_image(linear: np.ndarray) -> np.ndarray:
     """Display values (H, W, 3) in [0, 1] of exposed linear radiance, as kadv shows its own."""
     return tone_map(torch.from_numpy(np.ascontiguousarray(linear))).numpy().astype(np.float32)
 
@@ -172,19 +222,27 @@ def render_reference(mitsuba_scene, sensor: int, spp: int, seed: int = 0, denois
     """(H, W, 3) linear radiance that Mitsuba path-traces for one of the scene's sensors, denoised by
     Intel Open Image Denoise with Mitsuba's own albedo and normals (at 256 spp two independent
     renders of a gallery view agree to about 22 dB raw, 32 dB denoised)."""
+    return render_reference_and_albedo(mitsuba_scene, sensor, spp, seed, denoise)[0]
+
+
+def render_reference_and_albedo(
+    mitsuba_scene, sensor: int, spp: int, seed: int = 0, denoise: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`render_reference`'s image and the albedo (H, W, 3) Mitsuba's film saw (the surfaces'
+    diffuse reflectance, textures filtered over the pixel; 0 where rays leave the scene)."""
     mi = _mitsuba()
     image = np.array(mi.render(mitsuba_scene, sensor=sensor, spp=spp, seed=seed), np.float32)
     colour = np.ascontiguousarray(image[..., :3])
-    if denoise and image.shape[-1] >= 9:
+    albedo = np.ascontiguousarray(image[..., 3:6])
+    if denoise:
         try:
             import pyoidn
         except ImportError as error:
             raise ImportError(
                 "the reference's denoiser needs Open Image Denoise: pip install 'kadv[reference]'"
             ) from error
-        albedo, normals = np.ascontiguousarray(image[..., 3:6]), np.ascontiguousarray(image[..., 6:9])
-        colour = pyoidn.denoise(colour, albedo, normals, hdr=True)
-    return np.maximum(colour, 0.0).astype(np.float64)
+        colour = pyoidn.denoise(colour, albedo, np.ascontiguousarray(image[..., 6:9]), hdr=True)
+    return np.maximum(colour, 0.0).astype(np.float64), albedo.astype(np.float64)
 
 
 def _both_images(
@@ -196,7 +254,7 @@ def _both_images(
     ours = renderer.render(world_T_cam, K, height, width, supersample=2).to("cpu")
     linear = render_reference(mitsuba_scene, sensor, spp, seed) if reference is None else reference
     kadv_rgb = ours.rgb[0].permute(1, 2, 0).numpy()
-    return ours, kadv_rgb, _display(linear * _exposure(linear, kadv_rgb))
+    return ours, kadv_rgb, display_image(linear * matched_exposure(linear, kadv_rgb))
 
 
 def _as_tensor(image: np.ndarray) -> torch.Tensor:
@@ -213,8 +271,8 @@ def noise_floor(mitsuba_scene, sensor: int, spp: int, denoise: bool = True) -> t
     """PSNR and SSIM of two independent Mitsuba renders of one view against each other, exposed
     alike (the median to a mid grey): the best score any renderer can reach against one of them."""
     first, second = (render_reference(mitsuba_scene, sensor, spp, seed, denoise) for seed in (0, 1))
-    scale = _exposure(first, np.full((1, 3), 0.5))
-    return _image_scores(_display(first * scale), _display(second * scale))
+    scale = matched_exposure(first, np.full((1, 3), 0.5))
+    return _image_scores(display_image(first * scale), display_image(second * scale))
 
 
 def compare_view(

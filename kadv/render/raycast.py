@@ -17,6 +17,7 @@ from torch.nn import functional as F
 from kadv.checks import check_shape
 from kadv.geometry.camera import pixel_rays
 from kadv.render.bake import load_or_bake
+from kadv.render.irradiance import BakedLighting
 from kadv.render.shading import Shader, Shading
 from kadv.render.surface import RayHits, Surfaces
 from kadv.scenes.scene import Scene
@@ -81,6 +82,8 @@ class ExactRenderer:
         device: where the rays are cast and shaded.
         max_rays: the most rays cast and shaded at once; a render of more (views x pixels x
             samples) goes through in parts of this many, so that a large batch fits the device.
+        baked: lighting already baked for this scene, shaded instead of the cache's (with
+            ``lighting="baked"``): the error budget shades one term of the light at a time.
     """
 
     def __init__(
@@ -91,6 +94,7 @@ class ExactRenderer:
         backend: str = "auto",
         device: torch.device | str = "cpu",
         max_rays: int = DEFAULT_MAX_RAYS,
+        baked: BakedLighting | None = None,
     ) -> None:
         if max_rays < 1:
             raise ValueError(f"render.max_rays must be a positive number of rays, got {max_rays}")
@@ -100,8 +104,11 @@ class ExactRenderer:
         self.surfaces = Surfaces(scene, backend, device)
         self.device = self.surfaces.device
         self.caster = self.surfaces.caster
-        baked = self.shading.lighting == "baked"
-        self.baked = load_or_bake(self.surfaces, self.shading.bake, progress) if baked else None
+        if baked is not None and self.shading.lighting != "baked":
+            raise ValueError("ExactRenderer: baked lighting was given to a renderer with render.lighting=direct")
+        if self.shading.lighting == "baked" and baked is None:
+            baked = load_or_bake(self.surfaces, self.shading.bake, progress)
+        self.baked = baked
         self.shader = Shader(self.surfaces, self.shading, self.baked)
         self.lights = self.shader.lights
 
