@@ -3,7 +3,8 @@
 For each scene (the three ../shared scenes by default; ``--scenes`` takes names or paths to Mitsuba
 XML files), the file camera (moved clear of walls as the attack does) plus ``--sampled`` init views
 sampled with kadv-tiny are rendered by Mitsuba 3 (path tracing, the file's emitters, denoised with
-Open Image Denoise) and by kadv's exact renderer under each lighting (``direct``, ``baked``). Per
+Open Image Denoise) and by kadv's exact renderer under each lighting (``direct``, ``baked``, and
+``reflections``: baked with ``render.shading.reflections=true``). Per
 view: the median relative z-depth error (Mitsuba's ray intersection at our pixel centres), PSNR
 and SSIM of the images after exposure matching, and delta1 between kadv-tiny's predictions on the
 two images. The reference's noise floor is two independent Mitsuba renders of the file camera
@@ -59,10 +60,21 @@ _ATTACK = ["model=kadv_tiny", "render.height=120", "render.width=160", "init.cou
 _ATTACK += ["attack.budget_evaluations=123", "video=false"]
 
 
+# each lighting compared: its shading, and the attack's overrides that select it
+_LIGHTINGS = {
+    "direct": (Shading(lighting="direct"), ["render.lighting=direct"]),
+    "baked": (Shading(lighting="baked"), ["render.lighting=baked", "render.shading.reflections=false"]),
+    "reflections": (
+        Shading(lighting="baked", reflections=True),
+        ["render.lighting=baked", "render.shading.reflections=true"],
+    ),
+}
+
+
 def _attack(path: Path, lighting: str, out: Path) -> RunSummary:
     """Run the default attack, made small (_ATTACK), on a scene file under a lighting; its summary."""
     command = [str(Path(sys.executable).parent / "kadv-attack"), "scene=file", f"scene.path={path}", *_ATTACK]
-    command += [f"render.lighting={lighting}", f"hydra.run.dir={out}"]
+    command += [*_LIGHTINGS[lighting][1], f"hydra.run.dir={out}"]
     subprocess.run(command, check=True, capture_output=True)
     return RunSummary.read(out / "summary.json")
 
@@ -168,8 +180,8 @@ def main() -> None:
         if not (scene_file(name).is_file() and scene_file(name).suffix.lower() == ".xml"):
             parser.error(f"--scenes: {name!r} is neither a shared scene's name nor a Mitsuba XML file")
     lightings = args.lightings.split(",")
-    if not set(lightings) <= {"direct", "baked"}:
-        parser.error(f"--lightings: each must be direct or baked, got {args.lightings!r}")
+    if not set(lightings) <= set(_LIGHTINGS):
+        parser.error(f"--lightings: each must be one of {', '.join(_LIGHTINGS)}, got {args.lightings!r}")
     if args.budget and "baked" not in lightings:
         parser.error(f"--budget: the budget is of baked lighting, and --lightings is {args.lightings!r}")
     default = default_lighting()
@@ -198,7 +210,7 @@ def main() -> None:
         scene = load_scene(path)
         renderers, bake = {}, "-"
         for lighting in lightings:
-            renderers[lighting] = ExactRenderer(scene, Shading(lighting=lighting))
+            renderers[lighting] = ExactRenderer(scene, _LIGHTINGS[lighting][0])
             if lighting == "baked":  # 0 s: read from the cache (benchmarks/bake.py measures a bake)
                 bake = f"{renderers[lighting].baked.seconds:.0f}" if renderers[lighting].baked.seconds else "cached"
         table, floor_psnr, floor_ssim, budgets = _compare(args, scene, path, renderers, model, header)

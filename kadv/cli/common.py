@@ -350,6 +350,7 @@ def shading_from_config(cfg: DictConfig) -> Shading:
         background=tuple(float(v) for v in shading.background),
         lighting=cfg.get("lighting", "direct"),
         bake=settings_from_node(BakeConfig, bake, "render.bake"),
+        reflections=shading.get("reflections", False),
     )
 
 

@@ -15,7 +15,9 @@ others left as they are: each term, the diffuse surfaces' ``albedo`` (textures a
 against Mitsuba's albedo AOV), the ``exposure`` (the best single scale against the median matching), and
 each pixel class of :data:`~kadv.diagnostics.reference.PIXEL_CLASSES` (what the camera ray meets in
 Mitsuba's scene), with each class's share of the squared error. The gains do not add up: each is
-measured with the other parts wrong.
+measured with the other parts wrong. The terms are of the diffuse shading: with
+:attr:`~kadv.render.Shading.reflections` on, the coats' reflections stay in kadv's whole image,
+outside every term.
 """
 
 from __future__ import annotations
@@ -80,9 +82,9 @@ class KadvTerms:
         def lit(lights: Emitters, irradiance: np.ndarray) -> ExactRenderer:
             """A renderer of the scene under ``lights`` (per hit) and the baked ``irradiance``."""
             lighting = replace(baked, irradiance=np.ascontiguousarray(irradiance, np.float32))
-            return ExactRenderer(
-                replace(scene, emitters=lights), shading, False, device=renderer.device, baked=lighting
-            )
+            lit_scene = replace(scene, emitters=lights)
+            diffuse = replace(shading, reflections=False)  # a term's own sky would show in a coat
+            return ExactRenderer(lit_scene, diffuse, progress=False, device=renderer.device, baked=lighting)
 
         zero = np.zeros_like(baked.irradiance)
         self.renderers = {
@@ -224,7 +226,7 @@ def save_budget_figure(path: str | Path, budget: ViewBudget, mitsuba_rgb: np.nda
     )
     for axis, (name, change) in zip(axes[1], budget.term_maps.items()):
         shown = axis.imshow(change.mean(axis=-1), cmap="RdBu_r", vmin=-0.25, vmax=0.25)
-        axis.set_title(f"{name} made exact: +{budget.gains[name]:.1f} dB", fontsize=8)
+        axis.set_title(f"{name} made exact: {budget.gains[name]:+.1f} dB", fontsize=8)
     figure.colorbar(shown, ax=axes[1].tolist(), fraction=0.02, pad=0.02, label="display change")
     for axis in axes.ravel():
         axis.set_axis_off()

@@ -17,6 +17,7 @@ __all__ = [
     "coated_albedo",
     "exposed",
     "fresnel_diffuse_reflectance",
+    "fresnel_reflectance",
     "srgb_decode",
     "tone_map",
 ]
@@ -46,17 +47,22 @@ def exposed(display: float) -> float:
     return -math.log1p(-min(display, 0.999))
 
 
+def fresnel_reflectance(cosine: torch.Tensor, eta: torch.Tensor | float) -> torch.Tensor:
+    """The unpolarised Fresnel reflectance at cosines of incidence ``cosine`` (...) in [0, 1] on an
+    interface of relative index ``eta`` (below 1: light inside the denser medium, 1 beyond the
+    critical angle)."""
+    sin_t2 = (1.0 - cosine**2) / eta**2
+    cos_t = (1.0 - sin_t2).clamp_min(0.0).sqrt()
+    rs = (cosine - eta * cos_t) / (cosine + eta * cos_t)
+    rp = (eta * cosine - cos_t) / (eta * cosine + cos_t)
+    return torch.where(sin_t2 >= 1.0, 1.0, 0.5 * (rs**2 + rp**2))
+
+
 def fresnel_diffuse_reflectance(eta: float, samples: int = 4096) -> float:
-    """The cosine-weighted hemispherical average of the unpolarised Fresnel reflectance at an
-    interface of relative index ``eta`` (below 1: light inside the denser medium, where total
-    internal reflection sets in); 0.092 for eta 1.5 and 0.596 for 1 / 1.5."""
-    mu = (np.arange(samples) + 0.5) / samples  # cosine of incidence, midpoint rule
-    sin_t2 = (1.0 - mu**2) / eta**2
-    cos_t = np.sqrt(np.clip(1.0 - sin_t2, 0.0, None))
-    rs = (mu - eta * cos_t) / (mu + eta * cos_t)
-    rp = (eta * mu - cos_t) / (eta * mu + cos_t)
-    reflectance = np.where(sin_t2 >= 1.0, 1.0, 0.5 * (rs**2 + rp**2))
-    return float(np.mean(2.0 * mu * reflectance))
+    """The cosine-weighted hemispherical average of :func:`fresnel_reflectance` at an interface of
+    relative index ``eta``; 0.092 for eta 1.5 and 0.596 for 1 / 1.5."""
+    mu = (torch.arange(samples, dtype=torch.float64) + 0.5) / samples  # cosine of incidence, midpoint rule
+    return float(torch.mean(2.0 * mu * fresnel_reflectance(mu, eta)))
 
 
 def coat_table(scene: Scene) -> np.ndarray:

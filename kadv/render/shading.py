@@ -1,6 +1,7 @@
 """Shading, the stage after :mod:`kadv.render.surface`: a hit's colour from its albedo and the
 light it receives, view-independent (no head-light, no specular term; the differentiable
-reprojection relies on it).
+reprojection relies on it) unless coated surfaces are set to mirror their surroundings
+(:attr:`Shading.reflections`).
 
 Direct lighting is albedo x (ambient + Lambertian world lights). Baked lighting is albedo x baked
 irradiance (:mod:`kadv.render.irradiance`) plus the point, spot and sun lights' sharp shadows,
@@ -22,9 +23,9 @@ from torch.nn import functional as F
 
 from kadv.geometry.vector import dot
 from kadv.render.bake import BakeConfig
-from kadv.render.colour import tone_map
+from kadv.render.colour import fresnel_reflectance, tone_map
 from kadv.render.irradiance import BakedLighting
-from kadv.render.lights import DeltaLights, Sky, scene_lights, sky_emitters
+from kadv.render.lights import SURFACE_OFFSET, DeltaLights, Sky, scene_lights, sky_emitters
 from kadv.render.surface import RayHits, Surfaces, first_hits
 
 __all__ = ["Shader", "Shading", "shade"]
@@ -45,6 +46,10 @@ class Shading:
             commands default to ``"baked"`` (``render.lighting``); a renderer built here shades
             ``"direct"`` unless asked, so that building one never starts a bake of minutes.
         bake: the bake's settings, for ``lighting="baked"``.
+        reflections: with baked lighting, coated surfaces (Mitsuba's plastics) mirror what they
+            face, weighted by the coat's Fresnel reflectance at the viewing angle, in place of the
+            coat's reflection counted as diffuse light: one more ray per such hit, and their colour
+            depends on the view.
     """
 
     ambient: float = 0.45
@@ -53,10 +58,13 @@ class Shading:
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     lighting: str = "direct"
     bake: BakeConfig = field(default_factory=BakeConfig)
+    reflections: bool = False
 
     def __post_init__(self) -> None:
         if self.lighting not in ("direct", "baked"):
             raise ValueError(f"render.lighting must be 'direct' or 'baked', got {self.lighting!r}")
+        if not isinstance(self.reflections, bool):
+            raise ValueError(f"render.shading.reflections must be true or false, got {self.reflections!r}")
 
 
 def shade(
@@ -68,6 +76,63 @@ def shade(
     lambert = dot(to_lights, normals[:, None, :]).clamp_min(0.0).mean(dim=1)
     light = shading.ambient + shading.diffuse * lambert
     return (base_colour * light[:, None]).clamp(0.0, 1.0)
+
+
+# reflection rays per coated hit and sample, spread over the coat's GGX lobe
+_REFLECTION_RAYS = 2
+# devices whose reflections are cast for the coated hits only, counted (elsewhere every row, masked)
+_COMPACTING = ("cpu",)
+# Roberts' R2 sequence's constants (1 / g, 1 / g^2, g^3 = g + 1): even 2-D points for any count
+_R2 = (1.0 / 1.324717957244746, 1.0 / 1.324717957244746**2)
+
+
+def _lobe_samples(directions: torch.Tensor, count: int) -> torch.Tensor:
+    """(N, count, 2) points in the unit square per ray: the R2 sequence shifted modulo 1 by a hash
+    of each ray's unit direction (N, 3), so that a view renders to the same bytes however its rays
+    are batched."""
+    k = torch.arange(1, count + 1, dtype=torch.float64, device=directions.device)
+    sequence = torch.stack([0.5 + k * _R2[0], 0.5 + k * _R2[1]], dim=-1)
+    # per row, products and sums in a fixed order (a matrix product's rounding changes with the batch)
+    x, y, z = directions.double().unbind(dim=1)
+    phases = torch.stack([12.9898 * x + 78.233 * y + 37.719 * z, 39.3467 * x + 11.135 * y + 83.155 * z], dim=-1)
+    shift = torch.frac(torch.sin(phases) * 43758.5453).abs()
+    return torch.frac(sequence[None] + shift[:, None])
+
+
+def _ggx_half_vectors(normals: torch.Tensor, alpha: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+    """(N, K, 3) unit half-vectors drawn from the GGX distribution of roughness ``alpha`` (N,) about
+    unit ``normals`` (N, 3), at points ``u`` (N, K, 2) of the unit square (weighted by D cos)."""
+    tan2 = alpha[:, None] ** 2 * u[..., 0] / (1.0 - u[..., 0]).clamp_min(1e-12)
+    cos_theta = torch.rsqrt(1.0 + tan2)
+    sin_theta = (1.0 - cos_theta**2).clamp_min(0.0).sqrt()
+    phi = 2.0 * math.pi * u[..., 1]
+    helper = torch.where(normals[:, :1].abs() < 0.9, normals.new_tensor([1.0, 0, 0]), normals.new_tensor([0, 1.0, 0]))
+    tangent = F.normalize(torch.cross(normals, helper, dim=1), dim=1)
+    bitangent = torch.cross(normals, tangent, dim=1)
+    return (
+        (sin_theta * torch.cos(phi))[..., None] * tangent[:, None]
+        + (sin_theta * torch.sin(phi))[..., None] * bitangent[:, None]
+        + cos_theta[..., None] * normals[:, None]
+    )
+
+
+def _ggx_weight(
+    view: torch.Tensor, normals: torch.Tensor, halfway: torch.Tensor, reflected: torch.Tensor, alpha: torch.Tensor
+) -> torch.Tensor:
+    """(N, K) the GGX microfacet BRDF times the cosine over the sampling density of ``halfway``
+    (N, K, 3), without the Fresnel term: Smith's masking G(v) G(l) (v.h) / ((n.v) (n.h)); 0 below
+    the surface. ``view`` (N, 3) points from the eye, ``reflected`` (N, K, 3) away from the surface."""
+    cos_view = (-(view * normals).sum(dim=1)).clamp_min(1e-6)[:, None]
+    cos_light = (reflected * normals[:, None]).sum(dim=-1)
+    cos_half = (halfway * normals[:, None]).sum(dim=-1).clamp_min(1e-6)
+    view_h = (-(view[:, None] * halfway).sum(dim=-1)).clamp_min(0.0)
+
+    def masking(cosine: torch.Tensor) -> torch.Tensor:
+        tan2 = (1.0 - cosine**2).clamp_min(0.0) / cosine.clamp_min(1e-6) ** 2
+        return 2.0 / (1.0 + (1.0 + alpha[:, None] ** 2 * tan2).sqrt())
+
+    weight = masking(cos_view) * masking(cos_light.clamp_min(0.0)) * view_h / (cos_view * cos_half)
+    return torch.where(cos_light > 0, weight.clamp(0.0, 1.0), 0.0)
 
 
 class Shader:
@@ -95,8 +160,15 @@ class Shader:
                 )
                 cross = np.cross(emitters[:, 1] - emitters[:, 0], emitters[:, 2] - emitters[:, 0])
                 self._emitter_normals = torch.from_numpy(cross).to(device)
-                glow = tone_map(torch.from_numpy(scene.emitters.area_radiance * baked.exposure)).float()
-                self._emitter_colour = glow.to(device)
+                self._emitter_radiance = torch.from_numpy(scene.emitters.area_radiance * baked.exposure).to(device)
+            coat_ior = [material.coat_ior or 0.0 for material in scene.materials]
+            # per triangle, the relative index of its coat (0: bare)
+            per_material = torch.tensor(coat_ior, dtype=torch.float64)
+            self._coat_ior = per_material[torch.from_numpy(scene.material_ids)].to(device)
+            self._coat_alpha = torch.tensor([m.coat_alpha for m in scene.materials], dtype=torch.float64)[
+                torch.from_numpy(scene.material_ids)
+            ].to(device)
+            self._reflecting = shading.reflections and bool((self._coat_ior > 0).any())
 
     def shade(
         self,
@@ -124,8 +196,8 @@ class Shader:
         facing = self.surfaces.facing(ids, directions)
         back = hit & (facing > 0)
         # hit points and shading normals, where something reads them: the maps, Lambert's term or
-        # the delta lights (baked light alone needs neither)
-        lit_at_points = self.baked is None or not self._delta_lights.empty
+        # the delta lights or the reflections (baked light alone needs neither)
+        lit_at_points = self.baked is None or not self._delta_lights.empty or self._reflecting
         if geometry or (colour and lit_at_points):
             points = origins + directions * t[:, None]
             normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
@@ -145,7 +217,12 @@ class Shader:
                 irradiance = self.baked.irradiance_at(ids, bary.double(), back)
                 if not self._delta_lights.empty:
                     irradiance = irradiance + self._delta_irradiance(points, directions, normals, hit)
-                shaded = tone_map(self.surfaces.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi))
+                radiance = self.surfaces.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi)
+                if self._reflecting:
+                    radiance = self._with_reflections(
+                        radiance, irradiance, ids, points, normals, directions, hit, t, pixel_angle
+                    )
+                shaded = tone_map(radiance)
                 # a ray that leaves the scene sees the sky the bake was lit by
                 sky = self._sky(F.normalize(directions, dim=1))
                 background = tone_map((sky * self.baked.exposure).float())
@@ -172,15 +249,79 @@ class Shader:
         irradiance = self._delta_lights.irradiance(self.surfaces, points, facing)
         return torch.where(hit[:, None], irradiance, 0.0).float()
 
-    def _emitters_seen(
-        self, rgb: torch.Tensor, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor
-    ) -> torch.Tensor:
-        """``rgb`` (N, 3) with the colour of an area emitter wherever a ray meets one before any
-        surface: its radiance on its emitting side, black behind. Emitters are no geometry (they
-        carry no depth): only the colour shows them."""
+    def _emitter_glow(
+        self, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Where rays (N, 3) meet an area emitter before any surface of ``hits`` (N,) bool, and its
+        exposed radiance there (N, 3) float64: on its emitting side, black behind. Emitters are no
+        geometry (they carry no depth): only the colour shows them."""
         emitter = first_hits(self._emitter_caster, origins, directions)
         seen = emitter.hit & (emitter.t < torch.where(hits.hit, hits.t, torch.inf))
         ids = emitter.triangle_ids.clamp_min(0)
         facing = dot(self._emitter_normals.index_select(0, ids), directions) < 0
-        glow = self._emitter_colour.index_select(0, ids) * facing[:, None]
-        return torch.where(seen[:, None], glow, rgb)
+        return seen, self._emitter_radiance.index_select(0, ids) * facing[:, None]
+
+    def _emitters_seen(
+        self, rgb: torch.Tensor, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor
+    ) -> torch.Tensor:
+        """``rgb`` (N, 3) with the colour of an area emitter wherever a ray meets one first."""
+        seen, glow = self._emitter_glow(hits, origins, directions)
+        return torch.where(seen[:, None], tone_map(glow).float(), rgb)
+
+    def _with_reflections(
+        self,
+        radiance: torch.Tensor,
+        irradiance: torch.Tensor,
+        ids: torch.Tensor,
+        points: torch.Tensor,
+        normals: torch.Tensor,
+        directions: torch.Tensor,
+        hit: torch.Tensor,
+        t: torch.Tensor,
+        pixel_angle: float,
+    ) -> torch.Tensor:
+        """Exposed radiance (N, 3) of hits with the coated ones' mirror reflection (see
+        :attr:`Shading.reflections`): what the reflected ray meets, its baked light (the sky, an
+        emitter's glow, a surface's diffuse light without its point lights and suns) times the
+        coat's Fresnel reflectance, replacing the coat's reflection that ``radiance`` counted diffuse."""
+        coated = hit & (self._coat_ior.index_select(0, ids) > 0)
+        # on the CPU, rays for the coated hits only; a GPU casts every row's, masked, sooner than it
+        # waits for a count
+        rows = torch.nonzero(coated)[:, 0] if self.surfaces.device.type in _COMPACTING else None
+        if rows is not None and not len(rows):
+            return radiance
+
+        def take(values: torch.Tensor) -> torch.Tensor:
+            return values if rows is None else values.index_select(0, rows)
+
+        view = F.normalize(take(directions), dim=1)
+        normal = take(normals).double()
+        count, samples = len(view), _REFLECTION_RAYS
+        halfway = _ggx_half_vectors(normal, take(self._coat_alpha.index_select(0, ids)), _lobe_samples(view, samples))
+        view_h = (-(view[:, None] * halfway).sum(dim=-1)).clamp_min(0.0)  # (R, K)
+        reflected = view[:, None] + 2.0 * view_h[..., None] * halfway
+        weight = _ggx_weight(view, normal, halfway, reflected, take(self._coat_alpha.index_select(0, ids)))
+        weight = weight * fresnel_reflectance(view_h, take(self._coat_ior.index_select(0, ids))[:, None])
+        origins = (take(points) + SURFACE_OFFSET * normal)[:, None].expand(count, samples, 3).reshape(-1, 3)
+        reflected = reflected.reshape(-1, 3)
+        live = None if rows is not None else coated[:, None].expand(count, samples).reshape(-1)
+        seen = self.surfaces.cast(origins, reflected, live)
+        met = seen.hit
+        met_ids = seen.triangle_ids.clamp_min(0)
+        back = met & (self.surfaces.facing(met_ids, reflected) > 0)
+        # the texture filtered to the reflection's footprint: the eye's distance plus the mirror's
+        eye = (take(t) * take(directions).norm(dim=1))[:, None].expand(count, samples).reshape(-1)
+        footprint = (eye + torch.where(met, seen.t.double(), 0.0)) * pixel_angle
+        base = self.surfaces.albedo(met_ids, seen.barycentrics, footprint.float())
+        light = self.baked.irradiance_at(met_ids, seen.barycentrics.double(), back)
+        surface = self.surfaces.reflectance(met_ids, base) * light * (self.baked.exposure / math.pi)
+        incoming = torch.where(met[:, None], surface.double(), self._sky(reflected) * self.baked.exposure)
+        if self._emitter_caster is not None:
+            glowing, glow = self._emitter_glow(seen, origins, reflected)
+            incoming = torch.where(glowing[:, None], glow, incoming)
+        mirrored = (weight[..., None] * incoming.reshape(count, samples, 3)).mean(dim=1)
+        own = self.surfaces.coats.index_select(0, take(ids))[:, 2:3].double() * take(irradiance).double()
+        change = mirrored - own * (self.baked.exposure / math.pi)
+        if rows is None:
+            return radiance + torch.where(coated[:, None], change, 0.0).float()
+        return radiance.index_add(0, rows, change.float())

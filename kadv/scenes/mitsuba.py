@@ -266,7 +266,9 @@ def _coat(kind: str, props: dict[str, ET.Element], ctx: _Context) -> dict:
         return {}
     ior = _ior(props, "int_ior", ctx, "polypropylene") / _ior(props, "ext_ior", ctx, "air")
     nonlinear = "nonlinear" in props and ctx.attr(props["nonlinear"], "value", "false").lower() == "true"
-    return {"coat_ior": ior, "coat_nonlinear": nonlinear}
+    # Mitsuba's default roughness of a rough plastic; a smooth one is a mirror
+    alpha = _scalar(props, "alpha", ctx, 0.1) if kind == "roughplastic" else 0.0
+    return {"coat_ior": ior, "coat_nonlinear": nonlinear, "coat_alpha": alpha}
 
 
 def _material(element: ET.Element, ctx: _Context, name: str) -> Material:

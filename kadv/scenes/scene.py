@@ -30,6 +30,8 @@ class Material:
             (Mitsuba ``plastic``, ``roughplastic``); None: bare. Only baked lighting reads it.
         coat_nonlinear: the coat's internal scattering deepens the base's colour (Mitsuba's
             ``nonlinear``).
+        coat_alpha: the coat's GGX roughness (Mitsuba's ``alpha``; 0: a smooth coat), read by the
+            reflections of :attr:`kadv.render.Shading.reflections`.
     """
 
     name: str
@@ -43,6 +45,7 @@ class Material:
     emission: np.ndarray | None = None
     coat_ior: float | None = None
     coat_nonlinear: bool = False
+    coat_alpha: float = 0.0
 
     def __post_init__(self) -> None:
         self.base_color = np.clip(np.asarray(self.base_color, np.float32).reshape(3), 0.0, 1.0)

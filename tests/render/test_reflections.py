@@ -1,0 +1,92 @@
+"""Shading.reflections: coated surfaces mirror what they face, by their coat's Fresnel reflectance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from kadv.geometry import intrinsics_from_fov, look_at
+from kadv.render import BakeConfig, ExactRenderer, Shading, shading
+from kadv.render.colour import coat_table, fresnel_reflectance, srgb_decode
+from kadv.scenes import Emitters, Material, assemble_scene, box_room
+from kadv.scenes.parts import facing, quad_part
+
+SKY = 0.2
+HEIGHT, WIDTH = 24, 32
+
+
+def _floor(alpha: float, tmp_path, reflections: bool, max_rays: int = 2**22) -> ExactRenderer:
+    """A 200 m coated floor under a uniform sky: every reflected ray meets the sky."""
+    corners = np.array([[-100.0, 0.0, -100.0], [100.0, 0.0, -100.0], [100.0, 0.0, 100.0], [-100.0, 0.0, 100.0]])
+    floor = quad_part(facing(corners, np.array([0.0, 1.0, 0.0])), 0, "floor")
+    varnish = Material("varnish", base_color=np.full(3, 0.5), coat_ior=1.5, coat_alpha=alpha)
+    scene = assemble_scene([floor], [varnish], name=f"floor_{alpha}", emitters=Emitters(sky_radiance=np.full(3, SKY)))
+    bake = BakeConfig(texel=50.0, rays=16, light_samples=1, cache=str(tmp_path))
+    shading = Shading(lighting="baked", bake=bake, reflections=reflections)
+    return ExactRenderer(scene, shading, progress=False, max_rays=max_rays)
+
+
+EYE = torch.tensor([0.0, 1.5, 0.0])
+POSE = look_at(EYE, torch.tensor([0.0, 0.0, -4.0])).double()
+K = intrinsics_from_fov(70.0, HEIGHT, WIDTH)
+
+
+def _linear(display: torch.Tensor) -> torch.Tensor:
+    """Exposed linear radiance of display values (the tone map undone)."""
+    return -torch.log1p(-srgb_decode(display.double()).clamp(max=1 - 1e-9))
+
+
+def test_a_smooth_coat_trades_its_diffuse_counted_reflection_for_the_fresnel_weighted_sky(tmp_path):
+    """Under a uniform sky, a smooth coat's radiance changes by (F(view angle) - its hemispherical
+    mean) x the sky: darker face-on (F = 0.04 < 0.092), brighter at grazing angles."""
+    renders = {on: _floor(0.0, tmp_path, on).render(POSE, K, HEIGHT, WIDTH) for on in (False, True)}
+    mask = renders[False].mask[0, 0]
+    assert mask.sum() > 0.4 * HEIGHT * WIDTH
+    points = renders[False].points[0].permute(1, 2, 0)[mask].double()
+    cosine = (EYE.double() - points)[:, 1] / (EYE.double() - points).norm(dim=1)
+    renderer = _floor(0.0, tmp_path, True)
+    outside = coat_table(renderer.scene)[0, 2]
+    expected = (fresnel_reflectance(cosine, 1.5) - outside) * SKY * renderer.baked.exposure
+    change = _linear(renders[True].rgb[0].permute(1, 2, 0)[mask]) - _linear(
+        renders[False].rgb[0].permute(1, 2, 0)[mask]
+    )
+    np.testing.assert_allclose(change.numpy(), expected[:, None].expand(-1, 3).numpy(), atol=2e-3)
+    assert change.min() < -0.005 and change.max() > 0.05  # both ways, as the angles span face-on to grazing
+
+
+def test_a_rough_coat_renders_the_same_bytes_again_and_the_same_image_however_its_rays_are_batched(
+    tmp_path, monkeypatch
+):
+    """The lobe's samples hang on each ray's direction, not on its place in a batch: rendered in
+    parts, or with every row cast and masked as on a GPU, the image moves by float rounding only,
+    as it does without reflections, not by a new draw of its noise."""
+    whole = _floor(0.3, tmp_path, True).render(POSE, K, HEIGHT, WIDTH, supersample=2).rgb
+    again = _floor(0.3, tmp_path, True).render(POSE, K, HEIGHT, WIDTH, supersample=2).rgb
+    parts = _floor(0.3, tmp_path, True, max_rays=500).render(POSE, K, HEIGHT, WIDTH, supersample=2).rgb
+    assert torch.equal(whole, again)
+    assert (whole - parts).abs().max() < 1e-6
+    monkeypatch.setattr(shading, "_COMPACTING", ())  # every row cast, masked, as on a GPU
+    masked = _floor(0.3, tmp_path, True).render(POSE, K, HEIGHT, WIDTH, supersample=2).rgb
+    assert (whole - masked).abs().max() < 1e-6
+    smooth = _floor(0.0, tmp_path, True).render(POSE, K, HEIGHT, WIDTH, supersample=2).rgb
+    assert not torch.equal(whole, smooth)  # the roughness is read
+
+
+def test_reflections_leave_a_scene_without_coats_as_it_was(tmp_path):
+    scene = box_room(seed=0)
+    bake = BakeConfig(texel=0.2, rays=16, light_samples=4, cache=str(tmp_path))
+    pose = (
+        scene.cameras[0].world_T_cam
+        if scene.cameras
+        else look_at(torch.tensor([1.0, 1.2, 1.0]), torch.tensor([2.0, 1.0, 3.0])).double()
+    )
+    off, on = (
+        ExactRenderer(scene, Shading(lighting="baked", bake=bake, reflections=r), progress=False)
+        .render(pose, K, HEIGHT, WIDTH)
+        .rgb
+        for r in (False, True)
+    )
+    assert torch.equal(off, on)
+    with pytest.raises(ValueError, match=r"render\.shading\.reflections"):
+        Shading(reflections="yes")
