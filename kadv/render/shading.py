@@ -1,6 +1,6 @@
 """Shading, the stage after :mod:`kadv.render.surface`: a hit's colour from its albedo and the
 light it receives, view-independent (no head-light, no specular term; the differentiable
-reprojection relies on it) unless coated surfaces are set to mirror their surroundings
+reprojection relies on it) unless coats and metals are set to mirror their surroundings
 (:attr:`Shading.reflections`).
 
 Direct lighting is albedo x (ambient + Lambertian world lights). Baked lighting is albedo x baked
@@ -23,10 +23,11 @@ from torch.nn import functional as F
 
 from kadv.geometry.vector import dot
 from kadv.render.bake import BakeConfig
-from kadv.render.colour import fresnel_reflectance, tone_map
+from kadv.render.colour import fresnel_reflectance, srgb_decode, tone_map
 from kadv.render.irradiance import BakedLighting
 from kadv.render.lights import SURFACE_OFFSET, DeltaLights, Sky, scene_lights, sky_emitters
 from kadv.render.surface import RayHits, Surfaces, first_hits
+from kadv.scenes.scene import CONDUCTOR_GREY
 
 __all__ = ["Shader", "Shading", "shade"]
 
@@ -46,10 +47,11 @@ class Shading:
             commands default to ``"baked"`` (``render.lighting``); a renderer built here shades
             ``"direct"`` unless asked, so that building one never starts a bake of minutes.
         bake: the bake's settings, for ``lighting="baked"``.
-        reflections: with baked lighting, coated surfaces (Mitsuba's plastics) mirror what they
-            face, weighted by the coat's Fresnel reflectance at the viewing angle, in place of the
-            coat's reflection counted as diffuse light: one more ray per such hit, and their colour
-            depends on the view.
+        reflections: with baked lighting, coated surfaces (Mitsuba's plastics) and metals mirror
+            what they face, through their GGX lobe and weighted by the coat's Fresnel reflectance
+            or the metal's reflectance, in place of the coat's reflection counted as diffuse light
+            and of the metal's diffuse look: two more rays per such hit and sample, and their
+            colour depends on the view.
     """
 
     ambient: float = 0.45
@@ -78,9 +80,9 @@ def shade(
     return (base_colour * light[:, None]).clamp(0.0, 1.0)
 
 
-# reflection rays per coated hit and sample, spread over the coat's GGX lobe
+# reflection rays per glossy hit (a coat or a metal) and sample, spread over its GGX lobe
 _REFLECTION_RAYS = 2
-# devices whose reflections are cast for the coated hits only, counted (elsewhere every row, masked)
+# devices whose reflections are cast for the glossy hits only, counted (elsewhere every row, masked)
 _COMPACTING = ("cpu",)
 # Roberts' R2 sequence's constants (1 / g, 1 / g^2, g^3 = g + 1): even 2-D points for any count
 _R2 = (1.0 / 1.324717957244746, 1.0 / 1.324717957244746**2)
@@ -161,14 +163,15 @@ class Shader:
                 cross = np.cross(emitters[:, 1] - emitters[:, 0], emitters[:, 2] - emitters[:, 0])
                 self._emitter_normals = torch.from_numpy(cross).to(device)
                 self._emitter_radiance = torch.from_numpy(scene.emitters.area_radiance * baked.exposure).to(device)
-            coat_ior = [material.coat_ior or 0.0 for material in scene.materials]
-            # per triangle, the relative index of its coat (0: bare)
-            per_material = torch.tensor(coat_ior, dtype=torch.float64)
-            self._coat_ior = per_material[torch.from_numpy(scene.material_ids)].to(device)
-            self._coat_alpha = torch.tensor([m.coat_alpha for m in scene.materials], dtype=torch.float64)[
-                torch.from_numpy(scene.material_ids)
-            ].to(device)
-            self._reflecting = shading.reflections and bool((self._coat_ior > 0).any())
+
+            def per_triangle(values: list) -> torch.Tensor:
+                return torch.tensor(values, dtype=torch.float64)[torch.from_numpy(scene.material_ids)].to(device)
+
+            # the relative index of each triangle's coat (0: bare), its metals, and their roughness
+            self._coat_ior = per_triangle([material.coat_ior or 0.0 for material in scene.materials])
+            self._conductor = per_triangle([material.conductor for material in scene.materials]) > 0
+            self._roughness = per_triangle([material.roughness for material in scene.materials])
+            self._reflecting = shading.reflections and bool(((self._coat_ior > 0) | self._conductor).any())
 
     def shade(
         self,
@@ -220,7 +223,7 @@ class Shader:
                 radiance = self.surfaces.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi)
                 if self._reflecting:
                     radiance = self._with_reflections(
-                        radiance, irradiance, ids, points, normals, directions, hit, t, pixel_angle
+                        radiance, irradiance, base, ids, points, normals, directions, hit, t, pixel_angle
                     )
                 shaded = tone_map(radiance)
                 # a ray that leaves the scene sees the sky the bake was lit by
@@ -272,6 +275,7 @@ class Shader:
         self,
         radiance: torch.Tensor,
         irradiance: torch.Tensor,
+        base: torch.Tensor,
         ids: torch.Tensor,
         points: torch.Tensor,
         normals: torch.Tensor,
@@ -280,14 +284,17 @@ class Shader:
         t: torch.Tensor,
         pixel_angle: float,
     ) -> torch.Tensor:
-        """Exposed radiance (N, 3) of hits with the coated ones' mirror reflection (see
-        :attr:`Shading.reflections`): what the reflected ray meets, its baked light (the sky, an
-        emitter's glow, a surface's diffuse light without its point lights and suns) times the
-        coat's Fresnel reflectance, replacing the coat's reflection that ``radiance`` counted diffuse."""
-        coated = hit & (self._coat_ior.index_select(0, ids) > 0)
-        # on the CPU, rays for the coated hits only; a GPU casts every row's, masked, sooner than it
+        """Exposed radiance (N, 3) of hits with the coats' and metals' reflections (see
+        :attr:`Shading.reflections`): what the reflected rays meet, in baked light (the sky, an
+        emitter's glow, a surface's diffuse light without its point lights and suns), times the
+        coat's Fresnel reflectance in place of the coat's reflection that ``radiance`` counted
+        diffuse, or times a metal's reflectance (its display ``base`` (N, 3) over
+        :data:`~kadv.scenes.scene.CONDUCTOR_GREY`) in place of its diffuse look."""
+        metal = self._conductor.index_select(0, ids)
+        glossy = hit & ((self._coat_ior.index_select(0, ids) > 0) | metal)
+        # on the CPU, rays for the glossy hits only; a GPU casts every row's, masked, sooner than it
         # waits for a count
-        rows = torch.nonzero(coated)[:, 0] if self.surfaces.device.type in _COMPACTING else None
+        rows = torch.nonzero(glossy)[:, 0] if self.surfaces.device.type in _COMPACTING else None
         if rows is not None and not len(rows):
             return radiance
 
@@ -297,14 +304,18 @@ class Shader:
         view = F.normalize(take(directions), dim=1)
         normal = take(normals).double()
         count, samples = len(view), _REFLECTION_RAYS
-        halfway = _ggx_half_vectors(normal, take(self._coat_alpha.index_select(0, ids)), _lobe_samples(view, samples))
+        roughness = take(self._roughness.index_select(0, ids))
+        halfway = _ggx_half_vectors(normal, roughness, _lobe_samples(view, samples))
         view_h = (-(view[:, None] * halfway).sum(dim=-1)).clamp_min(0.0)  # (R, K)
         reflected = view[:, None] + 2.0 * view_h[..., None] * halfway
-        weight = _ggx_weight(view, normal, halfway, reflected, take(self._coat_alpha.index_select(0, ids)))
-        weight = weight * fresnel_reflectance(view_h, take(self._coat_ior.index_select(0, ids))[:, None])
+        weight = _ggx_weight(view, normal, halfway, reflected, roughness)
+        is_metal = take(metal)
+        # a metal's Fresnel term is taken as 1: its colour comes from its reflectance below
+        ior = torch.where(is_metal, 1.5, take(self._coat_ior.index_select(0, ids)))
+        weight = weight * torch.where(is_metal[:, None], 1.0, fresnel_reflectance(view_h, ior[:, None]))
         origins = (take(points) + SURFACE_OFFSET * normal)[:, None].expand(count, samples, 3).reshape(-1, 3)
         reflected = reflected.reshape(-1, 3)
-        live = None if rows is not None else coated[:, None].expand(count, samples).reshape(-1)
+        live = None if rows is not None else glossy[:, None].expand(count, samples).reshape(-1)
         seen = self.surfaces.cast(origins, reflected, live)
         met = seen.hit
         met_ids = seen.triangle_ids.clamp_min(0)
@@ -312,16 +323,18 @@ class Shader:
         # the texture filtered to the reflection's footprint: the eye's distance plus the mirror's
         eye = (take(t) * take(directions).norm(dim=1))[:, None].expand(count, samples).reshape(-1)
         footprint = (eye + torch.where(met, seen.t.double(), 0.0)) * pixel_angle
-        base = self.surfaces.albedo(met_ids, seen.barycentrics, footprint.float())
+        met_base = self.surfaces.albedo(met_ids, seen.barycentrics, footprint.float())
         light = self.baked.irradiance_at(met_ids, seen.barycentrics.double(), back)
-        surface = self.surfaces.reflectance(met_ids, base) * light * (self.baked.exposure / math.pi)
+        surface = self.surfaces.reflectance(met_ids, met_base) * light * (self.baked.exposure / math.pi)
         incoming = torch.where(met[:, None], surface.double(), self._sky(reflected) * self.baked.exposure)
         if self._emitter_caster is not None:
             glowing, glow = self._emitter_glow(seen, origins, reflected)
             incoming = torch.where(glowing[:, None], glow, incoming)
         mirrored = (weight[..., None] * incoming.reshape(count, samples, 3)).mean(dim=1)
         own = self.surfaces.coats.index_select(0, take(ids))[:, 2:3].double() * take(irradiance).double()
-        change = mirrored - own * (self.baked.exposure / math.pi)
+        coat_change = mirrored - own * (self.baked.exposure / math.pi)
+        reflectance = srgb_decode((take(base).double() / CONDUCTOR_GREY).clamp(0.0, 1.0))
+        change = torch.where(is_metal[:, None], reflectance * mirrored - take(radiance).double(), coat_change)
         if rows is None:
-            return radiance + torch.where(coated[:, None], change, 0.0).float()
+            return radiance + torch.where(glossy[:, None], change, 0.0).float()
         return radiance.index_add(0, rows, change.float())

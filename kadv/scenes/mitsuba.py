@@ -20,7 +20,7 @@ import trimesh
 
 from kadv.geometry.camera import Camera
 from kadv.scenes.emitters import MISSING_ENVMAP_RADIANCE, SUNSKY_SKY_PER_SCALE, Emitters
-from kadv.scenes.scene import Material, MeshPart
+from kadv.scenes.scene import CONDUCTOR_GREY, Material, MeshPart
 from kadv.scenes.textures import linear_to_srgb, load_hdr_image, load_image, srgb_to_linear
 from kadv.scenes.trimesh_loader import mesh_parts
 
@@ -60,7 +60,6 @@ _DIFFUSE_KEYS = {
     "roughconductor": ("specular_reflectance",),
 }
 # A mirror has no colour of its own; a light grey reads as "shiny surface" in a diffuse render.
-_CONDUCTOR_GREY = 0.75
 _DEFAULT_REFLECTANCE = 0.5
 # Mitsuba's named indices of refraction that coats use, and its defaults for plastic
 _IOR = {"vacuum": 1.0, "air": 1.000277, "water": 1.333, "acrylic glass": 1.49, "polypropylene": 1.49}
@@ -266,9 +265,12 @@ def _coat(kind: str, props: dict[str, ET.Element], ctx: _Context) -> dict:
         return {}
     ior = _ior(props, "int_ior", ctx, "polypropylene") / _ior(props, "ext_ior", ctx, "air")
     nonlinear = "nonlinear" in props and ctx.attr(props["nonlinear"], "value", "false").lower() == "true"
-    # Mitsuba's default roughness of a rough plastic; a smooth one is a mirror
-    alpha = _scalar(props, "alpha", ctx, 0.1) if kind == "roughplastic" else 0.0
-    return {"coat_ior": ior, "coat_nonlinear": nonlinear, "coat_alpha": alpha}
+    return {"coat_ior": ior, "coat_nonlinear": nonlinear}
+
+
+def _roughness(kind: str, props: dict[str, ET.Element], ctx: _Context) -> float:
+    """The GGX roughness of a rough BSDF (Mitsuba's default 0.1); 0 for a smooth one."""
+    return _scalar(props, "alpha", ctx, 0.1) if kind in ("roughplastic", "roughconductor") else 0.0
 
 
 def _material(element: ET.Element, ctx: _Context, name: str) -> Material:
@@ -302,7 +304,7 @@ def _material(element: ET.Element, ctx: _Context, name: str) -> Material:
     props = _named(element, ctx)
     key = next((k for k in _DIFFUSE_KEYS[kind] if k in props), None)
     is_conductor = kind.endswith("conductor")
-    base = np.full(3, _CONDUCTOR_GREY if is_conductor else linear_to_srgb(_DEFAULT_REFLECTANCE))
+    base = np.full(3, CONDUCTOR_GREY if is_conductor else linear_to_srgb(_DEFAULT_REFLECTANCE))
     texture, uv_scale = None, np.ones(2)
     if key is not None:
         source = ctx.resolve(props[key])
@@ -312,10 +314,10 @@ def _material(element: ET.Element, ctx: _Context, name: str) -> Material:
             color = _color(source, ctx)
             base = color if color is not None else base
         if is_conductor:
-            base = np.clip(base, 0.0, 1.0) * _CONDUCTOR_GREY
+            base = np.clip(base, 0.0, 1.0) * CONDUCTOR_GREY
     return Material(
         name, base_color=base, texture=texture, opacity=opacity, uv_scale=uv_scale, two_sided=two_sided,
-        **_coat(kind, props, ctx),
+        conductor=is_conductor, roughness=_roughness(kind, props, ctx), **_coat(kind, props, ctx),
     )  # fmt: skip
 
 

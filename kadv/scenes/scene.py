@@ -9,7 +9,10 @@ import numpy as np
 from kadv.geometry.camera import Camera
 from kadv.scenes.emitters import DEFAULT_LAMP_RADIANCE, Emitters
 
-__all__ = ["Material", "MeshPart", "Scene", "assemble_scene"]
+__all__ = ["CONDUCTOR_GREY", "Material", "MeshPart", "Scene", "assemble_scene"]
+
+# the display grey a metal is shaded with as diffuse, times its reflectance: a mirror is no white wall
+CONDUCTOR_GREY = 0.75
 
 
 @dataclass
@@ -30,8 +33,10 @@ class Material:
             (Mitsuba ``plastic``, ``roughplastic``); None: bare. Only baked lighting reads it.
         coat_nonlinear: the coat's internal scattering deepens the base's colour (Mitsuba's
             ``nonlinear``).
-        coat_alpha: the coat's GGX roughness (Mitsuba's ``alpha``; 0: a smooth coat), read by the
-            reflections of :attr:`kadv.render.Shading.reflections`.
+        conductor: a metal (Mitsuba ``conductor``, ``roughconductor``): ``base_color`` is its
+            reflectance times :data:`CONDUCTOR_GREY`, the diffuse look it has without reflections.
+        roughness: GGX roughness (Mitsuba's ``alpha``) of a coat or a metal (0: smooth), read by
+            :attr:`kadv.render.Shading.reflections`.
     """
 
     name: str
@@ -45,7 +50,8 @@ class Material:
     emission: np.ndarray | None = None
     coat_ior: float | None = None
     coat_nonlinear: bool = False
-    coat_alpha: float = 0.0
+    conductor: bool = False
+    roughness: float = 0.0
 
     def __post_init__(self) -> None:
         self.base_color = np.clip(np.asarray(self.base_color, np.float32).reshape(3), 0.0, 1.0)

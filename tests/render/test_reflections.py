@@ -20,7 +20,7 @@ def _floor(alpha: float, tmp_path, reflections: bool, max_rays: int = 2**22) -> 
     """A 200 m coated floor under a uniform sky: every reflected ray meets the sky."""
     corners = np.array([[-100.0, 0.0, -100.0], [100.0, 0.0, -100.0], [100.0, 0.0, 100.0], [-100.0, 0.0, 100.0]])
     floor = quad_part(facing(corners, np.array([0.0, 1.0, 0.0])), 0, "floor")
-    varnish = Material("varnish", base_color=np.full(3, 0.5), coat_ior=1.5, coat_alpha=alpha)
+    varnish = Material("varnish", base_color=np.full(3, 0.5), coat_ior=1.5, roughness=alpha)
     scene = assemble_scene([floor], [varnish], name=f"floor_{alpha}", emitters=Emitters(sky_radiance=np.full(3, SKY)))
     bake = BakeConfig(texel=50.0, rays=16, light_samples=1, cache=str(tmp_path))
     shading = Shading(lighting="baked", bake=bake, reflections=reflections)

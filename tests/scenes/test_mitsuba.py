@@ -164,7 +164,7 @@ def test_primitives_and_nested_bsdfs(tmp_path: Path) -> None:
     assert np.allclose(np.linalg.norm(sphere - [5, 0, 0], axis=1), 0.5, atol=1e-6)
     # the plastic's coat: Mitsuba's defaults (polypropylene in air), linear; other BSDFs are bare
     assert by_count[12].coat_ior == pytest.approx(1.49 / 1.000277) and not by_count[12].coat_nonlinear
-    assert by_count[12].coat_alpha == 0.0  # a smooth plastic
+    assert by_count[12].roughness == 0.0  # a smooth plastic
     assert by_count[64].coat_ior is None and by_count[1280].coat_ior is None
 
 
@@ -183,7 +183,7 @@ def test_a_plastic_coat_reads_named_and_numeric_indices(tmp_path: Path) -> None:
     rough, smooth = scene.materials
     assert rough.coat_ior == pytest.approx(1.5046) and rough.coat_nonlinear
     assert smooth.coat_ior == pytest.approx(1.6 / 1.000277) and not smooth.coat_nonlinear
-    assert (rough.coat_alpha, smooth.coat_alpha) == (0.25, 0.0)
+    assert (rough.roughness, smooth.roughness) == (0.25, 0.0)
 
 
 def test_unknown_elements_warn_once_per_kind(tmp_path: Path) -> None:
