@@ -138,7 +138,7 @@ def _compare(
 def _budget_rows(name: str, budgets: list[ViewBudget]) -> tuple[list, list]:
     """A scene's rows of the two budget tables: by term (mean dB gained over its views) and by pixel
     class (mean share of the pixels and of the squared error, mean dB gained)."""
-    mean = lambda values: statistics.mean(values)
+    mean = statistics.mean
     psnr = statistics.median(b.psnr for b in budgets)
     terms = [name, psnr, *(mean(b.gains[t] for b in budgets) for t in (*TERMS, "albedo", "exposure"))]
     terms.append(mean(b.best_exposure for b in budgets))

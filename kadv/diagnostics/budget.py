@@ -29,7 +29,6 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
-from kornia.color import rgb_to_linear_rgb
 from matplotlib.colors import ListedColormap
 from matplotlib.patches import Patch
 
@@ -43,6 +42,7 @@ from kadv.diagnostics.reference import (
 )
 from kadv.render import ExactRenderer
 from kadv.render.bake import load_or_bake
+from kadv.render.colour import untone
 from kadv.report.figures import save_figure
 from kadv.scenes.emitters import Emitters
 
@@ -52,13 +52,6 @@ TERMS = ("direct sun", "other direct", "indirect")
 _SURFACES = (PIXEL_CLASSES.index("diffuse"), PIXEL_CLASSES.index("coated or glossy"))
 # exposure multipliers the best scale is searched over: a factor 4 either way, 1% apart
 _SCALES = np.geomspace(0.25, 4.0, 281)
-
-
-def _linear(display: torch.Tensor) -> np.ndarray:
-    """Exposed linear radiance (H, W, 3) of kadv's display image (3, H, W): the tone map undone
-    (:func:`kadv.render.colour.tone_map`); a supersampled pixel's average is undone as one value."""
-    encoded = rgb_to_linear_rgb(display.double()).clamp(0.0, 1.0 - 1e-6)
-    return (-torch.log1p(-encoded)).permute(1, 2, 0).numpy()
 
 
 class KadvTerms:
@@ -103,7 +96,8 @@ class KadvTerms:
         parts = {}
         for name, renderer in self.renderers.items():
             output = renderer.render(world_T_cam, K, height, width, supersample=2).to("cpu")
-            parts[name] = _linear(output.rgb[0])
+            # a supersampled pixel's average is undone as one value
+            parts[name] = untone(output.rgb[0].permute(1, 2, 0).double()).numpy()
         parts["mask"] = output.mask[0, 0].numpy()
         return parts
 
@@ -182,8 +176,9 @@ def error_budget(ours: dict[str, np.ndarray], theirs: dict[str, np.ndarray]) -> 
     diffuse = surface & (classes == PIXEL_CLASSES.index("diffuse"))[..., None]
     ratio = np.divide(theirs["albedo"], ours["albedo"], out=np.ones_like(ours["albedo"]), where=ours["albedo"] > 1e-4)
     exact["albedo"] = np.where(diffuse, ours["full"] * ratio, ours["full"])
-    term_maps = {name: display_image(image) - shown for name, image in exact.items()}
-    gains = {name: _psnr(display_image(image), reference) - psnr for name, image in exact.items()}
+    shown_exact = {name: display_image(image) for name, image in exact.items()}
+    term_maps = {name: image - shown for name, image in shown_exact.items()}
+    gains = {name: _psnr(image, reference) - psnr for name, image in shown_exact.items()}
     scored = [_psnr(shown, display_image(theirs["full"] * scale * factor)) for factor in _SCALES]
     best = int(np.argmax(scored))
     gains["exposure"] = scored[best] - psnr

@@ -20,6 +20,7 @@ __all__ = [
     "fresnel_reflectance",
     "srgb_decode",
     "tone_map",
+    "untone",
 ]
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # of linear Rec. 709 RGB
@@ -40,6 +41,12 @@ def tone_map(linear: torch.Tensor) -> torch.Tensor:
     (linear in the shadows, highlights rolling off rather than clipping, as a camera's response
     does), then sRGB-encoded. The reference comparison tone-maps the path tracer's image the same way."""
     return _channels_last(linear_rgb_to_rgb, -torch.expm1(-linear.clamp_min(0.0)))
+
+
+def untone(display: torch.Tensor) -> torch.Tensor:
+    """Exposed linear radiance (..., 3) that :func:`tone_map` shows as the display values (..., 3);
+    white (1), which no finite radiance reaches, is read as just below it."""
+    return -torch.log1p(-srgb_decode(display).clamp(0.0, 1.0 - 1e-6))
 
 
 def exposed(display: float) -> float:

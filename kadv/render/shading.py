@@ -119,15 +119,20 @@ def _ggx_half_vectors(normals: torch.Tensor, alpha: torch.Tensor, u: torch.Tenso
 
 
 def _ggx_weight(
-    view: torch.Tensor, normals: torch.Tensor, halfway: torch.Tensor, reflected: torch.Tensor, alpha: torch.Tensor
+    view: torch.Tensor,
+    normals: torch.Tensor,
+    halfway: torch.Tensor,
+    view_h: torch.Tensor,
+    reflected: torch.Tensor,
+    alpha: torch.Tensor,
 ) -> torch.Tensor:
     """(N, K) the GGX microfacet BRDF times the cosine over the sampling density of ``halfway``
     (N, K, 3), without the Fresnel term: Smith's masking G(v) G(l) (v.h) / ((n.v) (n.h)); 0 below
-    the surface. ``view`` (N, 3) points from the eye, ``reflected`` (N, K, 3) away from the surface."""
+    the surface. ``view`` (N, 3) points from the eye, ``view_h`` (N, K) is -view.h, ``reflected``
+    (N, K, 3) points away from the surface."""
     cos_view = (-(view * normals).sum(dim=1)).clamp_min(1e-6)[:, None]
     cos_light = (reflected * normals[:, None]).sum(dim=-1)
     cos_half = (halfway * normals[:, None]).sum(dim=-1).clamp_min(1e-6)
-    view_h = (-(view[:, None] * halfway).sum(dim=-1)).clamp_min(0.0)
 
     def masking(cosine: torch.Tensor) -> torch.Tensor:
         tan2 = (1.0 - cosine**2).clamp_min(0.0) / cosine.clamp_min(1e-6) ** 2
@@ -163,6 +168,7 @@ class Shader:
                 cross = np.cross(emitters[:, 1] - emitters[:, 0], emitters[:, 2] - emitters[:, 0])
                 self._emitter_normals = torch.from_numpy(cross).to(device)
                 self._emitter_radiance = torch.from_numpy(scene.emitters.area_radiance * baked.exposure).to(device)
+                self._emitter_colour = tone_map(self._emitter_radiance).float()
 
             def per_triangle(values: list) -> torch.Tensor:
                 return torch.tensor(values, dtype=torch.float64)[torch.from_numpy(scene.material_ids)].to(device)
@@ -253,23 +259,23 @@ class Shader:
         return torch.where(hit[:, None], irradiance, 0.0).float()
 
     def _emitter_glow(
-        self, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor
+        self, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor, table: torch.Tensor
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Where rays (N, 3) meet an area emitter before any surface of ``hits`` (N,) bool, and its
-        exposed radiance there (N, 3) float64: on its emitting side, black behind. Emitters are no
-        geometry (they carry no depth): only the colour shows them."""
+        """Where rays (N, 3) meet an area emitter before any surface of ``hits`` (N,) bool, and the
+        emitter's row of ``table`` (its exposed radiance or its colour) there (N, 3): on its emitting
+        side, black behind. Emitters are no geometry (they carry no depth): only the colour shows them."""
         emitter = first_hits(self._emitter_caster, origins, directions)
         seen = emitter.hit & (emitter.t < torch.where(hits.hit, hits.t, torch.inf))
         ids = emitter.triangle_ids.clamp_min(0)
         facing = dot(self._emitter_normals.index_select(0, ids), directions) < 0
-        return seen, self._emitter_radiance.index_select(0, ids) * facing[:, None]
+        return seen, table.index_select(0, ids) * facing[:, None]
 
     def _emitters_seen(
         self, rgb: torch.Tensor, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor
     ) -> torch.Tensor:
         """``rgb`` (N, 3) with the colour of an area emitter wherever a ray meets one first."""
-        seen, glow = self._emitter_glow(hits, origins, directions)
-        return torch.where(seen[:, None], tone_map(glow).float(), rgb)
+        seen, glow = self._emitter_glow(hits, origins, directions, self._emitter_colour)
+        return torch.where(seen[:, None], glow, rgb)
 
     def _with_reflections(
         self,
@@ -290,8 +296,7 @@ class Shader:
         coat's Fresnel reflectance in place of the coat's reflection that ``radiance`` counted
         diffuse, or times a metal's reflectance (its display ``base`` (N, 3) over
         :data:`~kadv.scenes.scene.CONDUCTOR_GREY`) in place of its diffuse look."""
-        metal = self._conductor.index_select(0, ids)
-        glossy = hit & ((self._coat_ior.index_select(0, ids) > 0) | metal)
+        glossy = hit & ((self._coat_ior.index_select(0, ids) > 0) | self._conductor.index_select(0, ids))
         # on the CPU, rays for the glossy hits only; a GPU casts every row's, masked, sooner than it
         # waits for a count
         rows = torch.nonzero(glossy)[:, 0] if self.surfaces.device.type in _COMPACTING else None
@@ -301,17 +306,18 @@ class Shader:
         def take(values: torch.Tensor) -> torch.Tensor:
             return values if rows is None else values.index_select(0, rows)
 
+        glossy_ids = take(ids)
         view = F.normalize(take(directions), dim=1)
         normal = take(normals).double()
         count, samples = len(view), _REFLECTION_RAYS
-        roughness = take(self._roughness.index_select(0, ids))
+        roughness = self._roughness.index_select(0, glossy_ids)
         halfway = _ggx_half_vectors(normal, roughness, _lobe_samples(view, samples))
         view_h = (-(view[:, None] * halfway).sum(dim=-1)).clamp_min(0.0)  # (R, K)
         reflected = view[:, None] + 2.0 * view_h[..., None] * halfway
-        weight = _ggx_weight(view, normal, halfway, reflected, roughness)
-        is_metal = take(metal)
+        weight = _ggx_weight(view, normal, halfway, view_h, reflected, roughness)
+        is_metal = self._conductor.index_select(0, glossy_ids)
         # a metal's Fresnel term is taken as 1: its colour comes from its reflectance below
-        ior = torch.where(is_metal, 1.5, take(self._coat_ior.index_select(0, ids)))
+        ior = torch.where(is_metal, 1.5, self._coat_ior.index_select(0, glossy_ids))
         weight = weight * torch.where(is_metal[:, None], 1.0, fresnel_reflectance(view_h, ior[:, None]))
         origins = (take(points) + SURFACE_OFFSET * normal)[:, None].expand(count, samples, 3).reshape(-1, 3)
         reflected = reflected.reshape(-1, 3)
@@ -328,10 +334,10 @@ class Shader:
         surface = self.surfaces.reflectance(met_ids, met_base) * light * (self.baked.exposure / math.pi)
         incoming = torch.where(met[:, None], surface.double(), self._sky(reflected) * self.baked.exposure)
         if self._emitter_caster is not None:
-            glowing, glow = self._emitter_glow(seen, origins, reflected)
+            glowing, glow = self._emitter_glow(seen, origins, reflected, self._emitter_radiance)
             incoming = torch.where(glowing[:, None], glow, incoming)
         mirrored = (weight[..., None] * incoming.reshape(count, samples, 3)).mean(dim=1)
-        own = self.surfaces.coats.index_select(0, take(ids))[:, 2:3].double() * take(irradiance).double()
+        own = self.surfaces.coats.index_select(0, glossy_ids)[:, 2:3].double() * take(irradiance).double()
         coat_change = mirrored - own * (self.baked.exposure / math.pi)
         reflectance = srgb_decode((take(base).double() / CONDUCTOR_GREY).clamp(0.0, 1.0))
         change = torch.where(is_metal[:, None], reflectance * mirrored - take(radiance).double(), coat_change)

@@ -8,7 +8,7 @@ import torch
 
 from kadv.geometry import intrinsics_from_fov, look_at
 from kadv.render import BakeConfig, ExactRenderer, Shading, shading
-from kadv.render.colour import coat_table, fresnel_reflectance, srgb_decode
+from kadv.render.colour import coat_table, fresnel_reflectance, untone
 from kadv.scenes import Emitters, Material, assemble_scene, box_room
 from kadv.scenes.parts import facing, quad_part
 
@@ -32,11 +32,6 @@ POSE = look_at(EYE, torch.tensor([0.0, 0.0, -4.0])).double()
 K = intrinsics_from_fov(70.0, HEIGHT, WIDTH)
 
 
-def _linear(display: torch.Tensor) -> torch.Tensor:
-    """Exposed linear radiance of display values (the tone map undone)."""
-    return -torch.log1p(-srgb_decode(display.double()).clamp(max=1 - 1e-9))
-
-
 def test_a_smooth_coat_trades_its_diffuse_counted_reflection_for_the_fresnel_weighted_sky(tmp_path):
     """Under a uniform sky, a smooth coat's radiance changes by (F(view angle) - its hemispherical
     mean) x the sky: darker face-on (F = 0.04 < 0.092), brighter at grazing angles."""
@@ -48,9 +43,7 @@ def test_a_smooth_coat_trades_its_diffuse_counted_reflection_for_the_fresnel_wei
     renderer = _floor(0.0, tmp_path, True)
     outside = coat_table(renderer.scene)[0, 2]
     expected = (fresnel_reflectance(cosine, 1.5) - outside) * SKY * renderer.baked.exposure
-    change = _linear(renders[True].rgb[0].permute(1, 2, 0)[mask]) - _linear(
-        renders[False].rgb[0].permute(1, 2, 0)[mask]
-    )
+    change = untone(renders[True].rgb[0].permute(1, 2, 0)[mask]) - untone(renders[False].rgb[0].permute(1, 2, 0)[mask])
     np.testing.assert_allclose(change.numpy(), expected[:, None].expand(-1, 3).numpy(), atol=2e-3)
     assert change.min() < -0.005 and change.max() > 0.05  # both ways, as the angles span face-on to grazing
 
