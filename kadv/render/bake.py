@@ -23,6 +23,7 @@ cameras.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import time
 import warnings
@@ -47,14 +48,16 @@ from kadv.scenes.scene import Scene
 
 __all__ = ["BakeConfig", "bake_bytes", "bake_lighting", "default_emitters", "load_or_bake"]
 
-_BAKE_VERSION = 8  # part of the cache key: raise it when the bake's arithmetic changes
+_BAKE_VERSION = 9  # part of the cache key: raise it when the bake's arithmetic changes
 _SLIVER = 8.0
 _CLOSED_ESCAPE_SHARE = 1e-3  # a room whose meter rays escape less than this sees no sky
 # a lattice point whose gather rays meet surfaces' hidden sides this often sits in a crevice or at a
 # seam: its own estimate is discarded and filled from neighbours
 _BURIED_SHARE = 0.25
-# gather rays from the free space that must meet a lattice point for its side to join it: one ray
-# through a seam's crack does not carry the flood beyond a wall
+# gather rays from the free space that must meet a lattice point for its side to join it, per 64
+# gather rays a point casts (and at least this many): one ray through a seam's crack does not carry
+# the flood beyond a wall. The rays through a crack grow with the rays cast, so the count must too:
+# at 256 rays a fixed 2 let the dining room's floor see the sky through the crack under a wall
 _FLOOD_HITS = 2
 # bytes of one block of the bake's per-point work (its (points, neighbours or rays, 3) intermediates)
 _BLOCK_BYTES = 64 * 2**20
@@ -307,21 +310,22 @@ def _free(
     A ray meets a lattice point on the side it arrives from, so the fill does not cross a surface:
     the insides of closed meshes (a desk, a window frame) and a wall's rim beyond the wall it meets
     stay out, whatever the windings (files leave them to chance on two-sided materials). A point
-    joins once ``_FLOOD_HITS`` rays from the free space met it and it sees where one of them came
+    joins once ``_FLOOD_HITS`` rays per 64 from the free space met it and it sees where one of them came
     from: a lattice point stands for a patch, and a ray that meets the floor beside a box would
     otherwise carry the fill to the point under the box that lies nearest."""
     count, rays = hit_point.shape
+    needed = max(_FLOOD_HITS, math.ceil(_FLOOD_HITS * rays / 64))
     origin = lambda index: lattice.points[index] + SURFACE_OFFSET * lattice.normals[index]
     free, met = np.zeros(count, bool), np.zeros(count, np.int64)
     # where a ray that met the point came from: a lattice point's index, or -1 - the eye's index
     source = np.zeros(count, np.int32)
     renewed = np.zeros(count, bool)  # whose source changed since its last check
     met_by_eye = np.flatnonzero(seen >= 0)
-    met[seen[met_by_eye]] = _FLOOD_HITS  # a camera sees them: as if enough rays met them
+    met[seen[met_by_eye]] = needed  # a camera sees them: as if enough rays met them
     source[seen[met_by_eye]] = -1 - met_by_eye
     renewed[seen[met_by_eye]] = True
     while True:
-        check = np.flatnonzero(renewed & ~free & (met >= _FLOOD_HITS))
+        check = np.flatnonzero(renewed & ~free & (met >= needed))
         renewed[:] = False
         if not len(check):
             return free
