@@ -48,7 +48,7 @@ from kadv.scenes.scene import Scene
 
 __all__ = ["BakeConfig", "bake_bytes", "bake_lighting", "default_emitters", "load_or_bake"]
 
-_BAKE_VERSION = 9  # part of the cache key: raise it when the bake's arithmetic changes
+_BAKE_VERSION = 10  # part of the cache key: raise it when the bake's arithmetic changes
 _SLIVER = 8.0
 _CLOSED_ESCAPE_SHARE = 1e-3  # a room whose meter rays escape less than this sees no sky
 # a lattice point whose gather rays meet surfaces' hidden sides this often sits in a crevice or at a
@@ -260,10 +260,11 @@ def _filter_weights(lattice: _Lattice, neighbours: int, valid: np.ndarray) -> tu
     facing the same way on the same plane (within a few millimetres), by a Gaussian of their
     distance in units of the lattice spacing. A point with no valid neighbour (a small part
     buried whole, as an ornament against a wall) averages its neighbours' own estimates instead."""
-    # twice the neighbours: each point's twin on the other side shares its position
-    count = len(lattice.points)
-    k = min(2 * neighbours, count)
-    tree = cKDTree(lattice.points)
+    # each point's twin on the other side shares its position, and at most one of the two faces a
+    # point's way: the tree holds one side, and each neighbour found is taken on the side it faces
+    per_side = len(lattice.points) // 2
+    count, k = len(lattice.points), min(neighbours, per_side)
+    tree = cKDTree(lattice.points[:per_side])
     index = np.empty((count, k), np.int32)  # lattices hold far fewer than 2**31 points
     weights = np.empty((count, k), np.float32)
     for rows in _blocks(count, k):
@@ -272,7 +273,9 @@ def _filter_weights(lattice: _Lattice, neighbours: int, valid: np.ndarray) -> tu
         near_index = near_index.reshape(len(points), k)
         distance = distance.reshape(len(points), k)
         normals = lattice.face_normals[rows]
-        facing = np.einsum("nd,nkd->nk", normals, lattice.face_normals[near_index]) > 0.9
+        alignment = np.einsum("nd,nkd->nk", normals, lattice.face_normals[near_index])
+        near_index = np.where(alignment < 0, near_index + per_side, near_index)
+        facing = np.abs(alignment) > 0.9
         plane = np.abs(np.einsum("nd,nkd->nk", normals, lattice.points[near_index] - points[:, None]))
         near = np.exp(-((distance / lattice.spacing[rows, None]) ** 2)) * facing * (plane < 4 * SURFACE_OFFSET)
         block = near * valid[near_index]
@@ -382,7 +385,7 @@ def bake_bytes(points: int, config: BakeConfig) -> int:
     """About the most memory a bake of ``points`` lattice points takes: per point its arrays (position,
     normals, sums of light: about 400 bytes), its gather rays' hits (4 bytes a ray) and its filter's
     neighbours (8 bytes each), then the blocks of per-point work and the renderer beside them."""
-    per_point = 400 + 4 * config.rays + 8 * 2 * config.neighbours
+    per_point = 400 + 4 * config.rays + 8 * config.neighbours
     return points * per_point + 3 * _BLOCK_BYTES + 2**30
 
 
