@@ -75,6 +75,7 @@ class BakeConfig:
         light_samples: shadow rays per lattice point towards the area emitters.
         bounces: diffuse inter-reflections after the direct light.
         neighbours: lattice points the noise filter averages.
+        filter_width: the noise filter's Gaussian width, in lattice spacings.
         key: the linear display grey that the metered median radiance is shown as.
         seed: seed of the Monte-Carlo sampling; the same seed gives the same bake, bit for bit.
         cache: folder of baked files; None: ``$KADV_CACHE/lighting`` or ``~/.cache/kadv/lighting``.
@@ -87,12 +88,13 @@ class BakeConfig:
     light_samples: int = 32
     bounces: int = 3
     neighbours: int = 32
+    filter_width: float = 3.0
     key: float = 0.18
     seed: int = 0
     cache: str | None = None
 
     def __post_init__(self) -> None:
-        positive = {"texel": self.texel, "key": self.key}
+        positive = {"texel": self.texel, "filter_width": self.filter_width, "key": self.key}
         for name, value in positive.items():
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
                 raise ValueError(f"render.bake.{name} must be a positive number, got {value!r}")
@@ -255,10 +257,12 @@ def _blocks(count: int, width: int) -> Iterator[slice]:
         yield slice(start, start + step)
 
 
-def _filter_weights(lattice: _Lattice, neighbours: int, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _filter_weights(
+    lattice: _Lattice, neighbours: int, width: float, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Neighbour indices and normalised weights (N, k) of the noise filter: nearby ``valid`` points
     facing the same way on the same plane (within a few millimetres), by a Gaussian of their
-    distance in units of the lattice spacing. A point with no valid neighbour (a small part
+    distance in units of ``width`` lattice spacings. A point with no valid neighbour (a small part
     buried whole, as an ornament against a wall) averages its neighbours' own estimates instead."""
     # each point's twin on the other side shares its position, and at most one of the two faces a
     # point's way: the tree holds one side, and each neighbour found is taken on the side it faces
@@ -277,7 +281,9 @@ def _filter_weights(lattice: _Lattice, neighbours: int, valid: np.ndarray) -> tu
         near_index = np.where(alignment < 0, near_index + per_side, near_index)
         facing = np.abs(alignment) > 0.9
         plane = np.abs(np.einsum("nd,nkd->nk", normals, lattice.points[near_index] - points[:, None]))
-        near = np.exp(-((distance / lattice.spacing[rows, None]) ** 2)) * facing * (plane < 4 * SURFACE_OFFSET)
+        near = (
+            np.exp(-((distance / (width * lattice.spacing[rows, None])) ** 2)) * facing * (plane < 4 * SURFACE_OFFSET)
+        )
         block = near * valid[near_index]
         block = np.where(block.sum(axis=1, keepdims=True) > 0, block, near)
         total = block.sum(axis=1, keepdims=True)
@@ -439,7 +445,7 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
         hit_point[begin:end] = nearest.reshape(end - begin, config.rays)
     seen = _nearest(lattice, surfaces, meter, meter_directions)
     buried = _buried(hit_point, _free(lattice, surfaces, hit_point, seen, eyes))
-    index, weights = _filter_weights(lattice, config.neighbours, ~buried)
+    index, weights = _filter_weights(lattice, config.neighbours, config.filter_width, ~buried)
     smooth = lambda values: _smooth(index, weights, values)
     # the delta lights' own term is shaded per hit, with sharp shadows (a lattice point may stand
     # metres apart on a large floor); the light they bounce is baked

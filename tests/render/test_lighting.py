@@ -279,6 +279,28 @@ def test_the_training_bake_is_less_noisy_than_its_earlier_settings(tmp_path) -> 
     assert training < 0.5 * seed_difference(BakeConfig(texel=0.1, max_points=300_000, rays=32, light_samples=16))
 
 
+def test_a_wider_filter_leaves_less_noise_on_a_floor_lit_through_a_window(tmp_path) -> None:
+    """Two seeds' bakes of the floor, as in the test above: the relative RMS difference falls with
+    the filter's width (measured 0.28 at 1 spacing, 0.19 at 3), and the floor's mean light stays
+    within the noise (the floor lies on one plane: the wider filter averages points of it alone)."""
+    from dataclasses import replace
+
+    room = _room(albedo=0.7, window=True, emitters=Emitters(sky_radiance=np.ones(3)))
+    floor = [np.array([x, 1.0, z]) for x in np.linspace(0.3, 3.7, 8) for z in np.linspace(2.0, 3.7, 6)]
+
+    def two_seeds(width: float) -> tuple[np.ndarray, np.ndarray]:
+        config = replace(QUICK, filter_width=width)
+        return tuple(
+            np.array([_irradiance_at(_baked(room, replace(config, seed=seed), tmp_path), p) for p in floor])
+            for seed in (0, 1)
+        )
+
+    (a1, b1), (a3, b3) = two_seeds(1.0), two_seeds(3.0)
+    noise = lambda a, b: float(np.sqrt(np.mean((a / b - 1) ** 2)))
+    assert noise(a3, b3) < 0.8 * noise(a1, b1)
+    assert abs((a3 + b3).mean() / (a1 + b1).mean() - 1) < 0.05
+
+
 def test_rooms_without_emitters_get_the_documented_defaults(tmp_path) -> None:
     closed = bake.default_emitters(_room(albedo=0.5), escape_share=0.0)
     opened = bake.default_emitters(_room(albedo=0.5, window=True), escape_share=0.05)
