@@ -268,6 +268,7 @@ BAD_INPUTS = [
     ("kadv-render", ["render.heigth=100"], "render has no key 'heigth'; it has: height"),
     ("kadv-render", ["render.lighting=sunny"], "render.lighting must be 'direct' or 'baked', got 'sunny'"),
     ("kadv-render", ["render.lighting=baked", "render.bake.rays=0"], "render.bake.rays must be an integer >= 1"),
+    ("kadv-render", ["render.bake.filter_width=0"], "render.bake.filter_width must be a positive number, got 0"),
     ("kadv-attack", ["render.lighting=baked", "+render.bake.samples=4"], "render.bake.samples"),
     ("kadv-attack", ["+render.foo=1"], "+render.foo=1: render has no key 'foo'; it has: height, width"),
     ("kadv-render", ["+render.shading.glow=2"], "render.shading has no key 'glow'; it has: ambient"),
