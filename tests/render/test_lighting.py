@@ -133,6 +133,24 @@ def _square_irradiance(dx: float, dz: float, half: float, height: float, radianc
     return radiance * total
 
 
+def _floor_by_a_window(config: BakeConfig, tmp_path) -> tuple[np.ndarray, np.ndarray]:
+    """The irradiance (48, 3) at a grid on the floor of a room lit through a window, baked with
+    ``config`` at seeds 0 and 1."""
+    from dataclasses import replace
+
+    room = _room(albedo=0.7, window=True, emitters=Emitters(sky_radiance=np.ones(3)))
+    floor = [np.array([x, 1.0, z]) for x in np.linspace(0.3, 3.7, 8) for z in np.linspace(2.0, 3.7, 6)]
+    return tuple(
+        np.array([_irradiance_at(_baked(room, replace(config, seed=seed), tmp_path), p) for p in floor])
+        for seed in (0, 1)
+    )
+
+
+def _seed_difference(a: np.ndarray, b: np.ndarray) -> float:
+    """The relative RMS difference of two seeds' bakes (about 1.4x each bake's noise)."""
+    return float(np.sqrt(np.mean((a / b - 1) ** 2)))
+
+
 def test_a_closed_black_room_gets_the_closed_form_irradiance_of_its_default_ceiling_light(tmp_path) -> None:
     """Tolerance 3%: the Monte-Carlo noise left after 16 light samples and the filter."""
     # no emitters: a closed room gets a downward square light at the direct shading's light (0.9 of
@@ -260,23 +278,12 @@ def test_a_crack_into_a_closed_box_lets_no_more_of_the_fill_in_with_more_gather_
 def test_the_training_bake_is_less_noisy_than_its_earlier_settings(tmp_path) -> None:
     """Two seeds' bakes of the floor lit through a window: the relative RMS difference, about 1.4x
     each bake's noise, measured 0.105 for TRAINING_BAKE and 0.284 for the settings before it."""
-    from dataclasses import replace
-
     from kadv.datasets import TRAINING_BAKE
 
-    room = _room(albedo=0.7, window=True, emitters=Emitters(sky_radiance=np.ones(3)))
-    floor = [np.array([x, 1.0, z]) for x in np.linspace(0.3, 3.7, 8) for z in np.linspace(2.0, 3.7, 6)]
-
-    def seed_difference(config: BakeConfig) -> float:
-        a, b = (
-            np.array([_irradiance_at(_baked(room, replace(config, seed=seed), tmp_path), p) for p in floor])
-            for seed in (0, 1)
-        )
-        return float(np.sqrt(np.mean((a / b - 1) ** 2)))
-
-    training = seed_difference(TRAINING_BAKE)
+    training = _seed_difference(*_floor_by_a_window(TRAINING_BAKE, tmp_path))
     assert training < 0.15
-    assert training < 0.5 * seed_difference(BakeConfig(texel=0.1, max_points=300_000, rays=32, light_samples=16))
+    earlier = BakeConfig(texel=0.1, max_points=300_000, rays=32, light_samples=16)
+    assert training < 0.5 * _seed_difference(*_floor_by_a_window(earlier, tmp_path))
 
 
 def test_a_wider_filter_leaves_less_noise_on_a_floor_lit_through_a_window(tmp_path) -> None:
@@ -285,19 +292,9 @@ def test_a_wider_filter_leaves_less_noise_on_a_floor_lit_through_a_window(tmp_pa
     within the noise (the floor lies on one plane: the wider filter averages points of it alone)."""
     from dataclasses import replace
 
-    room = _room(albedo=0.7, window=True, emitters=Emitters(sky_radiance=np.ones(3)))
-    floor = [np.array([x, 1.0, z]) for x in np.linspace(0.3, 3.7, 8) for z in np.linspace(2.0, 3.7, 6)]
-
-    def two_seeds(width: float) -> tuple[np.ndarray, np.ndarray]:
-        config = replace(QUICK, filter_width=width)
-        return tuple(
-            np.array([_irradiance_at(_baked(room, replace(config, seed=seed), tmp_path), p) for p in floor])
-            for seed in (0, 1)
-        )
-
-    (a1, b1), (a3, b3) = two_seeds(1.0), two_seeds(3.0)
-    noise = lambda a, b: float(np.sqrt(np.mean((a / b - 1) ** 2)))
-    assert noise(a3, b3) < 0.8 * noise(a1, b1)
+    a1, b1 = _floor_by_a_window(replace(QUICK, filter_width=1.0), tmp_path)
+    a3, b3 = _floor_by_a_window(replace(QUICK, filter_width=3.0), tmp_path)
+    assert _seed_difference(a3, b3) < 0.8 * _seed_difference(a1, b1)
     assert abs((a3 + b3).mean() / (a1 + b1).mean() - 1) < 0.05
 
 
