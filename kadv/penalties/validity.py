@@ -7,12 +7,15 @@ optical centre instead:
 - *outside the scene*: more than ``outside_threshold`` (0.3) of the probe directions escape. A
   room's windows and doors rarely let a fifth of all directions out, while anywhere under open
   sky, even over an endless ground plane, about half of them escape;
-- *inside an object*: most probe directions first hit the back of a triangle. Exporters write
-  closed objects with outward normals and rooms with inward normals, so from free space one sees
-  front faces. One- and two-sided materials are treated alike in this vote: the back of a
-  two-sided panel (a painting, a leaf) is legitimately visible, but only over the minority of
-  directions the panel covers, so it cannot swing the majority; a one-sided surface seen from
-  behind counts the same way.
+- *inside an object*: most probe directions first hit a hidden side of a surface
+  (:meth:`~kadv.render.ExactRenderer.hidden_side`). With baked lighting that is a side the bake's
+  flood fill from the scene's cameras did not reach, which holds whatever the file's windings (a
+  room wound outwards, as some exporters leave two-sided walls). With direct lighting it is the
+  back of a triangle: exporters mostly write closed objects with outward normals and rooms with
+  inward normals, so from free space one sees front faces. One- and two-sided materials are
+  treated alike in this vote: the back of a two-sided panel (a painting, a leaf) is legitimately
+  visible, but only over the minority of directions the panel covers, so it cannot swing the
+  majority; a one-sided surface seen from behind counts the same way.
 - *too close*: the centre is nearer than ``min_distance`` to a surface or some of the view's
   pixels are nearer than the near plane.
 - *uninformative*: a view that is otherwise valid but where one plane (a wall seen close, the
@@ -81,7 +84,8 @@ class ViewValidity:
         back_face_fraction: fraction of the view's pixels that see the back of a triangle.
         near_fraction: fraction of the view's pixels closer than the near plane.
         probe_miss_fraction: fraction of spherical probe directions that escape.
-        probe_back_fraction: fraction of probe directions whose first hit is a back face.
+        probe_back_fraction: fraction of probe directions whose first hit is a hidden side
+            (:meth:`~kadv.render.ExactRenderer.hidden_side`: with direct lighting a back face).
         distance: distance from the optical centre to the nearest surface, metres.
         plane_share: share of the pixels that hit a surface which lie on the most common plane.
         limits: what the figures are judged by.
@@ -134,7 +138,9 @@ class ViewValidity:
                 reasons.append(f"{miss_frac:.0%} of probe rays escape the scene (> {limits.outside_threshold:.0%})")
             elif back_frac > limits.inside_threshold:
                 verdicts.append(INSIDE)
-                reasons.append(f"{back_frac:.0%} of probe rays first hit a back face (> {limits.inside_threshold:.0%})")
+                reasons.append(
+                    f"{back_frac:.0%} of probe rays first hit a hidden side (> {limits.inside_threshold:.0%})"
+                )
             elif distance[b] < limits.min_distance or near_fraction[b] > 0:
                 verdicts.append(TOO_CLOSE)
                 reasons.append(
@@ -152,7 +158,7 @@ class ViewValidity:
             else:
                 verdicts.append(VALID)
                 reasons.append(
-                    f"enclosed ({miss_frac:.0%} escape, {back_frac:.0%} back faces), {distance[b]:.2f} m clear"
+                    f"enclosed ({miss_frac:.0%} escape, {back_frac:.0%} hidden sides), {distance[b]:.2f} m clear"
                 )
         return verdicts, reasons
 
@@ -245,15 +251,16 @@ def _device_plane_labels(renderer: ExactRenderer, device: torch.device) -> tuple
 def probe_directions_hits(
     renderer: ExactRenderer, centres: torch.Tensor, directions: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """(miss, back) booleans (B, N) on the renderer's device for rays from each centre (B, 3) along
-    each direction (N, 3).
+    """(miss, hidden) booleans (B, N) on the renderer's device for rays from each centre (B, 3) along
+    each direction (N, 3): whether each escapes, and whether it meets a hidden side
+    (:meth:`~kadv.render.ExactRenderer.hidden_side`).
 
     Examples:
         >>> import kadv
         >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
         >>> centres = torch.tensor([[2.0, 1.5, 2.5], [2.0, 1.5, -1.0]])  # inside; outside, behind the wall z = 0
         >>> miss, back = probe_directions_hits(room, centres, fibonacci_sphere(64))
-        >>> miss.any(dim=1).tolist(), back.any(dim=1).tolist()  # from outside: escaping rays, back faces
+        >>> miss.any(dim=1).tolist(), back.any(dim=1).tolist()  # from outside: escaping rays, hidden sides
         ([False, True], [False, True])
     """
     centres = torch.as_tensor(centres).to(renderer.device, torch.float64, non_blocking=True)
@@ -262,7 +269,7 @@ def probe_directions_hits(
     rays = directions[None].expand(origins.shape)
     hits = renderer.cast(origins, rays)
     shape = (len(centres), len(directions))
-    return ~hits.hit.reshape(shape), renderer.back_facing(hits, rays).reshape(shape)
+    return ~hits.hit.reshape(shape), renderer.hidden_side(hits, rays).reshape(shape)
 
 
 def view_validity(
@@ -292,7 +299,7 @@ def view_validity(
         min_distance: the centre may not be nearer than this to any surface.
         probe_rays: directions of the spherical probe.
         outside_threshold: probe miss fraction above which the centre is outside the scene.
-        inside_threshold: probe back-face fraction above which the centre is inside an object.
+        inside_threshold: probe hidden-side fraction above which the centre is inside an object.
         max_plane_share: a view whose most common plane covers more of its hit pixels than this is
             "uninformative" (None: never).
         render: the views' exact render at these poses, K and size, when the caller has one: its

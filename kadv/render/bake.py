@@ -48,7 +48,7 @@ from kadv.scenes.scene import Scene
 
 __all__ = ["BakeConfig", "bake_bytes", "bake_lighting", "default_emitters", "load_or_bake"]
 
-_BAKE_VERSION = 10  # part of the cache key: raise it when the bake's arithmetic changes
+_BAKE_VERSION = 11  # part of the cache key: raise it when the bake's arithmetic or its file changes
 _SLIVER = 8.0
 _CLOSED_ESCAPE_SHARE = 1e-3  # a room whose meter rays escape less than this sees no sky
 # a lattice point whose gather rays meet surfaces' hidden sides this often sits in a crevice or at a
@@ -444,7 +444,8 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
         nearest = _nearest(lattice, surfaces, hits, directions)
         hit_point[begin:end] = nearest.reshape(end - begin, config.rays)
     seen = _nearest(lattice, surfaces, meter, meter_directions)
-    buried = _buried(hit_point, _free(lattice, surfaces, hit_point, seen, eyes))
+    free = _free(lattice, surfaces, hit_point, seen, eyes)
+    buried = _buried(hit_point, free)
     index, weights = _filter_weights(lattice, config.neighbours, config.filter_width, ~buried)
     smooth = lambda values: _smooth(index, weights, values)
     # the delta lights' own term is shaded per hit, with sharp shadows (a lattice point may stand
@@ -466,6 +467,7 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
         irradiance=baked.astype(np.float32),
         exposure=exposure,
         buried=buried,
+        enclosed=~free,
         seconds=time.perf_counter() - start,
     )
 
@@ -500,6 +502,7 @@ def _read(path: Path, digest: str, num_triangles: int) -> BakedLighting:
             irradiance=data["irradiance"],
             exposure=float(data["exposure"]),
             buried=data["buried"],
+            enclosed=data["enclosed"],
         )
     counts = (baked.resolution + 1) * (baked.resolution + 2) // 2
     if (
@@ -507,6 +510,7 @@ def _read(path: Path, digest: str, num_triangles: int) -> BakedLighting:
         or baked.offsets.shape != (2, num_triangles)
         or baked.irradiance.shape != (2 * int(counts.sum()), 3)
         or baked.buried.shape != baked.irradiance.shape[:1]
+        or baked.enclosed.shape != baked.irradiance.shape[:1]
         or not np.isfinite(baked.irradiance).all()
         or not (np.isfinite(baked.exposure) and baked.exposure > 0)
     ):
@@ -553,6 +557,7 @@ def _load_or_bake(surfaces: Surfaces, config: BakeConfig, progress: bool, path: 
                 irradiance=baked.irradiance,
                 exposure=np.array(baked.exposure),
                 buried=baked.buried,
+                enclosed=baked.enclosed,
             )
 
     atomic_write(path, write)

@@ -23,6 +23,9 @@ class BakedLighting:
         exposure: the scene's one scale from radiance to display values.
         buried: (N,) bool, the lattice points whose own estimate was discarded and filled from their
             neighbours' (inside closed meshes, beyond a wall, in crevices).
+        enclosed: (N,) bool, the lattice points on a side of a surface that the free space the
+            scene's cameras stand in does not reach (inside closed meshes, beyond a wall), whatever
+            the triangles' windings: the bake's flood fill.
         seconds: how long the bake took (0 when read from the cache).
     """
 
@@ -31,31 +34,54 @@ class BakedLighting:
     irradiance: np.ndarray
     exposure: float
     buried: np.ndarray
+    enclosed: np.ndarray
     seconds: float = 0.0
 
     def irradiance_at(self, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor) -> torch.Tensor:
         """(N, 3) irradiance at hits: triangle ids (N,), Open3D barycentrics (N, 2) and side (N,) bool,
         on the hits' device (the tables are copied there once)."""
-        resolution, offsets, irradiance = self._tables(triangle_ids.device)
-        taps, weights = lattice_taps(resolution, offsets, triangle_ids, bary, back)
-        values = irradiance.index_select(0, taps.reshape(-1)).reshape(*taps.shape, 3)
+        tables = self._tables(triangle_ids.device)
+        taps, weights = lattice_taps(tables["resolution"], tables["offsets"], triangle_ids, bary, back)
+        values = tables["irradiance"].index_select(0, taps.reshape(-1)).reshape(*taps.shape, 3)
         return (values * weights[..., None].float()).sum(dim=1)
 
     def buried_at(self, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor) -> torch.Tensor:
         """(N,) bool: whether the lattice point nearest each hit (as :meth:`irradiance_at` takes them)
         had its own estimate discarded (:attr:`buried`)."""
-        resolution, offsets, _ = self._tables(triangle_ids.device)
-        nearest = nearest_tap(resolution, offsets, triangle_ids, bary, back)
-        return torch.from_numpy(self.buried).to(triangle_ids.device)[nearest]
+        return self._nearest_flag("buried", triangle_ids, bary, back)
 
-    def _tables(self, device: torch.device) -> tuple[torch.Tensor, ...]:
-        """resolution, offsets and irradiance as tensors on ``device``, made on first use."""
+    def enclosed_at(self, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor) -> torch.Tensor:
+        """(N,) bool: whether each hit lies on a side of its surface that the cameras' free space
+        does not reach (:attr:`enclosed`): the lattice point nearest it and most of its triangle's
+        points on that side are enclosed. The fill leaves points on a room's edges out (the walls
+        overlap there), so the nearest point alone would hide hits beside them; most of the side
+        alone would hide a floor's open part when most of its triangle lies under a cabinet."""
+        sides = self._tables(triangle_ids.device)["enclosed_sides"][back.long(), triangle_ids]
+        return sides & self._nearest_flag("enclosed", triangle_ids, bary, back)
+
+    def _nearest_flag(
+        self, name: str, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor
+    ) -> torch.Tensor:
+        """(N,) the per-point flags ``name`` ("buried" or "enclosed") at the lattice point nearest each hit."""
+        tables = self._tables(triangle_ids.device)
+        return tables[name][nearest_tap(tables["resolution"], tables["offsets"], triangle_ids, bary, back)]
+
+    def _tables(self, device: torch.device) -> dict[str, torch.Tensor]:
+        """The lattice's arrays as tensors on ``device``, made on first use, and "enclosed_sides"
+        (2, F): whether most lattice points of each triangle's front and back side are enclosed."""
         tables = self.__dict__.setdefault("_device_tables", {})
         if device not in tables:
-            tables[device] = tuple(
-                torch.from_numpy(np.ascontiguousarray(a)).to(device)
-                for a in (self.resolution, self.offsets, self.irradiance)
-            )
+            counts = (self.resolution + 1) * (self.resolution + 2) // 2
+            total = np.concatenate([[0], np.cumsum(self.enclosed, dtype=np.int64)])
+            arrays = {
+                "resolution": self.resolution,
+                "offsets": self.offsets,
+                "irradiance": self.irradiance,
+                "buried": self.buried,
+                "enclosed": self.enclosed,
+                "enclosed_sides": 2 * (total[self.offsets + counts] - total[self.offsets]) > counts,
+            }
+            tables[device] = {k: torch.from_numpy(np.ascontiguousarray(a)).to(device) for k, a in arrays.items()}
         return tables[device]
 
 

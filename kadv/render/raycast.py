@@ -126,6 +126,21 @@ class ExactRenderer:
         """(N,) True where a ray hit the back of a triangle (:meth:`Surfaces.back_facing`)."""
         return self.surfaces.back_facing(hits, directions)
 
+    def hidden_side(self, hits: RayHits, directions: torch.Tensor | np.ndarray) -> torch.Tensor:
+        """(N,) True where a ray met a side of a surface that the scene's free space does not face.
+
+        With direct lighting that is the back of a triangle (:meth:`back_facing`). With baked
+        lighting it is a side outside the bake's flood fill from the cameras
+        (:meth:`BakedLighting.enclosed_at`), whatever the file's windings: a room whose walls are
+        wound outwards is still a room. The fill can leak through a crack into a hollow (under a
+        staircase, behind panelling), whose inside then counts as free, as it does for the bake's
+        light; sampled init views keep a clearance that no such hollow has room for.
+        """
+        back = self.back_facing(hits, directions)
+        if self.baked is None:
+            return back
+        return hits.hit & self.baked.enclosed_at(hits.triangle_ids.clamp_min(0), hits.barycentrics.double(), back)
+
     def cast_and_shade(
         self, origins: torch.Tensor, directions: torch.Tensor, pixel_angle: float, colour: bool, geometry: bool
     ) -> tuple[RayHits, dict[str, torch.Tensor]]:

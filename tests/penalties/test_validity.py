@@ -7,8 +7,9 @@ import torch
 
 from kadv.geometry import intrinsics_from_fov, look_at
 from kadv.penalties import view_validity
-from kadv.render import ExactRenderer
+from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.scenes import box_room
+from tests.windings import rewound
 
 K = intrinsics_from_fov(70.0, 12, 16)
 
@@ -77,6 +78,31 @@ def test_statistics_shapes_and_back_faces_seen_from_inside_a_box(room_renderer: 
     # the box bottom is coplanar with the floor, so downward probes may see the floor instead
     assert result.probe_back_fraction[0] > 0.8 and result.distance[1] > 0.5
     assert result.valid.tolist() == [False, True]
+
+
+def test_with_baked_lighting_a_camera_is_inside_where_the_flood_fill_says_not_where_the_windings_do(
+    tmp_path_factory,
+) -> None:
+    """The box room with its walls wound outwards (as files leave two-sided walls) and its first box
+    wound inwards. By the windings the file camera would stand inside an object and the first box's
+    inside would be free space; the bake's flood fill from the file camera says otherwise, and with
+    baked lighting the verdicts follow it. Direct lighting keeps the windings' verdicts."""
+    room = box_room(seed=0)
+    flip = np.zeros(room.num_triangles, bool)
+    flip[:24] = True  # the room's 12 triangles and the first box's 12
+    scene = rewound(room, flip, "box_room_wound_outwards")
+    bake = BakeConfig(texel=0.25, rays=64, light_samples=8, cache=str(tmp_path_factory.mktemp("bake")))
+    baked = ExactRenderer(scene, Shading(lighting="baked", bake=bake), progress=False)
+    direct = ExactRenderer(scene)
+    camera = scene.cameras[0].world_T_cam[:3, 3].numpy()
+    (lo0, hi0), (lo1, hi1) = _box_bounds(baked, 0), _box_bounds(baked, 1)
+    assert _verdict(direct, camera) == "inside an object"
+    assert _verdict(baked, camera) == "valid"
+    assert _verdict(baked, (lo0 + hi0) / 2) == "inside an object"  # wound inwards
+    assert _verdict(baked, (lo1 + hi1) / 2) == "inside an object"  # wound outwards
+    assert _verdict(baked, scene.bounds[1] + [1.0, 0.5, 1.0]) == "outside the scene"
+    pose = look_at(torch.tensor(camera), torch.tensor(camera + [1.0, -0.1, 0.7]))
+    assert view_validity(baked, pose, K, 12, 16).probe_back_fraction.item() < 0.05
 
 
 def _reference_classes(scene, centres: np.ndarray, directions: int = 4096) -> list[str]:

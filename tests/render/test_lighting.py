@@ -29,6 +29,7 @@ from kadv.render.irradiance import lattice_ij, lattice_taps
 from kadv.scenes import Emitters, Material, assemble_scene, box_room
 from kadv.scenes.emitters import DEFAULT_CEILING_LIGHT_SIZE, DEFAULT_LAMP_RADIANCE
 from kadv.scenes.parts import box_parts, facing, quad_part
+from tests.windings import rewound
 
 from .references.direct_views import HEIGHT, REFERENCE, WIDTH, render_direct_views
 
@@ -85,14 +86,6 @@ def _room(
 
 
 BOX = (np.array([0.6, 0.0, 2.4]), np.array([1.4, 0.8, 3.2]))  # the closed box's corners, beside the floor's centre
-
-
-def _rewound(scene, flip: np.ndarray, name: str):
-    """``scene`` with the triangles ``flip`` (F,) bool wound the other way."""
-    faces, uvs, normals = scene.faces.copy(), scene.uvs.copy(), scene.normals.copy()
-    for array in (faces, uvs, normals):
-        array[flip] = array[flip][:, [0, 2, 1]]
-    return replace(scene, faces=faces, uvs=uvs, normals=normals, name=name)
 
 
 def _side_points(baked, triangle: int, side: int) -> np.ndarray:
@@ -201,7 +194,7 @@ def test_a_room_wound_any_way_bakes_as_one_wound_inwards(tmp_path, winding: str)
         other = _room(0.5, window=True, emitters=sky, outward=True)
     else:
         flip = np.random.default_rng(0).random(inward.num_triangles) < 0.5
-        other = _rewound(inward, flip, "room_wound_at_random")
+        other = rewound(inward, flip, "room_wound_at_random")
     expected, found = (
         np.mean([_irradiance_at(_baked(scene, config, tmp_path), p) for p in floor], axis=0)
         for scene in (inward, other)
@@ -213,7 +206,7 @@ def test_a_room_wound_any_way_bakes_as_one_wound_inwards(tmp_path, winding: str)
 def test_the_inside_of_a_closed_box_takes_no_part_in_the_bake_whatever_its_winding(tmp_path) -> None:
     """The bake's flood fill from the cameras' free space never enters a closed mesh: away from the
     edges (where the faces overlap by a millimetre and meet the floor), every lattice point on the
-    inner side of a closed box is buried and none on its outer sides; and the box's top bakes alike
+    inner side of a closed box is buried and enclosed, and none on its outer sides; and the box's top bakes alike
     wound outwards or inwards (mean over 9 points: 6% apart, two seeds of one winding 2-8%).
     Version 7 let the inner points vote on which side is seen."""
     sky = Emitters(sky_radiance=np.ones(3))
@@ -221,7 +214,7 @@ def test_the_inside_of_a_closed_box_takes_no_part_in_the_bake_whatever_its_windi
     box = np.arange(outward.num_triangles - 12, outward.num_triangles)
     flip = np.zeros(outward.num_triangles, bool)
     flip[box] = True
-    inward = _rewound(outward, flip, "room_box_wound_inwards")
+    inward = rewound(outward, flip, "room_box_wound_inwards")
     centre = np.mean(BOX, axis=0)
     tops = []
     for scene in (outward, inward):
@@ -236,9 +229,11 @@ def test_the_inside_of_a_closed_box_takes_no_part_in_the_bake_whatever_its_windi
             # on one face of the box only: a point near two of its planes lies on an edge
             planes = (np.abs(positions[:, None] - np.stack(BOX)[None]) < 0.02).sum(axis=(1, 2))
             front_inside = scene.face_normals[triangle] @ (centre - corners.mean(axis=0)) > 0
-            inner.append(baked.buried[_side_points(baked, triangle, int(not front_inside))][planes == 1])
+            inner_points = _side_points(baked, triangle, int(not front_inside))[planes == 1]
+            inner.append(baked.buried[inner_points] & baked.enclosed[inner_points])
             if corners[:, 1].max() > 0.01:  # the face on the floor faces it: buried on both sides
-                outer.append(baked.buried[_side_points(baked, triangle, int(front_inside))][planes == 1])
+                outer_points = _side_points(baked, triangle, int(front_inside))[planes == 1]
+                outer.append(baked.buried[outer_points] | baked.enclosed[outer_points])
         inner, outer = np.concatenate(inner), np.concatenate(outer)
         assert len(inner) > 100 and inner.all() and not outer.any()
         top = [centre + (dx, 1.5, dz) for dx in (-0.25, 0.0, 0.25) for dz in (-0.25, 0.0, 0.25)]
@@ -329,6 +324,7 @@ def test_the_bake_is_deterministic_for_a_seed_and_cached(tmp_path, monkeypatch) 
     monkeypatch.setattr(bake, "bake_lighting", no_bake)
     again = load_or_bake(renderer.surfaces, config, False)
     assert np.array_equal(again.irradiance, baked.irradiance) and again.exposure == baked.exposure
+    assert np.array_equal(again.buried, baked.buried) and np.array_equal(again.enclosed, baked.enclosed)
     assert np.array_equal(baked.irradiance, first.irradiance)
 
 
