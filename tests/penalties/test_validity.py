@@ -5,6 +5,7 @@ import open3d as o3d
 import pytest
 import torch
 
+from kadv.attack import InitViewError, PenaltyConfig, check_init_views, file_init_views
 from kadv.geometry import intrinsics_from_fov, look_at
 from kadv.penalties import view_validity
 from kadv.render import BakeConfig, ExactRenderer, Shading
@@ -103,6 +104,11 @@ def test_with_baked_lighting_a_camera_is_inside_where_the_flood_fill_says_not_wh
     assert _verdict(baked, scene.bounds[1] + [1.0, 0.5, 1.0]) == "outside the scene"
     pose = look_at(torch.tensor(camera), torch.tensor(camera + [1.0, -0.1, 0.7]))
     assert view_validity(baked, pose, K, 12, 16).probe_back_fraction.item() < 0.05
+    # the attack takes the file camera as an init view under baked lighting, and says why not under direct
+    penalty = PenaltyConfig()
+    check_init_views(baked, file_init_views(baked, penalty.margin), penalty, 12, 16)
+    with pytest.raises(InitViewError, match=r"inside an object: .* probe rays first hit a hidden side"):
+        check_init_views(direct, file_init_views(direct, penalty.margin), penalty, 12, 16)
 
 
 def _reference_classes(scene, centres: np.ndarray, directions: int = 4096) -> list[str]:
