@@ -40,7 +40,7 @@ from tqdm import tqdm
 from kadv.device import free_memory
 from kadv.io import atomic_write
 from kadv.render.colour import LUMINANCE, exposed
-from kadv.render.irradiance import BakedLighting, lattice_ij, nearest_tap
+from kadv.render.irradiance import BakedLighting, lattice_counts, lattice_ij, nearest_tap
 from kadv.render.lights import SURFACE_OFFSET, DeltaLights, Sky, area_irradiance, scene_lights
 from kadv.render.surface import RayHits, Surfaces
 from kadv.scenes.emitters import DEFAULT_CEILING_LIGHT_SIZE, DEFAULT_LAMP_RADIANCE, MISSING_ENVMAP_RADIANCE, Emitters
@@ -147,7 +147,7 @@ def _build_lattice(scene: Scene, config: BakeConfig) -> _Lattice:
         resolution = np.where(size < texel, 0, np.minimum(np.ceil(size / texel), config.max_subdivision)).astype(
             np.int64
         )
-        counts = (resolution + 1) * (resolution + 2) // 2
+        counts = lattice_counts(resolution)
         if 2 * counts.sum() <= config.max_points or texel > 1e3:
             break
         texel *= 1.25
@@ -504,7 +504,7 @@ def _read(path: Path, digest: str, num_triangles: int) -> BakedLighting:
             buried=data["buried"],
             enclosed=data["enclosed"],
         )
-    counts = (baked.resolution + 1) * (baked.resolution + 2) // 2
+    counts = lattice_counts(baked.resolution)
     if (
         baked.resolution.shape != (num_triangles,)
         or baked.offsets.shape != (2, num_triangles)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-__all__ = ["BakedLighting", "lattice_ij", "lattice_taps", "nearest_tap"]
+__all__ = ["BakedLighting", "lattice_counts", "lattice_ij", "lattice_taps", "nearest_tap"]
 
 
 @dataclass
@@ -71,7 +71,7 @@ class BakedLighting:
         (2, F): whether most lattice points of each triangle's front and back side are enclosed."""
         tables = self.__dict__.setdefault("_device_tables", {})
         if device not in tables:
-            counts = (self.resolution + 1) * (self.resolution + 2) // 2
+            counts = lattice_counts(self.resolution)
             total = np.concatenate([[0], np.cumsum(self.enclosed, dtype=np.int64)])
             arrays = {
                 "resolution": self.resolution,
@@ -83,6 +83,11 @@ class BakedLighting:
             }
             tables[device] = {k: torch.from_numpy(np.ascontiguousarray(a)).to(device) for k, a in arrays.items()}
         return tables[device]
+
+
+def lattice_counts(resolution: np.ndarray) -> np.ndarray:
+    """(F,) lattice points on one side of each triangle, of resolutions (F,): (r + 1)(r + 2) / 2."""
+    return (resolution + 1) * (resolution + 2) // 2
 
 
 def lattice_ij(r: int) -> tuple[np.ndarray, np.ndarray]:

@@ -25,7 +25,7 @@ from kadv.render import (
     lights,
     load_or_bake,
 )
-from kadv.render.irradiance import lattice_ij, lattice_taps
+from kadv.render.irradiance import lattice_counts, lattice_ij, lattice_taps
 from kadv.scenes import Emitters, Material, assemble_scene, box_room
 from kadv.scenes.emitters import DEFAULT_CEILING_LIGHT_SIZE, DEFAULT_LAMP_RADIANCE
 from kadv.scenes.parts import box_parts, facing, quad_part
@@ -90,8 +90,7 @@ BOX = (np.array([0.6, 0.0, 2.4]), np.array([1.4, 0.8, 3.2]))  # the closed box's
 
 def _side_points(baked, triangle: int, side: int) -> np.ndarray:
     """The lattice points of one side (0: the winding's front) of a triangle."""
-    count = (baked.resolution[triangle] + 1) * (baked.resolution[triangle] + 2) // 2
-    return baked.offsets[side, triangle] + np.arange(count)
+    return baked.offsets[side, triangle] + np.arange(lattice_counts(baked.resolution[triangle]))
 
 
 def _irradiance_at(renderer: ExactRenderer, point: np.ndarray) -> np.ndarray:
@@ -129,8 +128,6 @@ def _square_irradiance(dx: float, dz: float, half: float, height: float, radianc
 def _floor_by_a_window(config: BakeConfig, tmp_path) -> tuple[np.ndarray, np.ndarray]:
     """The irradiance (48, 3) at a grid on the floor of a room lit through a window, baked with
     ``config`` at seeds 0 and 1."""
-    from dataclasses import replace
-
     room = _room(albedo=0.7, window=True, emitters=Emitters(sky_radiance=np.ones(3)))
     floor = [np.array([x, 1.0, z]) for x in np.linspace(0.3, 3.7, 8) for z in np.linspace(2.0, 3.7, 6)]
     return tuple(
@@ -285,8 +282,6 @@ def test_a_wider_filter_leaves_less_noise_on_a_floor_lit_through_a_window(tmp_pa
     """Two seeds' bakes of the floor, as in the test above: the relative RMS difference falls with
     the filter's width (measured 0.28 at 1 spacing, 0.19 at 3), and the floor's mean light stays
     within the noise (the floor lies on one plane: the wider filter averages points of it alone)."""
-    from dataclasses import replace
-
     a1, b1 = _floor_by_a_window(replace(QUICK, filter_width=1.0), tmp_path)
     a3, b3 = _floor_by_a_window(replace(QUICK, filter_width=3.0), tmp_path)
     assert _seed_difference(a3, b3) < 0.8 * _seed_difference(a1, b1)
