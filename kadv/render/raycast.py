@@ -17,8 +17,9 @@ from torch.nn import functional as F
 from kadv.checks import check_shape
 from kadv.geometry.camera import pixel_rays
 from kadv.render.bake import load_or_bake
+from kadv.render.colour import tone_map, untone
 from kadv.render.irradiance import BakedLighting
-from kadv.render.shading import Shader, Shading
+from kadv.render.shading import Shader, Shading, compact_rows
 from kadv.render.surface import RayHits, Surfaces
 from kadv.scenes.scene import Scene
 
@@ -161,6 +162,45 @@ class ExactRenderer:
         hits = self.cast(origins, directions)
         return hits, self.shader.shade(hits, origins, directions, pixel_angle, colour=colour, geometry=geometry)
 
+    def _with_reflections(
+        self,
+        rgb: torch.Tensor,
+        triangle_ids: torch.Tensor,
+        hits: RayHits,
+        origins: torch.Tensor,
+        directions: torch.Tensor,
+        angle: float,
+        height: int,
+        width: int,
+    ) -> torch.Tensor:
+        """``rgb`` (B, 3, sH, sW) of s x s rays per pixel, on triangles ``triangle_ids`` (B, 1, sH,
+        sW), with what coats and metals mirror (:meth:`Shader.reflections`) as the pixel-centre rays
+        (B * H * W, 3) and their ``hits`` see it, added to the exposed radiance of each of the
+        pixel's rays on the centre ray's surface (:meth:`Shader.same_surface`)."""
+        batch, _, fine_height, fine_width = rgb.shape
+        s = fine_height // height
+        change = self.shader.reflections(hits, origins, directions, angle, (batch, height, width))
+
+        def fine(values: torch.Tensor) -> torch.Tensor:
+            """(B * sH * sW, C) of per-pixel (B * H * W, C): each pixel's value on its s x s rays."""
+            channels = values.shape[1]
+            values = values.reshape(batch, height, 1, width, 1, channels)
+            return values.expand(-1, -1, s, -1, s, -1).reshape(-1, channels)
+
+        fine_change = fine(change)
+        centre_ids = fine(hits.triangle_ids[:, None])[:, 0]
+        colours = rgb.permute(0, 2, 3, 1).reshape(-1, 3)
+        glossy = (fine_change != 0).any(dim=1)
+        rows = compact_rows(glossy)
+        if rows is None:
+            glossy = glossy & self.shader.same_surface(triangle_ids.reshape(-1), centre_ids)
+            colours = torch.where(glossy[:, None], tone_map(untone(colours) + fine_change), colours)
+        else:
+            rows = rows[self.shader.same_surface(triangle_ids.reshape(-1)[rows], centre_ids[rows])]
+            shown = tone_map(untone(colours.index_select(0, rows)) + fine_change.index_select(0, rows))
+            colours = colours.index_copy(0, rows, shown)
+        return colours.reshape(batch, fine_height, fine_width, 3).permute(0, 3, 1, 2)
+
     def render(
         self,
         world_T_cam: torch.Tensor,
@@ -169,6 +209,7 @@ class ExactRenderer:
         width: int,
         supersample: int = 1,
         sub_rgb: torch.Tensor | None = None,
+        sub_ids: torch.Tensor | None = None,
     ) -> RenderOutput:
         """Render B cameras in one cast (in parts of :attr:`max_rays` rays when they are more).
 
@@ -181,6 +222,8 @@ class ExactRenderer:
                 pixel-centre ray.
             sub_rgb: (B, 3, s * height, s * width) colours of those s x s rays, when the caller has
                 already shaded them (an anchor render at this pose covers them): they are not cast again.
+            sub_ids: (B, 1, s * height, s * width) their triangles (-1: none), with ``sub_rgb``
+                when coats and metals reflect (:attr:`Shading.reflections`).
 
         Returns:
             The maps, on the renderer's device.
@@ -201,11 +244,26 @@ class ExactRenderer:
                 raise ValueError("sub_rgb: given with supersample 1, where there are no sub-pixel rays")
             check_shape(sub_rgb, f"B 3 {s * height} {s * width}", "sub_rgb", {"B": batch})
             sub_rgb = sub_rgb.to(self.device)
+            if self.shader.reflecting:
+                if sub_ids is None:
+                    raise ValueError(
+                        "sub_ids: the sub-pixel rays' triangles are needed with their colours when coats reflect"
+                    )
+                check_shape(sub_ids, f"B 1 {s * height} {s * width}", "sub_ids", {"B": batch})
+                sub_ids = sub_ids.to(self.device)
         elif s > 1:
             sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s, device=self.device)
-            _, sub = self.cast_and_shade(sub_origins.reshape(-1, 3), sub_dirs.reshape(-1, 3), angle / s, True, False)
+            sub_hits, sub = self.cast_and_shade(
+                sub_origins.reshape(-1, 3), sub_dirs.reshape(-1, 3), angle / s, True, False
+            )
             sub_rgb = sub["rgb"].reshape(batch, s * height, s * width, 3).permute(0, 3, 1, 2)
-        rgb = F.avg_pool2d(sub_rgb, s).contiguous() if s > 1 else image(maps["rgb"], 3)
+            sub_ids = sub_hits.triangle_ids.reshape(batch, 1, s * height, s * width)
+        else:
+            sub_rgb, sub_ids = image(maps["rgb"], 3), image(hits.triangle_ids, 1)
+        if self.shader.reflecting:
+            flat = (origins.reshape(-1, 3), directions.reshape(-1, 3))
+            sub_rgb = self._with_reflections(sub_rgb, sub_ids, hits, *flat, angle, height, width)
+        rgb = F.avg_pool2d(sub_rgb, s).contiguous() if s > 1 else sub_rgb.contiguous()
 
         # a ray that meets a surface within a micrometre of the eye starts on it (the eye lies on the
         # surface): it measures no depth, so it is no hit in the mask

@@ -1,7 +1,8 @@
 """Shading, the stage after :mod:`kadv.render.surface`: a hit's colour from its albedo and the
 light it receives, view-independent (no head-light, no specular term; the differentiable
-reprojection relies on it) unless coats and metals are set to mirror their surroundings
-(:attr:`Shading.reflections`).
+reprojection relies on it). What coats and metals mirror (:attr:`Shading.reflections`) depends on
+the view: :meth:`Shader.reflections` estimates it per pixel, and the exact render adds it to the
+finished image.
 
 Direct lighting is albedo x (ambient + Lambertian world lights). Baked lighting is albedo x baked
 irradiance (:mod:`kadv.render.irradiance`) plus the point, spot and sun lights' sharp shadows,
@@ -19,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
+from kornia.filters import gaussian_blur2d
 from torch.nn import functional as F
 
 from kadv.geometry.vector import dot
@@ -50,8 +52,8 @@ class Shading:
         reflections: with baked lighting, coated surfaces (Mitsuba's plastics) and metals mirror
             what they face, through their GGX lobe and weighted by the coat's Fresnel reflectance
             or the metal's reflectance, in place of the coat's reflection counted as diffuse light
-            and of the metal's diffuse look: two more rays per such hit and sample, and their
-            colour depends on the view.
+            and of the metal's diffuse look: one more ray per such pixel, whose colour depends on
+            the view (the exact render's image has them; anchor layers and the warp do not).
     """
 
     ambient: float = 0.45
@@ -80,8 +82,13 @@ def shade(
     return (base_colour * light[:, None]).clamp(0.0, 1.0)
 
 
-# reflection rays per glossy hit (a coat or a metal) and sample, spread over its GGX lobe
-_REFLECTION_RAYS = 2
+# lobes at most this rough (GGX alpha) mirror sharply: one ray per pixel shows them without noise;
+# rougher lobes' single rays are averaged over their neighbours (see Shader.reflections)
+SHARP_ROUGHNESS = 0.03
+# the width (radians, a Gaussian's sigma) over which rougher lobes' single rays per pixel are
+# averaged: about 4 pixels at 160 pixels across a 70-degree view, where one ray per pixel sparkles
+# and a wider average spreads a window's mirror image past its lobe (docs/reference_renders.md)
+_REFLECTION_SMOOTHING = 0.03
 # devices whose reflections are cast for the glossy hits only, counted (elsewhere every row, masked)
 _COMPACTING = ("cpu",)
 # Roberts' R2 sequence's constants (1 / g, 1 / g^2, g^3 = g + 1): even 2-D points for any count
@@ -142,6 +149,57 @@ def _ggx_weight(
     return torch.where(cos_light > 0, weight.clamp(0.0, 1.0), 0.0)
 
 
+def _footprint(t: torch.Tensor, directions: torch.Tensor, facing: torch.Tensor, pixel_angle: float) -> torch.Tensor:
+    """(N,) float32 width of a pixel's footprint on the surfaces that rays (N, 3) meet at ``t`` (N,)
+    (in direction lengths), with :meth:`~kadv.render.surface.Surfaces.facing` ``facing`` (N,): the
+    geometric mean of its two axes, one stretched by 1 / cos incidence."""
+    length = directions.norm(dim=1)
+    incidence = facing.abs() / length
+    return (t * length * pixel_angle / incidence.clamp_min(0.05).sqrt()).float()
+
+
+def compact_rows(mask: torch.Tensor) -> torch.Tensor | None:
+    """The indices (M,) where ``mask`` (N,) holds, on devices that work on those rows only; None on
+    the others (a GPU), which work on every row, masked, sooner than they wait for a count."""
+    return torch.nonzero(mask)[:, 0] if mask.device.type in _COMPACTING else None
+
+
+def _every_other(images: tuple[int, int, int], device: torch.device) -> torch.Tensor:
+    """(N,) True at the pixels of (B, H, W) ``images`` in even rows and even columns."""
+    batch, height, width = images
+    rows = torch.arange(height, device=device) % 2 == 0
+    columns = torch.arange(width, device=device) % 2 == 0
+    return (rows[:, None] & columns[None, :]).expand(batch, -1, -1).reshape(-1)
+
+
+def _smoothed(
+    light: torch.Tensor, weights: torch.Tensor, axis: torch.Tensor, images: tuple[int, int, int], sigma: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``light`` (N, 3) of the (B, H, W) ``images``' pixels averaged over a Gaussian of ``sigma``
+    pixels among the pixels where ``weights`` (N,) bool holds and whose normals point along the
+    same ``axis`` (N,), by normalised convolution; and the weight each average rests on (N,) (0:
+    no such pixel within reach)."""
+    # a wide average is taken on a grid `step` times coarser, and read back bilinearly
+    step = max(1, int(sigma // 2))
+    sigma = sigma / step
+    size = 2 * math.ceil(2.0 * sigma) + 1
+    stacked = []
+    for a in range(3):
+        w = (weights & (axis == a)).float()[:, None]
+        stacked += [light.float() * w, w]
+    batch, height, width = images
+    stacked = torch.cat(stacked, dim=1).reshape(batch, height, width, 12).permute(0, 3, 1, 2)
+    if step > 1:
+        stacked = F.avg_pool2d(stacked, step, ceil_mode=True)
+    blurred = gaussian_blur2d(stacked, (size, size), (sigma, sigma), border_type="constant")
+    if step > 1:
+        blurred = F.interpolate(blurred, size=(height, width), mode="bilinear", align_corners=False)
+    blurred = blurred.permute(0, 2, 3, 1).reshape(-1, 3, 4)
+    mine = blurred.gather(1, axis[:, None, None].expand(-1, 1, 4))[:, 0].double()
+    support = torch.where(mine[:, 3] > 1e-6, mine[:, 3], 0.0)
+    return mine[:, :3] / mine[:, 3:].clamp_min(1e-6), support
+
+
 class Shader:
     """Colours of hits on ``surfaces`` under ``shading``, with the scene's ``baked`` lighting (None:
     direct lighting), computed on the surfaces' device.
@@ -157,6 +215,7 @@ class Shader:
         self._lights = torch.from_numpy(self.lights.astype(np.float32)).to(device)
         self._background = torch.tensor(shading.background, dtype=torch.float32).to(device)
         self._emitter_caster = None
+        self.reflecting = False
         if baked is not None:
             self._delta_lights = DeltaLights(scene.emitters, device)
             self._sky = Sky(sky_emitters(scene), device)
@@ -177,7 +236,7 @@ class Shader:
             self._coat_ior = per_triangle([material.coat_ior or 0.0 for material in scene.materials])
             self._conductor = per_triangle([material.conductor for material in scene.materials]) > 0
             self._roughness = per_triangle([material.roughness for material in scene.materials])
-            self._reflecting = shading.reflections and bool(((self._coat_ior > 0) | self._conductor).any())
+            self.reflecting = shading.reflections and bool(((self._coat_ior > 0) | self._conductor).any())
 
     def shade(
         self,
@@ -205,19 +264,15 @@ class Shader:
         facing = self.surfaces.facing(ids, directions)
         back = hit & (facing > 0)
         # hit points and shading normals, where something reads them: the maps, Lambert's term or
-        # the delta lights or the reflections (baked light alone needs neither)
-        lit_at_points = self.baked is None or not self._delta_lights.empty or self._reflecting
+        # the delta lights (baked light alone needs neither)
+        lit_at_points = self.baked is None or not self._delta_lights.empty
         if geometry or (colour and lit_at_points):
             points = origins + directions * t[:, None]
             normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
             normals = torch.where(back[:, None], -normals, normals)
         rgb = self._background.expand(len(t), 3)
         if colour:
-            length = directions.norm(dim=1)
-            incidence = facing.abs() / length
-            # geometric mean of the footprint's two axes (one stretched by 1 / cos incidence)
-            footprint = t * length * pixel_angle / incidence.clamp_min(0.05).sqrt()
-            base = self.surfaces.albedo(ids, bary, footprint.float())
+            base = self.surfaces.albedo(ids, bary, _footprint(t, directions, facing, pixel_angle))
             background = self._background
             if self.baked is None:
                 shaded = shade(self.shading, self._lights, points.float(), normals, base)
@@ -227,10 +282,6 @@ class Shader:
                 if not self._delta_lights.empty:
                     irradiance = irradiance + self._delta_irradiance(points, directions, normals, hit)
                 radiance = self.surfaces.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi)
-                if self._reflecting:
-                    radiance = self._with_reflections(
-                        radiance, irradiance, base, ids, points, normals, directions, hit, t, pixel_angle
-                    )
                 shaded = tone_map(radiance)
                 # a ray that leaves the scene sees the sky the bake was lit by
                 sky = self._sky(F.normalize(directions, dim=1))
@@ -270,6 +321,19 @@ class Shader:
         facing = dot(self._emitter_normals.index_select(0, ids), directions) < 0
         return seen, table.index_select(0, ids) * facing[:, None]
 
+    def _emitter_in_front(
+        self, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor, where: torch.Tensor
+    ) -> torch.Tensor:
+        """(N,) True where rays (N, 3) with ``where`` (N,) meet an area emitter before ``hits``."""
+        rows = compact_rows(where)
+        if rows is None:
+            return where & self._emitter_glow(hits, origins, directions, self._emitter_colour)[0]
+        part = RayHits(*(values.index_select(0, rows) for values in (hits.t, hits.triangle_ids, hits.barycentrics)))
+        seen = self._emitter_glow(
+            part, origins.index_select(0, rows), directions.index_select(0, rows), self._emitter_colour
+        )[0]
+        return torch.zeros_like(where).index_put((rows,), seen)
+
     def _emitters_seen(
         self, rgb: torch.Tensor, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor
     ) -> torch.Tensor:
@@ -277,70 +341,135 @@ class Shader:
         seen, glow = self._emitter_glow(hits, origins, directions, self._emitter_colour)
         return torch.where(seen[:, None], glow, rgb)
 
-    def _with_reflections(
+    def reflections(
         self,
-        radiance: torch.Tensor,
-        irradiance: torch.Tensor,
-        base: torch.Tensor,
-        ids: torch.Tensor,
-        points: torch.Tensor,
-        normals: torch.Tensor,
+        hits: RayHits,
+        origins: torch.Tensor,
         directions: torch.Tensor,
-        hit: torch.Tensor,
-        t: torch.Tensor,
         pixel_angle: float,
+        images: tuple[int, int, int],
     ) -> torch.Tensor:
-        """Exposed radiance (N, 3) of hits with the coats' and metals' reflections (see
-        :attr:`Shading.reflections`): what the reflected rays meet, in baked light (the sky, an
-        emitter's glow, a surface's diffuse light without its point lights and suns), times the
-        coat's Fresnel reflectance in place of the coat's reflection that ``radiance`` counted
-        diffuse, or times a metal's reflectance (its display ``base`` (N, 3) over
-        :data:`~kadv.scenes.scene.CONDUCTOR_GREY`) in place of its diffuse look."""
-        glossy = hit & ((self._coat_ior.index_select(0, ids) > 0) | self._conductor.index_select(0, ids))
-        # on the CPU, rays for the glossy hits only; a GPU casts every row's, masked, sooner than it
-        # waits for a count
-        rows = torch.nonzero(glossy)[:, 0] if self.surfaces.device.type in _COMPACTING else None
+        """(N, 3) float32 change of the exposed radiance of pixels whose centre rays (N, 3) met a
+        coat or a metal (0 elsewhere), for :attr:`Shading.reflections`: what one ray per pixel,
+        drawn from the GGX lobe, meets in baked light (the sky, an emitter's glow, a surface's
+        diffuse light without its point lights and suns), times the coat's Fresnel reflectance in
+        place of the coat's reflection that the shading counted diffuse, or times a metal's
+        reflectance (its display albedo over :data:`~kadv.scenes.scene.CONDUCTOR_GREY`) in place of
+        its diffuse look.
+
+        The rows are the (B, H, W) ``images``' pixels in order. A lobe rougher than
+        :data:`SHARP_ROUGHNESS` would sparkle with one ray per pixel: its mirrored light is averaged
+        over a Gaussian of ``_REFLECTION_SMOOTHING`` radians among the pixels whose normals point
+        along the same axis (normalised convolution): a stair's treads apart from its risers.
+        """
+        ids = hits.triangle_ids.clamp_min(0)
+        glossy = hits.hit & ((self._coat_ior.index_select(0, ids) > 0) | self._conductor.index_select(0, ids))
+        if self._emitter_caster is not None:  # a lamp in front of the surface shows its own glow
+            glossy = glossy & ~self._emitter_in_front(hits, origins, directions, glossy)
+        rough = glossy & (self._roughness.index_select(0, ids) > SHARP_ROUGHNESS)
+        sigma = _REFLECTION_SMOOTHING / pixel_angle
+        # the average spans several pixels: a ray at every other pixel along each axis feeds it
+        casting = glossy & (~rough | _every_other(images, hits.hit.device)) if sigma >= 2.0 else glossy
+        mirrored = self._mirrored(hits, origins, directions, casting, pixel_angle)
+        smoothed, support = _smoothed(mirrored, rough & casting, self._normal_axes(hits), images, sigma)
+        mirrored = torch.where(rough[:, None], smoothed, mirrored)
+        glossy = glossy & (~rough | (support > 0))
+        rows = compact_rows(glossy)
+        change = torch.zeros(len(ids), 3, dtype=torch.float64, device=ids.device)
         if rows is not None and not len(rows):
-            return radiance
+            return change.float()
 
         def take(values: torch.Tensor) -> torch.Tensor:
             return values if rows is None else values.index_select(0, rows)
 
-        glossy_ids = take(ids)
-        view = F.normalize(take(directions), dim=1)
-        normal = take(normals).double()
-        count, samples = len(view), _REFLECTION_RAYS
-        roughness = self._roughness.index_select(0, glossy_ids)
-        halfway = _ggx_half_vectors(normal, roughness, _lobe_samples(view, samples))
-        view_h = (-(view[:, None] * halfway).sum(dim=-1)).clamp_min(0.0)  # (R, K)
-        reflected = view[:, None] + 2.0 * view_h[..., None] * halfway
-        weight = _ggx_weight(view, normal, halfway, view_h, reflected, roughness)
+        # what the shading showed at the pixel, which the mirrored light replaces in part
+        glossy_ids, bary, mirrored = take(ids), take(hits.barycentrics), take(mirrored)
+        facing = self.surfaces.facing(glossy_ids, take(directions))
+        back = take(hits.hit) & (facing > 0)
+        t = take(torch.where(hits.hit, hits.t.double(), 0.0))
+        base = self.surfaces.albedo(glossy_ids, bary, _footprint(t, take(directions), facing, pixel_angle))
+        irradiance = self.baked.irradiance_at(glossy_ids, bary.double(), back)
+        if not self._delta_lights.empty:
+            points = take(origins) + take(directions) * t[:, None]
+            normal = F.normalize(self.surfaces.interpolate(self.surfaces.normals, glossy_ids, bary), dim=1, eps=1e-12)
+            irradiance = irradiance + self._delta_irradiance(points, take(directions), normal, torch.ones_like(back))
+        irradiance = irradiance.double()
+        own = self.surfaces.coats.index_select(0, glossy_ids)[:, 2:3].double() * irradiance
+        coat_change = mirrored - own * (self.baked.exposure / math.pi)
+        diffuse = self.surfaces.reflectance(glossy_ids, base).double() * irradiance * (self.baked.exposure / math.pi)
+        reflectance = srgb_decode((base.double() / CONDUCTOR_GREY).clamp(0.0, 1.0))
         is_metal = self._conductor.index_select(0, glossy_ids)
-        # a metal's Fresnel term is taken as 1: its colour comes from its reflectance below
-        ior = torch.where(is_metal, 1.5, self._coat_ior.index_select(0, glossy_ids))
-        weight = weight * torch.where(is_metal[:, None], 1.0, fresnel_reflectance(view_h, ior[:, None]))
-        origins = (take(points) + SURFACE_OFFSET * normal)[:, None].expand(count, samples, 3).reshape(-1, 3)
-        reflected = reflected.reshape(-1, 3)
-        live = None if rows is not None else glossy[:, None].expand(count, samples).reshape(-1)
-        seen = self.surfaces.cast(origins, reflected, live)
+        change_rows = torch.where(is_metal[:, None], reflectance * mirrored - diffuse, coat_change)
+        if rows is None:
+            return torch.where(glossy[:, None], change_rows, 0.0).float()
+        return change.index_copy(0, rows, change_rows).float()
+
+    def _mirrored(
+        self,
+        hits: RayHits,
+        origins: torch.Tensor,
+        directions: torch.Tensor,
+        casting: torch.Tensor,
+        pixel_angle: float,
+    ) -> torch.Tensor:
+        """(N, 3) float64 exposed radiance that one ray drawn from the GGX lobe of each hit where
+        ``casting`` (N,) holds brings towards the eye, weighted by the lobe and the coat's Fresnel
+        reflectance (a metal's is 1); 0 elsewhere."""
+        rows = compact_rows(casting)
+        mirrored = torch.zeros(len(casting), 3, dtype=torch.float64, device=casting.device)
+        if rows is not None and not len(rows):
+            return mirrored
+
+        def take(values: torch.Tensor) -> torch.Tensor:
+            return values if rows is None else values.index_select(0, rows)
+
+        ids, bary, view = (
+            take(hits.triangle_ids.clamp_min(0)),
+            take(hits.barycentrics),
+            F.normalize(take(directions), dim=1),
+        )
+        back = take(hits.hit) & (self.surfaces.facing(ids, view) > 0)
+        normal = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
+        normal = torch.where(back[:, None], -normal, normal).double()
+        roughness = self._roughness.index_select(0, ids)
+        halfway = _ggx_half_vectors(normal, roughness, _lobe_samples(view, 1))[:, 0]
+        view_h = (-(view * halfway).sum(dim=-1)).clamp_min(0.0)
+        reflected = view + 2.0 * view_h[:, None] * halfway
+        weight = _ggx_weight(view, normal, halfway[:, None], view_h[:, None], reflected[:, None], roughness)[:, 0]
+        is_metal = self._conductor.index_select(0, ids)
+        # a metal's Fresnel term is taken as 1: its colour comes from its reflectance
+        ior = torch.where(is_metal, 1.5, self._coat_ior.index_select(0, ids))
+        weight = weight * torch.where(is_metal, 1.0, fresnel_reflectance(view_h, ior))
+        distance = take(torch.where(hits.hit, hits.t.double(), 0.0)) * take(directions).norm(dim=1)
+        start = take(origins) + view * distance[:, None] + SURFACE_OFFSET * normal
+        seen = self.surfaces.cast(start, reflected, None if rows is not None else casting)
         met = seen.hit
         met_ids = seen.triangle_ids.clamp_min(0)
-        back = met & (self.surfaces.facing(met_ids, reflected) > 0)
+        met_back = met & (self.surfaces.facing(met_ids, reflected) > 0)
         # the texture filtered to the reflection's footprint: the eye's distance plus the mirror's
-        eye = (take(t) * take(directions).norm(dim=1))[:, None].expand(count, samples).reshape(-1)
-        footprint = (eye + torch.where(met, seen.t.double(), 0.0)) * pixel_angle
+        footprint = (distance + torch.where(met, seen.t.double(), 0.0)) * pixel_angle
         met_base = self.surfaces.albedo(met_ids, seen.barycentrics, footprint.float())
-        light = self.baked.irradiance_at(met_ids, seen.barycentrics.double(), back)
+        light = self.baked.irradiance_at(met_ids, seen.barycentrics.double(), met_back)
         surface = self.surfaces.reflectance(met_ids, met_base) * light * (self.baked.exposure / math.pi)
         incoming = torch.where(met[:, None], surface.double(), self._sky(reflected) * self.baked.exposure)
         if self._emitter_caster is not None:
-            glowing, glow = self._emitter_glow(seen, origins, reflected, self._emitter_radiance)
+            glowing, glow = self._emitter_glow(seen, start, reflected, self._emitter_radiance)
             incoming = torch.where(glowing[:, None], glow, incoming)
-        mirrored = (weight[..., None] * incoming.reshape(count, samples, 3)).mean(dim=1)
-        own = self.surfaces.coats.index_select(0, glossy_ids)[:, 2:3].double() * take(irradiance).double()
-        coat_change = mirrored - own * (self.baked.exposure / math.pi)
-        reflectance = srgb_decode((take(base).double() / CONDUCTOR_GREY).clamp(0.0, 1.0))
-        change = torch.where(is_metal[:, None], reflectance * mirrored - take(radiance).double(), coat_change)
         if rows is None:
-            return radiance + torch.where(glossy[:, None], change, 0.0).float()
-        return radiance.index_add(0, rows, change.float())
+            return torch.where(casting[:, None], weight[:, None] * incoming, 0.0)
+        return mirrored.index_copy(0, rows, weight[:, None] * incoming)
+
+    def same_surface(self, triangle_ids: torch.Tensor, others: torch.Tensor) -> torch.Tensor:
+        """(N,) True where hits on triangles (N,) and ``others`` (N,) (-1: a miss) show one surface
+        to a reflection: the same material, face normals within 45 degrees (a curved rail's
+        triangles are one surface; a stair's tread and riser are two)."""
+        a, b = triangle_ids.clamp_min(0), others.clamp_min(0)
+        material = self.surfaces.materials.material_ids
+        cosine = dot(self.surfaces.face_normals.index_select(0, a), self.surfaces.face_normals.index_select(0, b))
+        same = material.index_select(0, a) == material.index_select(0, b)
+        return (triangle_ids >= 0) & (others >= 0) & same & (cosine.abs() > math.sqrt(0.5))
+
+    def _normal_axes(self, hits: RayHits) -> torch.Tensor:
+        """(N,) int64: the axis (0, 1, 2) along which a hit's shading normal points most."""
+        ids = hits.triangle_ids.clamp_min(0)
+        return self.surfaces.interpolate(self.surfaces.normals, ids, hits.barycentrics).abs().argmax(dim=1)

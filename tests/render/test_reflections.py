@@ -1,4 +1,5 @@
-"""Shading.reflections: coated surfaces mirror what they face, by their coat's Fresnel reflectance."""
+"""Shading.reflections: coated surfaces mirror what they face, by their coat's Fresnel reflectance,
+added per pixel to the exact render's image."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import pytest
 import torch
 
 from kadv.geometry import intrinsics_from_fov, look_at
-from kadv.render import BakeConfig, ExactRenderer, Shading, shading
+from kadv.render import BakeConfig, ExactRenderer, Shading, render_anchor, shading
 from kadv.render.colour import coat_table, fresnel_reflectance, untone
 from kadv.scenes import Emitters, Material, assemble_scene, box_room
 from kadv.scenes.parts import facing, quad_part
@@ -32,11 +33,19 @@ POSE = look_at(EYE, torch.tensor([0.0, 0.0, -4.0])).double()
 K = intrinsics_from_fov(70.0, HEIGHT, WIDTH)
 
 
-def test_a_smooth_coat_trades_its_diffuse_counted_reflection_for_the_fresnel_weighted_sky(tmp_path):
+@pytest.mark.parametrize("supersample", [1, 2])
+def test_a_smooth_coat_trades_its_diffuse_counted_reflection_for_the_fresnel_weighted_sky(tmp_path, supersample):
     """Under a uniform sky, a smooth coat's radiance changes by (F(view angle) - its hemispherical
-    mean) x the sky: darker face-on (F = 0.04 < 0.092), brighter at grazing angles."""
-    renders = {on: _floor(0.0, tmp_path, on).render(POSE, K, HEIGHT, WIDTH) for on in (False, True)}
-    mask = renders[False].mask[0, 0]
+    mean) x the sky: darker face-on (F = 0.04 < 0.092), brighter at grazing angles; with s x s rays
+    per pixel as with one, as the pixel-centre ray's reflection is added to each of the pixel's rays
+    on the floor (the row at the horizon, whose pixels show the sky in part, is left out)."""
+    renders = {
+        on: _floor(0.0, tmp_path, on).render(POSE, K, HEIGHT, WIDTH, supersample=supersample) for on in (False, True)
+    }
+    floor = renders[False].mask[0, 0]
+    edge = floor & ~torch.cat([floor[:1], floor[:-1]])  # the floor's top row, below the sky
+    assert edge.sum() == WIDTH
+    mask = floor & ~edge
     assert mask.sum() > 0.4 * HEIGHT * WIDTH
     points = renders[False].points[0].permute(1, 2, 0)[mask].double()
     cosine = (EYE.double() - points)[:, 1] / (EYE.double() - points).norm(dim=1)
@@ -83,3 +92,43 @@ def test_reflections_leave_a_scene_without_coats_as_it_was(tmp_path):
     assert torch.equal(off, on)
     with pytest.raises(ValueError, match=r"render\.shading\.reflections"):
         Shading(reflections="yes")
+
+
+def _pixel_noise(image: torch.Tensor) -> float:
+    """Mean absolute difference of horizontally neighbouring pixels of (3, H, W), on the floor's rows."""
+    rows = image[:, image.shape[1] // 2 :]
+    return float((rows[..., 1:] - rows[..., :-1]).abs().mean())
+
+
+def test_a_rough_coats_single_reflection_rays_are_averaged_over_the_neighbouring_pixels(tmp_path, monkeypatch):
+    """One ray per pixel through a rough lobe scatters from pixel to pixel; the render averages the
+    mirrored light over its neighbours (a Gaussian of _REFLECTION_SMOOTHING), so that under a
+    uniform sky the rough floor's reflection changes smoothly across the image, while its mean stays."""
+    height, width = 96, 128  # the average spans about 1.6 pixels here
+    K_fine = intrinsics_from_fov(70.0, height, width)
+    off = _floor(0.3, tmp_path, False).render(POSE, K_fine, height, width).rgb[0].permute(1, 2, 0)
+    change = {}
+    for smoothing in (shading._REFLECTION_SMOOTHING, 1e-6):
+        monkeypatch.setattr(shading, "_REFLECTION_SMOOTHING", smoothing)
+        on = _floor(0.3, tmp_path, True).render(POSE, K_fine, height, width).rgb[0].permute(1, 2, 0)
+        change[smoothing] = (untone(on) - untone(off)).permute(2, 0, 1)
+    smoothed, single = change.values()
+    assert _pixel_noise(single) > 2.0 * _pixel_noise(smoothed)
+    floor = slice(height // 2, None)
+    assert abs(float(smoothed[:, floor].mean() - single[:, floor].mean())) < 0.1 * float(single[:, floor].abs().mean())
+
+
+def test_with_reflections_the_shading_stays_view_independent_and_an_anchors_colours_serve_the_render(tmp_path):
+    """Reflections are added to the exact render's finished image, not to the shading: an anchor
+    layer's colours (what the warp reprojects) are the same with them on as off, and a render fed
+    those colours as its sub-pixel rays is the render that casts them itself."""
+    on, off = _floor(0.3, tmp_path, True), _floor(0.3, tmp_path, False)
+    anchors = {r is on: render_anchor(r, POSE[None], K, HEIGHT, WIDTH, supersample=2) for r in (on, off)}
+    assert torch.equal(anchors[True].rgb, anchors[False].rgb)
+    sub_rgb, sub_ids = anchors[True].rgb[:, 0], anchors[True].triangle_ids[:, 0]
+    fed = on.render(POSE, K, HEIGHT, WIDTH, supersample=2, sub_rgb=sub_rgb, sub_ids=sub_ids).rgb
+    cast = on.render(POSE, K, HEIGHT, WIDTH, supersample=2).rgb
+    assert (fed - cast).abs().max() < 1e-6
+    assert (cast - off.render(POSE, K, HEIGHT, WIDTH, supersample=2).rgb).abs().max() > 0.02
+    with pytest.raises(ValueError, match="sub_ids"):
+        on.render(POSE, K, HEIGHT, WIDTH, supersample=2, sub_rgb=sub_rgb)
