@@ -104,7 +104,7 @@ def test_a_rough_coats_single_reflection_rays_are_averaged_over_the_neighbouring
     """One ray per pixel through a rough lobe scatters from pixel to pixel; the render averages the
     mirrored light over its neighbours (a Gaussian of _REFLECTION_SMOOTHING), so that under a
     uniform sky the rough floor's reflection changes smoothly across the image, while its mean stays."""
-    height, width = 96, 128  # the average spans about 1.6 pixels here
+    height, width = 96, 128  # the average spans about 3 pixels here
     K_fine = intrinsics_from_fov(70.0, height, width)
     off = _floor(0.3, tmp_path, False).render(POSE, K_fine, height, width).rgb[0].permute(1, 2, 0)
     change = {}
