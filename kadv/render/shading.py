@@ -16,6 +16,7 @@ need no more) and float64 for texture coordinates, whose tiling can reach hundre
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -164,6 +165,21 @@ def compact_rows(mask: torch.Tensor) -> torch.Tensor | None:
     return torch.nonzero(mask)[:, 0] if mask.device.type in _COMPACTING else None
 
 
+def _on_rows(
+    mask: torch.Tensor, compute: Callable[[Callable[[torch.Tensor], torch.Tensor], torch.Tensor | None], torch.Tensor]
+) -> torch.Tensor:
+    """(N, 3) float64: what ``compute(take, live)`` returns (M, 3) for the rows where ``mask`` (N,)
+    holds, 0 elsewhere. ``take`` gives the rows of an (N, ...) tensor that ``compute`` works on;
+    ``live`` is ``mask`` where those are every row (a GPU's, :func:`compact_rows`), else None."""
+    rows = compact_rows(mask)
+    if rows is None:
+        return torch.where(mask[:, None], compute(lambda values: values, mask), 0.0)
+    out = torch.zeros(len(mask), 3, dtype=torch.float64, device=mask.device)
+    if not len(rows):
+        return out
+    return out.index_copy(0, rows, compute(lambda values: values.index_select(0, rows), None))
+
+
 def _every_other(images: tuple[int, int, int], device: torch.device) -> torch.Tensor:
     """(N,) True at the pixels of (B, H, W) ``images`` in even rows and even columns."""
     batch, height, width = images
@@ -177,8 +193,7 @@ def _smoothed(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``light`` (N, 3) of the (B, H, W) ``images``' pixels averaged over a Gaussian of ``sigma``
     pixels among the pixels where ``weights`` (N,) bool holds and whose normals point along the
-    same ``axis`` (N,), by normalised convolution; and the weight each average rests on (N,) (0:
-    no such pixel within reach)."""
+    same ``axis`` (N,), by normalised convolution; and (N,) whether any such pixel is within reach."""
     # a wide average is taken on a grid `step` times coarser, and read back bilinearly
     step = max(1, int(sigma // 2))
     sigma = sigma / step
@@ -196,8 +211,7 @@ def _smoothed(
         blurred = F.interpolate(blurred, size=(height, width), mode="bilinear", align_corners=False)
     blurred = blurred.permute(0, 2, 3, 1).reshape(-1, 3, 4)
     mine = blurred.gather(1, axis[:, None, None].expand(-1, 1, 4))[:, 0].double()
-    support = torch.where(mine[:, 3] > 1e-6, mine[:, 3], 0.0)
-    return mine[:, :3] / mine[:, 3:].clamp_min(1e-6), support
+    return mine[:, :3] / mine[:, 3:].clamp_min(1e-6), mine[:, 3] > 1e-6
 
 
 class Shader:
@@ -371,19 +385,25 @@ class Shader:
         # the average spans several pixels: a ray at every other pixel along each axis feeds it
         casting = glossy & (~rough | _every_other(images, hits.hit.device)) if sigma >= 2.0 else glossy
         mirrored = self._mirrored(hits, origins, directions, casting, pixel_angle)
-        smoothed, support = _smoothed(mirrored, rough & casting, self._normal_axes(hits), images, sigma)
+        smoothed, covered = _smoothed(mirrored, rough & casting, self._normal_axes(hits), images, sigma)
         mirrored = torch.where(rough[:, None], smoothed, mirrored)
-        glossy = glossy & (~rough | (support > 0))
-        rows = compact_rows(glossy)
-        change = torch.zeros(len(ids), 3, dtype=torch.float64, device=ids.device)
-        if rows is not None and not len(rows):
-            return change.float()
+        glossy = glossy & (~rough | covered)
+        change = _on_rows(glossy, lambda take, _: self._change(take, hits, origins, directions, mirrored, pixel_angle))
+        return change.float()
 
-        def take(values: torch.Tensor) -> torch.Tensor:
-            return values if rows is None else values.index_select(0, rows)
-
-        # what the shading showed at the pixel, which the mirrored light replaces in part
-        glossy_ids, bary, mirrored = take(ids), take(hits.barycentrics), take(mirrored)
+    def _change(
+        self,
+        take: Callable[[torch.Tensor], torch.Tensor],
+        hits: RayHits,
+        origins: torch.Tensor,
+        directions: torch.Tensor,
+        mirrored: torch.Tensor,
+        pixel_angle: float,
+    ) -> torch.Tensor:
+        """(M, 3) float64 change of the exposed radiance of the rows ``take`` gives of the hits (N,)
+        of rays (N, 3), whose ``mirrored`` light (N, 3) replaces the coat's diffuse-counted
+        reflection, or a metal's diffuse look, that the shading showed."""
+        glossy_ids, bary, mirrored = take(hits.triangle_ids.clamp_min(0)), take(hits.barycentrics), take(mirrored)
         facing = self.surfaces.facing(glossy_ids, take(directions))
         back = take(hits.hit) & (facing > 0)
         t = take(torch.where(hits.hit, hits.t.double(), 0.0))
@@ -399,10 +419,7 @@ class Shader:
         diffuse = self.surfaces.reflectance(glossy_ids, base).double() * irradiance * (self.baked.exposure / math.pi)
         reflectance = srgb_decode((base.double() / CONDUCTOR_GREY).clamp(0.0, 1.0))
         is_metal = self._conductor.index_select(0, glossy_ids)
-        change_rows = torch.where(is_metal[:, None], reflectance * mirrored - diffuse, coat_change)
-        if rows is None:
-            return torch.where(glossy[:, None], change_rows, 0.0).float()
-        return change.index_copy(0, rows, change_rows).float()
+        return torch.where(is_metal[:, None], reflectance * mirrored - diffuse, coat_change)
 
     def _mirrored(
         self,
@@ -415,14 +432,19 @@ class Shader:
         """(N, 3) float64 exposed radiance that one ray drawn from the GGX lobe of each hit where
         ``casting`` (N,) holds brings towards the eye, weighted by the lobe and the coat's Fresnel
         reflectance (a metal's is 1); 0 elsewhere."""
-        rows = compact_rows(casting)
-        mirrored = torch.zeros(len(casting), 3, dtype=torch.float64, device=casting.device)
-        if rows is not None and not len(rows):
-            return mirrored
+        return _on_rows(casting, lambda take, live: self._mirror(take, live, hits, origins, directions, pixel_angle))
 
-        def take(values: torch.Tensor) -> torch.Tensor:
-            return values if rows is None else values.index_select(0, rows)
-
+    def _mirror(
+        self,
+        take: Callable[[torch.Tensor], torch.Tensor],
+        live: torch.Tensor | None,
+        hits: RayHits,
+        origins: torch.Tensor,
+        directions: torch.Tensor,
+        pixel_angle: float,
+    ) -> torch.Tensor:
+        """(M, 3) :meth:`_mirrored`'s light of the rows ``take`` gives; ``live``: the rays to cast
+        among them (None: all)."""
         ids, bary, view = (
             take(hits.triangle_ids.clamp_min(0)),
             take(hits.barycentrics),
@@ -442,7 +464,7 @@ class Shader:
         weight = weight * torch.where(is_metal, 1.0, fresnel_reflectance(view_h, ior))
         distance = take(torch.where(hits.hit, hits.t.double(), 0.0)) * take(directions).norm(dim=1)
         start = take(origins) + view * distance[:, None] + SURFACE_OFFSET * normal
-        seen = self.surfaces.cast(start, reflected, None if rows is not None else casting)
+        seen = self.surfaces.cast(start, reflected, live)
         met = seen.hit
         met_ids = seen.triangle_ids.clamp_min(0)
         met_back = met & (self.surfaces.facing(met_ids, reflected) > 0)
@@ -455,9 +477,7 @@ class Shader:
         if self._emitter_caster is not None:
             glowing, glow = self._emitter_glow(seen, start, reflected, self._emitter_radiance)
             incoming = torch.where(glowing[:, None], glow, incoming)
-        if rows is None:
-            return torch.where(casting[:, None], weight[:, None] * incoming, 0.0)
-        return mirrored.index_copy(0, rows, weight[:, None] * incoming)
+        return weight[:, None] * incoming
 
     def same_surface(self, triangle_ids: torch.Tensor, others: torch.Tensor) -> torch.Tensor:
         """(N,) True where hits on triangles (N,) and ``others`` (N,) (-1: a miss) show one surface
