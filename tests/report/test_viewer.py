@@ -3,16 +3,21 @@ and its bad inputs."""
 
 from __future__ import annotations
 
+import base64
+import io
 import json
 import shutil
 import socket
 import subprocess
+import time
+import urllib.request
 from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 from viser import CameraFrustumHandle
+from websockets.sync.client import connect
 
 from kadv.cli.attack import main as attack_main
 from kadv.cli.view import main as view_main
@@ -109,11 +114,20 @@ def test_a_sweep_opens_and_choosing_another_run_shows_its_cameras(sweep: Path) -
         viewer.stop()
 
 
-def _screenshot(chromium: str, url: str, folder: Path) -> tuple[float, int]:
-    """Headless Chromium's screenshot of ``url``: the share of its most common colour (the page's
-    background) and its number of colours."""
-    shot = folder / "viewer.png"
-    subprocess.run(
+def _shares(png: bytes) -> tuple[float, int]:
+    """The share of a screenshot's most common colour (the page's background) and its number of colours."""
+    pixels = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).reshape(-1, 3)
+    colours, counts = np.unique(pixels // 8, axis=0, return_counts=True)
+    return counts.max() / len(pixels), len(colours)
+
+
+def _drawn(chromium: str, url: str, folder: Path, patience_s: float = 120.0) -> tuple[float, int]:
+    """Opens ``url`` in headless Chromium and screenshots it over the DevTools protocol once a second,
+    in real time, until the room is drawn or ``patience_s`` pass; returns the last screenshot's shares.
+
+    The scene reaches the page over viser's websocket in real time; a one-shot ``--screenshot`` is
+    taken on Chromium's virtual clock, which on a busy machine can end before the scene arrives."""
+    browser = subprocess.Popen(
         [
             chromium,
             "--headless",
@@ -122,17 +136,36 @@ def _screenshot(chromium: str, url: str, folder: Path) -> tuple[float, int]:
             "--enable-unsafe-swiftshader",
             f"--user-data-dir={folder / 'chromium'}",
             "--window-size=1000,700",
-            "--virtual-time-budget=15000",
-            f"--screenshot={shot}",
+            "--remote-debugging-port=0",
             url,
         ],
-        capture_output=True,
-        timeout=120,
-        check=False,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
     )
-    pixels = np.asarray(Image.open(shot).convert("RGB")).reshape(-1, 3)
-    colours, counts = np.unique(pixels // 8, axis=0, return_counts=True)
-    return counts.max() / len(pixels), len(colours)
+    try:
+        deadline = time.monotonic() + patience_s
+        port_file = folder / "chromium" / "DevToolsActivePort"
+        while not port_file.exists() or len(port_file.read_text().split()) < 2:
+            assert time.monotonic() < deadline and browser.poll() is None, "headless Chromium did not start"
+            time.sleep(0.2)
+        port = port_file.read_text().split()[0]
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list") as listing:
+            page = next(target for target in json.load(listing) if target["type"] == "page")
+        with connect(page["webSocketDebuggerUrl"], max_size=None) as devtools:
+            request = 0
+            while True:
+                request += 1
+                devtools.send(json.dumps({"id": request, "method": "Page.captureScreenshot"}))
+                reply = json.loads(devtools.recv())
+                while reply.get("id") != request:  # events the page sends meanwhile
+                    reply = json.loads(devtools.recv())
+                background, colours = _shares(base64.b64decode(reply["result"]["data"]))
+                if (background < 0.6 and colours > 200) or time.monotonic() > deadline:
+                    return background, colours
+                time.sleep(1.0)
+    finally:
+        browser.kill()
+        browser.wait()
 
 
 def test_chromium_draws_the_scene(sweep: Path, tmp_path: Path) -> None:
@@ -140,12 +173,7 @@ def test_chromium_draws_the_scene(sweep: Path, tmp_path: Path) -> None:
     assert chromium, "headless Chromium is missing: apt-get install -y chromium"
     viewer = view(sweep / "tiny", port=_free_port())
     try:
-        # the scene reaches the page over a websocket in real time, while the screenshot is taken
-        # on Chromium's virtual clock: on a busy machine the first may show the page before it
-        for attempt in range(3):
-            background, colours = _screenshot(chromium, viewer.url, tmp_path / str(attempt))
-            if background < 0.6 and colours > 200:
-                break
+        background, colours = _drawn(chromium, viewer.url, tmp_path)
     finally:
         viewer.stop()
     assert background < 0.6 and colours > 200, (background, colours)  # the room, not an empty page
