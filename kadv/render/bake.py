@@ -5,7 +5,10 @@ The bake path-traces with the renderer's own surfaces and ray casters
 (:class:`~kadv.render.surface.Surfaces`). Irradiance is stored on a lattice of barycentric points
 per triangle and side (a refined mesh that keeps the triangles: triangle ids, depth and silhouettes
 stay those of the scene), ``r`` steps along each edge with ``r`` set by the
-triangle's size (``texel``), or one point at the centroid for triangles smaller than a texel.
+triangle's size (``texel``), or one point at the centroid for triangles smaller than a texel. In a
+scene of so many triangles that those points alone would take half of ``max_points`` (a kitchen's
+appliances and plants: a million), the small triangles whose centroids share a texel-sized cell and
+whose normals point along one axis the same way share one point, so that the texel need not grow.
 
 Per lattice point: direct light with shadow rays (area emitters sampled by area and power, point
 and spot lights, directional suns), then ``rays`` cosine-distributed gather rays cast once. A gather
@@ -48,7 +51,7 @@ from kadv.scenes.scene import Scene
 
 __all__ = ["BakeConfig", "bake_bytes", "bake_lighting", "default_emitters", "load_or_bake"]
 
-_BAKE_VERSION = 11  # part of the cache key: raise it when the bake's arithmetic or its file changes
+_BAKE_VERSION = 12  # part of the cache key: raise it when the bake's arithmetic or its file changes
 _SLIVER = 8.0
 _CLOSED_ESCAPE_SHARE = 1e-3  # a room whose meter rays escape less than this sees no sky
 # a lattice point whose gather rays meet surfaces' hidden sides this often sits in a crevice or at a
@@ -70,7 +73,8 @@ class BakeConfig:
     Attributes:
         texel: metres between lattice points on large triangles.
         max_subdivision: the most lattice steps along a triangle's edge.
-        max_points: the most lattice points (both sides); ``texel`` grows until the scene fits.
+        max_points: the most lattice points (both sides); ``texel`` grows until the scene fits
+            (small triangles share points where one each would take half of them).
         rays: gather rays per lattice point.
         light_samples: shadow rays per lattice point towards the area emitters.
         bounces: diffuse inter-reflections after the direct light.
@@ -142,21 +146,31 @@ def _build_lattice(scene: Scene, config: BakeConfig) -> _Lattice:
         np.sqrt(2.0 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)),
         edges / _SLIVER,
     )
+    centroids = corners.mean(axis=1)
+    # where one point per small triangle would take half the points (a million-triangle kitchen),
+    # small triangles facing one way in one texel-sized cell share a point: else the texel grows
+    # until every large floor and wall is one point too
+    sharing = 2 * len(size) > config.max_points // 2
     texel = config.texel
     while True:
         resolution = np.where(size < texel, 0, np.minimum(np.ceil(size / texel), config.max_subdivision)).astype(
             np.int64
         )
-        counts = lattice_counts(resolution)
-        if 2 * counts.sum() <= config.max_points or texel > 1e3:
+        small = np.flatnonzero(resolution == 0) if sharing else np.empty(0, np.int64)
+        cell, representatives = _shared_cells(centroids[small], scene.face_normals[small], size[small], texel)
+        own = np.ones(len(size), bool)
+        own[small] = False
+        counts = np.where(own, lattice_counts(resolution), 0)
+        if 2 * (counts.sum() + len(representatives)) <= config.max_points or texel > 1e3:
             break
         texel *= 1.25
     starts = np.r_[0, np.cumsum(counts)[:-1]]
-    per_side = int(counts.sum())
+    per_side = int(counts.sum()) + len(representatives)
+    starts[small] = int(counts.sum()) + cell
     triangle_ids = np.empty(per_side, np.int64)
     bary = np.empty((per_side, 2))
-    for r in np.unique(resolution):
-        faces = np.flatnonzero(resolution == r)
+    for r in np.unique(resolution[own]):
+        faces = np.flatnonzero(own & (resolution == r))
         if r == 0:
             steps = np.full((1, 2), 1.0 / 3.0)
         else:
@@ -165,6 +179,8 @@ def _build_lattice(scene: Scene, config: BakeConfig) -> _Lattice:
         index = (starts[faces][:, None] + np.arange(len(steps))[None]).reshape(-1)
         triangle_ids[index] = np.repeat(faces, len(steps))
         bary[index] = np.tile(steps, (len(faces), 1))
+    triangle_ids[int(counts.sum()) :] = small[representatives]
+    bary[int(counts.sum()) :] = 1.0 / 3.0
     tri = corners[triangle_ids]
     weights = np.c_[1.0 - bary.sum(axis=1), bary]
     points = np.einsum("nk,nkd->nd", weights, tri)
@@ -195,6 +211,24 @@ def _build_lattice(scene: Scene, config: BakeConfig) -> _Lattice:
         texel=texel,
         spacing=np.concatenate([spacing, spacing]),
     )
+
+
+def _shared_cells(
+    centroids: np.ndarray, face_normals: np.ndarray, size: np.ndarray, cell: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Small triangles grouped by the ``cell``-metre grid cell of their centroids (M, 3) and the axis
+    and sign their face normals (M, 3) point along most: each one's group (M,), and each group's
+    largest triangle by ``size`` (M,) (G,), whose centroid stands for the group."""
+    if not len(centroids):
+        return np.empty(0, np.int64), np.empty(0, np.int64)
+    axis = np.abs(face_normals).argmax(axis=1)
+    sign = np.take_along_axis(face_normals, axis[:, None], axis=1)[:, 0] > 0
+    keys = np.c_[np.floor(centroids / cell).astype(np.int64), 2 * axis + sign]
+    order = np.argsort(-size, kind="stable")
+    _, first, group = np.unique(keys[order], axis=0, return_index=True, return_inverse=True)
+    cells = np.empty(len(keys), np.int64)
+    cells[order] = group.reshape(-1)
+    return cells, order[first]
 
 
 def _cosine_directions(normals: np.ndarray, rng: np.random.Generator, count: int) -> np.ndarray:
@@ -508,7 +542,10 @@ def _read(path: Path, digest: str, num_triangles: int) -> BakedLighting:
     if (
         baked.resolution.shape != (num_triangles,)
         or baked.offsets.shape != (2, num_triangles)
-        or baked.irradiance.shape != (2 * int(counts.sum()), 3)
+        or baked.irradiance.ndim != 2
+        or baked.irradiance.shape[1] != 3
+        or baked.offsets.min(initial=0) < 0
+        or (baked.offsets + counts).max(initial=0) > len(baked.irradiance)
         or baked.buried.shape != baked.irradiance.shape[:1]
         or baked.enclosed.shape != baked.irradiance.shape[:1]
         or not np.isfinite(baked.irradiance).all()
