@@ -175,11 +175,11 @@ class ExactRenderer:
     ) -> torch.Tensor:
         """``rgb`` (B, 3, sH, sW) of s x s rays per pixel, on triangles ``triangle_ids`` (B, 1, sH,
         sW), with what coats and metals mirror (:meth:`Shader.reflections`) as the pixel-centre rays
-        (B * H * W, 3) and their ``hits`` see it, added to the exposed radiance of each of the
-        pixel's rays on the centre ray's surface (:meth:`Shader.same_surface`)."""
+        (B * H * W, 3) and their ``hits`` see it, in the exposed radiance of each of the pixel's rays
+        on the centre ray's surface (:meth:`Shader.same_surface`)."""
         batch, _, fine_height, fine_width = rgb.shape
         s = fine_height // height
-        change = self.shader.reflections(hits, origins, directions, angle, (batch, height, width))
+        mirrored = self.shader.reflections(hits, origins, directions, angle, (batch, height, width))
 
         def fine(values: torch.Tensor) -> torch.Tensor:
             """(B * sH * sW, C) of per-pixel (B * H * W, C): each pixel's value on its s x s rays."""
@@ -187,18 +187,18 @@ class ExactRenderer:
             values = values.reshape(batch, height, 1, width, 1, channels)
             return values.expand(-1, -1, s, -1, s, -1).reshape(-1, channels)
 
-        fine_change = fine(change)
+        keep, add = fine(mirrored.keep), fine(mirrored.add)
         centre_ids = fine(hits.triangle_ids[:, None])[:, 0]
         colours = rgb.permute(0, 2, 3, 1).reshape(-1, 3)
-        glossy = (fine_change != 0).any(dim=1)
+        glossy = fine(mirrored.glossy[:, None])[:, 0]
         rows = compact_rows(glossy)
         if rows is None:
             glossy = glossy & self.shader.same_surface(triangle_ids.reshape(-1), centre_ids)
-            colours = torch.where(glossy[:, None], tone_map(untone(colours) + fine_change), colours)
+            colours = torch.where(glossy[:, None], tone_map(untone(colours) * keep + add), colours)
         else:
             rows = rows[self.shader.same_surface(triangle_ids.reshape(-1)[rows], centre_ids[rows])]
-            shown = tone_map(untone(colours.index_select(0, rows)) + fine_change.index_select(0, rows))
-            colours = colours.index_copy(0, rows, shown)
+            shown = untone(colours.index_select(0, rows)) * keep.index_select(0, rows) + add.index_select(0, rows)
+            colours = colours.index_copy(0, rows, tone_map(shown))
         return colours.reshape(batch, fine_height, fine_width, 3).permute(0, 3, 1, 2)
 
     def render(

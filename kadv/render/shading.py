@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -32,7 +33,7 @@ from kadv.render.lights import SURFACE_OFFSET, DeltaLights, Sky, scene_lights, s
 from kadv.render.surface import RayHits, Surfaces, first_hits
 from kadv.scenes.scene import CONDUCTOR_GREY
 
-__all__ = ["Shader", "Shading", "shade"]
+__all__ = ["Reflections", "Shader", "Shading", "shade"]
 
 
 @dataclass(frozen=True)
@@ -166,15 +167,17 @@ def compact_rows(mask: torch.Tensor) -> torch.Tensor | None:
 
 
 def _on_rows(
-    mask: torch.Tensor, compute: Callable[[Callable[[torch.Tensor], torch.Tensor], torch.Tensor | None], torch.Tensor]
+    mask: torch.Tensor,
+    compute: Callable[[Callable[[torch.Tensor], torch.Tensor], torch.Tensor | None], torch.Tensor],
+    channels: int = 3,
 ) -> torch.Tensor:
-    """(N, 3) float64: what ``compute(take, live)`` returns (M, 3) for the rows where ``mask`` (N,)
-    holds, 0 elsewhere. ``take`` gives the rows of an (N, ...) tensor that ``compute`` works on;
+    """(N, C) float64: what ``compute(take, live)`` returns (M, ``channels``) for the rows where
+    ``mask`` (N,) holds, 0 elsewhere. ``take`` gives the rows of an (N, ...) tensor that ``compute`` works on;
     ``live`` is ``mask`` where those are every row (a GPU's, :func:`compact_rows`), else None."""
     rows = compact_rows(mask)
     if rows is None:
         return torch.where(mask[:, None], compute(lambda values: values, mask), 0.0)
-    out = torch.zeros(len(mask), 3, dtype=torch.float64, device=mask.device)
+    out = torch.zeros(len(mask), channels, dtype=torch.float64, device=mask.device)
     if not len(rows):
         return out
     return out.index_copy(0, rows, compute(lambda values: values.index_select(0, rows), None))
@@ -212,6 +215,16 @@ def _smoothed(
     blurred = blurred.permute(0, 2, 3, 1).reshape(-1, 3, 4)
     mine = blurred.gather(1, axis[:, None, None].expand(-1, 1, 4))[:, 0].double()
     return mine[:, :3] / mine[:, 3:].clamp_min(1e-6), mine[:, 3] > 1e-6
+
+
+class Reflections(NamedTuple):
+    """What coats and metals mirror into a render's pixels (:meth:`Shader.reflections`): where
+    ``glossy`` (N,) holds, a pixel's rays on its centre ray's surface show the exposed radiance
+    ``keep * theirs + add`` (both (N, 3) float32) in place of their shaded ``theirs``."""
+
+    glossy: torch.Tensor
+    keep: torch.Tensor
+    add: torch.Tensor
 
 
 class Shader:
@@ -362,14 +375,13 @@ class Shader:
         directions: torch.Tensor,
         pixel_angle: float,
         images: tuple[int, int, int],
-    ) -> torch.Tensor:
-        """(N, 3) float32 change of the exposed radiance of pixels whose centre rays (N, 3) met a
-        coat or a metal (0 elsewhere), for :attr:`Shading.reflections`: what one ray per pixel,
-        drawn from the GGX lobe, meets in baked light (the sky, an emitter's glow, a surface's
-        diffuse light without its point lights and suns), times the coat's Fresnel reflectance in
-        place of the coat's reflection that the shading counted diffuse, or times a metal's
-        reflectance (its display albedo over :data:`~kadv.scenes.scene.CONDUCTOR_GREY`) in place of
-        its diffuse look.
+    ) -> Reflections:
+        """What coats and metals mirror, for :attr:`Shading.reflections`, at the pixels whose centre
+        rays (N, 3) met one (:class:`Reflections`): what one ray per pixel, drawn from the GGX lobe,
+        meets in baked light (the sky, an emitter's glow, a surface's diffuse light without its
+        point lights and suns), times the coat's Fresnel reflectance in place of the coat's
+        reflection that the shading counted diffuse, or times a metal's reflectance (its display
+        albedo over :data:`~kadv.scenes.scene.CONDUCTOR_GREY`) in place of its diffuse look.
 
         The rows are the (B, H, W) ``images``' pixels in order. A lobe rougher than
         :data:`SHARP_ROUGHNESS` would sparkle with one ray per pixel: its mirrored light is averaged
@@ -388,38 +400,26 @@ class Shader:
         smoothed, covered = _smoothed(mirrored, rough & casting, self._normal_axes(hits), images, sigma)
         mirrored = torch.where(rough[:, None], smoothed, mirrored)
         glossy = glossy & (~rough | covered)
-        change = _on_rows(glossy, lambda take, _: self._change(take, hits, origins, directions, mirrored, pixel_angle))
-        return change.float()
+        terms = _on_rows(glossy, lambda take, _: self._glossy_terms(take, hits, directions, pixel_angle), 6)
+        keep, scale = terms.split(3, dim=1)
+        return Reflections(glossy, keep.float(), (scale * mirrored).float())
 
-    def _change(
-        self,
-        take: Callable[[torch.Tensor], torch.Tensor],
-        hits: RayHits,
-        origins: torch.Tensor,
-        directions: torch.Tensor,
-        mirrored: torch.Tensor,
-        pixel_angle: float,
+    def _glossy_terms(
+        self, take: Callable[[torch.Tensor], torch.Tensor], hits: RayHits, directions: torch.Tensor, pixel_angle: float
     ) -> torch.Tensor:
-        """(M, 3) float64 change of the exposed radiance of the rows ``take`` gives of the hits (N,)
-        of rays (N, 3), whose ``mirrored`` light (N, 3) replaces the coat's diffuse-counted
-        reflection, or a metal's diffuse look, that the shading showed."""
-        glossy_ids, bary, mirrored = take(hits.triangle_ids.clamp_min(0)), take(hits.barycentrics), take(mirrored)
-        facing = self.surfaces.facing(glossy_ids, take(directions))
-        back = take(hits.hit) & (facing > 0)
+        """(M, 6) float64 :class:`Reflections`' ``keep`` and the factor of the mirrored light, for the
+        rows ``take`` gives of the hits (N,) of rays (N, 3): on a coat, the share of its shaded light
+        that is not the coat's own reflection (which the shading counted diffuse), and 1; on a
+        metal, 0 and its reflectance."""
+        ids, bary = take(hits.triangle_ids.clamp_min(0)), take(hits.barycentrics)
+        facing = self.surfaces.facing(ids, take(directions))
         t = take(torch.where(hits.hit, hits.t.double(), 0.0))
-        base = self.surfaces.albedo(glossy_ids, bary, _footprint(t, take(directions), facing, pixel_angle))
-        irradiance = self.baked.irradiance_at(glossy_ids, bary.double(), back)
-        if not self._delta_lights.empty:
-            points = take(origins) + take(directions) * t[:, None]
-            normal = F.normalize(self.surfaces.interpolate(self.surfaces.normals, glossy_ids, bary), dim=1, eps=1e-12)
-            irradiance = irradiance + self._delta_irradiance(points, take(directions), normal, torch.ones_like(back))
-        irradiance = irradiance.double()
-        own = self.surfaces.coats.index_select(0, glossy_ids)[:, 2:3].double() * irradiance
-        coat_change = mirrored - own * (self.baked.exposure / math.pi)
-        diffuse = self.surfaces.reflectance(glossy_ids, base).double() * irradiance * (self.baked.exposure / math.pi)
+        base = self.surfaces.albedo(ids, bary, _footprint(t, take(directions), facing, pixel_angle))
+        own = self.surfaces.coats.index_select(0, ids)[:, 2:3].double()
+        coat = torch.cat([1.0 - own / self.surfaces.reflectance(ids, base).double(), torch.ones_like(base)], dim=1)
         reflectance = srgb_decode((base.double() / CONDUCTOR_GREY).clamp(0.0, 1.0))
-        is_metal = self._conductor.index_select(0, glossy_ids)
-        return torch.where(is_metal[:, None], reflectance * mirrored - diffuse, coat_change)
+        metal = torch.cat([torch.zeros_like(reflectance), reflectance], dim=1)
+        return torch.where(self._conductor.index_select(0, ids)[:, None], metal, coat)
 
     def _mirrored(
         self,
