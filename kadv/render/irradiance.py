@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+from torch.nn import functional as F
 
 __all__ = ["BakedLighting", "lattice_counts", "lattice_ij", "lattice_taps", "nearest_tap"]
 
@@ -42,8 +43,8 @@ class BakedLighting:
         on the hits' device (the tables are copied there once)."""
         tables = self._tables(triangle_ids.device)
         taps, weights = lattice_taps(tables["resolution"], tables["offsets"], triangle_ids, bary, back)
-        values = tables["irradiance"].index_select(0, taps.reshape(-1)).reshape(*taps.shape, 3)
-        return (values * weights[..., None].float()).sum(dim=1)
+        # the three gathers, weighted and summed in one call
+        return F.embedding_bag(taps, tables["irradiance"], per_sample_weights=weights.float(), mode="sum")
 
     def buried_at(self, triangle_ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor) -> torch.Tensor:
         """(N,) bool: whether the lattice point nearest each hit (as :meth:`irradiance_at` takes them)
@@ -110,29 +111,31 @@ def lattice_taps(
         back: (N,) True on the back side.
     """
     r = resolution.index_select(0, triangle_ids)
-    start = offsets[back.long(), triangle_ids]
-    rf = r.clamp_min(1).to(bary.dtype)
+    start = offsets.reshape(-1).index_select(0, back.long() * offsets.shape[1] + triangle_ids)
+    steps = r.clamp_min(1)
     uv = bary.clamp_min(0.0)
     uv = uv / uv.sum(dim=1, keepdim=True).clamp_min(1.0)
-    a, b = uv[:, 0] * rf, uv[:, 1] * rf
-    i0 = torch.minimum(torch.floor(a).long(), r.clamp_min(1) - 1)
-    j0 = torch.minimum(torch.floor(b).long(), r.clamp_min(1) - 1 - i0).clamp_min(0)
+    a, b = (uv * steps[:, None].to(uv.dtype)).unbind(dim=1)
+    i0 = torch.minimum(a.long(), steps - 1)  # a, b >= 0: truncation floors
+    j0 = torch.minimum(b.long(), steps - 1 - i0).clamp_min(0)
     fa, fb = a - i0, b - j0
     upper = fa + fb > 1.0
-    step = upper.long()
-    corner_i = torch.stack([i0 + step, i0 + 1 - step, i0 + step], dim=1)
-    corner_j = torch.stack([j0 + step, j0 + step, j0 + 1 - step], dim=1)
+    # point (i, j) is row i's start, i (r + 1) - i (i - 1) / 2, plus j; the next row starts r + 1 - i on
+    corner = start + i0 * (r + 1) - i0 * (i0 - 1) // 2 + j0
+    down = r + 1 - i0
+    taps = torch.where(
+        upper[:, None],
+        torch.stack([corner + down + 1, corner + 1, corner + down], dim=1),
+        torch.stack([corner, corner + down, corner + 1], dim=1),
+    )
     weights = torch.where(
         upper[:, None],
         torch.stack([fa + fb - 1.0, 1.0 - fa, 1.0 - fb], dim=1),
         torch.stack([1.0 - fa - fb, fa, fb], dim=1),
     ).clamp_min(0.0)
-    row_start = corner_i * (r[:, None] + 1) - corner_i * (corner_i - 1) // 2
-    taps = start[:, None] + row_start + corner_j
-    centroid = r == 0  # one point: every tap is it
-    taps = torch.where(centroid[:, None], start[:, None].expand(-1, 3), taps)
-    first = torch.arange(3, device=weights.device) == 0
-    weights = torch.where(centroid[:, None], first.to(weights.dtype), weights)
+    centroid = (r == 0)[:, None]  # one point: every tap is it
+    taps = torch.where(centroid, start[:, None], taps)
+    weights = torch.where(centroid, weights.new_tensor([1.0, 0.0, 0.0]), weights)
     return taps, weights / weights.sum(dim=1, keepdim=True)
 
 
