@@ -93,21 +93,18 @@ SHARP_ROUGHNESS = 0.03
 _REFLECTION_SMOOTHING = 0.03
 # devices whose reflections are cast for the glossy hits only, counted (elsewhere every row, masked)
 _COMPACTING = ("cpu",)
-# Roberts' R2 sequence's constants (1 / g, 1 / g^2, g^3 = g + 1): even 2-D points for any count
-_R2 = (1.0 / 1.324717957244746, 1.0 / 1.324717957244746**2)
+# added to every hash: the first point of Roberts' R2 sequence (1 / g, 1 / g^2 with g^3 = g + 1)
+_R2_FIRST = (0.5 + 1.0 / 1.324717957244746, 0.5 + 1.0 / 1.324717957244746**2)
 
 
-def _lobe_samples(directions: torch.Tensor, count: int) -> torch.Tensor:
-    """(N, count, 2) points in the unit square per ray: the R2 sequence shifted modulo 1 by a hash
-    of each ray's unit direction (N, 3), so that a view renders to the same bytes however its rays
-    are batched."""
-    k = torch.arange(1, count + 1, dtype=torch.float64, device=directions.device)
-    sequence = torch.stack([0.5 + k * _R2[0], 0.5 + k * _R2[1]], dim=-1)
+def _lobe_samples(directions: torch.Tensor) -> torch.Tensor:
+    """(N, 2) a point in the unit square per ray: a hash of each ray's unit direction (N, 3), so that
+    a view renders to the same bytes however its rays are batched, shifted modulo 1."""
     # per row, products and sums in a fixed order (a matrix product's rounding changes with the batch)
     x, y, z = directions.double().unbind(dim=1)
     phases = torch.stack([12.9898 * x + 78.233 * y + 37.719 * z, 39.3467 * x + 11.135 * y + 83.155 * z], dim=-1)
     shift = torch.frac(torch.sin(phases) * 43758.5453).abs()
-    return torch.frac(sequence[None] + shift[:, None])
+    return torch.frac(shift + shift.new_tensor(_R2_FIRST))
 
 
 def _ggx_half_vectors(normals: torch.Tensor, alpha: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
@@ -454,7 +451,7 @@ class Shader:
         normal = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
         normal = torch.where(back[:, None], -normal, normal).double()
         roughness = self._roughness.index_select(0, ids)
-        halfway = _ggx_half_vectors(normal, roughness, _lobe_samples(view, 1))[:, 0]
+        halfway = _ggx_half_vectors(normal, roughness, _lobe_samples(view)[:, None])[:, 0]
         view_h = (-(view * halfway).sum(dim=-1)).clamp_min(0.0)
         reflected = view + 2.0 * view_h[:, None] * halfway
         weight = _ggx_weight(view, normal, halfway[:, None], view_h[:, None], reflected[:, None], roughness)[:, 0]
