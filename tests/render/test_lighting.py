@@ -375,6 +375,21 @@ def test_a_corrupt_cache_file_is_moved_aside_and_baked_again(tmp_path) -> None:
     assert np.array_equal(np.load(path)["irradiance"], fresh.irradiance)  # the cache holds the new bake
 
 
+def test_a_cache_file_whose_points_do_not_reach_its_offsets_is_baked_again(tmp_path) -> None:
+    renderer = ExactRenderer(box_room(seed=0))
+    config = BakeConfig(texel=0.2, rays=16, cache=str(tmp_path))
+    fresh = load_or_bake(renderer.surfaces, config, False)
+    (path,) = tmp_path.glob("*.npz")
+    with np.load(path) as data:
+        arrays = dict(data)
+    for name in ("irradiance", "buried", "enclosed"):  # one point short of the last triangle's back side
+        arrays[name] = arrays[name][:-1]
+    np.savez(path, **arrays)
+    with pytest.warns(UserWarning, match="moved to"):
+        again = load_or_bake(renderer.surfaces, config, False)
+    assert np.array_equal(again.irradiance, fresh.irradiance)
+
+
 def test_lattice_taps_reproduce_a_linear_function_inside_each_triangle() -> None:
     resolution = torch.tensor([0, 1, 3, 8])
     counts = (resolution + 1) * (resolution + 2) // 2
