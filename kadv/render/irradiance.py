@@ -18,7 +18,8 @@ class BakedLighting:
     """Irradiance on each triangle's lattice, both sides.
 
     Attributes:
-        resolution: (F,) int64 lattice steps per edge (0: one point at the centroid).
+        resolution: (F,) int64 lattice steps per edge (0: one point, at the centroid or, in scenes
+            of very many triangles, shared by the small triangles of a texel cell that face one way).
         offsets: (2, F) int64 index of each triangle's first lattice point, front side then back.
         irradiance: (N, 3) float32 linear irradiance at the lattice points.
         exposure: the scene's one scale from radiance to display values.
