@@ -108,19 +108,19 @@ def _lobe_samples(directions: torch.Tensor) -> torch.Tensor:
 
 
 def _ggx_half_vectors(normals: torch.Tensor, alpha: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
-    """(N, K, 3) unit half-vectors drawn from the GGX distribution of roughness ``alpha`` (N,) about
-    unit ``normals`` (N, 3), at points ``u`` (N, K, 2) of the unit square (weighted by D cos)."""
-    tan2 = alpha[:, None] ** 2 * u[..., 0] / (1.0 - u[..., 0]).clamp_min(1e-12)
+    """(N, 3) unit half-vectors drawn from the GGX distribution of roughness ``alpha`` (N,) about
+    unit ``normals`` (N, 3), at points ``u`` (N, 2) of the unit square (weighted by D cos)."""
+    tan2 = alpha**2 * u[:, 0] / (1.0 - u[:, 0]).clamp_min(1e-12)
     cos_theta = torch.rsqrt(1.0 + tan2)
     sin_theta = (1.0 - cos_theta**2).clamp_min(0.0).sqrt()
-    phi = 2.0 * math.pi * u[..., 1]
+    phi = 2.0 * math.pi * u[:, 1]
     helper = torch.where(normals[:, :1].abs() < 0.9, normals.new_tensor([1.0, 0, 0]), normals.new_tensor([0, 1.0, 0]))
     tangent = F.normalize(torch.cross(normals, helper, dim=1), dim=1)
     bitangent = torch.cross(normals, tangent, dim=1)
     return (
-        (sin_theta * torch.cos(phi))[..., None] * tangent[:, None]
-        + (sin_theta * torch.sin(phi))[..., None] * bitangent[:, None]
-        + cos_theta[..., None] * normals[:, None]
+        (sin_theta * torch.cos(phi))[:, None] * tangent
+        + (sin_theta * torch.sin(phi))[:, None] * bitangent
+        + cos_theta[:, None] * normals
     )
 
 
@@ -132,17 +132,17 @@ def _ggx_weight(
     reflected: torch.Tensor,
     alpha: torch.Tensor,
 ) -> torch.Tensor:
-    """(N, K) the GGX microfacet BRDF times the cosine over the sampling density of ``halfway``
-    (N, K, 3), without the Fresnel term: Smith's masking G(v) G(l) (v.h) / ((n.v) (n.h)); 0 below
-    the surface. ``view`` (N, 3) points from the eye, ``view_h`` (N, K) is -view.h, ``reflected``
-    (N, K, 3) points away from the surface."""
-    cos_view = (-(view * normals).sum(dim=1)).clamp_min(1e-6)[:, None]
-    cos_light = (reflected * normals[:, None]).sum(dim=-1)
-    cos_half = (halfway * normals[:, None]).sum(dim=-1).clamp_min(1e-6)
+    """(N,) the GGX microfacet BRDF times the cosine over the sampling density of ``halfway``
+    (N, 3), without the Fresnel term: Smith's masking G(v) G(l) (v.h) / ((n.v) (n.h)); 0 below the
+    surface. ``view`` (N, 3) points from the eye, ``view_h`` (N,) is -view.h, ``reflected`` (N, 3)
+    points away from the surface."""
+    cos_view = (-(view * normals).sum(dim=1)).clamp_min(1e-6)
+    cos_light = (reflected * normals).sum(dim=1)
+    cos_half = (halfway * normals).sum(dim=1).clamp_min(1e-6)
 
     def masking(cosine: torch.Tensor) -> torch.Tensor:
         tan2 = (1.0 - cosine**2).clamp_min(0.0) / cosine.clamp_min(1e-6) ** 2
-        return 2.0 / (1.0 + (1.0 + alpha[:, None] ** 2 * tan2).sqrt())
+        return 2.0 / (1.0 + (1.0 + alpha**2 * tan2).sqrt())
 
     weight = masking(cos_view) * masking(cos_light.clamp_min(0.0)) * view_h / (cos_view * cos_half)
     return torch.where(cos_light > 0, weight.clamp(0.0, 1.0), 0.0)
@@ -451,10 +451,10 @@ class Shader:
         normal = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
         normal = torch.where(back[:, None], -normal, normal).double()
         roughness = self._roughness.index_select(0, ids)
-        halfway = _ggx_half_vectors(normal, roughness, _lobe_samples(view)[:, None])[:, 0]
-        view_h = (-(view * halfway).sum(dim=-1)).clamp_min(0.0)
+        halfway = _ggx_half_vectors(normal, roughness, _lobe_samples(view))
+        view_h = (-(view * halfway).sum(dim=1)).clamp_min(0.0)
         reflected = view + 2.0 * view_h[:, None] * halfway
-        weight = _ggx_weight(view, normal, halfway[:, None], view_h[:, None], reflected[:, None], roughness)[:, 0]
+        weight = _ggx_weight(view, normal, halfway, view_h, reflected, roughness)
         is_metal = self._conductor.index_select(0, ids)
         # a metal's Fresnel term is taken as 1: its colour comes from its reflectance
         ior = torch.where(is_metal, 1.5, self._coat_ior.index_select(0, ids))
