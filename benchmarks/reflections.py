@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import time
+from functools import partial
 
-from common import REAL_SCENES, load_bench_scene
+from common import REAL_SCENES, fastest_seconds, load_bench_scene
 
 from kadv.render import ExactRenderer, Shading
 
@@ -33,11 +33,13 @@ def main() -> None:
             on: ExactRenderer(scene, Shading(lighting="baked", reflections=on), progress=False) for on in (False, True)
         }
         fastest = dict.fromkeys(renderers, float("inf"))
-        for _ in range(args.repeats + 1):  # the first round warms up
+        for repeat in range(args.repeats + 1):  # the first round warms up
             for on, renderer in renderers.items():
-                start = time.perf_counter()
-                renderer.render(camera.world_T_cam, K, HEIGHT, WIDTH, supersample=SUPERSAMPLE)
-                fastest[on] = min(fastest[on], time.perf_counter() - start)
+                render = partial(renderer.render, camera.world_T_cam, K, HEIGHT, WIDTH, supersample=SUPERSAMPLE)
+                if repeat:
+                    fastest[on] = min(fastest[on], fastest_seconds(render, repeats=1, warmup=0))
+                else:
+                    render()
         ratios.append(fastest[True] / fastest[False])
         print(f"{name:<22} {fastest[False] * 1e3:>9.0f} {fastest[True] * 1e3:>15.0f} {ratios[-1]:>6.2f}")
     print(f"reflections ratio_mean={statistics.mean(ratios):.2f} ratio_max={max(ratios):.2f}")
