@@ -60,6 +60,16 @@ class RenderOutput:
         return RenderOutput(**{f.name: getattr(self, f.name)[inner] for f in fields(self)})
 
 
+def _sub_pixel_rows(rows: torch.Tensor, height: int, width: int, s: int) -> torch.Tensor:
+    """(M * s * s,) the rows, in (B, s * height, s * width) images, of the s x s sub-pixel rays of
+    the pixels ``rows`` (M,) of (B, height, width) images, each pixel's s * s together."""
+    image, pixel = rows // (height * width), rows % (height * width)
+    offsets = torch.arange(s, device=rows.device)
+    sub_y = (pixel // width * s)[:, None] + offsets.repeat_interleave(s)
+    sub_x = (pixel % width * s)[:, None] + offsets.repeat(s)
+    return ((image[:, None] * (s * height) + sub_y) * (s * width) + sub_x).reshape(-1)
+
+
 def pixel_angle(K: torch.Tensor) -> float:
     """Angle in radians one pixel subtends at the image centre (the smallest of the batch)."""
     K = torch.as_tensor(K, dtype=torch.float64).reshape(-1, 3, 3)
@@ -187,18 +197,21 @@ class ExactRenderer:
             values = values.reshape(batch, height, 1, width, 1, channels)
             return values.expand(-1, -1, s, -1, s, -1).reshape(-1, channels)
 
-        keep, add = fine(mirrored.keep), fine(mirrored.add)
-        centre_ids = fine(hits.triangle_ids[:, None])[:, 0]
         colours = rgb.permute(0, 2, 3, 1).reshape(-1, 3)
-        glossy = fine(mirrored.glossy[:, None])[:, 0]
-        rows = compact_rows(glossy)
+        rows = compact_rows(mirrored.glossy)
         if rows is None:
-            glossy = glossy & self.shader.same_surface(triangle_ids.reshape(-1), centre_ids)
-            colours = torch.where(glossy[:, None], tone_map(untone(colours) * keep + add), colours)
+            glossy = fine(mirrored.glossy[:, None])[:, 0]
+            glossy = glossy & self.shader.same_surface(triangle_ids.reshape(-1), fine(hits.triangle_ids[:, None])[:, 0])
+            shown = untone(colours) * fine(mirrored.keep) + fine(mirrored.add)
+            colours = torch.where(glossy[:, None], tone_map(shown), colours)
         else:
-            rows = rows[self.shader.same_surface(triangle_ids.reshape(-1)[rows], centre_ids[rows])]
-            shown = untone(colours.index_select(0, rows)) * keep.index_select(0, rows) + add.index_select(0, rows)
-            colours = colours.index_copy(0, rows, tone_map(shown))
+            sub_rows, centres = _sub_pixel_rows(rows, height, width, s), rows.repeat_interleave(s * s)
+            same = self.shader.same_surface(
+                triangle_ids.reshape(-1).index_select(0, sub_rows), hits.triangle_ids.index_select(0, centres)
+            )
+            sub_rows, centres = sub_rows[same], centres[same]
+            shown = untone(colours.index_select(0, sub_rows)) * mirrored.keep.index_select(0, centres)
+            colours = colours.index_copy(0, sub_rows, tone_map(shown + mirrored.add.index_select(0, centres)))
         return colours.reshape(batch, fine_height, fine_width, 3).permute(0, 3, 1, 2)
 
     def render(

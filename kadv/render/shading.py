@@ -198,18 +198,23 @@ def _smoothed(
     step = max(1, int(sigma // 2))
     sigma = sigma / step
     size = 2 * math.ceil(2.0 * sigma) + 1
+    axes = [0, 1, 2]
+    if weights.device.type in _COMPACTING:  # a CPU blurs the axes some pixel has (a GPU would wait to know)
+        axes = [a for a in axes if bool((weights & (axis == a)).any())] or [0]
     stacked = []
-    for a in range(3):
+    for a in axes:
         w = (weights & (axis == a)).float()[:, None]
         stacked += [light.float() * w, w]
     batch, height, width = images
-    stacked = torch.cat(stacked, dim=1).reshape(batch, height, width, 12).permute(0, 3, 1, 2)
+    stacked = torch.cat(stacked, dim=1).reshape(batch, height, width, -1).permute(0, 3, 1, 2)
     if step > 1:
         stacked = F.avg_pool2d(stacked, step, ceil_mode=True)
     blurred = gaussian_blur2d(stacked, (size, size), (sigma, sigma), border_type="constant")
     if step > 1:
         blurred = F.interpolate(blurred, size=(height, width), mode="bilinear", align_corners=False)
-    blurred = blurred.permute(0, 2, 3, 1).reshape(-1, 3, 4)
+    blurred = blurred.permute(0, 2, 3, 1).reshape(-1, len(axes), 4)
+    if len(axes) < 3:  # the other axes' blocks: no pixel, no weight
+        blurred = blurred.new_zeros(len(axis), 3, 4).index_copy(1, torch.tensor(axes, device=axis.device), blurred)
     mine = blurred.gather(1, axis[:, None, None].expand(-1, 1, 4))[:, 0].double()
     return mine[:, :3] / mine[:, 3:].clamp_min(1e-6), mine[:, 3] > 1e-6
 
