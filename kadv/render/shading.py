@@ -88,13 +88,21 @@ def shade(
 # rougher lobes' single rays are averaged over their neighbours (see Shader.reflections)
 SHARP_ROUGHNESS = 0.03
 # the width (radians, a Gaussian's sigma) over which rougher lobes' single rays per pixel are
-# averaged: about 4 pixels at 160 pixels across a 70-degree view, where one ray per pixel sparkles
-# and a wider average spreads a window's mirror image past its lobe (docs/reference_renders.md)
+# averaged: _LOBE_SHARE x the lobe's GGX alpha, and at least _REFLECTION_SMOOTHING (about 4 pixels at
+# 160 pixels across a 70-degree view). The lobe already blurs what it mirrors over about twice its
+# alpha, so half of that adds little blur, while a fixed width showed a rough floor's mirrored
+# windows in blotches, too few rays of the wide lobe meeting them (docs/reference_renders.md)
 _REFLECTION_SMOOTHING = 0.03
+_LOBE_SHARE = 0.5
 # devices whose reflections are cast for the glossy hits only, counted (elsewhere every row, masked)
 _COMPACTING = ("cpu",)
 # added to every hash: the first point of Roberts' R2 sequence (1 / g, 1 / g^2 with g^3 = g + 1)
 _R2_FIRST = (0.5 + 1.0 / 1.324717957244746, 0.5 + 1.0 / 1.324717957244746**2)
+
+
+def _smoothing_width(alpha: float) -> float | None:
+    """The width (radians) over which a lobe of GGX ``alpha`` is averaged; None: it mirrors sharply."""
+    return None if alpha <= SHARP_ROUGHNESS else max(_REFLECTION_SMOOTHING, _LOBE_SHARE * alpha)
 
 
 def _lobe_samples(directions: torch.Tensor) -> torch.Tensor:
@@ -200,7 +208,9 @@ def _smoothed(
     size = 2 * math.ceil(2.0 * sigma) + 1
     axes = [0, 1, 2]
     if weights.device.type in _COMPACTING:  # a CPU blurs the axes some pixel has (a GPU would wait to know)
-        axes = [a for a in axes if bool((weights & (axis == a)).any())] or [0]
+        axes = [a for a in axes if bool((weights & (axis == a)).any())]
+        if not axes:
+            return torch.zeros_like(light, dtype=torch.float64), torch.zeros_like(weights)
     stacked = []
     for a in axes:
         w = (weights & (axis == a)).float()[:, None]
@@ -213,9 +223,11 @@ def _smoothed(
     if step > 1:
         blurred = F.interpolate(blurred, size=(height, width), mode="bilinear", align_corners=False)
     blurred = blurred.permute(0, 2, 3, 1).reshape(-1, len(axes), 4)
-    if len(axes) < 3:  # the other axes' blocks: no pixel, no weight
-        blurred = blurred.new_zeros(len(axis), 3, 4).index_copy(1, torch.tensor(axes, device=axis.device), blurred)
-    mine = blurred.gather(1, axis[:, None, None].expand(-1, 1, 4))[:, 0].double()
+    # each pixel reads its axis' block among those blurred; an axis not blurred has no weight there
+    place = torch.tensor([axes.index(a) if a in axes else -1 for a in range(3)], device=axis.device)
+    block = place.index_select(0, axis)
+    mine = blurred.gather(1, block.clamp_min(0)[:, None, None].expand(-1, 1, 4))[:, 0]
+    mine = torch.where((block >= 0)[:, None], mine, 0.0).double()
     return mine[:, :3] / mine[:, 3:].clamp_min(1e-6), mine[:, 3] > 1e-6
 
 
@@ -265,6 +277,10 @@ class Shader:
             self._coat_ior = per_triangle([material.coat_ior or 0.0 for material in scene.materials])
             self._conductor = per_triangle([material.conductor for material in scene.materials]) > 0
             self._roughness = per_triangle([material.roughness for material in scene.materials])
+            # each rough material's smoothing width, and its index in the scene's widths (-1: sharp)
+            widths = [_smoothing_width(material.roughness) for material in scene.materials]
+            self._widths = sorted({width for width in widths if width is not None})
+            self._width_index = per_triangle([-1 if w is None else self._widths.index(w) for w in widths]).long()
             self.reflecting = shading.reflections and bool(((self._coat_ior > 0) | self._conductor).any())
 
     def shade(
@@ -387,20 +403,26 @@ class Shader:
 
         The rows are the (B, H, W) ``images``' pixels in order. A lobe rougher than
         :data:`SHARP_ROUGHNESS` would sparkle with one ray per pixel: its mirrored light is averaged
-        over a Gaussian of ``_REFLECTION_SMOOTHING`` radians among the pixels whose normals point
-        along the same axis (normalised convolution): a stair's treads apart from its risers.
+        over a Gaussian of half its GGX alpha in radians (at least ``_REFLECTION_SMOOTHING``) among
+        the pixels of its roughness whose normals point along the same axis (normalised
+        convolution): a stair's treads apart from its risers.
         """
         ids = hits.triangle_ids.clamp_min(0)
         glossy = hits.hit & ((self._coat_ior.index_select(0, ids) > 0) | self._conductor.index_select(0, ids))
         if self._emitter_caster is not None:  # a lamp in front of the surface shows its own glow
             glossy = glossy & ~self._emitter_in_front(hits, origins, directions, glossy)
-        rough = glossy & (self._roughness.index_select(0, ids) > SHARP_ROUGHNESS)
-        sigma = _REFLECTION_SMOOTHING / pixel_angle
-        # the average spans several pixels: a ray at every other pixel along each axis feeds it
-        casting = glossy & (~rough | _every_other(images, hits.hit.device)) if sigma >= 2.0 else glossy
+        width_index = self._width_index.index_select(0, ids)
+        rough = glossy & (width_index >= 0)
+        # the averages span several pixels: a ray at every other pixel along each axis feeds them
+        wide = _REFLECTION_SMOOTHING / pixel_angle >= 2.0
+        casting = glossy & (~rough | _every_other(images, hits.hit.device)) if wide else glossy
         mirrored = self._mirrored(hits, origins, directions, casting, pixel_angle)
-        smoothed, covered = _smoothed(mirrored, rough & casting, self._normal_axes(hits), images, sigma)
-        mirrored = torch.where(rough[:, None], smoothed, mirrored)
+        axes, covered = self._normal_axes(hits), torch.zeros_like(rough)
+        for index, width in enumerate(self._widths):
+            group = rough & (width_index == index)
+            smoothed, reached = _smoothed(mirrored, group & casting, axes, images, width / pixel_angle)
+            mirrored = torch.where(group[:, None], smoothed, mirrored)
+            covered = covered | (group & reached)
         glossy = glossy & (~rough | covered)
         terms = _on_rows(glossy, lambda take, _: self._glossy_terms(take, hits, directions, pixel_angle), 6)
         keep, scale = terms.split(3, dim=1)
