@@ -59,6 +59,18 @@ def load_image(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
         raise ValueError(f"texture file {path} could not be decoded: {error}") from error
 
 
+def _read_exr(path: Path) -> np.ndarray:
+    """(H, W, C) the first part of an OpenEXR file: its RGB(A) channels, else its first channel."""
+    import OpenEXR
+
+    with OpenEXR.File(str(path)) as file:
+        channels = file.channels()
+        for name in ("RGB", "RGBA", "Y"):
+            if name in channels:
+                return np.asarray(channels[name].pixels)
+        return np.asarray(next(iter(channels.values())).pixels)
+
+
 def load_hdr_image(path: Path) -> np.ndarray:
     """(H, W, 3) float32 linear radiance of an environment map: floating-point files (.exr, .hdr,
     .pfm) as stored, 8-bit images decoded from sRGB.
@@ -69,8 +81,9 @@ def load_hdr_image(path: Path) -> np.ndarray:
     import imageio.v3 as iio
 
     try:
-        image = np.asarray(iio.imread(path))
-    except Exception as error:  # each imageio plugin raises its own kinds
+        # imageio reads OpenEXR only through plugins that download a library or need OpenCV
+        image = _read_exr(path) if path.suffix.lower() == ".exr" else np.asarray(iio.imread(path))
+    except Exception as error:  # each reader raises its own kinds
         raise ValueError(f"environment map {path} could not be read ({type(error).__name__}: {error})") from error
     if image.dtype.kind == "f":
         image = image.astype(np.float32)

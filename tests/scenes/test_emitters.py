@@ -6,6 +6,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import OpenEXR
 import pytest
 import torch
 from PIL import Image
@@ -82,15 +83,22 @@ def test_generated_rooms_light_by_their_lamps_and_the_sky() -> None:
     assert (room.emitters.sky_radiance > 0).all()
 
 
-def test_an_environment_map_is_looked_up_in_latitude_and_longitude(tmp_path: Path) -> None:
-    image = np.zeros((8, 16, 3), np.uint8)
-    image[:4] = (255, 0, 0)  # upper half (v < 0.5): the +y hemisphere, red
-    image[4:] = (0, 0, 255)
-    Image.fromarray(image).save(tmp_path / "sky.png")
+@pytest.mark.parametrize("suffix", ["png", "exr"])
+def test_an_environment_map_is_looked_up_in_latitude_and_longitude(tmp_path: Path, suffix: str) -> None:
+    """An 8-bit map decoded from sRGB, an OpenEXR map (half floats, as Mitsuba's gallery ships its
+    skies) as stored: the upper half of the image lights the +y hemisphere."""
+    image = np.zeros((8, 16, 3), np.float32)
+    image[:4] = (1, 0, 0)  # upper half (v < 0.5): the +y hemisphere, red
+    image[4:] = (0, 0, 1)
+    if suffix == "png":
+        Image.fromarray((image * 255).astype(np.uint8)).save(tmp_path / "sky.png")
+    else:
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+        OpenEXR.File(header, {"RGB": image.astype(np.float16)}).write(str(tmp_path / "sky.exr"))
     (tmp_path / "scene.xml").write_text(
         '<scene version="0.6.0"><shape type="rectangle"/>'
-        '<emitter type="envmap"><string name="filename" value="sky.png"/><float name="scale" value="2"/></emitter>'
-        "</scene>"
+        f'<emitter type="envmap"><string name="filename" value="sky.{suffix}"/><float name="scale" value="2"/>'
+        "</emitter></scene>"
     )
     emitters = load_scene(tmp_path / "scene.xml").emitters
     seen = Sky(emitters)(torch.tensor([[0.0, 1.0, 0.0], [0.3, -0.9, 0.3]], dtype=torch.float64)).numpy()
