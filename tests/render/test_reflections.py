@@ -17,12 +17,15 @@ SKY = 0.2
 HEIGHT, WIDTH = 24, 32
 
 
-def _floor(alpha: float, tmp_path, reflections: bool, max_rays: int = 2**22) -> ExactRenderer:
-    """A 200 m coated floor under a uniform sky: every reflected ray meets the sky."""
+def _floor(
+    alpha: float, tmp_path, reflections: bool, max_rays: int = 2**22, sky: Emitters | None = None
+) -> ExactRenderer:
+    """A 200 m coated floor under a uniform sky (or ``sky``): every reflected ray meets the sky."""
     corners = np.array([[-100.0, 0.0, -100.0], [100.0, 0.0, -100.0], [100.0, 0.0, 100.0], [-100.0, 0.0, 100.0]])
     floor = quad_part(facing(corners, np.array([0.0, 1.0, 0.0])), 0, "floor")
     varnish = Material("varnish", base_color=np.full(3, 0.5), coat_ior=1.5, roughness=alpha)
-    scene = assemble_scene([floor], [varnish], name=f"floor_{alpha}", emitters=Emitters(sky_radiance=np.full(3, SKY)))
+    sky = sky or Emitters(sky_radiance=np.full(3, SKY))
+    scene = assemble_scene([floor], [varnish], name=f"floor_{alpha}", emitters=sky)
     bake = BakeConfig(texel=50.0, rays=16, light_samples=1, cache=str(tmp_path))
     shading = Shading(lighting="baked", bake=bake, reflections=reflections)
     return ExactRenderer(scene, shading, progress=False, max_rays=max_rays)
@@ -130,11 +133,6 @@ def test_a_rough_coats_mirror_image_of_a_bright_patch_of_sky_is_averaged_over_a_
     (measured 0.25 and 0.54; exposed values below white, so that no ray's light is clipped)."""
     sky = np.full((32, 64, 3), 0.5)
     sky[8:14, :3] = sky[8:14, -3:] = 4.0  # 15-45 degrees up, within 17 degrees of -z
-    corners = np.array([[-100.0, 0.0, -100.0], [100.0, 0.0, -100.0], [100.0, 0.0, 100.0], [-100.0, 0.0, 100.0]])
-    floor = quad_part(facing(corners, np.array([0.0, 1.0, 0.0])), 0, "floor")
-    varnish = Material("varnish", base_color=np.full(3, 0.5), coat_ior=1.5, roughness=0.3)
-    scene = assemble_scene([floor], [varnish], name="floor_under_a_patch", emitters=Emitters(envmap=sky))
-    bake = BakeConfig(texel=50.0, rays=16, light_samples=1, cache=str(tmp_path))
     height, width = 96, 128
     K_fine = intrinsics_from_fov(70.0, height, width)
 
@@ -142,9 +140,7 @@ def test_a_rough_coats_mirror_image_of_a_bright_patch_of_sky_is_averaged_over_a_
         """(3, H / 4, W / 4) the light the reflections add to the view turned by ``turn`` m at 4 m."""
         pose = look_at(EYE, torch.tensor([turn, 0.0, -4.0])).double()
         on, off = (
-            ExactRenderer(scene, Shading(lighting="baked", bake=bake, reflections=r), progress=False)
-            .render(pose, K_fine, height, width)
-            .rgb[0]
+            _floor(0.3, tmp_path, r, sky=Emitters(envmap=sky)).render(pose, K_fine, height, width).rgb[0]
             for r in (True, False)
         )
         assert on.max() < 0.99  # no ray's light clipped at white
