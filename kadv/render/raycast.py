@@ -177,6 +177,7 @@ class ExactRenderer:
         rgb: torch.Tensor,
         triangle_ids: torch.Tensor,
         hits: RayHits,
+        normals: torch.Tensor,
         origins: torch.Tensor,
         directions: torch.Tensor,
         angle: float,
@@ -185,11 +186,12 @@ class ExactRenderer:
     ) -> torch.Tensor:
         """``rgb`` (B, 3, sH, sW) of s x s rays per pixel, on triangles ``triangle_ids`` (B, 1, sH,
         sW), with what coats and metals mirror (:meth:`Shader.reflections`) as the pixel-centre rays
-        (B * H * W, 3) and their ``hits`` see it, in the exposed radiance of each of the pixel's rays
+        (B * H * W, 3) and their ``hits`` (with shading ``normals`` (B * H * W, 3) turned towards the
+        eye) see it, in the exposed radiance of each of the pixel's rays
         on the centre ray's surface (:meth:`Shader.same_surface`)."""
         batch, _, fine_height, fine_width = rgb.shape
         s = fine_height // height
-        mirrored = self.shader.reflections(hits, origins, directions, angle, (batch, height, width))
+        mirrored = self.shader.reflections(hits, normals, origins, directions, angle, (batch, height, width))
 
         def fine(values: torch.Tensor) -> torch.Tensor:
             """(B * sH * sW, C) of per-pixel (B * H * W, C): each pixel's value on its s x s rays."""
@@ -275,7 +277,7 @@ class ExactRenderer:
             sub_rgb, sub_ids = image(maps["rgb"], 3), image(hits.triangle_ids, 1)
         if self.shader.reflecting:
             flat = (origins.reshape(-1, 3), directions.reshape(-1, 3))
-            sub_rgb = self._with_reflections(sub_rgb, sub_ids, hits, *flat, angle, height, width)
+            sub_rgb = self._with_reflections(sub_rgb, sub_ids, hits, maps["normals"], *flat, angle, height, width)
         rgb = F.avg_pool2d(sub_rgb, s).contiguous() if s > 1 else sub_rgb.contiguous()
 
         # a ray that meets a surface within a micrometre of the eye starts on it (the eye lies on the

@@ -197,37 +197,61 @@ def _every_other(images: tuple[int, int, int], device: torch.device) -> torch.Te
 
 
 def _smoothed(
-    light: torch.Tensor, weights: torch.Tensor, axis: torch.Tensor, images: tuple[int, int, int], sigma: float
+    light: torch.Tensor,
+    weights: torch.Tensor,
+    group: torch.Tensor,
+    axis: torch.Tensor,
+    images: tuple[int, int, int],
+    sigma: float,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``light`` (N, 3) of the (B, H, W) ``images``' pixels averaged over a Gaussian of ``sigma``
     pixels among the pixels where ``weights`` (N,) bool holds and whose normals point along the
-    same ``axis`` (N,), by normalised convolution; and (N,) whether any such pixel is within reach."""
-    # a wide average is taken on a grid `step` times coarser, and read back bilinearly
+    same ``axis`` (N,), by normalised convolution, at the pixels where ``group`` (N,) holds (0
+    elsewhere); and (N,) whether any such pixel is within reach."""
+    # the light is summed into cells `step` pixels wide, blurred there and read back bilinearly:
+    # work on the whole image only on cells, on pixels only where they feed or read the average
     step = max(1, int(sigma // 2))
     sigma = sigma / step
     size = 2 * math.ceil(2.0 * sigma) + 1
-    axes = [0, 1, 2]
-    if weights.device.type in _COMPACTING:  # a CPU blurs the axes some pixel has (a GPU would wait to know)
-        axes = [a for a in axes if bool((weights & (axis == a)).any())]
-        if not axes:
-            return torch.zeros_like(light, dtype=torch.float64), torch.zeros_like(weights)
-    stacked = []
-    for a in axes:
-        w = (weights & (axis == a)).float()[:, None]
-        stacked += [light.float() * w, w]
     batch, height, width = images
-    stacked = torch.cat(stacked, dim=1).reshape(batch, height, width, -1).permute(0, 3, 1, 2)
-    if step > 1:
-        stacked = F.avg_pool2d(stacked, step, ceil_mode=True)
-    blurred = gaussian_blur2d(stacked, (size, size), (sigma, sigma), border_type="constant")
-    if step > 1:
-        blurred = F.interpolate(blurred, size=(height, width), mode="bilinear", align_corners=False)
-    blurred = blurred.permute(0, 2, 3, 1).reshape(-1, len(axes), 4)
-    # each pixel reads its axis' block among those blurred; an axis not blurred has no weight there
-    place = torch.tensor([axes.index(a) if a in axes else -1 for a in range(3)], device=axis.device)
-    block = place.index_select(0, axis)
-    mine = blurred.gather(1, block.clamp_min(0)[:, None, None].expand(-1, 1, 4))[:, 0]
-    mine = torch.where((block >= 0)[:, None], mine, 0.0).double()
+    cell_rows, cell_columns = -(-height // step), -(-width // step)
+
+    def pixel(rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        return rows // (height * width), rows // width % height, rows % width
+
+    def rows_of(mask: torch.Tensor) -> torch.Tensor:
+        rows = compact_rows(mask)
+        return torch.arange(len(mask), device=mask.device) if rows is None else rows
+
+    feeding = rows_of(weights)
+    b, y, x = pixel(feeding)
+    cells = ((b * cell_rows + y // step) * cell_columns + x // step) * 3 + axis.index_select(0, feeding)
+    fed = torch.cat([light.index_select(0, feeding), light.new_ones(len(feeding), 1)], dim=1).float()
+    fed = fed * weights.index_select(0, feeding)[:, None]
+    sums = light.new_zeros(batch * cell_rows * cell_columns * 3, 4, dtype=torch.float32).index_add_(0, cells, fed)
+    grid = sums.reshape(batch, cell_rows, cell_columns, 12).permute(0, 3, 1, 2)
+    blurred = gaussian_blur2d(grid, (size, size), (sigma, sigma), border_type="constant")
+    table = blurred.permute(0, 2, 3, 1).reshape(-1, 4)
+
+    def read(take: Callable[[torch.Tensor], torch.Tensor], _: torch.Tensor | None) -> torch.Tensor:
+        """(M, 4) the blurred sums at the rows ``take`` gives, between the four nearest cell centres."""
+        b, y, x = pixel(take(torch.arange(len(group), device=group.device)))
+        a = take(axis)
+
+        def between(at: torch.Tensor, cells: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+            centre = ((at + 0.5) / step - 0.5).clamp(0.0, cells - 1)
+            low = centre.floor()
+            return low.long(), (low.long() + 1).clamp_max(cells - 1), (centre - low).float()[:, None]
+
+        (y0, y1, fy), (x0, x1, fx) = between(y, cell_rows), between(x, cell_columns)
+
+        def tap(row: torch.Tensor, column: torch.Tensor) -> torch.Tensor:
+            return table.index_select(0, ((b * cell_rows + row) * cell_columns + column) * 3 + a)
+
+        upper, lower = torch.lerp(tap(y0, x0), tap(y0, x1), fx), torch.lerp(tap(y1, x0), tap(y1, x1), fx)
+        return torch.lerp(upper, lower, fy).double()
+
+    mine = _on_rows(group, read, 4)
     return mine[:, :3] / mine[:, 3:].clamp_min(1e-6), mine[:, 3] > 1e-6
 
 
@@ -389,13 +413,15 @@ class Shader:
     def reflections(
         self,
         hits: RayHits,
+        normals: torch.Tensor,
         origins: torch.Tensor,
         directions: torch.Tensor,
         pixel_angle: float,
         images: tuple[int, int, int],
     ) -> Reflections:
         """What coats and metals mirror, for :attr:`Shading.reflections`, at the pixels whose centre
-        rays (N, 3) met one (:class:`Reflections`): what one ray per pixel, drawn from the GGX lobe,
+        rays (N, 3) met one (:class:`Reflections`), with the hits' shading ``normals`` (N, 3) turned
+        towards the eye (:meth:`shade`'s "normals"): what one ray per pixel, drawn from the GGX lobe,
         meets in baked light (the sky, an emitter's glow, a surface's diffuse light without its
         point lights and suns), times the coat's Fresnel reflectance in place of the coat's
         reflection that the shading counted diffuse, or times a metal's reflectance (its display
@@ -416,11 +442,12 @@ class Shader:
         # the averages span several pixels: a ray at every other pixel along each axis feeds them
         wide = _REFLECTION_SMOOTHING / pixel_angle >= 2.0
         casting = glossy & (~rough | _every_other(images, hits.hit.device)) if wide else glossy
-        mirrored = self._mirrored(hits, origins, directions, casting, pixel_angle)
-        axes, covered = self._normal_axes(hits), torch.zeros_like(rough)
+        mirrored = self._mirrored(hits, normals, origins, directions, casting, pixel_angle)
+        # the axis along which each normal points most
+        axes, covered = normals.abs().argmax(dim=1), torch.zeros_like(rough)
         for index, width in enumerate(self._widths):
             group = rough & (width_index == index)
-            smoothed, reached = _smoothed(mirrored, group & casting, axes, images, width / pixel_angle)
+            smoothed, reached = _smoothed(mirrored, group & casting, group, axes, images, width / pixel_angle)
             mirrored = torch.where(group[:, None], smoothed, mirrored)
             covered = covered | (group & reached)
         glossy = glossy & (~rough | covered)
@@ -448,6 +475,7 @@ class Shader:
     def _mirrored(
         self,
         hits: RayHits,
+        normals: torch.Tensor,
         origins: torch.Tensor,
         directions: torch.Tensor,
         casting: torch.Tensor,
@@ -456,27 +484,24 @@ class Shader:
         """(N, 3) float64 exposed radiance that one ray drawn from the GGX lobe of each hit where
         ``casting`` (N,) holds brings towards the eye, weighted by the lobe and the coat's Fresnel
         reflectance (a metal's is 1); 0 elsewhere."""
-        return _on_rows(casting, lambda take, live: self._mirror(take, live, hits, origins, directions, pixel_angle))
+        return _on_rows(
+            casting, lambda take, live: self._mirror(take, live, hits, normals, origins, directions, pixel_angle)
+        )
 
     def _mirror(
         self,
         take: Callable[[torch.Tensor], torch.Tensor],
         live: torch.Tensor | None,
         hits: RayHits,
+        normals: torch.Tensor,
         origins: torch.Tensor,
         directions: torch.Tensor,
         pixel_angle: float,
     ) -> torch.Tensor:
         """(M, 3) :meth:`_mirrored`'s light of the rows ``take`` gives; ``live``: the rays to cast
         among them (None: all)."""
-        ids, bary, view = (
-            take(hits.triangle_ids.clamp_min(0)),
-            take(hits.barycentrics),
-            F.normalize(take(directions), dim=1),
-        )
-        back = take(hits.hit) & (self.surfaces.facing(ids, view) > 0)
-        normal = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
-        normal = torch.where(back[:, None], -normal, normal).double()
+        ids, view = take(hits.triangle_ids.clamp_min(0)), F.normalize(take(directions), dim=1)
+        normal = take(normals).double()
         roughness = self._roughness.index_select(0, ids)
         halfway = _ggx_half_vectors(normal, roughness, _lobe_samples(view))
         view_h = (-(view * halfway).sum(dim=1)).clamp_min(0.0)
@@ -512,8 +537,3 @@ class Shader:
         cosine = dot(self.surfaces.face_normals.index_select(0, a), self.surfaces.face_normals.index_select(0, b))
         same = material.index_select(0, a) == material.index_select(0, b)
         return (triangle_ids >= 0) & (others >= 0) & same & (cosine.abs() > math.sqrt(0.5))
-
-    def _normal_axes(self, hits: RayHits) -> torch.Tensor:
-        """(N,) int64: the axis (0, 1, 2) along which a hit's shading normal points most."""
-        ids = hits.triangle_ids.clamp_min(0)
-        return self.surfaces.interpolate(self.surfaces.normals, ids, hits.barycentrics).abs().argmax(dim=1)
