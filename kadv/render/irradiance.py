@@ -113,31 +113,33 @@ def lattice_taps(
     """
     r = resolution.index_select(0, triangle_ids)
     start = offsets.reshape(-1).index_select(0, back.long() * offsets.shape[1] + triangle_ids)
-    steps = r.clamp_min(1)
-    uv = bary.clamp_min(0.0)
-    uv = uv / uv.sum(dim=1, keepdim=True).clamp_min(1.0)
-    a, b = (uv * steps[:, None].to(uv.dtype)).unbind(dim=1)
-    i0 = torch.minimum(a.long(), steps - 1)  # a, b >= 0: truncation floors
-    j0 = torch.minimum(b.long(), steps - 1 - i0).clamp_min(0)
-    fa, fb = a - i0, b - j0
+    # column by column: on (N, 3) a where or a sum costs several times its three columns' work
+    u, v = bary.clamp_min(0.0).unbind(dim=1)
+    total = (u + v).clamp_min(1.0)
+    scale = r.to(bary.dtype)  # r = 0 (one point): a = b = 0, and no step leaves the point
+    a, b = u / total * scale, v / total * scale
+    i0 = torch.minimum(a.long(), (r - 1).clamp_min(0))  # a, b >= 0: truncation floors
+    j0 = torch.minimum(b.long(), r - 1 - i0).clamp_min(0)
+    # in [0, 1] (b may pass r - a by a rounding): every weight below is >= 0
+    fa, fb = a - i0, (b - j0).clamp_max(1.0)
     upper = fa + fb > 1.0
-    # point (i, j) is row i's start, i (r + 1) - i (i - 1) / 2, plus j; the next row starts r + 1 - i on
+    # point (i, j) is row i's start, i (r + 1) - i (i - 1) / 2, plus j; the next row starts r + 1 - i on.
+    # Below the diagonal: (i, j), (i + 1, j), (i, j + 1); above it: (i + 1, j + 1), (i, j + 1), (i + 1, j)
     corner = start + i0 * (r + 1) - i0 * (i0 - 1) // 2 + j0
-    down = r + 1 - i0
-    taps = torch.where(
-        upper[:, None],
-        torch.stack([corner + down + 1, corner + 1, corner + down], dim=1),
-        torch.stack([corner, corner + down, corner + 1], dim=1),
+    step = (r > 0).long()
+    down = (r + 1 - i0) * step
+    taps = torch.stack(
+        [
+            corner + upper * (down + step),
+            corner + torch.where(upper, step, down),
+            corner + torch.where(upper, down, step),
+        ],
+        dim=1,
     )
-    weights = torch.where(
-        upper[:, None],
-        torch.stack([fa + fb - 1.0, 1.0 - fa, 1.0 - fb], dim=1),
-        torch.stack([1.0 - fa - fb, fa, fb], dim=1),
-    ).clamp_min(0.0)
-    centroid = (r == 0)[:, None]  # one point: every tap is it
-    taps = torch.where(centroid, start[:, None], taps)
-    weights = torch.where(centroid, weights.new_tensor([1.0, 0.0, 0.0]), weights)
-    return taps, weights / weights.sum(dim=1, keepdim=True)
+    weights = torch.stack(
+        [(1.0 - fa - fb).abs(), torch.where(upper, 1.0 - fa, fa), torch.where(upper, 1.0 - fb, fb)], 1
+    )
+    return taps, weights / (weights[:, 0] + weights[:, 1] + weights[:, 2])[:, None]
 
 
 def nearest_tap(
