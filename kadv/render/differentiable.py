@@ -300,16 +300,14 @@ class DifferentiableRenderer:
     ) -> RenderOutput:
         """The exact render of the frame plus ``border`` pixels; an anchor (CPU) just rendered at this
         pose holds the colours of the frame's sub-pixel rays, which are then not cast again."""
-        sub_rgb = sub_ids = None
+        sub = {}
         if anchor is not None and anchor.supersample > 1 and anchor.guard_band >= border:
             s, start = anchor.supersample, anchor.supersample * (anchor.guard_band - border)
-            sub_rgb, sub_ids = (
-                maps[:, 0, :, start : start + s * height, start : start + s * width]
-                for maps in (anchor.rgb, anchor.triangle_ids)
-            )
-        return self.renderer.render(
-            world_T_cam, K, height, width, supersample=self.config.supersample, sub_rgb=sub_rgb, sub_ids=sub_ids
-        )
+            window = (slice(None), slice(None), slice(start, start + s * height), slice(start, start + s * width))
+            sub = {"sub_rgb": anchor.rgb[:, 0][window], "sub_ids": anchor.triangle_ids[:, 0][window]}
+            if anchor.reflecting is not None:
+                sub["sub_terms"] = anchor.reflecting[window]
+        return self.renderer.render(world_T_cam, K, height, width, supersample=self.config.supersample, **sub)
 
     def _warp(
         self,

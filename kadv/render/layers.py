@@ -34,6 +34,9 @@ class AnchorLayers:
         normals: (B, L, 3, Hs, Ws) float32 camera-frame geometric (face) normals.
         triangle_ids: (B, L, 1, Hs, Ws) int64, -1 where invalid.
         mask: (B, L, 1, Hs, Ws) bool.
+        reflecting: (B, 6, Hs, Ws) float32 the first layer's reflection terms when coats and metals
+            reflect (:meth:`~kadv.render.shading.Shader.shade`'s "reflecting"), else None: what an
+            exact render at the anchor's pose needs beside the colours it takes from the anchor.
     """
 
     world_T_cam: torch.Tensor
@@ -45,6 +48,7 @@ class AnchorLayers:
     normals: torch.Tensor
     triangle_ids: torch.Tensor
     mask: torch.Tensor
+    reflecting: torch.Tensor | None = None
 
     @property
     def num_layers(self) -> int:
@@ -53,7 +57,8 @@ class AnchorLayers:
     def to(self, device: torch.device | str) -> AnchorLayers:
         """The same layers with every map on ``device``; the pose and intrinsics stay where they are."""
         maps = {name: getattr(self, name).to(device) for name in ("rgb", "points", "normals", "triangle_ids", "mask")}
-        return AnchorLayers(self.world_T_cam, self.K, self.supersample, self.guard_band, **maps)
+        reflecting = None if self.reflecting is None else self.reflecting.to(device)
+        return AnchorLayers(self.world_T_cam, self.K, self.supersample, self.guard_band, **maps, reflecting=reflecting)
 
 
 def guard_band_intrinsics(K: torch.Tensor, guard_band: int, supersample: int) -> torch.Tensor:
@@ -161,4 +166,7 @@ def render_anchor(
         tensor = torch.stack(maps[key], dim=1)  # (B, L, N, C)
         return tensor.reshape(batch, len(layered), h, w, -1).permute(0, 1, 4, 2, 3).contiguous()
 
-    return AnchorLayers(pose, K_anchor, supersample, guard_band, *(stack(key) for key in maps))
+    reflecting = layered[0][1].get("reflecting")
+    if reflecting is not None:
+        reflecting = reflecting.reshape(batch, h, w, 6).permute(0, 3, 1, 2).contiguous()
+    return AnchorLayers(pose, K_anchor, supersample, guard_band, *(stack(key) for key in maps), reflecting)

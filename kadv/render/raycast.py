@@ -17,7 +17,7 @@ from torch.nn import functional as F
 from kadv.checks import check_shape
 from kadv.geometry.camera import pixel_rays
 from kadv.render.bake import load_or_bake
-from kadv.render.colour import tone_map, untone
+from kadv.render.colour import tone_map
 from kadv.render.irradiance import BakedLighting
 from kadv.render.shading import Shader, Shading, compact_rows
 from kadv.render.surface import RayHits, Surfaces
@@ -176,6 +176,7 @@ class ExactRenderer:
         self,
         rgb: torch.Tensor,
         triangle_ids: torch.Tensor,
+        terms: torch.Tensor,
         hits: RayHits,
         normals: torch.Tensor,
         origins: torch.Tensor,
@@ -185,10 +186,11 @@ class ExactRenderer:
         width: int,
     ) -> torch.Tensor:
         """``rgb`` (B, 3, sH, sW) of s x s rays per pixel, on triangles ``triangle_ids`` (B, 1, sH,
-        sW), with what coats and metals mirror (:meth:`Shader.reflections`) as the pixel-centre rays
-        (B * H * W, 3) and their ``hits`` (with shading ``normals`` (B * H * W, 3) turned towards the
-        eye) see it, in the exposed radiance of each of the pixel's rays
-        on the centre ray's surface (:meth:`Shader.same_surface`)."""
+        sW) with reflection ``terms`` (B, 6, sH, sW) (:meth:`Shader.shade`'s "reflecting"), with
+        what coats and metals mirror (:meth:`Shader.reflections`) as the pixel-centre rays (B * H *
+        W, 3) and their ``hits`` (with shading ``normals`` (B * H * W, 3) turned towards the eye)
+        see it, on each of the pixel's rays on the centre ray's surface
+        (:meth:`Shader.same_surface`)."""
         batch, _, fine_height, fine_width = rgb.shape
         s = fine_height // height
         mirrored = self.shader.reflections(hits, normals, origins, directions, angle, (batch, height, width))
@@ -200,11 +202,12 @@ class ExactRenderer:
             return values.expand(-1, -1, s, -1, s, -1).reshape(-1, channels)
 
         colours = rgb.permute(0, 2, 3, 1).reshape(-1, 3)
+        terms = terms.permute(0, 2, 3, 1).reshape(-1, 6)
         rows = compact_rows(mirrored.glossy)
         if rows is None:
             glossy = fine(mirrored.glossy[:, None])[:, 0]
             glossy = glossy & self.shader.same_surface(triangle_ids.reshape(-1), fine(hits.triangle_ids[:, None])[:, 0])
-            shown = untone(colours) * fine(mirrored.keep) + fine(mirrored.add)
+            shown = terms[:, :3] + terms[:, 3:] * fine(mirrored.mirrored)
             colours = torch.where(glossy[:, None], tone_map(shown), colours)
         else:
             sub_rows, centres = _sub_pixel_rows(rows, height, width, s), rows.repeat_interleave(s * s)
@@ -212,8 +215,9 @@ class ExactRenderer:
                 triangle_ids.reshape(-1).index_select(0, sub_rows), hits.triangle_ids.index_select(0, centres)
             )
             sub_rows, centres = sub_rows[same], centres[same]
-            shown = untone(colours.index_select(0, sub_rows)) * mirrored.keep.index_select(0, centres)
-            colours = colours.index_copy(0, sub_rows, tone_map(shown + mirrored.add.index_select(0, centres)))
+            kept, factor = terms.index_select(0, sub_rows).split(3, dim=1)
+            shown = kept + factor * mirrored.mirrored.index_select(0, centres)
+            colours = colours.index_copy(0, sub_rows, tone_map(shown))
         return colours.reshape(batch, fine_height, fine_width, 3).permute(0, 3, 1, 2)
 
     def render(
@@ -225,6 +229,7 @@ class ExactRenderer:
         supersample: int = 1,
         sub_rgb: torch.Tensor | None = None,
         sub_ids: torch.Tensor | None = None,
+        sub_terms: torch.Tensor | None = None,
     ) -> RenderOutput:
         """Render B cameras in one cast (in parts of :attr:`max_rays` rays when they are more).
 
@@ -239,6 +244,8 @@ class ExactRenderer:
                 already shaded them (an anchor render at this pose covers them): they are not cast again.
             sub_ids: (B, 1, s * height, s * width) their triangles (-1: none), with ``sub_rgb``
                 when coats and metals reflect (:attr:`Shading.reflections`).
+            sub_terms: (B, 6, s * height, s * width) their reflection terms (:meth:`Shader.shade`'s
+                "reflecting"), with ``sub_rgb`` when coats and metals reflect.
 
         Returns:
             The maps, on the renderer's device.
@@ -260,12 +267,11 @@ class ExactRenderer:
             check_shape(sub_rgb, f"B 3 {s * height} {s * width}", "sub_rgb", {"B": batch})
             sub_rgb = sub_rgb.to(self.device)
             if self.shader.reflecting:
-                if sub_ids is None:
-                    raise ValueError(
-                        "sub_ids: the sub-pixel rays' triangles are needed with their colours when coats reflect"
-                    )
-                check_shape(sub_ids, f"B 1 {s * height} {s * width}", "sub_ids", {"B": batch})
-                sub_ids = sub_ids.to(self.device)
+                for name, given, channels in (("sub_ids", sub_ids, 1), ("sub_terms", sub_terms, 6)):
+                    if given is None:
+                        raise ValueError(f"{name}: needed with the sub-pixel rays' colours when coats reflect")
+                    check_shape(given, f"B {channels} {s * height} {s * width}", name, {"B": batch})
+                sub_ids, sub_terms = sub_ids.to(self.device), sub_terms.to(self.device)
         elif s > 1:
             sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s, device=self.device)
             sub_hits, sub = self.cast_and_shade(
@@ -273,11 +279,17 @@ class ExactRenderer:
             )
             sub_rgb = sub["rgb"].reshape(batch, s * height, s * width, 3).permute(0, 3, 1, 2)
             sub_ids = sub_hits.triangle_ids.reshape(batch, 1, s * height, s * width)
+            if self.shader.reflecting:
+                sub_terms = sub["reflecting"].reshape(batch, s * height, s * width, 6).permute(0, 3, 1, 2)
         else:
             sub_rgb, sub_ids = image(maps["rgb"], 3), image(hits.triangle_ids, 1)
+            if self.shader.reflecting:
+                sub_terms = image(maps["reflecting"], 6)
         if self.shader.reflecting:
             flat = (origins.reshape(-1, 3), directions.reshape(-1, 3))
-            sub_rgb = self._with_reflections(sub_rgb, sub_ids, hits, maps["normals"], *flat, angle, height, width)
+            sub_rgb = self._with_reflections(
+                sub_rgb, sub_ids, sub_terms, hits, maps["normals"], *flat, angle, height, width
+            )
         rgb = F.avg_pool2d(sub_rgb, s).contiguous() if s > 1 else sub_rgb.contiguous()
 
         # a ray that meets a surface within a micrometre of the eye starts on it (the eye lies on the

@@ -175,14 +175,15 @@ def _on_rows(
     mask: torch.Tensor,
     compute: Callable[[Callable[[torch.Tensor], torch.Tensor], torch.Tensor | None], torch.Tensor],
     channels: int = 3,
+    dtype: torch.dtype = torch.float64,
 ) -> torch.Tensor:
-    """(N, C) float64: what ``compute(take, live)`` returns (M, ``channels``) for the rows where
+    """(N, C) ``dtype``: what ``compute(take, live)`` returns (M, ``channels``) for the rows where
     ``mask`` (N,) holds, 0 elsewhere. ``take`` gives the rows of an (N, ...) tensor that ``compute`` works on;
     ``live`` is ``mask`` where those are every row (a GPU's, :func:`compact_rows`), else None."""
     rows = compact_rows(mask)
     if rows is None:
         return torch.where(mask[:, None], compute(lambda values: values, mask), 0.0)
-    out = torch.zeros(len(mask), channels, dtype=torch.float64, device=mask.device)
+    out = torch.zeros(len(mask), channels, dtype=dtype, device=mask.device)
     if not len(rows):
         return out
     return out.index_copy(0, rows, compute(lambda values: values.index_select(0, rows), None))
@@ -258,11 +259,11 @@ def _smoothed(
 class Reflections(NamedTuple):
     """What coats and metals mirror into a render's pixels (:meth:`Shader.reflections`): where
     ``glossy`` (N,) holds, a pixel's rays on its centre ray's surface show the exposed radiance
-    ``keep * theirs + add`` (both (N, 3) float32) in place of their shaded ``theirs``."""
+    ``kept + factor * mirrored`` in place of their shaded colour, with ``mirrored`` (N, 3) float32
+    and their own ``kept`` and ``factor`` (:meth:`Shader.shade`'s "reflecting")."""
 
     glossy: torch.Tensor
-    keep: torch.Tensor
-    add: torch.Tensor
+    mirrored: torch.Tensor
 
 
 class Shader:
@@ -306,6 +307,8 @@ class Shader:
             self._widths = sorted({width for width in widths if width is not None})
             self._width_index = per_triangle([-1 if w is None else self._widths.index(w) for w in widths]).long()
             self.reflecting = shading.reflections and bool(((self._coat_ior > 0) | self._conductor).any())
+            if self.reflecting and self._emitter_caster is not None:  # an emitter's colour, then its radiance
+                self._emitter_table = torch.cat([self._emitter_colour, self._emitter_radiance.float()], dim=1)
 
     def shade(
         self,
@@ -321,7 +324,10 @@ class Shader:
 
         Returns "rgb" (N, 3) float32 and, with ``geometry``, the masked "points", "normals" (N, 3)
         float32 and "back_face" (N,) bool, on the same device. With ``colour`` False "rgb" is the
-        background: the caller takes colour from other rays.
+        background: the caller takes colour from other rays. With ``colour`` when coats and metals
+        reflect (:attr:`reflecting`), also "reflecting" (N, 6) float32: on their hits, the exposed
+        radiance each keeps besides its mirror image and the factor of the mirrored light
+        (what :meth:`reflections` adds to).
         """
         # Every ray is shaded (a miss as a point on triangle 0 at the eye) and misses are masked at
         # the end: indoors nearly every ray hits, and compacting the hits would cost more (and, on a
@@ -352,13 +358,21 @@ class Shader:
                     irradiance = irradiance + self._delta_irradiance(points, directions, normals, hit)
                 radiance = self.surfaces.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi)
                 shaded = tone_map(radiance)
+                if self.reflecting:
+                    terms = self._reflecting_terms(hit, ids, base, radiance, irradiance)
                 # a ray that leaves the scene sees the sky the bake was lit by
                 sky = self._sky(F.normalize(directions, dim=1))
                 background = tone_map((sky * self.baked.exposure).float())
             rgb = torch.where(hit[:, None], shaded, background)
             if self._emitter_caster is not None:
-                rgb = self._emitters_seen(rgb, hits, origins, directions)
+                table = self._emitter_table if self.reflecting else self._emitter_colour
+                seen, glow = self._emitter_glow(hits, origins, directions, table)
+                rgb = torch.where(seen[:, None], glow[:, :3], rgb)
+                if self.reflecting:  # a lamp in front of a coat shows its glow, nothing mirrored
+                    terms = torch.where(seen[:, None], F.pad(glow[:, 3:], (0, 3)), terms)
         maps = {"rgb": rgb.contiguous()}
+        if colour and self.reflecting:
+            maps["reflecting"] = terms
         if geometry:
             maps.update(
                 points=torch.where(hit[:, None], points.float(), 0.0),
@@ -403,13 +417,6 @@ class Shader:
         )[0]
         return torch.zeros_like(where).index_put((rows,), seen)
 
-    def _emitters_seen(
-        self, rgb: torch.Tensor, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor
-    ) -> torch.Tensor:
-        """``rgb`` (N, 3) with the colour of an area emitter wherever a ray meets one first."""
-        seen, glow = self._emitter_glow(hits, origins, directions, self._emitter_colour)
-        return torch.where(seen[:, None], glow, rgb)
-
     def reflections(
         self,
         hits: RayHits,
@@ -423,9 +430,9 @@ class Shader:
         rays (N, 3) met one (:class:`Reflections`), with the hits' shading ``normals`` (N, 3) turned
         towards the eye (:meth:`shade`'s "normals"): what one ray per pixel, drawn from the GGX lobe,
         meets in baked light (the sky, an emitter's glow, a surface's diffuse light without its
-        point lights and suns), times the coat's Fresnel reflectance in place of the coat's
-        reflection that the shading counted diffuse, or times a metal's reflectance (its display
-        albedo over :data:`~kadv.scenes.scene.CONDUCTOR_GREY`) in place of its diffuse look.
+        point lights and suns), weighted by the lobe and the coat's Fresnel reflectance (a metal's
+        is 1). It takes the place of the coat's reflection that the shading counted diffuse, or of
+        a metal's diffuse look (:meth:`shade`'s "reflecting").
 
         The rows are the (B, H, W) ``images``' pixels in order. A lobe rougher than
         :data:`SHARP_ROUGHNESS` would sparkle with one ray per pixel: its mirrored light is averaged
@@ -451,26 +458,27 @@ class Shader:
             mirrored = torch.where(group[:, None], smoothed, mirrored)
             covered = covered | (group & reached)
         glossy = glossy & (~rough | covered)
-        terms = _on_rows(glossy, lambda take, _: self._glossy_terms(take, hits, directions, pixel_angle), 6)
-        keep, scale = terms.split(3, dim=1)
-        return Reflections(glossy, keep.float(), (scale * mirrored).float())
+        return Reflections(glossy, mirrored.float())
 
-    def _glossy_terms(
-        self, take: Callable[[torch.Tensor], torch.Tensor], hits: RayHits, directions: torch.Tensor, pixel_angle: float
+    def _reflecting_terms(
+        self, hit: torch.Tensor, ids: torch.Tensor, base: torch.Tensor, radiance: torch.Tensor, irradiance: torch.Tensor
     ) -> torch.Tensor:
-        """(M, 6) float64 :class:`Reflections`' ``keep`` and the factor of the mirrored light, for the
-        rows ``take`` gives of the hits (N,) of rays (N, 3): on a coat, the share of its shaded light
-        that is not the coat's own reflection (which the shading counted diffuse), and 1; on a
-        metal, 0 and its reflectance."""
-        ids, bary = take(hits.triangle_ids.clamp_min(0)), take(hits.barycentrics)
-        facing = self.surfaces.facing(ids, take(directions))
-        t = take(torch.where(hits.hit, hits.t.double(), 0.0))
-        base = self.surfaces.albedo(ids, bary, _footprint(t, take(directions), facing, pixel_angle))
-        own = self.surfaces.coats.index_select(0, ids)[:, 2:3].double()
-        coat = torch.cat([1.0 - own / self.surfaces.reflectance(ids, base).double(), torch.ones_like(base)], dim=1)
-        reflectance = srgb_decode((base.double() / CONDUCTOR_GREY).clamp(0.0, 1.0))
-        metal = torch.cat([torch.zeros_like(reflectance), reflectance], dim=1)
-        return torch.where(self._conductor.index_select(0, ids)[:, None], metal, coat)
+        """(N, 6) float32 :meth:`shade`'s "reflecting" for hits (N,) on triangles (N,) of display
+        colour ``base`` (N, 3), shaded to the exposed ``radiance`` (N, 3) from ``irradiance`` (N,
+        3): on a coat, its radiance less the coat's own reflection (which the shading counted
+        diffuse) and a factor 1 on the mirrored light; on a metal, no radiance and its reflectance
+        (its display albedo over :data:`~kadv.scenes.scene.CONDUCTOR_GREY`); 0 elsewhere."""
+        glossy = hit & ((self._coat_ior.index_select(0, ids) > 0) | self._conductor.index_select(0, ids))
+
+        def terms(take: Callable[[torch.Tensor], torch.Tensor], _: torch.Tensor | None) -> torch.Tensor:
+            rows = take(ids)
+            own = self.surfaces.coats.index_select(0, rows)[:, 2:3] * take(irradiance)
+            coat = torch.cat([take(radiance) - own * (self.baked.exposure / math.pi), torch.ones_like(own)], dim=1)
+            reflectance = srgb_decode((take(base) / CONDUCTOR_GREY).clamp(0.0, 1.0))
+            metal = torch.cat([torch.zeros_like(reflectance), reflectance], dim=1)
+            return torch.where(self._conductor.index_select(0, rows)[:, None], metal, coat)
+
+        return _on_rows(glossy, terms, 6, torch.float32)
 
     def _mirrored(
         self,

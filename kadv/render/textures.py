@@ -130,11 +130,15 @@ class TextureAtlas:
         x1, y1 = x0 + 1.0, y0 + 1.0
         x0, y0 = torch.where(x0 < 0, x0 + width, x0), torch.where(y0 < 0, y0 + height, y0)
         x1, y1 = torch.where(x1 >= width, x1 - width, x1), torch.where(y1 >= height, y1 - height, y1)
-        top, bottom = y0 * width, y1 * width
-        corners = torch.stack([top + x0, top + x1, bottom + x0, bottom + x1], dim=1).long() + offset[:, None]
-        taps = self.texels.index_select(0, corners.flatten()).reshape(len(u), 4, self.texels.shape[1])
-        upper = torch.lerp(taps[:, 0], taps[:, 1], fx)
-        return torch.lerp(upper, torch.lerp(taps[:, 2], taps[:, 3], fx), fy)
+        top, bottom = (y0 * width).long() + offset, (y1 * width).long() + offset
+        x0, x1 = x0.long(), x1.long()
+
+        def tap(row: torch.Tensor, column: torch.Tensor) -> torch.Tensor:
+            # one gather per corner: contiguous (N, C) rows, which the blends read faster than (N, 4, C)
+            return self.texels.index_select(0, row + column)
+
+        upper = torch.lerp(tap(top, x0), tap(top, x1), fx)
+        return torch.lerp(upper, torch.lerp(tap(bottom, x0), tap(bottom, x1), fx), fy)
 
 
 def _wrapped(uv: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

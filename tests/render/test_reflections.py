@@ -163,14 +163,21 @@ def test_a_rough_coats_mirror_image_of_a_bright_patch_of_sky_is_averaged_over_a_
 def test_with_reflections_the_shading_stays_view_independent_and_an_anchors_colours_serve_the_render(tmp_path):
     """Reflections are added to the exact render's finished image, not to the shading: an anchor
     layer's colours (what the warp reprojects) are the same with them on as off, and a render fed
-    those colours as its sub-pixel rays is the render that casts them itself."""
+    those colours, triangles and reflection terms as its sub-pixel rays is the render that casts
+    them itself."""
     on, off = _floor(0.3, tmp_path, True), _floor(0.3, tmp_path, False)
     anchors = {r is on: render_anchor(r, POSE[None], K, HEIGHT, WIDTH, supersample=2) for r in (on, off)}
     assert torch.equal(anchors[True].rgb, anchors[False].rgb)
-    sub_rgb, sub_ids = anchors[True].rgb[:, 0], anchors[True].triangle_ids[:, 0]
-    fed = on.render(POSE, K, HEIGHT, WIDTH, supersample=2, sub_rgb=sub_rgb, sub_ids=sub_ids).rgb
+    assert anchors[False].reflecting is None and anchors[True].reflecting.shape[1] == 6
+    sub = {
+        "sub_rgb": anchors[True].rgb[:, 0],
+        "sub_ids": anchors[True].triangle_ids[:, 0],
+        "sub_terms": anchors[True].reflecting,
+    }
+    fed = on.render(POSE, K, HEIGHT, WIDTH, supersample=2, **sub).rgb
     cast = on.render(POSE, K, HEIGHT, WIDTH, supersample=2).rgb
     assert (fed - cast).abs().max() < 1e-6
     assert (cast - off.render(POSE, K, HEIGHT, WIDTH, supersample=2).rgb).abs().max() > 0.02
-    with pytest.raises(ValueError, match="sub_ids"):
-        on.render(POSE, K, HEIGHT, WIDTH, supersample=2, sub_rgb=sub_rgb)
+    for missing in ("sub_ids", "sub_terms"):
+        with pytest.raises(ValueError, match=missing):
+            on.render(POSE, K, HEIGHT, WIDTH, supersample=2, **{k: v for k, v in sub.items() if k != missing})
