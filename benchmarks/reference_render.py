@@ -3,8 +3,9 @@
 For each scene (the three ../shared scenes by default; ``--scenes`` takes names or paths to Mitsuba
 XML files), the file camera (moved clear of walls as the attack does) plus ``--sampled`` init views
 sampled with kadv-tiny are rendered by Mitsuba 3 (path tracing, the file's emitters, denoised with
-Open Image Denoise) and by kadv's exact renderer under each lighting (``direct``, ``baked``, and
-``reflections``: baked with ``render.shading.reflections=true``). Per
+Open Image Denoise) and by kadv's exact renderer under each lighting (``direct``; ``baked`` with
+``render.shading.reflections=false``; ``reflections``: baked with the coats' and metals'
+reflections, the commands' default). Per
 view: the median relative z-depth error (Mitsuba's ray intersection at our pixel centres), PSNR
 and SSIM of the images after exposure matching, and delta1 between kadv-tiny's predictions on the
 two images. The reference's noise floor is two independent Mitsuba renders of the file camera
@@ -63,7 +64,10 @@ _ATTACK += ["attack.budget_evaluations=123", "video=false"]
 # each lighting compared: its shading, and the attack's overrides that select it
 _LIGHTINGS = {
     "direct": (Shading(lighting="direct"), ["render.lighting=direct"]),
-    "baked": (Shading(lighting="baked"), ["render.lighting=baked", "render.shading.reflections=false"]),
+    "baked": (
+        Shading(lighting="baked", reflections=False),
+        ["render.lighting=baked", "render.shading.reflections=false"],
+    ),
     "reflections": (
         Shading(lighting="baked", reflections=True),
         ["render.lighting=baked", "render.shading.reflections=true"],

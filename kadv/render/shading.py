@@ -55,7 +55,8 @@ class Shading:
             what they face, through their GGX lobe and weighted by the coat's Fresnel reflectance
             or the metal's reflectance, in place of the coat's reflection counted as diffuse light
             and of the metal's diffuse look: one more ray per such pixel, whose colour depends on
-            the view (the exact render's image has them; anchor layers and the warp do not).
+            the view (the exact render's image has them; anchor layers and the warp do not). On by
+            default; False shades coats and metals as diffuse surfaces.
     """
 
     ambient: float = 0.45
@@ -64,7 +65,7 @@ class Shading:
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     lighting: str = "direct"
     bake: BakeConfig = field(default_factory=BakeConfig)
-    reflections: bool = False
+    reflections: bool = True
 
     def __post_init__(self) -> None:
         if self.lighting not in ("direct", "baked"):
