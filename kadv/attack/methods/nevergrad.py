@@ -41,6 +41,27 @@ class NevergradSettings:
             )
 
 
+def _metamodel_type_errors_as_failures() -> None:
+    """nevergrad 1.0.12's meta-model turns the model's prediction, shaped (1,), into a float, which
+    numpy 2.4 refuses with a TypeError (nevergrad issue 1612): NGOpt then crashes once a long enough
+    search picks a meta-model optimizer. Report that TypeError as the ``MetaModelFailure`` the
+    optimizers already recover from (they go on without the meta-model's proposal)."""
+    from nevergrad.optimization import metamodel, optimizerlib
+
+    learn = optimizerlib.learn_on_k_best
+    if getattr(learn, "kadv_guarded", False):
+        return
+
+    def guarded(*args, **kwargs):
+        try:
+            return learn(*args, **kwargs)
+        except TypeError as error:
+            raise metamodel.MetaModelFailure(f"nevergrad's meta-model under this numpy: {error}") from error
+
+    guarded.kadv_guarded = True
+    optimizerlib.learn_on_k_best = guarded  # the optimizers call it through optimizerlib's name
+
+
 @register_proposer("nevergrad", NevergradSettings)
 class NevergradProposer(Proposer):
     """Minimises -objective over the unit search box [-1, 1]^6, seeded from the search's generator."""
@@ -48,6 +69,7 @@ class NevergradProposer(Proposer):
     def __init__(self, context, rng: np.random.Generator) -> None:
         import nevergrad as ng
 
+        _metamodel_type_errors_as_failures()
         super().__init__(context, rng)
         parametrization = ng.p.Array(shape=(6,), lower=-1.0, upper=1.0)
         parametrization.random_state = np.random.RandomState(int(rng.integers(1, 2**31 - 1)))
