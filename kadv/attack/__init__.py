@@ -19,6 +19,7 @@ from kadv.attack.init_views import (
 from kadv.attack.loop import Proposer, fitness, proposer_search, register_proposer
 from kadv.attack.methods.cma import CMASettings
 from kadv.attack.methods.gradient import GradientSettings, gradient_ascent, gradient_search
+from kadv.attack.methods.halving import HalvingSettings
 from kadv.attack.methods.hybrid import HybridSettings
 from kadv.attack.methods.nevergrad import NevergradSettings
 from kadv.attack.methods.random import RandomSettings
@@ -47,6 +48,7 @@ __all__ = [
     "CMASettings",
     "Clock",
     "GradientSettings",
+    "HalvingSettings",
     "HybridSettings",
     "InitView",
     "InitViewConfig",

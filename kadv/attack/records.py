@@ -50,6 +50,8 @@ class ViewRecord:
             record built without it takes L_depth).
         scale: the render's size relative to the run's: views screened smaller are never chosen
             or ranked, their best are re-scored at full size.
+        screened: scored at a search's cheap fidelity (fewer rays per pixel): like views of
+            another scale, never chosen or ranked; their best are re-scored exactly.
         yaw_deg, pitch_deg, roll_deg: the camera's heading, elevation and bank in degrees
             (:func:`kadv.geometry.yaw_pitch_roll`); made from ``theta`` when not given.
     """
@@ -73,6 +75,7 @@ class ViewRecord:
     seconds: float = math.nan
     loss: float = math.nan
     scale: float = 1.0
+    screened: bool = False
     yaw_deg: float = math.nan
     pitch_deg: float = math.nan
     roll_deg: float = math.nan
@@ -90,8 +93,8 @@ class ViewRecord:
 
     @property
     def rankable(self) -> bool:
-        """A valid view scored at the run's full size: one a search may choose or follow."""
-        return self.valid and self.scale == 1.0
+        """A valid view scored exactly at the run's full size: one a search may choose or follow."""
+        return self.valid and self.scale == 1.0 and not self.screened
 
     def world_T_cam(self, init_world_T_cam: torch.Tensor) -> torch.Tensor:
         """The view's pose (4, 4), recomputed exactly from the init pose and the parameters."""
@@ -101,11 +104,13 @@ class ViewRecord:
 
 @dataclass
 class Budget:
-    """Cost of a search: model forward passes, backward passes, and wall-clock seconds."""
+    """Cost of a search: model forward passes on exact renders (the evaluations a budget counts),
+    backward passes, forward passes on the screening's cheap renders, and wall-clock seconds."""
 
     forward: int = 0
     backward: int = 0
     seconds: float = 0.0
+    screened: int = 0
 
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
@@ -114,10 +119,15 @@ class Budget:
         """The cost of both searches, so that ``sum(budgets, Budget())`` totals a run.
 
         Examples:
-            >>> sum([Budget(10, 2, 1.5), Budget(5, 0, 0.5)], Budget())
-            Budget(forward=15, backward=2, seconds=2.0)
+            >>> sum([Budget(10, 2, 1.5, 40), Budget(5, 0, 0.5)], Budget())
+            Budget(forward=15, backward=2, seconds=2.0, screened=40)
         """
-        return Budget(self.forward + other.forward, self.backward + other.backward, self.seconds + other.seconds)
+        return Budget(
+            self.forward + other.forward,
+            self.backward + other.backward,
+            self.seconds + other.seconds,
+            self.screened + other.screened,
+        )
 
 
 @dataclass
@@ -152,9 +162,12 @@ class AttackResult:
 
 
 def _improvements(records: list[ViewRecord]) -> list[tuple[int, ViewRecord]]:
-    """(evaluations so far, view) for the first view and each rankable view that raised the best loss."""
+    """(evaluations so far, view) for the first view and each rankable view that raised the best
+    loss; screened views are not evaluations (the budget does not count them)."""
     out, best = [(1, records[0])], records[0].loss if records[0].rankable else -math.inf
-    for count, record in enumerate(records[1:], start=2):
+    count = 1
+    for record in records[1:]:
+        count += not record.screened
         if record.rankable and record.loss > best:
             out.append((count, record))
             best = record.loss

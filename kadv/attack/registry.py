@@ -11,6 +11,7 @@ Dependencies point one way: registry <- search <- loop <- methods <- runner.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -33,24 +34,33 @@ class SearchMethod:
         search: ``search(context, rng, bar) -> InitViewResult`` for one init view.
         evaluations: the forward passes it ends after by itself, given its settings (None: it runs
             until the budget ends).
+        check: ``check(settings, evaluations, supersample=None)`` raises a ValueError naming the
+            key when its settings cannot work within an evaluation budget (None: no count limit)
+            or with the run's rays per pixel side; called when an attack's config is made (without
+            ``supersample``) and before an attack starts (with it).
     """
 
     name: str
     settings: type
     search: Callable[..., Any]
     evaluations: Callable[[Any], int | None]
+    check: Callable[..., None] = lambda settings, evaluations, supersample=None: None
 
 
 METHODS: dict[str, SearchMethod] = {}
 
 
 def register_method(
-    name: str, settings: type = NoSettings, evaluations: Callable[[Any], int | None] = lambda settings: None
+    name: str,
+    settings: type = NoSettings,
+    evaluations: Callable[[Any], int | None] = lambda settings: None,
+    check: Callable[..., None] | None = None,
 ) -> Callable:
     """Decorator: register ``search(context, rng, bar)`` as method ``name``."""
 
     def decorate(search: Callable) -> Callable:
-        METHODS[name] = SearchMethod(name, settings, search, evaluations)
+        method = SearchMethod(name, settings, search, evaluations)
+        METHODS[name] = method if check is None else dataclasses.replace(method, check=check)
         return search
 
     return decorate

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+import torch
 from tqdm import tqdm
 
 from kadv.attack.init_views import InitView, fit_into_envelope
@@ -28,6 +29,7 @@ def attack(
     completed: dict[int, InitViewResult] | None = None,
     on_result: Callable[[int, InitViewResult], None] | None = None,
     progress: bool = True,
+    starts: dict[int, torch.Tensor] | None = None,
 ) -> AttackResult:
     """Search for adversarial views from every init view with ``config.method``.
 
@@ -47,8 +49,11 @@ def attack(
         completed: results already computed, by init-view index; they are not recomputed.
         on_result: called with (index, result) as each init view finishes (to save it).
         progress: show a tqdm bar (in evaluated views; no total under a seconds budget alone).
+        starts: warm starts by init-view index, pose parameters (N, 6) relative to that init view
+            (:class:`~kadv.attack.search.SearchContext`'s ``starts``).
     """
     method = get_method(config.method)
+    method.check(config.settings, config.evaluations, differentiable.config.supersample)
     # all of them before any search: a view that cannot be moved in is refused before work is spent
     margin = objective.penalty.margin
     init_views = [fit_into_envelope(differentiable.renderer, init, config.envelope, margin) for init in init_views]
@@ -70,7 +75,7 @@ def attack(
             bar.set_description(f"{config.method} attack, init view {index + 1}/{len(init_views)}")
             bar.set_postfix_str("", refresh=False)  # the previous init view's best is not this one's
             differentiable.reset()
-            context = SearchContext(objective, differentiable, init, height, width, config)
+            context = SearchContext(objective, differentiable, init, height, width, config, (starts or {}).get(index))
             view_result = method.search(context, np.random.default_rng([seed, index]), bar)
             result.views.append(view_result)
             if on_result is not None:

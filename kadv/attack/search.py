@@ -23,8 +23,8 @@ from kadv.render import DifferentiableRenderer, RenderOutput
 
 __all__ = ["DEFAULT_METHOD", "AttackConfig", "Clock", "Measures", "SearchContext", "check_settings", "scaled_size"]
 
-# The method that led the anytime benchmark at its full budget (benchmarks/search_anytime.py).
-DEFAULT_METHOD = "hybrid"
+# The search with the lowest regret and search noise at the default budget (benchmarks/worst_case.py).
+DEFAULT_METHOD = "halving"
 
 
 def scaled_size(height: int, width: int, scale: float) -> tuple[int, int]:
@@ -110,6 +110,7 @@ class AttackConfig:
             )
         if self.evaluations is None and self.budget_seconds is None:
             raise ValueError(f"attack.method={self.method} needs attack.budget_evaluations or attack.budget_seconds")
+        method.check(self.settings, self.evaluations)
 
     @property
     def evaluations(self) -> int | None:
@@ -180,11 +181,23 @@ class Clock:
             return 0
         return count
 
-    def spent(self, views: int, seconds: float, backward: int = 0) -> None:
-        """Count a batch of ``views`` forward (and ``backward``) passes that took ``seconds``."""
-        self.budget.forward += views
+    def spent(self, views: int, seconds: float, backward: int = 0, screened: bool = False) -> None:
+        """Count a batch of ``views`` forward (and ``backward``) passes that took ``seconds``; a
+        screening batch's views count as screened, not against the evaluations."""
+        if screened:
+            self.budget.screened += views
+        else:
+            self.budget.forward += views
         self.budget.backward += backward
         self._last_batch = seconds
+
+    def allows_screening(self, count: int) -> int:
+        """How many of ``count`` views a screening batch may score now: all of them while the
+        seconds budget (if any) still fits a batch, else 0; screened views leave the count budget
+        alone."""
+        if self.seconds is not None and self.elapsed() + self._last_batch > self.seconds:
+            return 0
+        return count
 
 
 @dataclass
@@ -264,6 +277,9 @@ class SearchContext:
         height: image height.
         width: image width.
         config: the attack's settings (bounds, budgets).
+        starts: warm starts, pose parameters (N, 6) relative to the init view (views found bad
+            before: at a smaller radius, by another search); methods that take them
+            (:attr:`SearchMethod.warm_starts`) consider them first, the others leave them.
     """
 
     def __init__(
@@ -274,6 +290,7 @@ class SearchContext:
         height: int,
         width: int,
         config: AttackConfig,
+        starts: torch.Tensor | None = None,
     ) -> None:
         self.objective = objective
         self.differentiable = differentiable
@@ -288,6 +305,7 @@ class SearchContext:
         self.margin = objective.penalty.margin
         self.validity_options = objective.penalty.validity_options()
         self.clock = Clock(config.evaluations, config.budget_seconds)
+        self.starts = torch.zeros(0, 6, dtype=torch.float64) if starts is None else starts.double().reshape(-1, 6)
 
     def base(self, batch: int) -> torch.Tensor:
         """The init view's pose (batch, 4, 4) float64 on :attr:`device`."""
@@ -365,22 +383,50 @@ class SearchContext:
         return intrinsics_from_fov(self.init.fov_x_deg, height, width), height, width
 
     def evaluate(
-        self, step: int, params: torch.Tensor, lanes: list[int] | range | None = None, scale: float = 1.0
+        self,
+        step: int,
+        params: torch.Tensor,
+        lanes: list[int] | range | None = None,
+        scale: float = 1.0,
+        supersample: int | None = None,
+        screened: bool = False,
     ) -> list[ViewRecord]:
         """Move from the init view to each pose (B, 6) through the step guard, render exactly at
-        ``scale`` times the run's size, evaluate and record, counting the views against the budget."""
+        ``scale`` times the run's size (with ``supersample`` rays per pixel side; None: the run's),
+        evaluate and record, counting the views against the budget (or, ``screened``, as screened
+        views: :meth:`screen`)."""
         started = time.perf_counter()
         params = self.project(params.to(self.device))
         reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
         params = torch.cat([params[:, :3], reached], dim=1)
         K, height, width = self.size(scale)
+        supersample = supersample or self.differentiable.config.supersample
         with torch.no_grad():
             pose = perturb_world_T_cam(self.base(len(params)), params[:, :3], params[:, 3:])
-            out = self.renderer.render(pose, K, height, width, supersample=self.differentiable.config.supersample)
+            out = self.renderer.render(pose, K, height, width, supersample=supersample)
             terms = self.objective(out.rgb, out.depth, out.mask, pose, K)
         rows = self.records(step, params, pose, terms, fraction, lanes=lanes, render=out, scale=scale)
-        self.clock.spent(len(params), time.perf_counter() - started)
+        if screened:
+            rows = [dataclasses.replace(row, screened=True) for row in rows]
+        self.clock.spent(len(params), time.perf_counter() - started, screened=screened)
         return rows
+
+    def screen(
+        self, step: int, params: torch.Tensor, supersample: int, batch: int, bar: Any = None
+    ) -> list[ViewRecord]:
+        """:meth:`evaluate` poses (N, 6) at the cheap fidelity of ``supersample`` rays per pixel side,
+        ``batch`` views a render, while the seconds budget allows; the records are screened (never
+        ranked), counted in ``budget.screened``, not against the evaluations. A progress ``bar``
+        (counting exact evaluations) shows the screening's count meanwhile."""
+        records: list[ViewRecord] = []
+        for chunk in params.split(batch):
+            count = self.clock.allows_screening(len(chunk))
+            if count == 0:
+                break
+            records += self.evaluate(step, chunk[:count], supersample=supersample, screened=True)
+            if bar is not None:
+                bar.set_postfix_str(f"screened {len(records)}/{len(params)}")
+        return records
 
     def result(self, records: list[ViewRecord], path: list[ViewRecord]) -> InitViewResult:
         """The search's result: its records, the adversarial views chosen from them, the budget

@@ -61,7 +61,8 @@ from kadv.report.run import (
 )
 from kadv.report.summary import RunInfo, RunSummary
 from kadv.runs import Interrupted, interruptible, run_lock
-from kadv.testing.profile import Profile, check_radii, profile_views
+from kadv.testing.options import check_radii
+from kadv.testing.profile import WARM_STARTS, Profile, profile_views, search_radii, warm_starts
 
 log = logging.getLogger(__name__)
 
@@ -204,6 +205,7 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     diff_config = DiffRenderConfig(
         supersample=supersample, **OmegaConf.to_container(cfg.render.differentiable, resolve=True)
     )
+    get_method(attack_config.method).check(attack_config.settings, attack_config.evaluations, supersample)
     scene = scene_from_config(cfg.scene)
     renderer = renderer_from_config(scene, cfg.render, device)
     model = model_from_config(cfg.model)
@@ -222,6 +224,12 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
         progress["done"] += 1
 
     differentiable = DifferentiableRenderer(renderer, diff_config, device)
+    smaller, starts = [], None
+    if radii is not None:  # the smaller radii first: the largest's search starts from their worst views
+        smaller = search_radii(
+            objective, differentiable, views, (height, width), attack_config, radii[:-1], seed, cfg.progress
+        )
+        starts = warm_starts(smaller, len(views), WARM_STARTS, attack_config)
     result = attack(
         objective,
         differentiable,
@@ -233,10 +241,11 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
         completed=completed,
         on_result=on_result,
         progress=cfg.progress,
+        starts=starts,
     )
     profile = None
-    if radii is not None:  # the smaller radii, then the profile of all of them
-        searched = {len(radii) - 1: result}
+    if radii is not None:  # the profile of all the radii
+        searched = dict(enumerate(smaller)) | {len(radii) - 1: result}
         seeded = profile_views(
             objective, differentiable, views, (height, width), attack_config, radii, seed, progress=cfg.progress,
             searched=searched,

@@ -77,6 +77,7 @@ def _seeds(values: dict[str, str | None]) -> tuple[int, ...]:
 
 
 def main(argv: list[str] | None = None) -> None:
+    from kadv.attack import AttackConfig
     from kadv.penalties import get_envelope
     from kadv.testing import DEFAULT_BUDGET, RobustnessInputError, scorecard
 
@@ -87,6 +88,10 @@ def main(argv: list[str] | None = None) -> None:
         seeds = _seeds(values)
         envelope = get_envelope(values["envelope"])
         budget = DEFAULT_BUDGET if values["budget"] is None else _int(values["budget"], "budget", 2)
+        try:
+            AttackConfig(budget_evaluations=budget)  # the default search's own floor
+        except ValueError as error:
+            raise ValueError(f"budget={budget} is too small for the default search: {error}") from None
         if values["lighting"] not in ("baked", "direct"):
             raise ValueError(f"lighting must be 'baked' or 'direct', got {values['lighting']!r}")
         out = Path(values["hydra.run.dir"] or values["out"])

@@ -11,7 +11,7 @@ import numpy as np
 from matplotlib.collections import PolyCollection
 from PIL import Image, ImageDraw, ImageFont
 
-from kadv.attack.records import InitViewResult, best_so_far
+from kadv.attack.records import InitViewResult, incumbent_path
 from kadv.io import atomic_write
 from kadv.report.images import depth_colour_map, depth_range
 from kadv.scenes import Scene
@@ -119,15 +119,19 @@ def loss_label(kind: str) -> str:
 
 
 def save_curves(path: str | Path, results: list[InitViewResult], label: str = "L_depth") -> Path:
-    """The attacked loss (named ``label``) of every evaluated view against the evaluations so far,
-    the best valid one so far and the search's path, per init view, with the init view's value and
-    the adversarial views marked."""
+    """The attacked loss (named ``label``) of every evaluated view (screened ones in grey) in the
+    order they were scored, the best valid one so far and the search's path, per init view, with
+    the init view's value and the adversarial views marked."""
     rows, columns = _grid(len(results))
     figure, axes = plt.subplots(rows, columns, figsize=(4.6 * columns, 3.2 * rows), squeeze=False)
     for axis, result in zip(axes.flat, results):
         order = {id(r): count for count, r in enumerate(result.records, start=1)}
-        valid = [r for r in result.records if r.valid]
+        valid = [r for r in result.records if r.valid and not r.screened]
         axis.scatter([order[id(r)] for r in valid], [r.loss for r in valid], s=6, alpha=0.4, label="evaluated views")
+        screened = [r for r in result.records if r.valid and r.screened]
+        if screened:
+            x, y = [order[id(r)] for r in screened], [r.loss for r in screened]
+            axis.scatter(x, y, s=3, alpha=0.3, color="grey", label="screened (one ray per pixel)")
         invalid = [r for r in result.records if not r.valid]
         if invalid:
             axis.scatter(
@@ -138,10 +142,10 @@ def save_curves(path: str | Path, results: list[InitViewResult], label: str = "L
                 color="grey",
                 label="invalid or uninformative",
             )
-        curve = best_so_far(result.records)
+        curve = incumbent_path(result.records)
         axis.step(
-            [c[0] for c in curve] + [len(result.records)],
-            [c[5] for c in curve] + [curve[-1][5]],
+            [order[id(r)] for r in curve] + [len(result.records)],
+            [r.loss for r in curve] + [curve[-1].loss],
             where="post",
             color="k",
             lw=1.5,
@@ -165,7 +169,7 @@ def save_curves(path: str | Path, results: list[InitViewResult], label: str = "L
             label="adversarial views",
         )
         axis.set_title(f"{result.init.name}")
-        axis.set_xlabel("evaluated views")
+        axis.set_xlabel("views scored" if screened else "evaluated views")
         axis.set_ylabel(label)
     for axis in list(axes.flat)[len(results) :]:
         axis.set_axis_off()

@@ -146,7 +146,8 @@ def read_trajectory(path: str | Path) -> dict[int, list[ViewRecord]]:
     evaluation order; their ``seconds``, which the file leaves out, are NaN."""
     with open(path, newline="") as file:
         rows = list(csv.DictReader(file))
-    parse = {"step": int, "restart": int, "verdict": str, "refreshed": lambda text: text == "True"}
+    flag = lambda text: text == "True"
+    parse = {"step": int, "restart": int, "verdict": str, "refreshed": flag, "screened": flag}
     records: dict[int, list[ViewRecord]] = {}
     for row in rows:
         values = {f.name: parse.get(f.name, float)(row[f.name]) for f in fields(ViewRecord) if f.name in row}
@@ -226,7 +227,7 @@ def _video_frames(view: InitViewResult, render: ViewRenderer, plan: PlanRaster) 
     at most :data:`_MAX_VIDEO_FRAMES`): image | depth | prediction | error and the plan with the
     camera and the path of the best views so far, with the step, L_depth and delta1 written above."""
     order = {id(r): position for position, r in enumerate(view.records)}
-    shown = [r for r in view.records if r.scale == 1.0]
+    shown = [r for r in view.records if r.scale == 1.0 and not r.screened]
     shown = shown[:: max(1, -(-len(shown) // _MAX_VIDEO_FRAMES))]
     incumbents = incumbent_path(view.records)
     frames = []
@@ -342,7 +343,7 @@ def _init_view_summary(index: int, view: InitViewResult, pictures: list[str]) ->
         },
         l_depth_gain=(view.top[0].l_depth - view.init_record.l_depth) if view.top else 0.0,
         anytime=[AnytimePoint(*point) for point in best_so_far(view.records)],
-        evaluations=len(view.records),
+        evaluations=view.budget.forward,
         invalid_views=sum(not r.valid for r in view.records),
         uninformative_views=sum(r.verdict == UNINFORMATIVE for r in view.records),
         guarded_steps=sum(r.guard_fraction < 1.0 for r in view.records),

@@ -19,7 +19,7 @@ from kadv._lazy import lazy_exports
 
 # loaded on first use: the pytest plugin reads the session settings without importing torch
 _EXPORTS = {
-    "DEFAULT_BUDGET": "kadv.testing.robustness",
+    "DEFAULT_BUDGET": "kadv.testing.options",
     "CheckSettings": "kadv.testing.session",
     "DEFAULT_RADII": "kadv.testing.profile",
     "InitViewOutcome": "kadv.testing.robustness",
@@ -39,9 +39,9 @@ _EXPORTS = {
 if TYPE_CHECKING:  # the same names, for type checkers and the API reference
     from kadv.testing.card import Scorecard, scorecard
     from kadv.testing.inputs import RobustnessInputError, scene
+    from kadv.testing.options import DEFAULT_BUDGET
     from kadv.testing.profile import DEFAULT_RADII, Profile, robustness_profile
     from kadv.testing.robustness import (
-        DEFAULT_BUDGET,
         InitViewOutcome,
         RobustnessResult,
         assert_viewpoint_robust,

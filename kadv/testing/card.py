@@ -10,9 +10,68 @@ from pathlib import Path
 import numpy as np
 
 from kadv.testing.inputs import RobustnessInputError
-from kadv.testing.profile import DEFAULT_RADII, Profile, robustness_profile, save_profile_panels
+from kadv.testing.profile import (
+    DEFAULT_RADII,
+    FAIL_BELOW,
+    TYPICAL_VIEWS,
+    Profile,
+    pool_worst_views,
+    profile_settings,
+    save_profile_panels,
+    save_worst_pictures,
+    seed_run,
+)
 
-__all__ = ["Scorecard", "scorecard"]
+__all__ = ["PairedDifference", "Scorecard", "paired_difference", "scorecard"]
+
+_AREAS = {"worst": "worst-case area", "typical": "typical area"}
+_UNITS = {"worst": "worst_scores", "typical": "scores"}  # a profile's per-seed areas
+_BOOTSTRAP_DRAWS = 4000
+
+
+@dataclass(frozen=True)
+class PairedDifference:
+    """The mean of paired differences a - b over units (probes and seeds) and its 95% bootstrap
+    interval (percentiles of the mean over resampled units).
+
+    Attributes:
+        mean: the mean difference.
+        low, high: the interval's ends.
+        units: the number of pairs.
+    """
+
+    mean: float
+    low: float
+    high: float
+    units: int
+
+    @property
+    def separated(self) -> bool:
+        """Whether the interval excludes 0: a and b differ beyond the units' spread."""
+        return self.low > 0 or self.high < 0
+
+
+def paired_difference(a: list[float], b: list[float], seed: int = 0) -> PairedDifference:
+    """a - b over paired units, with a 95% percentile bootstrap interval of the mean (deterministic
+    for ``seed``); a unit where either is NaN is left out.
+
+    Examples:
+        >>> d = paired_difference([0.9, 0.8, 0.85], [0.7, 0.75, 0.6])
+        >>> round(d.mean, 3), d.separated
+        (0.167, True)
+        >>> paired_difference([0.9, 0.7], [0.8, 0.8]).separated
+        False
+    """
+    if len(a) != len(b):
+        raise RobustnessInputError(f"paired_difference: {len(a)} units against {len(b)}; pair the same units")
+    differences = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
+    differences = differences[~np.isnan(differences)]
+    if len(differences) == 0:
+        return PairedDifference(float("nan"), float("nan"), float("nan"), 0)
+    picks = np.random.default_rng(seed).integers(0, len(differences), size=(_BOOTSTRAP_DRAWS, len(differences)))
+    means = differences[picks].mean(axis=1)
+    low, high = np.percentile(means, [2.5, 97.5])
+    return PairedDifference(float(differences.mean()), float(low), float(high), len(differences))
 
 
 @dataclass(frozen=True)
@@ -29,33 +88,59 @@ class Scorecard:
     probes: list[str]
     results: dict[str, dict[str, Profile]]
 
-    def seed_scores(self, model: str) -> list[float]:
-        """The model's score under each seed, the mean over the probes."""
-        return np.mean([self.results[probe][model].scores for probe in self.probes], axis=0).tolist()
+    def unit_scores(self, model: str, kind: str = "typical") -> list[float]:
+        """The model's area under its ``kind`` curve ("typical" or "worst") per probe and seed, in
+        the order of :attr:`probes` then seeds: the units two models are paired on (the same room,
+        init views and drawn views)."""
+        areas = "scores" if kind == "typical" else "worst_scores"
+        return [value for probe in self.probes for value in getattr(self.results[probe][model], areas)]
 
-    def ranking(self) -> str:
-        """``ranking: a (0.61) > b (0.55)``: the models by mean score, highest first; ``=`` joins
-        neighbours whose bands over the seeds (min to max) overlap: tied."""
-        bands = {model: self.seed_scores(model) for model in self.models}
-        order = sorted(self.models, key=lambda model: -float(np.mean(bands[model])))
-        text = f"ranking: {order[0]} ({np.mean(bands[order[0]]):.3f})"
+    def difference(self, a: str, b: str, kind: str = "typical") -> PairedDifference:
+        """``a``'s area minus ``b``'s, paired probe by probe and seed by seed, with its bootstrap interval."""
+        return paired_difference(self.unit_scores(a, kind), self.unit_scores(b, kind))
+
+    def ranking(self, kind: str = "typical") -> str:
+        """``ranking (typical area): a (0.61) > b (0.55)``: the models by mean area under their
+        ``kind`` curve, highest first; ``>`` only where the 95% bootstrap interval of the paired
+        difference between neighbours excludes 0, ``=`` (tied) otherwise."""
+        means = {model: float(np.mean(self.unit_scores(model, kind))) for model in self.models}
+        order = sorted(self.models, key=lambda model: -means[model])
+        text = f"ranking ({_AREAS[kind]}): {order[0]} ({means[order[0]]:.3f})"
         for better, worse in itertools.pairwise(order):
-            tied = min(bands[better]) <= max(bands[worse])
-            text += f" {'=' if tied else '>'} {worse} ({np.mean(bands[worse]):.3f})"
+            text += f" {'>' if self.difference(better, worse, kind).low > 0 else '='} {worse} ({means[worse]:.3f})"
         if len(order) > 1 and " = " in text:
-            text += "; '=': their scores' bands over the seeds overlap (tied)"
+            text += "; '=': the paired difference's 95% interval holds 0 (tied)"
         return text
 
+    def differences(self, kind: str = "typical") -> list[str]:
+        """One line per pair of models: the paired difference of their ``kind`` areas, its 95%
+        interval, and on how many probes alone the interval excludes 0."""
+        lines = []
+        for a, b in itertools.combinations(self.models, 2):
+            overall = self.difference(a, b, kind)
+            probes = sum(
+                paired_difference(
+                    getattr(self.results[p][a], _UNITS[kind]), getattr(self.results[p][b], _UNITS[kind])
+                ).separated
+                for p in self.probes
+            )
+            lines.append(
+                f"{a} - {b} ({_AREAS[kind]}): {overall.mean:+.3f} (95% {overall.low:+.3f} to {overall.high:+.3f}, "
+                f"{overall.units} probe-seed pairs); apart on {probes} of {len(self.probes)} probes"
+            )
+        return lines
+
     def markdown(self) -> str:
-        """Per probe and model: the worst delta1 at each radius, the failure rate at the largest,
-        the score (mean ± spread over the seeds); the models' mean scores; the ranking."""
+        """Per probe and model: the worst delta1 at each radius, the failure rate at the largest, the
+        worst-case area, the resilience and the typical area (mean ± spread over the seeds); the
+        models' means; the paired rankings under both areas and the differences behind them."""
         radii = self.results[self.probes[0]][self.models[0]].radii
         largest = f"{radii[-1][0]:g}°/{radii[-1][1]:g} m"
         lines = [
             "| probe | model | "
             + " | ".join(f"worst delta1 {d:g}°/{m:g} m" for d, m in radii)
-            + f" | failure rate {largest} | score (typical area) |",
-            "|---|---|" + "---|" * (len(radii) + 2),
+            + f" | failure rate {largest} | worst-case area | resilience | typical area |",
+            "|---|---|" + "---|" * (len(radii) + 4),
         ]
         for probe in self.probes:
             for model in self.models:
@@ -63,13 +148,21 @@ class Scorecard:
                 worst = " | ".join(f"{v:.3f}" for v in profile.worst)
                 lines.append(
                     f"| {probe} | {model} | {worst} | {profile.failure_rate[-1]:.0%} | "
+                    f"{profile.worst_score:.3f} ± {np.ptp(profile.worst_scores):.3f} | {profile.resilience:.3f} | "
                     f"{profile.score:.3f} ± {profile.score_spread:.3f} |"
                 )
+        blank = " | ".join([""] * (len(radii) + 1))
         for model in self.models:
-            scores = self.seed_scores(model)
-            blank = " | ".join([""] * (len(radii) + 1))
-            lines.append(f"| **mean** | {model} | {blank} | **{np.mean(scores):.3f} ± {np.ptp(scores):.3f}** |")
-        return "\n".join(lines) + "\n\n" + self.ranking()
+            worst, typical = self.unit_scores(model, "worst"), self.unit_scores(model, "typical")
+            resilience = np.mean([self.results[p][model].resilience for p in self.probes])
+            lines.append(
+                f"| **mean** | {model} | {blank} | **{np.mean(worst):.3f}** | **{resilience:.3f}** | "
+                f"**{np.mean(typical):.3f}** |"
+            )
+        rankings = [self.ranking("worst"), self.ranking("typical")]
+        if len(self.models) > 1:
+            rankings += self.differences("worst") + self.differences("typical")
+        return "\n".join(lines) + "\n\n" + "\n".join(rankings)
 
     def save_png(self, path: str | Path) -> Path:
         """One panel per probe: each model's worst (solid) and typical (dashed) delta1 against the
@@ -88,6 +181,9 @@ def scorecard(
     seeds=(0,),
     envelope="upright",
     radii=DEFAULT_RADII,
+    typical_views: int = TYPICAL_VIEWS,
+    fail_below: float = FAIL_BELOW,
+    pool: bool = True,
     progress: bool = False,
     **options,
 ) -> Scorecard:
@@ -98,7 +194,11 @@ def scorecard(
         models: what :func:`kadv.testing.viewpoint_robustness` takes as a model.
         probes: probe names (:data:`kadv.probes.PROBES`); None: all of them.
         seeds: the probes' and the searches' seeds.
-        envelope, radii: as :func:`kadv.testing.robustness_profile` takes them.
+        envelope, radii, typical_views, fail_below: as :func:`kadv.testing.robustness_profile`
+            takes them.
+        pool: score every model also at the worst views the other models' searches found (same
+            probe, seed and init views), so that each model's worst case is the worst over all the
+            searches (:func:`kadv.testing.profile.pool_worst_views`); False: each its own search's.
         progress: print a line per probe, model and seed as each finishes.
         options: more of :func:`kadv.testing.robustness_profile`'s arguments (``budget_evaluations``,
             ``artifacts``, ``lighting``, ...).
@@ -109,7 +209,6 @@ def scorecard(
     from kadv.models import DepthModel
     from kadv.scenes.probes import PROBES, probe_scene
     from kadv.testing.inputs import resolve_model
-    from kadv.testing.profile import check_radii
 
     probes = list(PROBES) if probes is None else list(probes)
     unknown = [name for name in probes if name not in PROBES]
@@ -120,23 +219,28 @@ def scorecard(
     seeds = tuple(seeds)
     if not seeds:
         raise RobustnessInputError("seeds is empty: give at least one seed")
-    radii = check_radii(radii)
     loaded: list[DepthModel] = [resolve_model(model) for model in models]
     names = [model.name for model in loaded]
     if len(set(names)) != len(names):
         raise RobustnessInputError(f"models: each must have its own name, got {names}")
+    settings = profile_settings(radii, envelope, typical_views, fail_below, options, "scorecard")
     results: dict[str, dict[str, Profile]] = {}
     for probe in probes:
-        runs: dict[str, list[Profile]] = {name: [] for name in names}
+        profiles: dict[str, list[Profile]] = {name: [] for name in names}
         for seed in seeds:
             built = probe_scene(probe, seed)
-            for model in loaded:
-                profile = robustness_profile(
-                    model, built, radii=radii, envelope=envelope, seeds=(seed,), progress=False, **options
-                )
-                runs[model.name].append(profile)
+            runs = [seed_run(model, built, settings, seed) for model in loaded]
+            if pool and len(runs) > 1:
+                pool_worst_views(runs, settings.radii)
+            for model, run in zip(loaded, runs):
+                profile = settings.profile([run], save_worst_pictures(run, settings.radii))
+                profiles[model.name].append(profile)
                 if progress:
                     worst = " ".join(f"{v:.3f}" for v in profile.worst)
-                    print(f"{probe} x {model.name}, seed {seed}: worst {worst}, score {profile.score:.3f}", flush=True)
-        results[probe] = {name: Profile.merge(profiles) for name, profiles in runs.items()}
+                    print(
+                        f"{probe} x {model.name}, seed {seed}: worst {worst}, worst-case area "
+                        f"{profile.worst_score:.3f}, typical area {profile.score:.3f}",
+                        flush=True,
+                    )
+        results[probe] = {name: Profile.merge(profiles[name]) for name in names}
     return Scorecard(names, probes, results)

@@ -21,20 +21,29 @@ import numpy as np
 import torch
 
 from kadv.testing.inputs import RobustnessInputError
-from kadv.testing.robustness import CheckOptions, setup, worst_record
+from kadv.testing.options import CheckOptions, Setup, check_radii, setup, worst_record
 
 __all__ = [
     "DEFAULT_RADII",
     "FAIL_BELOW",
     "PROFILE_KEYS",
     "TYPICAL_VIEWS",
+    "WARM_STARTS",
     "Profile",
+    "ProfileSettings",
     "SeedProfile",
-    "check_radii",
+    "SeedRun",
     "curve_area",
+    "pool_worst_views",
+    "profile_settings",
     "profile_views",
     "robustness_profile",
     "save_profile_panels",
+    "save_worst_pictures",
+    "search_radii",
+    "seed_run",
+    "warm_starts",
+    "worst_views",
 ]
 
 DEFAULT_RADII = ((5.0, 0.1), (15.0, 0.3), (45.0, 1.0))  # (degrees, metres), nested
@@ -42,6 +51,7 @@ DEFAULT_RADII = ((5.0, 0.1), (15.0, 0.3), (45.0, 1.0))  # (degrees, metres), nes
 # and under which a noisier model never fails less (benchmarks/ranking.py --parts threshold)
 FAIL_BELOW = 0.6
 TYPICAL_VIEWS = 16  # uniform draws per init view and radius
+WARM_STARTS = 2  # the worst separated views within the smaller radii that a search at the next starts from
 _DRAW_ROUNDS = 32  # rounds of 4 x typical_views draws at most, for the envelope to keep enough
 # what a profile takes beyond CheckOptions (whose radius and seed it replaces)
 PROFILE_KEYS = ("radii", "envelope", "seeds", "typical_views", "fail_below")
@@ -173,10 +183,23 @@ class Profile:
         return float(np.mean(self.scores))
 
     @property
+    def worst_scores(self) -> list[float]:
+        """The area under the worst-case curve under each seed (see :attr:`worst_score`)."""
+        return [curve_area(init, worst) for init, worst in zip(self.delta1_init, self.worst_by_seed)]
+
+    @property
     def worst_score(self) -> float:
-        """The same area under the worst-case curve, mean over seeds: the study's adversarial figure,
-        which falls to the floor for most models and varies with the search."""
-        return float(np.mean([curve_area(i, w) for i, w in zip(self.delta1_init, self.worst_by_seed)]))
+        """In [0, 1]: the same area under the worst-case curve, mean over seeds: how far the camera
+        must move, within the envelope, before the worst view the search finds fails the model (the
+        study's adversarial figure, as a curve over the move's size)."""
+        return float(np.mean(self.worst_scores))
+
+    @property
+    def resilience(self) -> float:
+        """The worst-case area over the init views' delta1, mean over seeds: the share of its
+        accuracy at the init views that the model keeps against the worst views (as RoboDepth's mRR
+        divides by clean accuracy); 1: no move within the radii costs it anything."""
+        return float(np.mean([w / i if i > 0 else math.nan for w, i in zip(self.worst_scores, self.delta1_init)]))
 
     @property
     def score_spread(self) -> float:
@@ -201,7 +224,8 @@ class Profile:
             )
         lines += [
             "",
-            f"worst-case area {self.worst_score:.3f}",
+            f"worst-case area {self.worst_score:.3f} ± {np.ptp(self.worst_scores):.3f}, "
+            f"resilience {self.resilience:.3f} (worst-case area / init delta1)",
             f"score {self.score:.3f} ± {self.score_spread:.3f} (typical area; spread over seeds)",
         ]
         return "\n".join(lines)
@@ -217,7 +241,9 @@ class Profile:
             failure_rate=self.failure_rate,
             score=self.score,
             score_spread=self.score_spread,
+            worst_scores=self.worst_scores,
             worst_score=self.worst_score,
+            resilience=self.resilience,
         )
         return out
 
@@ -311,26 +337,6 @@ def curve_area(init: float, values: list[float]) -> float:
     return float(np.mean([(a + b) / 2 for a, b in itertools.pairwise(curve)]))
 
 
-def check_radii(radii) -> tuple[tuple[float, float], ...]:
-    """The radii as (degrees, metres) pairs, or :class:`RobustnessInputError` naming what is wrong:
-    each positive, both increasing (nested: each radius holds the one before)."""
-    try:
-        pairs = tuple((float(d), float(m)) for d, m in radii)
-    except (TypeError, ValueError):
-        raise RobustnessInputError(f"radii must be (degrees, metres) pairs, got {radii!r}") from None
-    if not pairs:
-        raise RobustnessInputError("radii is empty: give at least one (degrees, metres) pair")
-    for d, m in pairs:
-        if not (math.isfinite(d) and math.isfinite(m) and d > 0 and m > 0):
-            raise RobustnessInputError(f"radii: each radius must be positive, got ({d:g}, {m:g})")
-    for (d0, m0), (d1, m1) in itertools.pairwise(pairs):
-        if d1 < d0 or m1 < m0 or (d1, m1) == (d0, m0):
-            raise RobustnessInputError(
-                f"radii must increase (each holds the one before), got ({d0:g}, {m0:g}) then ({d1:g}, {m1:g})"
-            )
-    return pairs
-
-
 def _wilson(failures: int, count: int) -> tuple[float, float]:
     if count == 0:
         return (math.nan, math.nan)
@@ -379,19 +385,104 @@ class SeedProfile:
 
     Attributes:
         delta1_init: mean delta1 at the init views.
-        worst, typical, failure: per radius, as :class:`Profile`'s ``*_by_seed`` rows.
+        typical, failure: per radius, as :class:`Profile`'s ``*_by_seed`` rows.
         draws: per radius, the delta1 of every valid drawn view.
-        worst_views: per radius, the (init view, record) of the worst view found so far.
+        found: per radius and init view, the (init view, record) of the worst view found within
+            that radius (by its own search, or scored at views other searches found: :meth:`pool`).
         results: per radius, the attack's result within it.
     """
 
     delta1_init: float
-    worst: list[float]
     typical: list[float]
     failure: list[float]
     draws: list[list[float]]
-    worst_views: list[tuple]
+    found: list[list[tuple]]
     results: list
+
+    @property
+    def carried(self) -> list[list[tuple]]:
+        """Per radius and init view, the worst view within that radius or a smaller one (nested)."""
+        rows, best = [], list(self.found[0])
+        for row in self.found:
+            best = [b if b[1].delta1 < f[1].delta1 else f for b, f in zip(best, row)]
+            rows.append(best)
+        return rows
+
+    @property
+    def worst(self) -> list[float]:
+        """Per radius, the mean over init views of the worst delta1 within it: never rising."""
+        return [float(np.mean([record.delta1 for _, record in row])) for row in self.carried]
+
+    @property
+    def worst_views(self) -> list[tuple]:
+        """Per radius, the (init view, record) of the worst view within it, over the init views."""
+        return [min(row, key=lambda pair: pair[1].delta1) for row in self.carried]
+
+    def pool(self, radius: int, view: int, records: list) -> None:
+        """Take ``records`` (this model's scores at views found by other searches within
+        ``radius`` from init view ``view``) into account: the worst rankable one lowers the view's
+        worst there if it is lower."""
+        rankable = [r for r in records if r.rankable]
+        if rankable:
+            init, current = self.found[radius][view]
+            lowest = worst_record(rankable)
+            if lowest.delta1 < current.delta1:
+                self.found[radius][view] = (init, lowest)
+
+
+def worst_views(records: list, count: int, min_distance: float, min_angle_deg: float) -> list:
+    """Up to ``count`` rankable records of lowest delta1 (the highest loss among ties), each
+    separated from those chosen before it: the views a larger radius's search starts from."""
+    from kadv.attack.records import separated
+
+    chosen: list = []
+    for record in sorted((r for r in records if r.rankable), key=lambda r: (r.delta1, -r.loss)):
+        if len(chosen) == count:
+            break
+        if all(separated(record, other, min_distance, min_angle_deg) for other in chosen):
+            chosen.append(record)
+    return chosen
+
+
+def search_radii(
+    objective,
+    differentiable,
+    views: list,
+    size: tuple[int, int],
+    config,
+    radii: tuple[tuple[float, float], ...],
+    seed: int,
+    progress: bool = False,
+    searched: dict[int, object] | None = None,
+    warm: int = WARM_STARTS,
+) -> list:
+    """The search ``config`` within each radius, smallest first (its bounds set to the radius): each
+    init view's search at a radius gets the ``warm`` worst separated views found within the smaller
+    ones as warm starts (they lie within it; :class:`~kadv.attack.SearchContext`'s ``starts``).
+    ``searched`` holds results already found at some radii (by index), used instead of searching.
+    Returns one :class:`~kadv.attack.AttackResult` per radius."""
+    from kadv.attack import attack
+
+    results: list = []
+    for k, (degrees, metres) in enumerate(radii):
+        within = dataclasses.replace(config, max_angle_deg=degrees, max_distance=metres)
+        result = (searched or {}).get(k)
+        if result is None:
+            starts = warm_starts(results, len(views), warm, config) if results else None
+            result = attack(objective, differentiable, views, *size, within, seed, progress=progress, starts=starts)
+        results.append(result)
+    return results
+
+
+def warm_starts(results: list, views: int, count: int, config) -> dict[int, torch.Tensor]:
+    """Per init view, the pose parameters (N, 6) of the ``count`` worst separated views that the
+    attack ``results`` found from it."""
+    starts = {}
+    for index in range(views):
+        records = [r for result in results for r in result.views[index].records]
+        chosen = worst_views(records, count, config.min_separation, config.min_separation_deg)
+        starts[index] = torch.tensor([r.params for r in chosen], dtype=torch.float64).reshape(-1, 6)
+    return starts
 
 
 def profile_views(
@@ -408,32 +499,23 @@ def profile_views(
     searched: dict[int, object] | None = None,
 ) -> SeedProfile:
     """One seed's profile of the init ``views``: per radius, the search ``config`` (its bounds set to
-    the radius) and ``typical_views`` uniform draws per init view; the worst view carried from
-    radius to radius (the radii are nested). ``searched`` holds results already found at some radii
-    (by index), which are used instead of searching again."""
-    from kadv.attack import attack
-
-    carried = [1.0] * len(views)  # the worst delta1 so far per init view: the radii are nested
-    carried_views: list = [None] * len(views)
-    out = SeedProfile(math.nan, [], [], [], [[] for _ in radii], [], [])
-    for k, (degrees, metres) in enumerate(radii):
+    the radius, warm-started from the smaller radii: :func:`search_radii`) and ``typical_views``
+    uniform draws per init view; the worst view carried from radius to radius (the radii are
+    nested). ``searched`` holds results already found at some radii (by index), which are used
+    instead of searching again."""
+    results = search_radii(objective, differentiable, views, size, config, radii, seed, progress, searched)
+    out = SeedProfile(math.nan, [], [], [[] for _ in radii], [], [])
+    for k, ((degrees, metres), result) in enumerate(zip(radii, results)):
         within = dataclasses.replace(config, max_angle_deg=degrees, max_distance=metres)
-        result = (searched or {}).get(k)
-        if result is None:
-            result = attack(objective, differentiable, views, *size, within, seed, progress=progress)
         typical: list[float] = []
         for i, view in enumerate(result.views):
-            worst = worst_record(view.records)
-            if worst.delta1 <= carried[i]:
-                carried[i], carried_views[i] = worst.delta1, (view.init, worst)
             typical += _typical(objective, differentiable, view.init, size, within, seed, i, typical_views)
         if k == 0:
             out.delta1_init = float(np.mean([v.init_record.delta1 for v in result.views]))
-        out.worst.append(float(np.mean(carried)))
+        out.found.append([(view.init, worst_record(view.records)) for view in result.views])
         out.typical.append(float(np.mean(typical)) if typical else math.nan)
         out.failure.append(float(np.mean([d < fail_below for d in typical])) if typical else math.nan)
         out.draws[k] = typical
-        out.worst_views.append(carried_views[int(np.argmin(carried))])
         out.results.append(result)
     return out
 
@@ -467,52 +549,135 @@ def robustness_profile(
     Raises:
         RobustnessInputError: bad radii, seeds, envelope, model, scene or setting, in one line.
     """
-    from kadv.attack import AttackConfig
-    from kadv.attack.init_views import InitViewError, fit_into_envelope
-    from kadv.penalties import get_envelope
-    from kadv.report.run import save_view_picture
-
-    taken = sorted({"radius", "seed"} & set(options))
-    if taken:
-        raise RobustnessInputError(f"robustness_profile takes radii and seeds, not {' or '.join(taken)}")
-    checked = CheckOptions.of(options, "robustness_profile")
-    radii = check_radii(radii)
+    settings = profile_settings(radii, envelope, typical_views, fail_below, options, "robustness_profile")
     seeds = tuple(seeds)
     if not seeds or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds):
         raise RobustnessInputError(f"seeds must be one or more integers >= 0, got {list(seeds)}")
+    runs = [seed_run(model, scene, settings, seed) for seed in seeds]
+    return settings.profile(runs, save_worst_pictures(runs[0], settings.radii))
+
+
+@dataclass(frozen=True)
+class ProfileSettings:
+    """How a profile searches and draws (checked): the check's options, the radii, the search and
+    its envelope, the typical views per init view and radius, the failure threshold."""
+
+    checked: CheckOptions
+    radii: tuple[tuple[float, float], ...]
+    config: object
+    typical_views: int
+    fail_below: float
+
+    def profile(self, runs: list[SeedRun], pictures: list[str]) -> Profile:
+        """The :class:`Profile` of one model's seed runs."""
+        built = runs[0].built
+        names = (built.model_name, built.scene_name, self.config.envelope.name)
+        seeds = tuple(run.seed for run in runs)
+        return Profile.of(*names, self.radii, seeds, [run.seeded for run in runs], self.fail_below, pictures)
+
+
+def profile_settings(radii, envelope, typical_views, fail_below, options: dict, taker: str) -> ProfileSettings:
+    """:class:`ProfileSettings` from a profile's arguments, or :class:`RobustnessInputError` naming
+    the bad one (``taker``: the function that was given them)."""
+    from kadv.attack import AttackConfig
+    from kadv.penalties import get_envelope
+
+    taken = sorted({"radius", "seed"} & set(options))
+    if taken:
+        raise RobustnessInputError(f"{taker} takes radii and seeds, not {' or '.join(taken)}")
+    checked = CheckOptions.of(options, taker)
+    radii = check_radii(radii)
     if not (isinstance(typical_views, int) and typical_views >= 2):
         raise RobustnessInputError(f"typical_views must be an integer >= 2, got {typical_views!r}")
     if not (isinstance(fail_below, (int, float)) and 0 < fail_below <= 1):
         raise RobustnessInputError(f"fail_below must be in (0, 1], got {fail_below!r}")
     try:
         bounds = get_envelope(envelope)
+        config = AttackConfig(checked.method, envelope=bounds)
     except ValueError as error:
         raise RobustnessInputError(str(error)) from None
-    config = AttackConfig(checked.method, envelope=bounds)
-    seed_profiles, pictures = [], []
-    for run, seed in enumerate(seeds):
-        built = setup(model, scene, dataclasses.replace(checked, seed=seed))
-        try:
-            views = [fit_into_envelope(built.renderer, v, bounds, built.penalty.margin) for v in built.views]
-        except InitViewError as error:
-            raise RobustnessInputError(f"scene {built.scene_name!r}: {error}") from None
-        seeded = profile_views(
-            built.objective,
-            built.differentiable,
-            views,
-            built.size,
-            dataclasses.replace(config, budget_evaluations=built.budget),
-            radii,
-            seed,
-            typical_views,
-            fail_below,
-            checked.progress,
-        )
-        seed_profiles.append(seeded)
-        if run == 0:
-            for k, ((degrees, metres), (init, record)) in enumerate(zip(radii, seeded.worst_views)):
-                label = f"worst within {degrees:g}°, {metres:g} m"
-                path = built.folder / f"{built.stem}-{bounds.name}-radius{k}.png"
-                pictures.append(str(save_view_picture(path, built.render, init, record, label)))
-    names = (built.model_name, built.scene_name, bounds.name)
-    return Profile.of(*names, radii, seeds, seed_profiles, fail_below, pictures)
+    return ProfileSettings(checked, radii, config, typical_views, float(fail_below))
+
+
+@dataclass
+class SeedRun:
+    """One model's profile run under one seed: what it searched with and what it found."""
+
+    seed: int
+    built: Setup
+    views: list
+    config: object
+    seeded: SeedProfile
+
+
+def seed_run(model, scene, settings: ProfileSettings, seed: int) -> SeedRun:
+    """The :class:`SeedRun` of ``model`` on ``scene`` under ``seed``, or
+    :class:`RobustnessInputError` in one line."""
+    from kadv.attack.init_views import InitViewError, fit_into_envelope
+
+    built = setup(model, scene, dataclasses.replace(settings.checked, seed=seed))
+    try:
+        config = dataclasses.replace(settings.config, budget_evaluations=built.budget)
+        views = [fit_into_envelope(built.renderer, v, config.envelope, built.penalty.margin) for v in built.views]
+    except InitViewError as error:
+        raise RobustnessInputError(f"scene {built.scene_name!r}: {error}") from None
+    except ValueError as error:  # a budget too small for the method
+        raise RobustnessInputError(f"budget_evaluations={built.budget}: {error}") from None
+    seeded = profile_views(
+        built.objective,
+        built.differentiable,
+        views,
+        built.size,
+        config,
+        settings.radii,
+        seed,
+        settings.typical_views,
+        settings.fail_below,
+        settings.checked.progress,
+    )
+    return SeedRun(seed, built, views, config, seeded)
+
+
+def save_worst_pictures(run: SeedRun, radii) -> list[str]:
+    """The four-panel picture of the worst view found within each radius, in the run's folder."""
+    from kadv.report.run import save_view_picture
+
+    pictures = []
+    for k, ((degrees, metres), (init, record)) in enumerate(zip(radii, run.seeded.worst_views)):
+        label = f"worst within {degrees:g}°, {metres:g} m"
+        path = run.built.folder / f"{run.built.stem}-{run.config.envelope.name}-radius{k}.png"
+        pictures.append(str(save_view_picture(path, run.built.render, init, record, label)))
+    return pictures
+
+
+def pool_worst_views(runs: list[SeedRun], radii, count: int = WARM_STARTS) -> int:
+    """Score every run's model at the ``count`` worst views each other run's search found, per
+    radius and init view, and lower its worst there where one of them is worse for it (the worst
+    case over all the searches: common views for every model, as RobustBench pools its attacks).
+    The runs must share their init views (the same scene and seed). Returns the views scored."""
+    from kadv.attack import SearchContext
+
+    scored = 0
+    for run in runs:
+        for k, (degrees, metres) in enumerate(radii):
+            within = dataclasses.replace(run.config, max_angle_deg=degrees, max_distance=metres)
+            for i, init in enumerate(run.views):
+                others = [
+                    record
+                    for other in runs
+                    if other is not run and torch.equal(other.views[i].world_T_cam, init.world_T_cam)
+                    for record in worst_views(
+                        other.seeded.results[k].views[i].records,
+                        count,
+                        within.min_separation,
+                        within.min_separation_deg,
+                    )
+                ]
+                if not others:
+                    continue
+                b = run.built
+                context = SearchContext(b.objective, b.differentiable, init, *b.size, within)
+                params = torch.tensor([r.params for r in others], dtype=torch.float64)
+                run.seeded.pool(k, i, context.evaluate(0, params))
+                scored += len(others)
+    return scored

@@ -8,29 +8,23 @@ its four-panel picture. :func:`assert_viewpoint_robust` turns it into a test.
 
 from __future__ import annotations
 
-import tempfile
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from kadv.testing.inputs import RobustnessInputError, resolve_model, resolve_scene
+from kadv.testing.inputs import RobustnessInputError
+from kadv.testing.options import DEFAULT_BUDGET, CheckOptions, check_radii, setup, worst_record
 from kadv.testing.session import current
 
 __all__ = [
     "DEFAULT_BUDGET",
-    "CheckOptions",
     "InitViewOutcome",
     "RobustnessResult",
-    "Setup",
     "assert_viewpoint_robust",
-    "setup",
     "viewpoint_robustness",
-    "worst_record",
 ]
-
-DEFAULT_BUDGET = 48  # model evaluations per init view, the init view's included
 
 
 @dataclass(frozen=True)
@@ -120,129 +114,6 @@ class RobustnessResult:
         return "\n".join(lines)
 
 
-def worst_record(records: list) -> object:
-    """The valid full-size record of lowest delta1 (the highest loss among ties)."""
-    rankable = [r for r in records if r.rankable] or records[:1]
-    return min(rankable, key=lambda r: (r.delta1, -r.loss))
-
-
-@dataclass(frozen=True)
-class CheckOptions:
-    """How a check searches (:func:`viewpoint_robustness`'s keyword arguments).
-
-    Attributes:
-        init_count: init views: the scene's cameras first, then sampled views the model gets right.
-        budget_evaluations: model evaluations per init view (scaled by ``--kadv-budget`` under pytest).
-        seed: the seed of the init views and the search.
-        loss: the attacked loss (``"delta1"``, ``"absrel"``, ``"ssim"``, ``"perceptual"``).
-        size: (height, width) of the renders.
-        method: the search method (:data:`kadv.attack.METHODS`).
-        lighting: ``"baked"`` (the commands' default; baked once per scene and cached) or ``"direct"``.
-        radius: (degrees, metres): how far the camera may turn and move from each init view.
-        envelope: the poses the camera may take (:mod:`kadv.penalties.envelope`): a preset's name
-            (``free``, ``upright``, ``handheld``, ``robot``) or an :class:`kadv.penalties.Envelope`.
-        artifacts: the folder for the worst views' pictures; None: the pytest plugin's folder for
-            this test, else a new temporary folder.
-        progress: show progress bars.
-    """
-
-    init_count: int = 2
-    budget_evaluations: int = DEFAULT_BUDGET
-    seed: int = 0
-    loss: str = "delta1"
-    size: tuple[int, int] = (96, 128)
-    method: str = "hybrid"
-    lighting: str = "baked"
-    radius: tuple[float, float] = (45.0, 1.0)
-    envelope: object = "free"
-    artifacts: str | Path | None = None
-    progress: bool = False
-
-    @classmethod
-    def of(cls, options: dict, taker: str) -> CheckOptions:
-        """The options from keyword arguments, or :class:`RobustnessInputError` naming an unknown one."""
-        unknown = sorted(set(options) - {f.name for f in fields(cls)})
-        if unknown:
-            raise RobustnessInputError(f"{taker} takes no option {', '.join(unknown)}")
-        return cls(**options)
-
-
-@dataclass
-class Setup:
-    """What a robustness check searches with: the scene's renderers, the objective, the init views,
-    and where and how the worst views' pictures go."""
-
-    model_name: str
-    scene_name: str
-    renderer: object
-    differentiable: object
-    objective: object
-    penalty: object
-    views: list
-    size: tuple[int, int]
-    budget: int
-    folder: Path
-    stem: str
-    render: object
-
-
-def setup(model, scene, options: CheckOptions) -> Setup:
-    """The :class:`Setup` of a check, or :class:`RobustnessInputError` in one line."""
-    from kadv.attack import (
-        InitViewConfig,
-        InitViewError,
-        Objective,
-        PenaltyConfig,
-        check_init_views,
-        file_init_views,
-        sample_init_views,
-    )
-    from kadv.losses import depth_loss
-    from kadv.render import DifferentiableRenderer, ExactRenderer, Shading
-    from kadv.report.run import ViewRenderer
-
-    init_count, budget_evaluations = options.init_count, options.budget_evaluations
-    if isinstance(init_count, bool) or not isinstance(init_count, int) or init_count < 1:
-        raise RobustnessInputError(f"init_count must be an integer >= 1, got {init_count!r}")
-    if isinstance(budget_evaluations, bool) or not isinstance(budget_evaluations, int) or budget_evaluations < 2:
-        raise RobustnessInputError(f"budget_evaluations must be an integer >= 2, got {budget_evaluations!r}")
-    settings = current()
-    budget = max(2, round(budget_evaluations * settings.budget_factor))
-    height, width = options.size
-    depth_model = resolve_model(model)
-    built = resolve_scene(scene)
-    try:
-        renderer = ExactRenderer(built, Shading(lighting=options.lighting), progress=options.progress)
-        penalty = PenaltyConfig()
-        objective = Objective(depth_model, depth_loss(options.loss), renderer, penalty)
-        views = file_init_views(renderer, penalty.margin)[:init_count]
-        views += sample_init_views(
-            renderer, depth_model, init_count - len(views), options.seed, InitViewConfig(), penalty, height, width
-        )
-        check_init_views(renderer, views, penalty, height, width)
-    except InitViewError as error:
-        raise RobustnessInputError(f"scene {built.name!r}: {error}") from error
-    except ValueError as error:
-        raise RobustnessInputError(str(error)) from error
-    folder = Path(options.artifacts) if options.artifacts is not None else settings.artifacts
-    if folder is None:
-        folder = Path(tempfile.mkdtemp(prefix="kadv-"))
-    return Setup(
-        depth_model.name,
-        built.name,
-        renderer,
-        DifferentiableRenderer(renderer),
-        objective,
-        penalty,
-        views,
-        (height, width),
-        budget,
-        folder,
-        f"{_slug(depth_model.name)}-{_slug(built.name)}-seed{options.seed}",
-        ViewRenderer(objective, height, width, supersample=2),
-    )
-
-
 def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
     """Search for views near a scene's init views where ``model`` fails, deterministically for its seed.
 
@@ -261,7 +132,6 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
     from kadv.attack import AttackConfig, InitViewError, attack
     from kadv.geometry import yaw_pitch_roll
     from kadv.report.run import save_view_picture
-    from kadv.testing.profile import check_radii
 
     checked = CheckOptions.of(options, "viewpoint_robustness")
     ((degrees, metres),) = check_radii([checked.radius])
@@ -307,7 +177,7 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
                 abs_rel_worst=worst.abs_rel,
                 centre=tuple(pose[:3, 3].tolist()),
                 angles_deg=tuple(torch.rad2deg(yaw_pitch_roll(pose[:3, :3].double())).tolist()),
-                evaluations=len(view.records),
+                evaluations=view.budget.forward,
                 picture=picture,
                 world_T_cam=pose.tolist(),
             )
@@ -321,10 +191,6 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
         config.envelope.name,
         (degrees, metres),
     )
-
-
-def _slug(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)[:80]
 
 
 def assert_viewpoint_robust(

@@ -227,7 +227,15 @@ BAD_INPUTS = [
     ("kadv-attack", ["scene=file", "scene.path={corrupt}"], "corrupt.xml"),
     ("kadv-attack", ["attack=gradient", "attack.gradient.steps=-3"], "attack.gradient.steps"),
     ("kadv-attack", ["attack.method=adam"], "attack.method must be one of"),
-    ("kadv-attack", ["attack.hybrid.screen_scale=2"], "attack.hybrid.screen_scale must be in (0, 1], got 2"),
+    (
+        "kadv-attack",
+        ["attack=hybrid", "attack.hybrid.screen_scale=2"],
+        "attack.hybrid.screen_scale must be in (0, 1], got 2",
+    ),
+    ("kadv-attack", ["attack.halving.screen_factor=-1"], "attack.halving.screen_factor must be >= 0, got -1"),
+    ("kadv-attack", ["attack.halving.refine=adam"], "attack.halving.refine must be 'gradient' or 'local', got 'adam'"),
+    ("kadv-attack", ["attack.budget_evaluations=4"], "attack.budget_evaluations must be at least 5 for attack.halving"),
+    ("kadv-attack", ["attack.halving.screen_supersample=2"], "attack.halving.screen_supersample must be below render"),
     ("kadv-attack", ["loss=delta1", "loss.temperature=0"], "loss.temperature must be positive, got 0"),
     ("kadv-attack", ["loss.kind=rmse"], "loss.kind must be one of perceptual, ssim, absrel, delta1, got 'rmse'"),
     # a key the composed config lacks: Hydra's own message is five lines and exit 1

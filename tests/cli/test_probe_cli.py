@@ -11,11 +11,11 @@ from kadv.cli.probe import main
 
 def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_path: Path, capsys) -> None:
     """``hydra.run.dir=`` names the output folder as ``out=`` does."""
-    main(["model=kadv_tiny", "probes=window,stairs", "budget=4", "lighting=direct", f"hydra.run.dir={tmp_path}"])
+    main(["model=kadv_tiny", "probes=window,stairs", "budget=5", "lighting=direct", f"hydra.run.dir={tmp_path}"])
     printed = capsys.readouterr().out
     assert "| probe | model | worst delta1 5°/0.1 m | worst delta1 15°/0.3 m | worst delta1 45°/1 m |" in printed
     assert "| window | kadv_tiny | " in printed and "| stairs | kadv_tiny | " in printed
-    assert "\nranking: kadv_tiny (" in printed
+    assert "\nranking (worst-case area): kadv_tiny (" in printed and "\nranking (typical area): kadv_tiny (" in printed
     assert (tmp_path / "scorecard.md").read_text().strip() in printed
     assert (tmp_path / "scorecard.png").stat().st_size > 10_000
     # the worst view at each of the three radii, per probe, in the upright envelope by default
@@ -29,6 +29,7 @@ def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_pat
         ("model=", "scorecard needs at least one model"),
         ("model=no_such_model", "unknown model 'no_such_model': not a preset"),
         ("budget=1", "budget must be an integer >= 2, got 1"),
+        ("budget=4", "budget=4 is too small for the default search: attack.budget_evaluations must be at least 5"),
         ("seed=x", "seed must be an integer >= 0, got 'x'"),
         ("seeds=", "seeds is empty: give one or more integers >= 0"),
         ("seeds=0,-1", "seeds must be an integer >= 0, got -1"),

@@ -94,8 +94,9 @@ def test_budget(kadv_scene, kadv_artifacts, request):
     for factor in ("1", "2"):
         pytester.runpytest("-p", "no:cacheprovider", "--kadv-budget", factor).assert_outcomes(passed=1)
         runs[factor] = json.loads((pytester.path / f"budget-{factor}.json").read_text())
-    assert runs["1"][0][:2] == [8, 8]
-    assert runs["2"][0][:2] == [16, 16]
+    # the budget scaled, and spent but for what a batch of two refined lanes may leave
+    assert runs["1"][0][0] == 8 and 8 - 1 <= runs["1"][0][1] <= 8
+    assert runs["2"][0][0] == 16 and 16 - 1 <= runs["2"][0][1] <= 16
     assert runs["1"][0] == runs["1"][1] and runs["2"][0] == runs["2"][1], "the same seed gives the same delta1 twice"
 
 

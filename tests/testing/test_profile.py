@@ -5,11 +5,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from kadv.testing import Profile, RobustnessInputError, assert_viewpoint_robust, robustness_profile, scene
+from kadv.testing.options import check_radii
 from kadv.testing.plugin import _summary_line
-from kadv.testing.profile import check_radii
 from kadv.testing.session import settings
 
 # two small radii, one init view, few views: the profile's arithmetic is the same at any budget
@@ -51,6 +52,9 @@ def test_the_score_is_the_mean_trapezoid_under_the_typical_curve_from_the_init_v
     assert profile.worst == pytest.approx([0.75, 0.45, 0.05]) and profile.failure_rate == pytest.approx([0, 0.05, 0.3])
     perfect = _profile(delta1_init=[1.0, 1.0], typical_by_seed=[[1.0] * 3] * 2)
     assert perfect.score == 1.0 and perfect.score_spread == 0.0
+    # the resilience: the worst-case area over the init views' delta1, per seed, mean
+    assert profile.worst_scores == pytest.approx([1.7 / 3, 1.6 / 3])
+    assert profile.resilience == pytest.approx(((1.7 / 3) / 0.9 + (1.6 / 3) / 0.8) / 2)
     table = profile.markdown()
     # the draws' intervals: 0.8 ± 1.96 * 0.0816 / 2; Wilson's for 0 of 4 and 1 of 4 failed
     assert "| 15°, 0.3 m | 0.450 | 0.800 (0.720-0.880) | 5% (0%-49%) |" in table
@@ -58,7 +62,10 @@ def test_the_score_is_the_mean_trapezoid_under_the_typical_curve_from_the_init_v
     merged = Profile.merge([profile, profile])
     assert merged.seeds == (0, 1, 0, 1) and merged.score == pytest.approx(profile.score)
     assert len(merged.draws[0]) == 8
-    assert table.endswith("worst-case area 0.550\nscore 0.800 ± 0.067 (typical area; spread over seeds)")
+    assert table.endswith(
+        "worst-case area 0.550 ± 0.033, resilience 0.648 (worst-case area / init delta1)\n"
+        "score 0.800 ± 0.067 (typical area; spread over seeds)"
+    )
     assert profile.to_dict()["score"] == pytest.approx(profile.score)
 
 
@@ -72,6 +79,27 @@ def test_a_profile_never_rises_with_the_radius_and_repeats_for_its_seed(tmp_path
     assert all(0 <= v <= 1 for v in [*first.typical, *first.failure_rate]) and 0 <= first.score <= 1
     assert first.envelope == "upright" and len(first.pictures) == 2 and Path(first.pictures[1]).is_file()
     assert first.save_png(tmp_path / "profile.png").stat().st_size > 0
+
+
+def test_each_radius_is_searched_from_the_worst_views_of_the_smaller_ones() -> None:
+    from kadv.attack import AttackConfig
+    from kadv.testing.options import CheckOptions, setup
+    from kadv.testing.profile import search_radii, worst_views
+
+    built = setup("kadv_tiny", "box_room", CheckOptions(init_count=1, size=(24, 32), lighting="direct"))
+    config = AttackConfig(budget_evaluations=8, envelope="upright")
+    radii = ((5.0, 0.1), (15.0, 0.3), (30.0, 0.6))
+    results = search_radii(built.objective, built.differentiable, built.views, built.size, config, radii, seed=0)
+    for k in (1, 2):
+        smaller = [r for result in results[:k] for r in result.views[0].records]
+        expected = [r.params for r in worst_views(smaller, 2, config.min_separation, config.min_separation_deg)]
+        started = [r.params for r in results[k].views[0].records if r.step == 1]  # evaluated right after the init view
+        np.testing.assert_allclose(started, expected)
+        assert all(r.rankable or not r.valid for r in results[k].views[0].records if r.step == 1)
+    # the worst views: rankable, lowest delta1 first
+    chosen = worst_views(results[0].views[0].records, 3, 0.0, 0.0)
+    rankable = sorted(r.delta1 for r in results[0].views[0].records if r.rankable)
+    assert [r.delta1 for r in chosen] == rankable[:3]
 
 
 @pytest.mark.parametrize(
@@ -122,16 +150,41 @@ def test_the_assertion_checks_one_radius_and_envelope_or_the_score(tmp_path: Pat
     )
 
 
-def test_the_ranking_ties_models_whose_seed_bands_overlap() -> None:
+def test_the_ranking_compares_models_by_their_paired_difference() -> None:
     from kadv.testing import Scorecard
 
-    high = _profile(typical_by_seed=[[1.0, 1.0, 0.9], [1.0, 0.9, 0.9]])  # scores 0.967, 0.917
-    near = _profile(typical_by_seed=[[0.9, 0.9, 0.9], [1.0, 1.0, 1.0]])  # 0.9, 0.967: overlaps high's band
-    low = _profile()  # 0.833, 0.767: below near's band
-    card = Scorecard(["near", "low", "high"], ["p"], {"p": {"near": near, "low": low, "high": high}})
+    # per seed (typical areas): high 0.967, 0.917; near 0.900, 0.967; low 0.833, 0.767
+    high = _profile(typical_by_seed=[[1.0, 1.0, 0.9], [1.0, 0.9, 0.9]])
+    near = _profile(typical_by_seed=[[0.9, 0.9, 0.9], [1.0, 1.0, 1.0]])  # ahead of high on seed 1, behind on seed 0
+    low = _profile()  # below high and near on both seeds, though its band overlaps near's
+    card = Scorecard(["near", "low", "high"], ["p", "q"], {p: {"near": near, "low": low, "high": high} for p in "pq"})
     assert card.ranking() == (
-        "ranking: high (0.942) = near (0.933) > low (0.800); '=': their scores' bands over the seeds overlap (tied)"
+        "ranking (typical area): high (0.942) = near (0.933) > low (0.800); "
+        "'=': the paired difference's 95% interval holds 0 (tied)"
     )
+    difference = card.difference("near", "low")
+    assert difference.mean == pytest.approx(0.1333, abs=1e-4) and difference.low > 0 and difference.units == 4
+    # the worst-case areas are the same for all three: tied, by a difference of exactly 0
+    assert card.ranking("worst").startswith("ranking (worst-case area): ") and " > " not in card.ranking("worst")
+    lines = card.differences("typical")
+    expected = "near - low (typical area): +0.133 (95% +0.067 to +0.200, 4 probe-seed pairs); apart on 2 of 2 probes"
+    assert expected in lines
+    table = card.markdown()
+    assert "| worst-case area | resilience | typical area |" in table.splitlines()[0]
+    assert f"| {low.worst_score:.3f} ± {np.ptp(low.worst_scores):.3f} | {low.resilience:.3f} |" in table
+
+
+def test_a_paired_difference_separates_only_when_its_bootstrap_interval_excludes_zero() -> None:
+    from kadv.testing.card import paired_difference
+
+    always = paired_difference([0.9, 0.8, 0.7, 0.6], [0.85, 0.7, 0.65, 0.5])  # a ahead on every unit
+    assert always.separated and always.low > 0 and always.mean == pytest.approx(0.075)
+    mixed = paired_difference([0.9, 0.6, 0.8], [0.7, 0.8, 0.75])
+    assert not mixed.separated and mixed.low < 0 < mixed.high
+    assert paired_difference([0.9, float("nan")], [0.5, 0.4]).units == 1  # a unit without a value is left out
+    assert paired_difference([0.9, 0.6, 0.8], [0.7, 0.8, 0.75]) == mixed  # deterministic
+    with pytest.raises(RobustnessInputError, match="paired_difference: 2 units against 3"):
+        paired_difference([0.1, 0.2], [0.1, 0.2, 0.3])
 
 
 def test_a_seed_without_valid_draws_leaves_the_others_mean() -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -17,6 +18,7 @@ from kadv.testing import (
     settings,
     viewpoint_robustness,
 )
+from kadv.testing.profile import seed_run
 
 # small and quick: the checks' arithmetic is the same at any budget
 QUICK = {"budget_evaluations": 8, "init_count": 1, "size": (48, 64), "lighting": "direct"}
@@ -42,7 +44,7 @@ def test_the_same_seed_gives_the_same_result_twice(tmp_path: Path) -> None:
     assert [replace(v, picture=None) for v in first.views] == [replace(v, picture=None) for v in again.views]
     view = first.views[0]
     assert view.delta1_worst <= view.delta1_init
-    assert view.evaluations == 8
+    assert 8 - 1 <= view.evaluations <= 8  # a batch of two refined lanes may leave one unspent
     assert view.picture.is_file() and view.picture.parent == tmp_path / "a"
     assert "kadv_tiny on box_room_3" in first.summary() and f"{view.delta1_worst:.3f}" in first.summary()
 
@@ -76,7 +78,7 @@ def test_the_budget_factor_in_force_scales_the_evaluations(tmp_path: Path) -> No
         result = viewpoint_robustness(
             "kadv_tiny", "box_room", artifacts=tmp_path, **{**QUICK, "budget_evaluations": 16}
         )
-    assert result.budget_evaluations == 8 and result.views[0].evaluations == 8
+    assert result.budget_evaluations == 8 and 8 - 1 <= result.views[0].evaluations <= 8
 
 
 @pytest.mark.parametrize(
@@ -108,7 +110,7 @@ def test_the_scorecard_profiles_each_model_on_each_probe_and_ranks_them(tmp_path
     table = card.markdown().splitlines()
     assert table[0] == (
         "| probe | model | worst delta1 5°/0.1 m | worst delta1 30°/0.6 m | failure rate 30°/0.6 m "
-        "| score (typical area) |"
+        "| worst-case area | resilience | typical area |"
     )
     assert [row.split(" | ")[:2] for row in table[2:8]] == [
         ["| window", "kadv_tiny"],
@@ -120,10 +122,54 @@ def test_the_scorecard_profiles_each_model_on_each_probe_and_ranks_them(tmp_path
     ]
     profile = card.results["window"]["Constant"]
     assert profile.seeds == (0, 1) and f"{profile.score:.3f} ± {profile.score_spread:.3f}" in table[3]
-    # a model that sees nothing scores below one that sees, beyond the seeds' spread
-    assert table[-1].startswith("ranking: kadv_tiny (") and " > Constant (" in table[-1]
+    # a model that sees nothing scores below one that sees, paired probe by probe and seed by seed
+    typical = next(line for line in table if line.startswith("ranking (typical area): "))
+    assert typical.startswith("ranking (typical area): kadv_tiny (") and " > Constant (" in typical
+    assert any(line.startswith("kadv_tiny - Constant (worst-case area): ") for line in table)
     png = card.save_png(tmp_path / "card.png")
     from PIL import Image
 
     with Image.open(png) as image:
         assert image.width > 2 * 200 and image.height > 150
+
+
+def test_pooling_scores_each_model_at_the_other_searches_worst_views_and_never_raises_its_worst() -> None:
+    from kadv.scenes.probes import probe_scene
+    from kadv.testing.profile import pool_worst_views, profile_settings, worst_views
+
+    options = {"budget_evaluations": 6, "size": (24, 32), "lighting": "direct", "init_count": 2}
+    settings = profile_settings(((5, 0.1), (30, 0.6)), "upright", 4, 0.6, options, "test")
+    room = probe_scene("window", 0)
+    runs = [seed_run(model, room, settings, 0) for model in ("kadv_tiny", (Constant(), "depth"))]
+    before = [[[record.delta1 for _, record in row] for row in run.seeded.found] for run in runs]
+    expected = {  # the views each run's model is scored at: the other's two worst per radius and init view
+        id(run): [
+            [[r.params for r in worst_views(other.seeded.results[k].views[i].records, 2, 0.05, 3.0)] for i in range(2)]
+            for k in range(2)
+        ]
+        for run, other in ((runs[0], runs[1]), (runs[1], runs[0]))
+    }
+    scored = pool_worst_views(runs, settings.radii)
+    assert scored == sum(len(views) for run in runs for row in expected[id(run)] for views in row)
+    for run, old in zip(runs, before):
+        for k, row in enumerate(run.seeded.found):
+            for i, (_, record) in enumerate(row):
+                assert record.delta1 <= old[k][i]  # pooling never raises a worst
+                if record.delta1 < old[k][i]:  # and a lower one is one of the other search's views
+                    assert any(np.allclose(record.params, p) for p in expected[id(run)][k][i])
+
+
+def test_a_pooled_view_lowers_the_worst_at_its_radius_and_every_larger_one() -> None:
+    from kadv.attack import ViewRecord
+    from kadv.testing.profile import SeedProfile
+
+    def record(delta1: float, verdict: str = "valid") -> ViewRecord:
+        return ViewRecord(0, 0, [0.0] * 6, [0.0] * 3, [1.0, 1.5, 1.0], 0.1, 0.0, 0.1, delta1, 0.1, verdict)
+
+    found = [[("a", record(0.8)), ("b", record(0.9))], [("a", record(0.7)), ("b", record(0.95))]]
+    seeded = SeedProfile(0.95, [], [], [[], []], found, [])
+    assert seeded.worst == pytest.approx([0.85, 0.8])  # nested: view b keeps 0.9 at the larger radius
+    seeded.pool(0, 1, [record(0.5), record(0.1, "inside an object")])  # the invalid one is left out
+    assert seeded.worst == pytest.approx([0.65, 0.6]) and seeded.worst_views[1][1].delta1 == 0.5
+    seeded.pool(1, 0, [record(0.75)])  # not lower than that radius's own 0.7: nothing changes
+    assert seeded.worst == pytest.approx([0.65, 0.6])

@@ -1,0 +1,165 @@
+"""What every robustness check shares: its options, the objects it searches with, and the worst
+record of a search. :mod:`kadv.testing.robustness` and :mod:`kadv.testing.profile` build on it."""
+
+from __future__ import annotations
+
+import itertools
+import math
+import tempfile
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+from kadv.attack.search import DEFAULT_METHOD
+from kadv.testing.inputs import RobustnessInputError, resolve_model, resolve_scene
+from kadv.testing.session import current
+
+__all__ = ["DEFAULT_BUDGET", "CheckOptions", "Setup", "check_radii", "setup", "slug", "worst_record"]
+
+DEFAULT_BUDGET = 48  # model evaluations per init view, the init view's included
+
+
+def worst_record(records: list) -> object:
+    """The valid full-size record of lowest delta1 (the highest loss among ties)."""
+    rankable = [r for r in records if r.rankable] or records[:1]
+    return min(rankable, key=lambda r: (r.delta1, -r.loss))
+
+
+@dataclass(frozen=True)
+class CheckOptions:
+    """How a check searches (:func:`viewpoint_robustness`'s keyword arguments).
+
+    Attributes:
+        init_count: init views: the scene's cameras first, then sampled views the model gets right.
+        budget_evaluations: model evaluations per init view (scaled by ``--kadv-budget`` under pytest).
+        seed: the seed of the init views and the search.
+        loss: the attacked loss (``"delta1"``, ``"absrel"``, ``"ssim"``, ``"perceptual"``).
+        size: (height, width) of the renders.
+        method: the search method (:data:`kadv.attack.METHODS`).
+        lighting: ``"baked"`` (the commands' default; baked once per scene and cached) or ``"direct"``.
+        radius: (degrees, metres): how far the camera may turn and move from each init view.
+        envelope: the poses the camera may take (:mod:`kadv.penalties.envelope`): a preset's name
+            (``free``, ``upright``, ``handheld``, ``robot``) or an :class:`kadv.penalties.Envelope`.
+        artifacts: the folder for the worst views' pictures; None: the pytest plugin's folder for
+            this test, else a new temporary folder.
+        progress: show progress bars.
+    """
+
+    init_count: int = 2
+    budget_evaluations: int = DEFAULT_BUDGET
+    seed: int = 0
+    loss: str = "delta1"
+    size: tuple[int, int] = (96, 128)
+    method: str = DEFAULT_METHOD
+    lighting: str = "baked"
+    radius: tuple[float, float] = (45.0, 1.0)
+    envelope: object = "free"
+    artifacts: str | Path | None = None
+    progress: bool = False
+
+    @classmethod
+    def of(cls, options: dict, taker: str) -> CheckOptions:
+        """The options from keyword arguments, or :class:`RobustnessInputError` naming an unknown one."""
+        unknown = sorted(set(options) - {f.name for f in fields(cls)})
+        if unknown:
+            raise RobustnessInputError(f"{taker} takes no option {', '.join(unknown)}")
+        return cls(**options)
+
+
+@dataclass
+class Setup:
+    """What a robustness check searches with: the scene's renderers, the objective, the init views,
+    and where and how the worst views' pictures go."""
+
+    model_name: str
+    scene_name: str
+    renderer: object
+    differentiable: object
+    objective: object
+    penalty: object
+    views: list
+    size: tuple[int, int]
+    budget: int
+    folder: Path
+    stem: str
+    render: object
+
+
+def setup(model, scene, options: CheckOptions) -> Setup:
+    """The :class:`Setup` of a check, or :class:`RobustnessInputError` in one line."""
+    from kadv.attack import (
+        InitViewConfig,
+        InitViewError,
+        Objective,
+        PenaltyConfig,
+        check_init_views,
+        file_init_views,
+        sample_init_views,
+    )
+    from kadv.losses import depth_loss
+    from kadv.render import DifferentiableRenderer, ExactRenderer, Shading
+    from kadv.report.run import ViewRenderer
+
+    init_count, budget_evaluations = options.init_count, options.budget_evaluations
+    if isinstance(init_count, bool) or not isinstance(init_count, int) or init_count < 1:
+        raise RobustnessInputError(f"init_count must be an integer >= 1, got {init_count!r}")
+    if isinstance(budget_evaluations, bool) or not isinstance(budget_evaluations, int) or budget_evaluations < 2:
+        raise RobustnessInputError(f"budget_evaluations must be an integer >= 2, got {budget_evaluations!r}")
+    settings = current()
+    budget = max(2, round(budget_evaluations * settings.budget_factor))
+    height, width = options.size
+    depth_model = resolve_model(model)
+    built = resolve_scene(scene)
+    try:
+        renderer = ExactRenderer(built, Shading(lighting=options.lighting), progress=options.progress)
+        penalty = PenaltyConfig()
+        objective = Objective(depth_model, depth_loss(options.loss), renderer, penalty)
+        views = file_init_views(renderer, penalty.margin)[:init_count]
+        views += sample_init_views(
+            renderer, depth_model, init_count - len(views), options.seed, InitViewConfig(), penalty, height, width
+        )
+        check_init_views(renderer, views, penalty, height, width)
+    except InitViewError as error:
+        raise RobustnessInputError(f"scene {built.name!r}: {error}") from error
+    except ValueError as error:
+        raise RobustnessInputError(str(error)) from error
+    folder = Path(options.artifacts) if options.artifacts is not None else settings.artifacts
+    if folder is None:
+        folder = Path(tempfile.mkdtemp(prefix="kadv-"))
+    return Setup(
+        depth_model.name,
+        built.name,
+        renderer,
+        DifferentiableRenderer(renderer),
+        objective,
+        penalty,
+        views,
+        (height, width),
+        budget,
+        folder,
+        f"{slug(depth_model.name)}-{slug(built.name)}-seed{options.seed}",
+        ViewRenderer(objective, height, width, supersample=2),
+    )
+
+
+def check_radii(radii) -> tuple[tuple[float, float], ...]:
+    """The radii as (degrees, metres) pairs, or :class:`RobustnessInputError` naming what is wrong:
+    each positive, both increasing (nested: each radius holds the one before)."""
+    try:
+        pairs = tuple((float(d), float(m)) for d, m in radii)
+    except (TypeError, ValueError):
+        raise RobustnessInputError(f"radii must be (degrees, metres) pairs, got {radii!r}") from None
+    if not pairs:
+        raise RobustnessInputError("radii is empty: give at least one (degrees, metres) pair")
+    for d, m in pairs:
+        if not (math.isfinite(d) and math.isfinite(m) and d > 0 and m > 0):
+            raise RobustnessInputError(f"radii: each radius must be positive, got ({d:g}, {m:g})")
+    for (d0, m0), (d1, m1) in itertools.pairwise(pairs):
+        if d1 < d0 or m1 < m0 or (d1, m1) == (d0, m0):
+            raise RobustnessInputError(
+                f"radii must increase (each holds the one before), got ({d0:g}, {m0:g}) then ({d1:g}, {m1:g})"
+            )
+    return pairs
+
+
+def slug(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)[:80]
