@@ -19,6 +19,7 @@ __all__ = [
     "fresnel_diffuse_reflectance",
     "fresnel_reflectance",
     "srgb_decode",
+    "srgb_encode",
     "tone_map",
     "untone",
 ]
@@ -36,11 +37,16 @@ def srgb_decode(srgb: torch.Tensor) -> torch.Tensor:
     return _channels_last(rgb_to_linear_rgb, srgb)
 
 
+def srgb_encode(linear: torch.Tensor) -> torch.Tensor:
+    """sRGB-encoded values (..., 3) of linear ones in [0, 1]."""
+    return _channels_last(linear_rgb_to_rgb, linear.clamp(0.0, 1.0))
+
+
 def tone_map(linear: torch.Tensor) -> torch.Tensor:
     """Display values (..., 3) in [0, 1] of exposed linear radiance (..., 3): a film-like shoulder ``1 - exp(-x)``
     (linear in the shadows, highlights rolling off rather than clipping, as a camera's response
     does), then sRGB-encoded. The reference comparison tone-maps the path tracer's image the same way."""
-    return _channels_last(linear_rgb_to_rgb, -torch.expm1(-linear.clamp_min(0.0)))
+    return srgb_encode(-torch.expm1(-linear.clamp_min(0.0)))
 
 
 def untone(display: torch.Tensor) -> torch.Tensor:

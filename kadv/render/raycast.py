@@ -116,7 +116,9 @@ class ExactRenderer:
         self.device = self.surfaces.device
         self.caster = self.surfaces.caster
         if baked is not None and self.shading.lighting != "baked":
-            raise ValueError("ExactRenderer: baked lighting was given to a renderer with render.lighting=direct")
+            raise ValueError(
+                f"ExactRenderer: baked lighting was given to a renderer with render.lighting={self.shading.lighting}"
+            )
         if self.shading.lighting == "baked" and baked is None:
             baked = load_or_bake(self.surfaces, self.shading.bake, progress)
         self.baked = baked

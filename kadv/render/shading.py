@@ -33,7 +33,9 @@ from kadv.render.lights import SURFACE_OFFSET, DeltaLights, Sky, scene_lights, s
 from kadv.render.surface import RayHits, Surfaces, first_hits
 from kadv.scenes.scene import CONDUCTOR_GREY
 
-__all__ = ["Reflections", "Shader", "Shading", "shade"]
+__all__ = ["LIGHTINGS", "Reflections", "Shader", "Shading", "shade"]
+
+LIGHTINGS = ("direct", "baked", "scanned")
 
 
 @dataclass(frozen=True)
@@ -45,10 +47,13 @@ class Shading:
         diffuse: weight of the Lambertian term, split evenly over the lights.
         lights: (L, 3) world positions; None uses the scene's emitters, else a light placed from
             the scene bounds.
-        background: RGB of rays that hit nothing.
-        lighting: ``"direct"`` (ambient + Lambertian lights, no shadows) or ``"baked"`` (the
-            scene's emitters with shadows and diffuse inter-reflection, baked once per scene). The
-            commands default to ``"baked"`` (``render.lighting``); a renderer built here shades
+        background: RGB of rays that hit nothing (black by default: under ``scanned`` lighting, the
+            holes of a scan and the sky above a room without a ceiling).
+        lighting: ``"direct"`` (ambient + Lambertian lights, no shadows), ``"baked"`` (the
+            scene's emitters with shadows and diffuse inter-reflection, baked once per scene) or
+            ``"scanned"`` (a scan's colour shown as the light its sensor captured: vertex colours
+            interpolated, or the texel, with no lights, no bake and no reflections). The commands
+            default to ``"baked"`` (``render.lighting``); a renderer built here shades
             ``"direct"`` unless asked, so that building one never starts a bake of minutes.
         bake: the bake's settings, for ``lighting="baked"``.
         reflections: with baked lighting, coated surfaces (Mitsuba's plastics) and metals mirror
@@ -68,8 +73,8 @@ class Shading:
     reflections: bool = True
 
     def __post_init__(self) -> None:
-        if self.lighting not in ("direct", "baked"):
-            raise ValueError(f"render.lighting must be 'direct' or 'baked', got {self.lighting!r}")
+        if self.lighting not in LIGHTINGS:
+            raise ValueError(f"render.lighting must be one of {', '.join(LIGHTINGS)}, got {self.lighting!r}")
         if not isinstance(self.reflections, bool):
             raise ValueError(f"render.shading.reflections must be true or false, got {self.reflections!r}")
 
@@ -283,6 +288,11 @@ class Shader:
         self._background = torch.tensor(shading.background, dtype=torch.float32).to(device)
         self._emitter_caster = None
         self.reflecting = False
+        if shading.lighting == "scanned" and scene.colors is None and all(m.texture is None for m in scene.materials):
+            raise ValueError(
+                f"render.lighting=scanned: scene {scene.name!r} has no vertex colours and no textures, no captured "
+                "colour to show; shade it with render.lighting=baked or direct"
+            )
         if baked is not None:
             self._delta_lights = DeltaLights(scene.emitters, device)
             self._sky = Sky(sky_emitters(scene), device)
@@ -341,18 +351,22 @@ class Shader:
         back = hit & (facing > 0)
         # hit points and shading normals, where something reads them: the maps, Lambert's term or
         # the delta lights (baked light alone needs neither)
-        lit_at_points = self.baked is None or not self._delta_lights.empty
+        lit_at_points = self.shading.lighting == "direct" or (self.baked is not None and not self._delta_lights.empty)
         if geometry or (colour and lit_at_points):
             points = origins + directions * t[:, None]
             normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
             normals = torch.where(back[:, None], -normals, normals)
         rgb = self._background.expand(len(t), 3)
         if colour:
-            base = self.surfaces.albedo(ids, bary, _footprint(t, directions, facing, pixel_angle))
+            footprint = _footprint(t, directions, facing, pixel_angle)
             background = self._background
-            if self.baked is None:
+            if self.shading.lighting == "scanned":
+                shaded = self.surfaces.captured(ids, bary, footprint)
+            elif self.baked is None:
+                base = self.surfaces.albedo(ids, bary, footprint)
                 shaded = shade(self.shading, self._lights, points.float(), normals, base)
             else:
+                base = self.surfaces.albedo(ids, bary, footprint)
                 # the lattice weights in float64: a hit's place between lattice points is a small difference
                 irradiance = self.baked.irradiance_at(ids, bary.double(), back)
                 if not self._delta_lights.empty:

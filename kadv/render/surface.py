@@ -16,7 +16,7 @@ from kadv.device import free_memory
 from kadv.geometry.vector import dot
 from kadv.render.backends import make_caster
 from kadv.render.casting import AlphaMasks, RayCaster
-from kadv.render.colour import coat_table, coated_albedo, srgb_decode
+from kadv.render.colour import coat_table, coated_albedo, srgb_decode, srgb_encode
 from kadv.render.textures import MaterialTextures, TextureAtlas
 from kadv.scenes.scene import Scene
 
@@ -134,6 +134,7 @@ class Surfaces:
         self.vertices = torch.from_numpy(scene.vertices.astype(np.float64)).to(device)
         self.faces = torch.from_numpy(scene.faces.astype(np.int64)).to(device)
         self.coats = torch.from_numpy(coat_table(scene)).float()[torch.from_numpy(scene.material_ids)].to(device)
+        self.colors = None if scene.colors is None else torch.from_numpy(scene.colors).to(device)
         # a caster that applies the masks while it casts reads the tables see_through reads
         self._alpha_masks = self._masks_for_casting() if self._masked and self.caster.applies_alpha_masks else None
 
@@ -258,6 +259,16 @@ class Surfaces:
         """(N, 3) linear albedo that baked lighting multiplies: of the display colours ``base``
         (N, 3) on triangles (N,), with their materials' coats (:func:`coated_albedo`)."""
         return coated_albedo(srgb_decode(base), self.coats.index_select(0, triangle_ids))
+
+    def captured(self, triangle_ids: torch.Tensor, bary: torch.Tensor, footprint: torch.Tensor) -> torch.Tensor:
+        """(N, 3) float32 display colour a scan shows at hits on triangles (N,) at barycentrics
+        (N, 2): its vertex colours interpolated in linear light, then sRGB-encoded once; where a
+        triangle has none, its material's colour or texel as stored (:meth:`albedo`)."""
+        base = self.albedo(triangle_ids, bary, footprint)
+        if self.colors is None:
+            return base
+        linear = self.interpolate(self.colors, triangle_ids, bary)
+        return torch.where(torch.isnan(linear), base, srgb_encode(torch.nan_to_num(linear)))
 
     def albedo(self, triangle_ids: torch.Tensor, bary: torch.Tensor, footprint: torch.Tensor) -> torch.Tensor:
         """(N, 3) float32 display base colour of hits on triangles (N,) at barycentrics (N, 2),

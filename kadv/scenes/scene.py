@@ -78,6 +78,8 @@ class MeshPart:
         normals: optional (F, 3, 3) per-corner shading normals; face normals when absent.
         material: index into the scene's material list.
         name: where the part came from (file or shape), for error messages.
+        colors: optional (F, 3, 3) per-corner linear RGB, the colour a scan captured
+            (:attr:`Scene.colors`).
     """
 
     vertices: np.ndarray
@@ -86,6 +88,7 @@ class MeshPart:
     normals: np.ndarray | None
     material: int
     name: str
+    colors: np.ndarray | None = None
 
 
 def _face_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -126,6 +129,10 @@ class Scene:
         interior: optional (2, 3) box (minimum corner, maximum corner) where cameras belong, for
             scenes that know it (generated rooms, whose windows look onto courtyards); None: the
             bounds.
+        colors: optional (F, 3, 3) float32 per-corner linear RGB, the light a scan's sensor
+            captured (vertex colours), shown as it is by ``render.lighting=scanned``; NaN on the
+            triangles that have none (their material's colour or texel is shown). None: no triangle
+            has one.
     """
 
     vertices: np.ndarray
@@ -139,6 +146,7 @@ class Scene:
     name: str = "scene"
     interior: np.ndarray | None = None
     emitters: Emitters = field(default_factory=Emitters)
+    colors: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, np.float64).reshape(-1, 3)
@@ -154,6 +162,12 @@ class Scene:
             raise ValueError(f"scene {self.name!r}: face indices out of range")
         if self.uvs.shape != (n, 3, 2) or self.normals.shape != (n, 3, 3) or self.material_ids.shape != (n,):
             raise ValueError(f"scene {self.name!r}: per-triangle arrays do not match {n} faces")
+        if self.colors is not None:
+            self.colors = np.asarray(self.colors, np.float32)
+            if self.colors.shape != (n, 3, 3):
+                raise ValueError(
+                    f"scene {self.name!r}: colours must be (F, 3, 3) per corner, got {self.colors.shape} for {n} faces"
+                )
         if self.material_ids.max() >= len(self.materials) or self.material_ids.min() < 0:
             raise ValueError(f"scene {self.name!r}: material ids out of range")
         face_normals, areas = _face_normals(self.vertices, self.faces)
@@ -226,7 +240,7 @@ def assemble_scene(
     rotation = _rotation_to_y_up(up_axis)
     light_list = [np.asarray(lights, np.float64).reshape(-1, 3)] if lights is not None else []
     emitters = emitters or Emitters()
-    vertices, faces, uvs, normals, material_ids = [], [], [], [], []
+    vertices, faces, uvs, normals, material_ids, colors = [], [], [], [], [], []
     offset = 0
     for part in parts:
         part_vertices = np.asarray(part.vertices, np.float64)
@@ -253,6 +267,7 @@ def assemble_scene(
         uvs.append(np.zeros((n, 3, 2)) if part.uvs is None else np.asarray(part.uvs).reshape(n, 3, 2))
         normals.append(part_normals)
         material_ids.append(np.full(n, part.material))
+        colors.append(np.full((n, 3, 3), np.nan, np.float32) if part.colors is None else part.colors)
         offset += len(part_vertices)
     if not faces:
         raise ValueError(f"scene {name!r}: no renderable triangles (all parts empty, transparent or emissive)")
@@ -286,4 +301,5 @@ def assemble_scene(
         name=name,
         interior=interior,
         emitters=emitters.transformed(rotation, scale),
+        colors=None if all(part.colors is None for part in parts) else np.concatenate(colors).astype(np.float32),
     )

@@ -274,7 +274,7 @@ BAD_INPUTS = [
     ("kadv-render", ["camera.eye=[1,1.5,1]", "camera.fov_x_deg=70"], "camera.target"),
     ("kadv-render", ["render.supersample=0"], "render.supersample"),
     ("kadv-render", ["render.heigth=100"], "render has no key 'heigth'; it has: height"),
-    ("kadv-render", ["render.lighting=sunny"], "render.lighting must be 'direct' or 'baked', got 'sunny'"),
+    ("kadv-render", ["render.lighting=sunny"], "render.lighting must be one of direct, baked, scanned, got 'sunny'"),
     ("kadv-render", ["render.lighting=baked", "render.bake.rays=0"], "render.bake.rays must be an integer >= 1"),
     ("kadv-render", ["render.bake.filter_width=0"], "render.bake.filter_width must be a positive number, got 0"),
     ("kadv-attack", ["render.lighting=baked", "+render.bake.samples=4"], "render.bake.samples"),
