@@ -14,7 +14,7 @@ from kadv.scenes.trimesh_loader import TRIMESH_SUFFIXES, load_mesh_file
 
 __all__ = ["SUPPORTED_SUFFIXES", "load_scene", "ply_part"]
 
-SUPPORTED_SUFFIXES = (".xml", *TRIMESH_SUFFIXES)
+SUPPORTED_SUFFIXES = (".xml", ".ply", *TRIMESH_SUFFIXES)
 
 
 def load_scene(

@@ -1,4 +1,5 @@
-"""Meshes through trimesh (glTF/GLB, OBJ+MTL, PLY, OFF, STL), keeping every material and texture."""
+"""Meshes through trimesh (glTF/GLB, OBJ+MTL, OFF, STL), keeping every material, texture and
+vertex colour."""
 
 from __future__ import annotations
 
@@ -8,11 +9,11 @@ import numpy as np
 import trimesh
 
 from kadv.scenes.scene import Material, MeshPart
-from kadv.scenes.textures import image_to_rgba, linear_to_srgb
+from kadv.scenes.textures import image_to_rgba, linear_to_srgb, srgb_to_linear
 
 __all__ = ["TRIMESH_SUFFIXES", "load_mesh_file", "mesh_parts"]
 
-TRIMESH_SUFFIXES = (".glb", ".gltf", ".obj", ".ply", ".off", ".stl")
+TRIMESH_SUFFIXES = (".glb", ".gltf", ".obj", ".off", ".stl")
 
 
 def _material_from_visual(visual: object, fallback_name: str) -> Material:
@@ -56,8 +57,11 @@ def mesh_parts(
     material_index: int,
     name: str,
     flat_normals: bool = False,
+    linear_colours: bool = False,
 ) -> MeshPart:
-    """Convert one trimesh mesh (in its own frame) to a world-frame :class:`MeshPart`."""
+    """Convert one trimesh mesh (in its own frame) to a world-frame :class:`MeshPart`; its vertex
+    colours, if any, per corner in linear light (``linear_colours``: stored linear, as glTF's
+    ``COLOR_0`` is; else sRGB-encoded, as OBJ and OFF colours are)."""
     faces = np.asarray(mesh.faces, np.int64)
     vertices_h = np.c_[np.asarray(mesh.vertices, np.float64), np.ones(len(mesh.vertices))]
     vertices = (vertices_h @ np.asarray(transform, np.float64).T)[:, :3]
@@ -68,7 +72,11 @@ def mesh_parts(
         normal_matrix = np.linalg.inv(np.asarray(transform, np.float64)[:3, :3]).T
         with np.errstate(invalid="ignore", divide="ignore"):
             normals = (np.asarray(mesh.vertex_normals, np.float64) @ normal_matrix.T)[faces]
-    return MeshPart(vertices, faces, uvs, normals, material_index, name)
+    colors = None
+    if getattr(mesh.visual, "kind", None) == "vertex" and len(faces):
+        stored = np.asarray(mesh.visual.vertex_colors, np.float64)[:, :3] / 255.0
+        colors = (stored if linear_colours else srgb_to_linear(stored)).astype(np.float32)[faces]
+    return MeshPart(vertices, faces, uvs, normals, material_index, name, colors)
 
 
 def load_mesh_file(path: Path, materials: list[Material]) -> list[MeshPart]:
@@ -92,7 +100,8 @@ def load_mesh_file(path: Path, materials: list[Material]) -> list[MeshPart]:
         if key not in known:
             known[key] = len(materials)
             materials.append(_material_from_visual(mesh.visual, str(geometry_name)))
-        parts.append(mesh_parts(mesh, transform, known[key], f"{path}:{geometry_name}"))
+        linear = path.suffix.lower() in (".glb", ".gltf")
+        parts.append(mesh_parts(mesh, transform, known[key], f"{path}:{geometry_name}", linear_colours=linear))
     if not parts:
         raise ValueError(f"{path}: contains no triangle mesh")
     return parts

@@ -117,3 +117,14 @@ def test_a_bad_ply_is_refused_in_one_line_naming_the_file(tmp_path: Path, make, 
     with pytest.raises(PlyError, match=message) as error:
         load_scene(path)
     assert str(error.value).startswith(str(path)) and "\n" not in str(error.value)
+
+
+def test_gltf_vertex_colours_are_linear_and_obj_ones_srgb(tmp_path: Path) -> None:
+    box = trimesh.creation.box()
+    box.visual.vertex_colors = np.tile([[10, 200, 30, 255]], (len(box.vertices), 1))
+    box.export(tmp_path / "box.glb")  # COLOR_0, normalised bytes: linear values
+    box.export(tmp_path / "box.obj")  # "v x y z r g b": display values
+    from_gltf, from_obj = load_scene(tmp_path / "box.glb"), load_scene(tmp_path / "box.obj")
+    np.testing.assert_allclose(from_gltf.colors[0, 0], np.array([10, 200, 30]) / 255.0, atol=1e-6)
+    np.testing.assert_allclose(from_obj.colors[0, 0], srgb_to_linear(np.array([10, 200, 30]) / 255.0), atol=1e-3)
+    assert load_scene(tmp_path / "box.obj").colors.shape == (12, 3, 3)
