@@ -59,10 +59,11 @@ def device_and_backend(
 
 
 def default_lighting() -> str:
-    """The lighting the commands render with by default (``render.lighting`` in conf/render/exact.yaml)."""
-    return yaml.safe_load((Path(__file__).resolve().parents[1] / "conf" / "render" / "exact.yaml").read_text())[
-        "lighting"
-    ]
+    """The lighting the commands render the benchmarks' scenes with by default (``render.lighting`` in
+    conf/render/exact.yaml; ``auto`` is ``baked`` for a scene that is not a scan)."""
+    path = Path(__file__).resolve().parents[1] / "conf" / "render" / "exact.yaml"
+    lighting = yaml.safe_load(path.read_text())["lighting"]
+    return "baked" if lighting == "auto" else lighting
 
 
 def bench_scenes() -> list[Scene]:

@@ -50,6 +50,7 @@ __all__ = [
     "dirname",
     "model_from_config",
     "reports_user_errors",
+    "resolve_lighting",
     "scene_from_config",
     "settings_from_node",
     "shading_from_config",
@@ -67,6 +68,7 @@ USER_ERRORS = (
     RunDirectoryBusy,
 )
 ENVIRONMENT_ERRORS = (WriteError,)
+log = logging.getLogger(__name__)
 
 
 FAILURE = "failure.json"
@@ -354,10 +356,25 @@ def shading_from_config(cfg: DictConfig) -> Shading:
     )
 
 
+def resolve_lighting(scene: Scene, cfg: DictConfig) -> str:
+    """``render.lighting``, with ``auto`` made ``scanned`` for a recognised scan (its colour is the
+    light its sensor captured) and ``baked`` for any other scene; written back into ``cfg`` (so that
+    a run's ``config.yaml`` names it) and said in the log."""
+    lighting = cfg.get("lighting", "direct")
+    if lighting == "auto":
+        lighting = "scanned" if scene.scan is not None else "baked"
+        cfg.lighting = lighting
+        reason = f"a {scene.scan} scan" if scene.scan is not None else "not a scan"
+        log.info("render.lighting=auto: %s (%s)", lighting, reason)
+    return lighting
+
+
 def renderer_from_config(scene: Scene, cfg: DictConfig, device: torch.device | str = "cpu") -> ExactRenderer:
-    """The exact renderer of ``scene`` that a ``render/`` node describes: its shading and its ray
-    caster (``render.backend``, on ``device``; a run saved before backends existed casts with auto) and
+    """The exact renderer of ``scene`` that a ``render/`` node describes: its shading
+    (``render.lighting=auto`` resolved in ``cfg``: :func:`resolve_lighting`) and its ray caster
+    (``render.backend``, on ``device``; a run saved before backends existed casts with auto) and
     the most rays it casts at once (``render.max_rays``)."""
+    resolve_lighting(scene, cfg)
     max_rays = config_int(cfg.get("max_rays", DEFAULT_MAX_RAYS), "render.max_rays", 1)
     return ExactRenderer(
         scene, shading_from_config(cfg), backend=cfg.get("backend", "auto"), device=device, max_rays=max_rays

@@ -83,6 +83,7 @@ def main(cfg: DictConfig) -> None:
         "height": height,
         "width": width,
         "supersample": supersample,
+        "lighting": renderer.shading.lighting,
         "hit_fraction": float(mask.mean()),
         "depth_range_m": [float(depth[mask].min()), float(depth[mask].max())] if mask.any() else None,
         "validity": {"verdict": verdict, "reason": reason},

@@ -2,17 +2,22 @@
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 from pathlib import Path
 
 import numpy as np
 
 from kadv.scenes.mitsuba import parse_mitsuba
 from kadv.scenes.ply import PlyMesh, read_ply
+from kadv.scenes.scans import recognise_scan
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 from kadv.scenes.textures import srgb_to_linear
 from kadv.scenes.trimesh_loader import TRIMESH_SUFFIXES, load_mesh_file
 
 __all__ = ["SUPPORTED_SUFFIXES", "load_scene", "ply_part"]
+
+log = logging.getLogger(__name__)
 
 SUPPORTED_SUFFIXES = (".xml", ".ply", *TRIMESH_SUFFIXES)
 
@@ -20,8 +25,8 @@ SUPPORTED_SUFFIXES = (".xml", ".ply", *TRIMESH_SUFFIXES)
 def load_scene(
     path: str | Path,
     *,
-    scale: float = 1.0,
-    up_axis: str = "y",
+    scale: float | None = None,
+    up_axis: str | None = None,
     drop_transparent: bool = True,
     drop_emitters: bool = True,
     missing: str = "error",
@@ -32,8 +37,10 @@ def load_scene(
 
     Args:
         path: the scene file.
-        scale: metres per file unit.
-        up_axis: the file's up axis (``"y"`` or ``"z"``); kadv's world is y-up.
+        scale: metres per file unit; None: a recognised scan's (:func:`kadv.scenes.scans.recognise_scan`,
+            metres), else 1.
+        up_axis: the file's up axis (``"y"`` or ``"z"``), rotated to kadv's y-up world; None: a
+            recognised scan's (``"z"``), else ``"y"``. The log says what was chosen for a scan.
         drop_transparent: leave out glass-like materials (they would hide what is behind them).
         drop_emitters: leave out light-source surfaces; their centres become the renderer's lights.
         missing: Mitsuba only: ``"error"`` or ``"skip"`` for referenced files that do not exist.
@@ -53,13 +60,30 @@ def load_scene(
         raise ValueError(f"unsupported scene format {suffix!r} for {path}; supported: {', '.join(SUPPORTED_SUFFIXES)}")
     if name is None:
         name = path.parent.name if path.stem == "scene" else path.stem
-    options = {"scale": scale, "up_axis": up_axis, "drop_transparent": drop_transparent, "drop_emitters": drop_emitters}
+    layout = recognise_scan(path)
+    if layout is not None:
+        chosen = dataclasses.replace(
+            layout,
+            up_axis=layout.up_axis if up_axis is None else up_axis,
+            scale=layout.scale if scale is None else scale,
+        )
+        log.info("%s: %s", path, chosen.describe())
+        up_axis, scale = chosen.up_axis, chosen.scale
+    options = {
+        "scale": 1.0 if scale is None else scale,
+        "up_axis": up_axis or "y",
+        "drop_transparent": drop_transparent,
+        "drop_emitters": drop_emitters,
+        "scan": None if layout is None else layout.dataset,
+    }
     if suffix == ".xml":
         parts, materials, cameras, lights, emitters = parse_mitsuba(path, missing=missing)
         return assemble_scene(parts, materials, cameras, lights, name=name, emitters=emitters, **options)
     if suffix == ".ply":
-        materials = [Material(name)]
-        return assemble_scene([ply_part(read_ply(path), 0, str(path))], materials, name=name, **options)
+        mesh = read_ply(path)
+        if layout is not None and layout.alignment is not None:  # into the dataset's aligned frame
+            mesh.vertices = mesh.vertices @ layout.alignment[:3, :3].T + layout.alignment[:3, 3]
+        return assemble_scene([ply_part(mesh, 0, str(path))], [Material(name)], name=name, **options)
     materials: list[Material] = []
     parts = load_mesh_file(path, materials)
     return assemble_scene(parts, materials, name=name, **options)

@@ -133,6 +133,8 @@ class Scene:
             captured (vertex colours), shown as it is by ``render.lighting=scanned``; NaN on the
             triangles that have none (their material's colour or texel is shown). None: no triangle
             has one.
+        scan: the dataset whose scan layout the file had (:mod:`kadv.scenes.scans`), or None: its
+            colour is the light a sensor captured, so ``render.lighting=auto`` shows it as scanned.
     """
 
     vertices: np.ndarray
@@ -147,6 +149,7 @@ class Scene:
     interior: np.ndarray | None = None
     emitters: Emitters = field(default_factory=Emitters)
     colors: np.ndarray | None = None
+    scan: str | None = None
 
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, np.float64).reshape(-1, 3)
@@ -216,6 +219,7 @@ def assemble_scene(
     drop_emitters: bool = True,
     interior: np.ndarray | None = None,
     emitters: Emitters | None = None,
+    scan: str | None = None,
 ) -> Scene:
     """Concatenate mesh parts into a :class:`Scene`, applying the load options.
 
@@ -231,6 +235,7 @@ def assemble_scene(
             triangles area emitters).
         interior: (2, 3) box where cameras belong, in file coordinates (see :class:`Scene`).
         emitters: the file's other light sources (point, spot, sky, sun), in file coordinates.
+        scan: the dataset whose scan layout the file had (:attr:`Scene.scan`).
 
     Raises:
         ValueError: on NaN/inf coordinates, a non-positive scale, or nothing left to render.
@@ -302,4 +307,5 @@ def assemble_scene(
         interior=interior,
         emitters=emitters.transformed(rotation, scale),
         colors=None if all(part.colors is None for part in parts) else np.concatenate(colors).astype(np.float32),
+        scan=scan,
     )

@@ -1,0 +1,83 @@
+"""Scans recognised by their layout: Z-up metres, ScanNet's axisAlignment, and the captured colour
+shown as it is (render.lighting=auto becomes scanned), every choice overridable."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from kadv.scenes import load_scene
+from kadv.scenes.scans import recognise_scan
+from tests.cli.in_process import call_main
+
+ROOM = (4.0, 5.0, 2.5)  # x, y and, up, z extent in the scans' Z-up metres
+
+
+def _room_ply(path: Path) -> None:
+    """A closed room, inward-facing, Z-up, its floor (z = 0) red, its walls and ceiling grey."""
+    box = trimesh.creation.box(extents=ROOM)
+    box.apply_translation(np.array(ROOM) / 2)
+    box.invert()
+    colours = np.where(box.vertices[:, 2:3] < 1e-6, [[200, 30, 30, 255]], [[120, 120, 120, 255]])
+    box = trimesh.Trimesh(box.vertices, box.faces, vertex_colors=colours, process=False)
+    path.write_bytes(trimesh.exchange.ply.export_ply(box, encoding="binary"))
+
+
+@pytest.mark.parametrize(
+    "name, dataset",
+    [
+        ("scene0000_00_vh_clean_2.ply", "ScanNet"),
+        ("scene0707_01_vh_clean.ply", "ScanNet"),
+        ("41069025_3dod_mesh.ply", "ARKitScenes"),
+        ("mesh.ply", "Replica"),
+        ("mesh.refined.v2.obj", "3RScan"),
+        ("00800-TEEsavR23oF.basis.glb", "HM3D"),
+        ("bd7e6c2b2a4e4e8c9e0b3f5d1a2c4e6f.obj", "Matterport3D"),
+        ("room.ply", None),
+        ("scene.xml", None),
+    ],
+)
+def test_scan_layouts_are_recognised_by_their_file_names(name: str, dataset: str | None) -> None:
+    layout = recognise_scan(Path("/data") / name)
+    assert (layout and layout.dataset) == dataset
+    if layout is not None:
+        assert (layout.up_axis, layout.scale) == ("z", 1.0)
+
+
+def test_a_scannet_scan_is_z_up_in_metres_and_moved_by_its_axis_alignment(tmp_path: Path) -> None:
+    path = tmp_path / "scene0000_00_vh_clean_2.ply"
+    _room_ply(path)
+    unaligned = load_scene(path)  # no scene0000_00.txt: identity
+    assert unaligned.scan == "ScanNet" and unaligned.colors is not None
+    # Z-up metres to kadv's y-up: the room's height (2.5 m) is its y extent
+    np.testing.assert_allclose(unaligned.bounds[1] - unaligned.bounds[0], [4.0, 2.5, 5.0], atol=1e-6)
+    (tmp_path / "scene0000_00.txt").write_text(
+        "colorHeight = 968\naxisAlignment = 1 0 0 -2 0 1 0 -2.5 0 0 1 0 0 0 0 1\nsceneType = Bedroom\n"
+    )
+    aligned = load_scene(path)
+    np.testing.assert_allclose(aligned.bounds[0], unaligned.bounds[0] + [-2.0, 0.0, 2.5], atol=1e-6)
+    overridden = load_scene(path, up_axis="y", scale=0.5)  # one override each
+    np.testing.assert_allclose(overridden.bounds[1] - overridden.bounds[0], [2.0, 2.5, 1.25], atol=1e-6)
+    (tmp_path / "scene0000_00.txt").write_text("axisAlignment = 1 0 0\n")
+    with pytest.raises(ValueError, match=r"scene0000_00.txt: axisAlignment must be 16 finite numbers"):
+        load_scene(path)
+
+
+def test_kadv_render_shows_a_recognised_scan_as_scanned_and_names_the_lighting(tmp_path: Path) -> None:
+    from kadv.cli.render import main as render_main
+
+    path = tmp_path / "41069025_3dod_mesh.ply"  # ARKitScenes: no alignment
+    # in kadv's y-up world the file's y runs along -z: eye 1.2 m above the floor, looking down the room
+    _room_ply(path)
+    args = ["kadv-render", "hydra.run.dir=run", "scene=file", f"scene.path={path}", "render.height=24"]
+    args += ["render.width=32", "camera.eye=[2.0,1.2,-1.0]", "camera.target=[2.0,0.0,-4.0]", "camera.fov_x_deg=60"]
+    result = call_main(render_main, args, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads((tmp_path / "run" / "render.json").read_text())
+    assert summary["lighting"] == "scanned" and summary["validity"]["verdict"] == "valid"
+    baked = call_main(render_main, [*args, "hydra.run.dir=baked", "render.lighting=direct"], cwd=tmp_path)
+    assert json.loads((tmp_path / "baked" / "render.json").read_text())["lighting"] == "direct", baked.stderr
