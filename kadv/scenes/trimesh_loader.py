@@ -3,6 +3,8 @@ vertex colour."""
 
 from __future__ import annotations
 
+import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -79,12 +81,50 @@ def mesh_parts(
     return MeshPart(vertices, faces, uvs, normals, material_index, name, colors)
 
 
+def _gltf_json(path: Path) -> dict:
+    """A glTF's JSON (a .gltf file, or a .glb's first chunk); {} where it cannot be read (trimesh
+    then says what is wrong)."""
+    try:
+        if path.suffix.lower() == ".gltf":
+            return json.loads(path.read_text())
+        with open(path, "rb") as file:
+            header = file.read(20)
+            if len(header) < 20 or header[:4] != b"glTF":
+                return {}
+            return json.loads(file.read(struct.unpack("<I", header[12:16])[0]))
+    except (OSError, ValueError):
+        return {}
+
+
+def _refuse_basis_textures(path: Path) -> None:
+    """A glTF whose textures are Basis Universal (HM3D's ``.basis.glb``, ``KHR_texture_basisu``),
+    which no decoder here reads: refused in one line naming the texture, not shown untextured."""
+    gltf = _gltf_json(path)
+    for index, image in enumerate(gltf.get("images", [])):
+        name = image.get("name") or image.get("uri") or f"image {index}"
+        if image.get("mimeType") in ("image/ktx2", "image/basis") or str(image.get("uri", "")).endswith(
+            (".ktx2", ".basis")
+        ):
+            raise ValueError(
+                f"{path}: texture {name!r} is Basis Universal ({image.get('mimeType') or image.get('uri')}), which "
+                "kadv cannot decode; load the dataset's OBJ/JPG variant of this scan instead"
+            )
+    if "KHR_texture_basisu" in gltf.get("extensionsRequired", []) + gltf.get("extensionsUsed", []):
+        raise ValueError(
+            f"{path}: its textures are Basis Universal (KHR_texture_basisu), which kadv cannot decode; load the "
+            "dataset's OBJ/JPG variant of this scan instead"
+        )
+
+
 def load_mesh_file(path: Path, materials: list[Material]) -> list[MeshPart]:
     """Load every mesh of a trimesh-readable file as parts, appending its materials to ``materials``.
 
     Raises:
-        ValueError: if the file holds no triangle mesh or cannot be parsed.
+        ValueError: if the file holds no triangle mesh, cannot be parsed, or has textures kadv cannot
+            decode (Basis Universal).
     """
+    if path.suffix.lower() in (".glb", ".gltf"):
+        _refuse_basis_textures(path)
     try:
         loaded = trimesh.load(str(path), force="scene", process=False)
     except Exception as error:  # trimesh raises many kinds on malformed files

@@ -81,3 +81,21 @@ def test_kadv_render_shows_a_recognised_scan_as_scanned_and_names_the_lighting(t
     assert summary["lighting"] == "scanned" and summary["validity"]["verdict"] == "valid"
     baked = call_main(render_main, [*args, "hydra.run.dir=baked", "render.lighting=direct"], cwd=tmp_path)
     assert json.loads((tmp_path / "baked" / "render.json").read_text())["lighting"] == "direct", baked.stderr
+
+
+def test_a_gltf_with_basis_universal_textures_is_refused_naming_the_texture(tmp_path: Path) -> None:
+    box = trimesh.creation.box()
+    box.export(tmp_path / "plain.glb")
+    data = (tmp_path / "plain.glb").read_bytes()
+    length = int.from_bytes(data[12:16], "little")
+    gltf = json.loads(data[20 : 20 + length])
+    gltf["extensionsUsed"] = ["KHR_texture_basisu"]
+    gltf["images"] = [{"name": "floor_atlas", "mimeType": "image/ktx2", "bufferView": 0}]
+    text = json.dumps(gltf).encode()
+    text += b" " * (-len(text) % 4)
+    patched = data[:12] + len(text).to_bytes(4, "little") + data[16:20] + text + data[20 + length :]
+    path = tmp_path / "00800-TEEsavR23oF.basis.glb"
+    path.write_bytes(patched[:8] + len(patched).to_bytes(4, "little") + patched[12:])  # the file's new length
+    with pytest.raises(ValueError, match=r"texture 'floor_atlas' is Basis Universal \(image/ktx2\), which kadv cannot"):
+        load_scene(path)
+    assert load_scene(tmp_path / "plain.glb").num_triangles == 12  # a glTF without them loads
