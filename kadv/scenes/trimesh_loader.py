@@ -116,15 +116,41 @@ def _refuse_basis_textures(path: Path) -> None:
         )
 
 
+def _refuse_missing_obj_textures(path: Path) -> None:
+    """An OBJ whose material library, or a texture it names (``map_Kd``, Matterport's and 3RScan's
+    atlases), is not on disk: refused in one line naming both, not shown in flat colours."""
+    text = path.read_text(errors="replace")
+    for line in text.splitlines():
+        if not line.startswith("mtllib "):
+            continue
+        library = path.parent / line.split(maxsplit=1)[1].strip()
+        if not library.is_file():
+            raise ValueError(f"{path}: its material library {library.name!r} is missing ({library})")
+        material = None
+        for entry in library.read_text(errors="replace").splitlines():
+            words = entry.split()
+            if words[:1] == ["newmtl"] and len(words) > 1:
+                material = words[1]
+            elif words[:1] == ["map_Kd"] and len(words) > 1:
+                texture = library.parent / words[-1]  # the file name is last, after any options
+                if not texture.is_file():
+                    raise ValueError(
+                        f"{path}: the texture {words[-1]!r} of material {material!r} in {library.name} is missing "
+                        f"({texture})"
+                    )
+
+
 def load_mesh_file(path: Path, materials: list[Material]) -> list[MeshPart]:
     """Load every mesh of a trimesh-readable file as parts, appending its materials to ``materials``.
 
     Raises:
-        ValueError: if the file holds no triangle mesh, cannot be parsed, or has textures kadv cannot
-            decode (Basis Universal).
+        ValueError: if the file holds no triangle mesh, cannot be parsed, lacks a texture it names
+            (OBJ), or has textures kadv cannot decode (Basis Universal).
     """
     if path.suffix.lower() in (".glb", ".gltf"):
         _refuse_basis_textures(path)
+    if path.suffix.lower() == ".obj":
+        _refuse_missing_obj_textures(path)
     try:
         loaded = trimesh.load(str(path), force="scene", process=False)
     except Exception as error:  # trimesh raises many kinds on malformed files

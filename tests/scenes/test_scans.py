@@ -99,3 +99,21 @@ def test_a_gltf_with_basis_universal_textures_is_refused_naming_the_texture(tmp_
     with pytest.raises(ValueError, match=r"texture 'floor_atlas' is Basis Universal \(image/ktx2\), which kadv cannot"):
         load_scene(path)
     assert load_scene(tmp_path / "plain.glb").num_triangles == 12  # a glTF without them loads
+
+
+def test_an_obj_whose_texture_atlas_is_missing_is_refused_naming_it(tmp_path: Path) -> None:
+    obj = "mtllib house.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl wall\nf 1/1 2/2 3/3\n"
+    (tmp_path / "house.obj").write_text(obj)
+    (tmp_path / "house.mtl").write_text("newmtl wall\nKd 1 1 1\nmap_Kd -bm 1 atlas/house_0.jpg\n")
+    message = r"house.obj: the texture 'atlas/house_0.jpg' of material 'wall' in house.mtl is missing"
+    with pytest.raises(ValueError, match=message):
+        load_scene(tmp_path / "house.obj")
+    (tmp_path / "atlas").mkdir()
+    from PIL import Image
+
+    Image.new("RGB", (4, 4), (200, 10, 10)).save(tmp_path / "atlas" / "house_0.jpg")
+    (tmp_path / "house.mtl").write_text("newmtl wall\nKd 1 1 1\nmap_Kd atlas/house_0.jpg\n")
+    assert load_scene(tmp_path / "house.obj").materials[0].texture is not None
+    (tmp_path / "house.mtl").unlink()
+    with pytest.raises(ValueError, match=r"house.obj: its material library 'house.mtl' is missing"):
+        load_scene(tmp_path / "house.obj")
