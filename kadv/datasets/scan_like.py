@@ -45,7 +45,8 @@ class ScanLikeSettings:
 
     Attributes:
         edge: the longest triangle edge, metres (a reconstruction's resolution).
-        jitter: vertices moved at random by up to this share of ``edge`` (irregular triangles).
+        jitter: vertices slid along their surface at random by up to this share of ``edge``
+            (irregular triangles).
         noise: standard deviation of the surface noise, metres.
         holes: holes in the walls and the floor, each a disc of missing surface.
         hole_radius: (smallest, largest) radius of a hole, metres.
@@ -152,8 +153,10 @@ def scan_like(room: Scene, seed: int = 0, settings: ScanLikeSettings | None = No
     keep &= ~removed
     faces = faces[keep]
     # surface noise and irregular triangles: every vertex moved a little
-    vertices = vertices + rng.normal(0.0, settings.noise, vertices.shape)
-    vertices += rng.uniform(-1, 1, vertices.shape) * settings.jitter * settings.edge * 0.5
+    # irregular triangles: every vertex slid along its surface; then the surface noise across it
+    slide = rng.uniform(-1, 1, vertices.shape) * settings.jitter * settings.edge * 0.5
+    slide -= np.einsum("vi,vi->v", slide, normals)[:, None] * normals
+    vertices = vertices + slide + rng.normal(0.0, settings.noise, vertices.shape)
     # floaters: a few small triangles each, in the room's free space
     box = room.camera_region
     extra_vertices, extra_faces, extra_colours = [], [], []

@@ -25,6 +25,9 @@ class PenaltyConfig:
         max_plane_share: a view is uninformative when one plane covers more than this share of the
             pixels that hit a surface (min-max normalisation turns a lone plane's depth into a ramp
             that any model's flat guess misses, so its L_depth says nothing about the model).
+        max_miss_share: a scan's view (``render.lighting=scanned``) is uninformative when more than
+            this share of its pixels look through a hole or a missing ceiling (they carry no depth);
+            in a modelled room a miss is sky through a window, and counts as nothing.
     """
 
     d_th: float = 0.2
@@ -37,6 +40,7 @@ class PenaltyConfig:
     inside_threshold: float = 0.5
     uninformative: bool = True
     max_plane_share: float = 0.9
+    max_miss_share: float = 0.25
 
     def __post_init__(self) -> None:
         for name in ("d_th", "margin", "near", "min_distance"):
@@ -46,7 +50,7 @@ class PenaltyConfig:
             raise ValueError(f"penalty.weight must be >= 0, got {self.weight}")
         if self.probe_rays < 16:
             raise ValueError(f"penalty.probe_rays must be >= 16, got {self.probe_rays}")
-        for name in ("outside_threshold", "inside_threshold", "max_plane_share"):
+        for name in ("outside_threshold", "inside_threshold", "max_plane_share", "max_miss_share"):
             if not 0 < getattr(self, name) < 1:
                 raise ValueError(f"penalty.{name} must be in (0, 1), got {getattr(self, name)}")
 
@@ -59,4 +63,5 @@ class PenaltyConfig:
             "outside_threshold": self.outside_threshold,
             "inside_threshold": self.inside_threshold,
             "max_plane_share": self.max_plane_share if self.uninformative else None,
+            "max_miss_share": self.max_miss_share if self.uninformative else None,
         }

@@ -26,7 +26,9 @@ optical centre instead:
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import math
 import weakref
 from dataclasses import dataclass, field
 
@@ -42,8 +44,11 @@ from kadv.penalties.envelope import OUTSIDE_ENVELOPE, EnvelopeFigures
 from kadv.render.raycast import ExactRenderer, RenderOutput
 
 __all__ = [
+    "SCAN_PLANE_TOLERANCE",
+    "SCAN_PROBE_ELEVATION",
     "ValidityLimits",
     "ViewValidity",
+    "dominant_plane_shares",
     "fibonacci_sphere",
     "plane_counts",
     "plane_labels",
@@ -54,6 +59,10 @@ __all__ = [
 
 VALID, INSIDE, OUTSIDE, TOO_CLOSE = "valid", "inside an object", "outside the scene", "too close"
 UNINFORMATIVE = "uninformative"
+# A scan's probe looks no higher than this above the horizon, degrees: its ceiling may be missing
+SCAN_PROBE_ELEVATION = 15.0
+# metres from a scan's dominant plane within which a hit counts as on it (a scan's noise is millimetres)
+SCAN_PLANE_TOLERANCE = 0.03
 # Triangles lie in one plane when their unit normals agree to ~1 degree and their offsets to 2 cm:
 # coarse enough for a wall split into many triangles, fine enough to part a table top from the floor.
 _PLANE_NORMAL_STEP, _PLANE_OFFSET_STEP = 0.02, 0.02
@@ -70,6 +79,7 @@ class ValidityLimits:
     outside_threshold: float = PenaltyConfig.outside_threshold
     inside_threshold: float = PenaltyConfig.inside_threshold
     max_plane_share: float | None = PenaltyConfig.max_plane_share
+    max_miss_share: float | None = PenaltyConfig.max_miss_share
 
 
 @dataclass
@@ -127,8 +137,9 @@ class ViewValidity:
             self.distance,
             self.near_fraction,
             self.plane_share,
+            self.miss_fraction,
         ]
-        probe_miss, probe_back, distance, near_fraction, share = torch.stack(figures).cpu()  # one copy
+        probe_miss, probe_back, distance, near_fraction, share, missed = torch.stack(figures).cpu()  # one copy
         limits, verdicts, reasons = self.limits, [], []
         outside_envelope = self.envelope.reasons() if self.envelope is not None else [None] * len(distance)
         for b in range(len(distance)):
@@ -152,6 +163,9 @@ class ViewValidity:
                 reasons.append(
                     f"one plane covers {share[b]:.0%} of the surface pixels (> {limits.max_plane_share:.0%})"
                 )
+            elif limits.max_miss_share is not None and missed[b] > limits.max_miss_share:
+                verdicts.append(UNINFORMATIVE)
+                reasons.append(f"{missed[b]:.0%} of the pixels see a hole in the scan (> {limits.max_miss_share:.0%})")
             elif outside_envelope[b] is not None:
                 verdicts.append(OUTSIDE_ENVELOPE)
                 reasons.append(f"{outside_envelope[b]} ({self.envelope.envelope.describe()})")
@@ -227,6 +241,31 @@ def plane_shares(renderer: ExactRenderer, triangle_ids: torch.Tensor) -> torch.T
     return torch.where(hits > 0, most.double() / hits.clamp_min(1).double(), 0.0)
 
 
+def dominant_plane_shares(points: torch.Tensor, hit: torch.Tensor, rounds: int = 3) -> torch.Tensor:
+    """(B,) share of each view's hit pixels within :data:`SCAN_PLANE_TOLERANCE` of its dominant
+    plane, from world points (B, N, 3) and hits (B, N): the plane is fitted by least squares, then
+    again to the points near it, ``rounds`` times (a scan's noisy triangles share no plane exactly,
+    so :func:`plane_shares`' labels would split its walls). 0 for a view that hits nothing.
+
+    Examples:
+        >>> wall = torch.cat([torch.rand(1, 90, 2), torch.zeros(1, 90, 1)], dim=2)  # the plane z = 0
+        >>> floor = torch.cat([torch.rand(1, 10, 1), torch.full((1, 10, 1), -0.5), torch.rand(1, 10, 1)], dim=2)
+        >>> hit = torch.ones(1, 100, dtype=torch.bool)
+        >>> round(dominant_plane_shares(torch.cat([wall, floor], dim=1), hit).item(), 2)
+        0.9
+    """
+    weight = hit.to(points.dtype)
+    for _ in range(rounds):
+        count = weight.sum(dim=1, keepdim=True).clamp_min(1.0)
+        centre = (points * weight[..., None]).sum(dim=1, keepdim=True) / count[..., None]
+        spread = (points - centre) * weight[..., None]
+        normal = torch.linalg.svd(spread.transpose(1, 2) @ spread).U[..., -1]  # the least-spread axis
+        near = ((points - centre) @ normal[..., None])[..., 0].abs() <= SCAN_PLANE_TOLERANCE
+        weight = (hit & near).to(points.dtype)
+    hits = hit.sum(dim=1)
+    return torch.where(hits > 0, weight.sum(dim=1) / hits.clamp_min(1), 0.0)
+
+
 def plane_counts(renderer: ExactRenderer, triangle_ids: torch.Tensor) -> torch.Tensor:
     """(B, P) int64 pixels of each view on each of the scene's P planes (:func:`plane_labels`), from
     per-pixel triangle ids (B, N) with -1 for a miss, on their device, without a loop over views."""
@@ -265,11 +304,32 @@ def probe_directions_hits(
     """
     centres = torch.as_tensor(centres).to(renderer.device, torch.float64, non_blocking=True)
     directions = torch.as_tensor(directions).to(renderer.device, torch.float64, non_blocking=True)
+    if renderer.shading.lighting == "scanned":
+        return _scan_probe(renderer, centres, directions)
     origins = centres[:, None, :].expand(len(centres), len(directions), 3)
     rays = directions[None].expand(origins.shape)
     hits = renderer.cast(origins, rays)
     shape = (len(centres), len(directions))
     return ~hits.hit.reshape(shape), renderer.hidden_side(hits, rays).reshape(shape)
+
+
+def _scan_probe(renderer: ExactRenderer, centres: torch.Tensor, directions: torch.Tensor) -> tuple:
+    """The probe of a scan, whose winding and closedness nothing keeps: only the directions at most
+    :data:`SCAN_PROBE_ELEVATION` above the horizon (a scan's ceiling may be missing), and instead of
+    the side a ray meets, the parity of the surfaces it crosses: from the free space of a room a ray
+    crosses its shell once (or once more through each closed object on its way), from inside an
+    object twice (the object's surface, then the shell). (miss, even) booleans (B, N') on the
+    renderer's device: the ray escapes; it crosses an even, non-zero number of surfaces."""
+    low = directions[directions[:, 1] <= math.sin(math.radians(SCAN_PROBE_ELEVATION))]
+    origins = centres[:, None, :].expand(len(centres), len(low), 3).reshape(-1, 3)
+    rays = low[None].expand(len(centres), len(low), 3).reshape(-1, 3)
+    ray_ids, t, _, _ = renderer.intersections(origins, rays)
+    # a surface met twice within a millimetre (coplanar duplicates, a seam) is crossed once
+    t64 = t.double()
+    repeated = torch.zeros_like(ray_ids, dtype=torch.bool)
+    repeated[1:] = (ray_ids[1:] == ray_ids[:-1]) & ((t64[1:] - t64[:-1]).abs() <= 1e-3)
+    crossings = torch.bincount(ray_ids[~repeated], minlength=len(origins)).reshape(len(centres), len(low))
+    return crossings == 0, (crossings > 0) & (crossings % 2 == 0)
 
 
 def view_validity(
@@ -279,13 +339,9 @@ def view_validity(
     height: int,
     width: int,
     *,
-    near: float = PenaltyConfig.near,
-    min_distance: float = PenaltyConfig.min_distance,
     probe_rays: int = PenaltyConfig.probe_rays,
-    outside_threshold: float = PenaltyConfig.outside_threshold,
-    inside_threshold: float = PenaltyConfig.inside_threshold,
-    max_plane_share: float | None = PenaltyConfig.max_plane_share,
     render: RenderOutput | None = None,
+    **limits: float | None,
 ) -> ViewValidity:
     """Classify B camera views.
 
@@ -295,15 +351,17 @@ def view_validity(
         K: (3, 3) or (B, 3, 3) intrinsics.
         height: the view's image height.
         width: the view's image width.
-        near: near plane in metres (z-depth); pixels closer than it make the view "too close".
-        min_distance: the centre may not be nearer than this to any surface.
         probe_rays: directions of the spherical probe.
-        outside_threshold: probe miss fraction above which the centre is outside the scene.
-        inside_threshold: probe hidden-side fraction above which the centre is inside an object.
-        max_plane_share: a view whose most common plane covers more of its hit pixels than this is
-            "uninformative" (None: never).
         render: the views' exact render at these poses, K and size, when the caller has one: its
             pixel-centre hits are used instead of casting them again.
+        limits: :class:`ValidityLimits`' fields, their defaults :class:`PenaltyConfig`'s: ``near``
+            (pixels nearer than this z-depth make the view "too close"), ``min_distance`` (nor may
+            the centre be nearer to a surface), ``outside_threshold`` (the probe's escape fraction
+            above which the centre is outside the scene), ``inside_threshold`` (its hidden-side
+            fraction above which it is inside an object), ``max_plane_share`` (a view whose most
+            common plane covers more of its hit pixels is "uninformative"; None: never),
+            ``max_miss_share`` (so is a scan's view, ``render.lighting=scanned``, where more of
+            the pixels see nothing; None, or any other scene: never).
 
     Examples:
         >>> import kadv
@@ -317,18 +375,31 @@ def view_validity(
     """
     pose = check_world_T_cam(world_T_cam)
     batch, device = len(pose), renderer.device
+    scanned = renderer.shading.lighting == "scanned"
+    limits = ValidityLimits(**limits)
+    if not scanned:
+        limits = dataclasses.replace(limits, max_miss_share=None)
     centres = pose[:, :3, 3].detach().double().to(device, non_blocking=True)
     if render is None:
         origins, directions = pixel_rays(pose, K, height, width, device=device)
         hits = renderer.cast(origins, directions)
         view_back = renderer.back_facing(hits, directions).reshape(batch, -1)
         triangle_ids = hits.triangle_ids.reshape(batch, -1)
-        near_hit = (triangle_ids >= 0) & (hits.t.double().reshape(batch, -1) < near)
+        near_hit = (triangle_ids >= 0) & (hits.t.double().reshape(batch, -1) < limits.near)
+        if scanned:
+            reach = torch.where(hits.hit, hits.t, 0.0).double()[:, None]
+            points = (origins.reshape(-1, 3) + directions.reshape(-1, 3) * reach).reshape(batch, -1, 3)
     else:
         check_shape(render.depth, f"B 1 {height} {width}", "render.depth", {"B": batch})
         triangle_ids = render.triangle_ids.reshape(batch, -1).to(device)
         view_back = render.back_face.reshape(batch, -1).to(device)
-        near_hit = (triangle_ids >= 0) & (render.depth.reshape(batch, -1).double().to(device) < near)
+        near_hit = (triangle_ids >= 0) & (render.depth.reshape(batch, -1).double().to(device) < limits.near)
+        if scanned:
+            points = render.points.to(device).flatten(2).transpose(1, 2)
+    if scanned:  # a scan's noisy triangles share no plane exactly
+        plane_share = dominant_plane_shares(points.double(), triangle_ids >= 0)
+    else:
+        plane_share = plane_shares(renderer, triangle_ids)
     probe_miss, probe_back = probe_directions_hits(renderer, centres, _probe_directions(probe_rays, device))
     return ViewValidity(
         miss_fraction=(triangle_ids < 0).double().mean(dim=1),
@@ -337,8 +408,8 @@ def view_validity(
         probe_miss_fraction=probe_miss.double().mean(dim=1),
         probe_back_fraction=probe_back.double().mean(dim=1),
         distance=distance_to_surface(renderer, centres).detach(),
-        plane_share=plane_shares(renderer, triangle_ids),
-        limits=ValidityLimits(near, min_distance, outside_threshold, inside_threshold, max_plane_share),
+        plane_share=plane_share,
+        limits=limits,
     )
 
 

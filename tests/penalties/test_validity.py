@@ -8,6 +8,7 @@ import torch
 from kadv.attack import InitViewError, PenaltyConfig, check_init_views, file_init_views
 from kadv.geometry import intrinsics_from_fov, look_at
 from kadv.penalties import view_validity
+from kadv.penalties.validity import ValidityLimits, ViewValidity
 from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.scenes import box_room
 from tests.windings import rewound
@@ -176,3 +177,47 @@ def test_a_wall_filling_the_frame_is_uninformative_and_a_corner_view_is_not(room
     assert result.plane_share[0] == 1.0 and result.plane_share[1] < 0.9
     # the verdict can be turned off (penalty.uninformative: false passes max_plane_share=None)
     assert view_validity(room_renderer, wall, K, 12, 16, max_plane_share=None).verdicts == ["valid"]
+
+
+def test_a_scan_without_trustworthy_winding_or_ceiling_is_judged_as_its_source_room_is(tmp_path) -> None:
+    """A scan-like box room (random winding, holes, a third of its ceiling missing) under
+    ``scanned`` lighting: the probe below the horizon counts crossings instead of sides, and its
+    verdicts agree with the source room's (direct lighting, faithful winding) on random views."""
+    import collections
+
+    import kadv
+    from kadv.datasets.scan_like import scan_like, write_scan
+    from kadv.penalties import PenaltyConfig
+    from kadv.render import Shading
+
+    room = kadv.box_room(seed=0)
+    scan = scan_like(room, seed=0)
+    scanned = kadv.ExactRenderer(kadv.load_scene(write_scan(scan, tmp_path, "scannet")), Shading(lighting="scanned"))
+    rng = np.random.default_rng(0)
+    box = room.camera_region
+    eyes = torch.from_numpy(rng.uniform(box[0] + 0.2, box[1] - 0.2, (300, 3)))
+    poses = kadv.look_at(eyes, eyes + torch.from_numpy(rng.normal(size=(300, 3)) * [1.0, 0.2, 1.0]))
+    K = kadv.intrinsics_from_fov(70.0, 48, 64)
+    options = PenaltyConfig().validity_options()
+    source = view_validity(kadv.ExactRenderer(room), poses, K, 48, 64, **options).verdicts
+    ours = view_validity(scanned, poses, K, 48, 64, **options).verdicts
+    pairs = collections.Counter(zip(source, ours))
+    agree = sum(n for (a, b), n in pairs.items() if a == b)
+    assert agree >= 0.9 * len(source), pairs  # 94.5% measured on 400 such views
+    # every centre inside a box is inside an object in the scan too, whatever its winding
+    inside = [i for i, verdict in enumerate(source) if verdict == "inside an object"]
+    assert inside and all(ours[i] == "inside an object" for i in inside)
+    # beyond a wall: outside; under the missing ceiling looking up: a hole fills the view
+    beyond = kadv.look_at(torch.tensor([[2.0, 1.5, -1.0]]), torch.tensor([[2.0, 1.5, 1.0]]))
+    assert view_validity(scanned, beyond, K, 48, 64, **options).verdicts == ["outside the scene"]
+    x, y, z, _ = max(scan.missing_ceiling, key=lambda patch: patch[3])
+    eye = torch.tensor([[x, y - 1.0, z]])
+    up = view_validity(scanned, kadv.look_at(eye, eye + torch.tensor([[0.0, 1.0, 0.1]])), K, 48, 64, **options)
+    assert up.verdicts == ["uninformative"] and float(up.miss_fraction[0]) > 0.25
+    # the rule itself: a view whose pixels see a hole past the limit, though no plane fills it
+    figures = {name: torch.zeros(1, dtype=torch.float64) for name in ("back_face_fraction", "near_fraction")}
+    figures |= {"probe_miss_fraction": torch.tensor([0.05]), "probe_back_fraction": torch.tensor([0.1])}
+    figures |= {"distance": torch.tensor([1.0]), "plane_share": torch.tensor([0.5])}
+    holed = ViewValidity(miss_fraction=torch.tensor([0.4]), limits=ValidityLimits(max_miss_share=0.25), **figures)
+    assert holed.verdicts == ["uninformative"] and holed.reasons == ["40% of the pixels see a hole in the scan (> 25%)"]
+    assert ViewValidity(miss_fraction=torch.tensor([0.2]), **figures).verdicts == ["valid"]
