@@ -78,3 +78,18 @@ def test_the_missing_ceiling_is_a_miss_in_the_mask_with_no_depth_and_the_backgro
     centre = (slice(None), slice(None), slice(6, 10), slice(6, 10))
     assert not out.mask[centre].any() and (out.depth[centre] == 0).all()
     torch.testing.assert_close(out.rgb[centre], torch.tensor(MAGENTA)[None, :, None, None].expand(1, 3, 4, 4))
+
+
+def test_an_attack_on_a_scan_like_in_scannets_layout_chooses_only_valid_views(written) -> None:
+    from kadv.attack import AttackConfig, attack
+    from kadv.testing.options import CheckOptions, setup
+
+    built = setup("kadv_tiny", str(written["scannet"]), CheckOptions(lighting="scanned", size=(48, 64)))
+    assert built.renderer.shading.lighting == "scanned" and len(built.views) == 2  # drawn in its free space
+    config = AttackConfig(budget_evaluations=16, envelope="upright")
+    result = attack(built.objective, built.differentiable, built.views, *built.size, config, 0, progress=False)
+    for view in result.views:
+        assert view.top and all(r.valid for r in view.top) and all(r.valid for r in view.path[1:])
+        assert min(r.delta1 for r in view.top) < view.init_record.delta1
+    verdicts = {r.verdict for view in result.views for r in view.records}
+    assert "valid" in verdicts
