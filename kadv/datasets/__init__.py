@@ -1,4 +1,5 @@
-"""Synthetic training and evaluation data rendered from procedural rooms."""
+"""Synthetic training and evaluation data rendered from procedural rooms, and scan-like rooms made
+from them in the scan datasets' layouts."""
 
 from __future__ import annotations
 
@@ -11,13 +12,19 @@ from kadv.datasets.procedural import (
     render_procedural_views,
     training_poses,
 )
+from kadv.datasets.scan_like import SCAN_LAYOUTS, ScanLike, ScanLikeSettings, scan_like, write_scan
 
 __all__ = [
     "HELD_OUT_SEED",
     "MAX_SQUEEZED_ASPECT",
+    "SCAN_LAYOUTS",
     "TRAINING_BAKE",
     "RoomMix",
+    "ScanLike",
+    "ScanLikeSettings",
     "ViewBatch",
     "render_procedural_views",
+    "scan_like",
     "training_poses",
+    "write_scan",
 ]

@@ -1,4 +1,5 @@
-"""Scene data and loaders: Mitsuba XML, trimesh formats, generated box rooms and furnished rooms."""
+"""Scene data and loaders: Mitsuba XML, PLY (scans' vertex colours), trimesh formats, scan layouts,
+generated box rooms and furnished rooms."""
 
 from __future__ import annotations
 
@@ -6,7 +7,9 @@ from kadv.scenes.box_rooms import box_room
 from kadv.scenes.emitters import Emitters
 from kadv.scenes.from_node import scene_from_node
 from kadv.scenes.load import SUPPORTED_SUFFIXES, load_scene
+from kadv.scenes.ply import PlyError, PlyMesh, read_ply
 from kadv.scenes.procedural import procedural_room
+from kadv.scenes.scans import ScanLayout, recognise_scan
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 
 __all__ = [
@@ -14,10 +17,15 @@ __all__ = [
     "Emitters",
     "Material",
     "MeshPart",
+    "PlyError",
+    "PlyMesh",
+    "ScanLayout",
     "Scene",
     "assemble_scene",
     "box_room",
     "load_scene",
     "procedural_room",
+    "read_ply",
+    "recognise_scan",
     "scene_from_node",
 ]
