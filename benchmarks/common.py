@@ -58,6 +58,14 @@ def device_and_backend(
     return device, checked_backend(parser, args.backend, device), args
 
 
+def check_names(parser: argparse.ArgumentParser, options: dict[str, tuple[list[str], tuple[str, ...]]]) -> None:
+    """End the script in one line (exit status 2) when an option names something unknown:
+    ``options`` maps each option to the names given and the names known."""
+    for option, (given, known) in options.items():
+        if set(given) - set(known):
+            parser.error(f"{option}: no {', '.join(sorted(set(given) - set(known)))}; choose from {', '.join(known)}")
+
+
 def default_lighting() -> str:
     """The lighting the commands render the benchmarks' scenes with by default (``render.lighting`` in
     conf/render/exact.yaml; ``auto`` is ``baked`` for a scene that is not a scan)."""

@@ -30,7 +30,7 @@ import json
 import time
 from pathlib import Path
 
-import common  # noqa: F401  (kadv's runtime settings, before torch starts its thread pool)
+import common  # first: kadv's runtime settings, before torch starts its thread pool
 import numpy as np
 import torch
 
@@ -193,9 +193,7 @@ def main() -> None:
     args = parser.parse_args()
     out, parts = Path(args.out), args.parts.split(",")
     probes = list(PROBES) if args.probes == "all" else args.probes.split(",")
-    for option, names, known in (("--parts", parts, PARTS), ("--probes", probes, PROBES)):
-        if set(names) - set(known):
-            parser.error(f"{option}: no {', '.join(sorted(set(names) - set(known)))}; choose from {', '.join(known)}")
+    common.check_names(parser, {"--parts": (parts, PARTS), "--probes": (probes, list(PROBES))})
     seeds = [int(s) for s in args.seeds.split(",")]
     tiny, dpt = load_model("kadv_tiny"), load_model("kadv_tiny_dpt")
 

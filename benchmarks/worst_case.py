@@ -477,9 +477,7 @@ def main() -> None:
     args = parser.parse_args()
     out, parts = Path(args.out), args.parts.split(",")
     names = list(SCENES) if args.scenes == "all" else args.scenes.split(",")
-    for option, given, known in (("--parts", parts, PARTS), ("--scenes", names, SCENES)):
-        if set(given) - set(known):
-            parser.error(f"{option}: no {', '.join(sorted(set(given) - set(known)))}; choose from {', '.join(known)}")
+    common.check_names(parser, {"--parts": (parts, PARTS), "--scenes": (names, SCENES)})
     seeds = [int(s) for s in args.seeds.split(",")]
     out.mkdir(parents=True, exist_ok=True)
     stores = {name: Store(out, Cells(name), name) for name in names}

@@ -20,7 +20,7 @@ import torch
 from scipy.stats import qmc
 from tqdm import tqdm
 
-from kadv.attack.methods.hybrid import HybridSettings, trust_region_refine
+from kadv.attack.methods.hybrid import HybridSettings, check_trust_region, trust_region_refine
 from kadv.attack.records import InitViewResult, ViewRecord, incumbent_path, select_top_views
 from kadv.attack.registry import register_method
 from kadv.attack.search import SearchContext
@@ -69,13 +69,7 @@ class HalvingSettings:
     def __post_init__(self) -> None:
         if self.refine not in ("gradient", "local"):
             raise ValueError(f"attack.halving.refine must be 'gradient' or 'local', got {self.refine!r}")
-        for name in ("step_fraction", "shrink", "stall_scale"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0.0 < value <= 1.0) or (name == "shrink" and value == 1.0):
-                interval = "(0, 1)" if name == "shrink" else "(0, 1]"
-                raise ValueError(f"attack.halving.{name} must be in {interval}, got {value}")
-        if not (math.isfinite(self.grow) and self.grow >= 1.0):
-            raise ValueError(f"attack.halving.grow must be >= 1, got {self.grow}")
+        check_trust_region(self, "attack.halving", ("step_fraction", "shrink", "stall_scale"))
         if not (math.isfinite(self.screen_factor) and self.screen_factor >= 0.0):
             raise ValueError(f"attack.halving.screen_factor must be >= 0, got {self.screen_factor}")
 

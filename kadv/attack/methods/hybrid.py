@@ -18,7 +18,7 @@ from kadv.attack.records import InitViewResult, ViewRecord, incumbent_path, sele
 from kadv.attack.registry import register_method
 from kadv.attack.search import SearchContext
 
-__all__ = ["HybridSettings", "hybrid_search", "trust_region_refine"]
+__all__ = ["HybridSettings", "check_trust_region", "hybrid_search", "trust_region_refine"]
 
 # Restart starts held per refined lane (each is re-scored at full size when screening ran smaller).
 _POOL_PER_LANE = 3
@@ -54,13 +54,19 @@ class HybridSettings:
     stall_scale: float = 0.1
 
     def __post_init__(self) -> None:
-        for name in ("screen_scale", "shrink", "stall_scale"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and 0.0 < value <= 1.0) or (name == "shrink" and value == 1.0):
-                interval = "(0, 1)" if name == "shrink" else "(0, 1]"
-                raise ValueError(f"attack.hybrid.{name} must be in {interval}, got {value}")
-        if not (math.isfinite(self.grow) and self.grow >= 1.0):
-            raise ValueError(f"attack.hybrid.grow must be >= 1, got {self.grow}")
+        check_trust_region(self, "attack.hybrid", ("screen_scale", "shrink", "stall_scale"))
+
+
+def check_trust_region(settings, node: str, shares: tuple[str, ...]) -> None:
+    """Refuse, naming ``<node>.<field>``, a trust region's ``grow`` below 1, a ``shrink`` outside
+    (0, 1), or another of the ``shares`` outside (0, 1]."""
+    for name in shares:
+        value = getattr(settings, name)
+        if not (math.isfinite(value) and 0.0 < value <= 1.0) or (name == "shrink" and value == 1.0):
+            interval = "(0, 1)" if name == "shrink" else "(0, 1]"
+            raise ValueError(f"{node}.{name} must be in {interval}, got {value}")
+    if not (math.isfinite(settings.grow) and settings.grow >= 1.0):
+        raise ValueError(f"{node}.grow must be >= 1, got {settings.grow}")
 
 
 def _steps(gradient: torch.Tensor, radius: torch.Tensor, settings: HybridSettings) -> torch.Tensor:
