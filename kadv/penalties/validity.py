@@ -241,27 +241,53 @@ def plane_shares(renderer: ExactRenderer, triangle_ids: torch.Tensor) -> torch.T
     return torch.where(hits > 0, most.double() / hits.clamp_min(1).double(), 0.0)
 
 
-def dominant_plane_shares(points: torch.Tensor, hit: torch.Tensor, rounds: int = 3) -> torch.Tensor:
+def dominant_plane_shares(
+    points: torch.Tensor, hit: torch.Tensor, hypotheses: int = 64, samples: int = 1024, rounds: int = 2
+) -> torch.Tensor:
     """(B,) share of each view's hit pixels within :data:`SCAN_PLANE_TOLERANCE` of its dominant
-    plane, from world points (B, N, 3) and hits (B, N): the plane is fitted by least squares, then
-    again to the points near it, ``rounds`` times (a scan's noisy triangles share no plane exactly,
-    so :func:`plane_shares`' labels would split its walls). 0 for a view that hits nothing.
+    plane, from world points (B, N, 3) and hits (B, N). A scan's noisy triangles share no plane
+    exactly, so :func:`plane_shares`' labels would split its walls; and a least-squares fit to all
+    points is pulled off every plane by the others. So RANSAC: ``hypotheses`` planes through three
+    hit points each, scored on ``samples`` hit points, the best refitted by least squares to its
+    inliers ``rounds`` times. The draws come from a generator of their own (seed 0): the same
+    views give the same shares, and the global random state is left alone. 0 for a view that hits
+    nothing.
 
     Examples:
+        >>> _ = torch.manual_seed(0)
         >>> wall = torch.cat([torch.rand(1, 90, 2), torch.zeros(1, 90, 1)], dim=2)  # the plane z = 0
         >>> floor = torch.cat([torch.rand(1, 10, 1), torch.full((1, 10, 1), -0.5), torch.rand(1, 10, 1)], dim=2)
         >>> hit = torch.ones(1, 100, dtype=torch.bool)
         >>> round(dominant_plane_shares(torch.cat([wall, floor], dim=1), hit).item(), 2)
         0.9
     """
-    weight = hit.to(points.dtype)
-    for _ in range(rounds):
+    check_shape(points, "B N 3", "points")
+    check_shape(hit, "B N", "hit", {"B": points.shape[0], "N": points.shape[1]})
+    batch = len(points)
+    generator = torch.Generator(device=points.device).manual_seed(0)
+    # a view with no hit draws from all its points; its share is 0 anyway
+    odds = hit.to(points.dtype) + (~hit.any(dim=1, keepdim=True)).to(points.dtype)
+    picks = torch.multinomial(odds, 3 * hypotheses + samples, replacement=True, generator=generator)
+    drawn = torch.gather(points, 1, picks[..., None].expand(-1, -1, 3))
+    corners = drawn[:, : 3 * hypotheses].reshape(batch, hypotheses, 3, 3)
+    normal = torch.linalg.cross(corners[:, :, 1] - corners[:, :, 0], corners[:, :, 2] - corners[:, :, 0])
+    length = normal.norm(dim=-1, keepdim=True)
+    normal = normal / length.clamp_min(1e-12)
+    offset = (normal * corners[:, :, 0]).sum(dim=-1)  # (B, H)
+    distance = (drawn[:, 3 * hypotheses :] @ normal.transpose(1, 2) - offset[:, None]).abs()  # (B, S, H)
+    score = (distance <= SCAN_PLANE_TOLERANCE).sum(dim=1) * (length[..., 0] > 1e-9)  # degenerate triples: 0
+    best = score.argmax(dim=1)
+    normal, offset = normal[torch.arange(batch), best], offset[torch.arange(batch), best]
+    for _ in range(rounds + 1):
+        near = hit & ((points @ normal[..., None])[..., 0] - offset[:, None]).abs().le(SCAN_PLANE_TOLERANCE)
+        weight = near.to(points.dtype)
         count = weight.sum(dim=1, keepdim=True).clamp_min(1.0)
         centre = (points * weight[..., None]).sum(dim=1, keepdim=True) / count[..., None]
         spread = (points - centre) * weight[..., None]
-        normal = torch.linalg.svd(spread.transpose(1, 2) @ spread).U[..., -1]  # the least-spread axis
-        near = ((points - centre) @ normal[..., None])[..., 0].abs() <= SCAN_PLANE_TOLERANCE
-        weight = (hit & near).to(points.dtype)
+        refit = torch.linalg.svd(spread.transpose(1, 2) @ spread).U[..., -1]  # the least-spread axis
+        enough = weight.sum(dim=1, keepdim=True) >= 3
+        normal = torch.where(enough, refit, normal)
+        offset = torch.where(enough[:, 0], (normal * centre[:, 0]).sum(dim=-1), offset)
     hits = hit.sum(dim=1)
     return torch.where(hits > 0, weight.sum(dim=1) / hits.clamp_min(1), 0.0)
 

@@ -10,11 +10,12 @@ from omegaconf import OmegaConf
 
 from kadv.attack import DEFAULT_METHOD, AttackConfig, InitViewConfig, get_method
 from kadv.cli.attack import attack_settings
-from kadv.cli.common import _open_keys, loss_from_config, shading_from_config
+from kadv.cli.common import _open_keys, loss_from_config, resolve_lighting, shading_from_config
 from kadv.models import EMBEDDED, PRESETS
 from kadv.models.train_tiny import TinyTrainConfig
 from kadv.penalties import PenaltyConfig
 from kadv.render import DiffRenderConfig, Shading
+from kadv.scenes import box_room
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
 
@@ -26,6 +27,12 @@ def _options(group: str) -> list[str]:
 def _compose(config: str, *overrides: str):
     with initialize_config_module(config_module="kadv.conf", version_base="1.3"):
         return compose(config_name=config, overrides=list(overrides))
+
+
+def _shading(render) -> Shading:
+    """A ``render/`` node's shading once its ``auto`` lighting is resolved, as for the box room."""
+    resolve_lighting(box_room(), render)
+    return shading_from_config(render)
 
 
 def _defaults(cls) -> dict:
@@ -42,7 +49,7 @@ def test_every_group_option_composes_into_valid_settings() -> None:
             )
             PenaltyConfig(**OmegaConf.to_container(cfg.penalty))
             DiffRenderConfig(supersample=cfg.render.supersample, **OmegaConf.to_container(cfg.render.differentiable))
-            shading_from_config(cfg.render)
+            _shading(cfg.render)
             assert cfg.loss.space in ("disparity", "depth")
             if cfg.loss.kind != "perceptual":  # its VGG-16 weights would be a download
                 loss_from_config(cfg.loss)
@@ -75,7 +82,9 @@ def test_yaml_defaults_equal_the_library_defaults() -> None:
     assert OmegaConf.to_container(cfg.penalty) == _defaults(PenaltyConfig)
     diff = OmegaConf.to_container(cfg.render.differentiable)
     assert DiffRenderConfig(supersample=cfg.render.supersample, **diff) == DiffRenderConfig()
-    shading = shading_from_config(cfg.render)
+    assert cfg.render.lighting == "auto"
+    shading = _shading(cfg.render)
+    assert shading.lighting == "baked"  # the box room is not a scan
     assert (shading.ambient, shading.diffuse, shading.lights) == (
         Shading().ambient,
         Shading().diffuse,
