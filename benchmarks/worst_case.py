@@ -38,7 +38,7 @@ default budget (evaluations per init view and radius). The last line:
 ``worst_case regret_median=... regret_p90=... noise_median=... win_random=... ...``.
 
 Run: .venv/bin/python benchmarks/worst_case.py [--out outputs/worst_case] [--parts ...] [--scenes all|a,b]
-     [--seeds 0,1,2,3,4] [--budget 48]
+     [--seeds 0,1,2,3,4] [--budget 48] [--views scene:count,...]
 """
 
 from __future__ import annotations
@@ -474,6 +474,7 @@ def main() -> None:
     parser.add_argument("--seeds", default="0,1,2,3,4")
     parser.add_argument("--family-seeds", default="0,1,2")
     parser.add_argument("--budget", type=int, default=48, help="evaluations per init view and radius")
+    parser.add_argument("--views", default="", help="scene:count,...: measure only a scene's first init views")
     args = parser.parse_args()
     out, parts = Path(args.out), args.parts.split(",")
     names = list(SCENES) if args.scenes == "all" else args.scenes.split(",")
@@ -482,6 +483,12 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     stores = {name: Store(out, Cells(name), name) for name in names}
     views = {name: len(store.cells.views) for name, store in stores.items()}
+    for item in filter(None, args.views.split(",")):
+        name, _, count = item.partition(":")
+        common.check_names(parser, {"--views": ([name], names)})
+        if not count.isdigit() or int(count) < 1:
+            parser.error(f"--views: {item!r} is not scene:count with a count of 1 or more")
+        views[name] = min(views[name], int(count))
     figures: dict[str, str] = {}
     if {"regret", "wins"} & set(parts):
         runs = Runs(stores, views, seeds, args.budget)

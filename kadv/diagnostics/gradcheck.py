@@ -43,16 +43,24 @@ def smooth_weights(seed: int, channels: int, height: int, width: int) -> torch.T
 
 
 def occlusion_edge_mask(exact: RenderOutput, radius: int = 2, jump: float = 0.005) -> torch.Tensor:
-    """(B, 1, H, W) True within ``radius`` pixels of an occlusion edge (id change and depth jump)."""
-    depth = torch.where(exact.mask, exact.depth.double(), torch.full_like(exact.depth.double(), float("inf")))
-    ids = exact.triangle_ids
-    edge = torch.zeros_like(exact.mask)
+    """(B, 1, H, W) True within ``radius`` pixels of an occlusion edge: neighbours on different
+    triangles where one's hit point lies off the other's tangent plane by more than ``jump`` times
+    its depth, or where one ray misses. Neighbouring triangles of one surface are not an edge,
+    however steeply the depth changes between them (a grazing floor, a scan's small irregular
+    triangles); a crease or a step is."""
+    points, normals = exact.points.double(), exact.normals.double()
+    depth, ids, hit = exact.depth.double(), exact.triangle_ids, exact.mask
+    edge = torch.zeros_like(hit)
     for a, b in (
         ((..., slice(None, -1)), (..., slice(1, None))),
         ((..., slice(None, -1), slice(None)), (..., slice(1, None), slice(None))),
     ):
-        near, far = torch.minimum(depth[a], depth[b]), torch.maximum(depth[a], depth[b])
-        jumpy = (ids[a] != ids[b]) & ((far - near) > jump * near)
+        gap = points[b] - points[a]
+        off = torch.maximum(
+            (normals[a] * gap).sum(dim=1, keepdim=True).abs() / depth[a].clamp_min(1e-9),
+            (normals[b] * gap).sum(dim=1, keepdim=True).abs() / depth[b].clamp_min(1e-9),
+        )
+        jumpy = (ids[a] != ids[b]) & (((hit[a] & hit[b]) & (off > jump)) | (hit[a] ^ hit[b]))
         edge[a] |= jumpy
         edge[b] |= jumpy
     return F.max_pool2d(edge.float(), 2 * radius + 1, stride=1, padding=radius) > 0
@@ -82,6 +90,10 @@ class GradientCheck:
     def step_agreement(self) -> float:
         return min(self.agreements.values())
 
+    def agreement(self, functionals: tuple[str, ...]) -> float:
+        """The least step agreement among ``functionals``."""
+        return min(self.agreements[f] for f in functionals)
+
     def score(self, functional: str) -> float:
         return min(self.cosines[functional])
 
@@ -106,6 +118,7 @@ def check_pose(
     reference_supersample: int = 4,
     rotation_step: float = 2e-3,
     translation_step: float = 4e-3,
+    edge_jump: float = 0.005,
     device: str | torch.device = "cpu",
 ) -> dict[str, GradientCheck]:
     """Compare analytic and finite-difference gradients of the four functionals at one pose.
@@ -115,12 +128,16 @@ def check_pose(
 
     Returns one :class:`GradientCheck` per renderer configuration (the reference is shared); its
     ``step_agreement`` < 0.99 says the reference is not trustworthy there (resample the pose).
+    The interior functionals leave out pixels near occlusion edges (:func:`occlusion_edge_mask`
+    with ``jump=edge_jump``; a scan's surface noise asks for a larger one).
     """
     base = world_T_cam.double().reshape(1, 4, 4)
     K = torch.as_tensor(K, dtype=torch.float64)
     w_rgb, w_depth = smooth_weights(weight_seed, 3, height, width), smooth_weights(weight_seed + 1, 1, height, width)
     # edges just outside the frame enter it when the camera moves: detect them on the ring too
-    edges = occlusion_edge_mask(renderer.render(base, *ring_view(K, height, width)))[..., RING:-RING, RING:-RING]
+    edges = occlusion_edge_mask(renderer.render(base, *ring_view(K, height, width)), jump=edge_jump)[
+        ..., RING:-RING, RING:-RING
+    ]
     interior = (~edges).double()
     weights = {
         "rgb_interior": (w_rgb * interior, None),
@@ -167,11 +184,14 @@ def gradient_check_poses(
     configs: dict[str, DiffRenderConfig],
     *,
     min_agreement: float = 0.99,
+    trusted: tuple[str, ...] = FUNCTIONALS,
     max_attempts: int = 60,
     **options,
 ) -> dict[str, list[GradientCheck]]:
     """Gradient checks at ``count`` seeded poses: >= 0.3 m from every surface, >= 90% of pixels hit,
-    and a reference whose halved-step estimate agrees to ``min_agreement`` (else the pose is resampled).
+    and a reference whose halved-step estimate agrees to ``min_agreement`` on the ``trusted``
+    functionals (else the pose is resampled). On a scan, whose floaters, holes and noise put small
+    occlusions everywhere, only the interior functionals' reference is stable.
     """
     K = intrinsics_from_fov(fov_x_deg, height, width)
     rng = np.random.default_rng(seed)
@@ -181,7 +201,7 @@ def gradient_check_poses(
         if float(renderer.render(pose, K, height, width).mask.float().mean()) < 0.9:
             continue
         checks = check_pose(renderer, pose, K, height, width, configs, **options)
-        if next(iter(checks.values())).step_agreement < min_agreement:
+        if next(iter(checks.values())).agreement(trusted) < min_agreement:
             continue
         for name, check in checks.items():
             results[name].append(check)

@@ -355,7 +355,9 @@ class Shader:
         if geometry or (colour and lit_at_points):
             points = origins + directions * t[:, None]
             normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
-            normals = torch.where(back[:, None], -normals, normals)
+            # a scan's winding is random, so its normals face the eye by their own side
+            away = back if self.shading.lighting != "scanned" else (normals * directions).sum(dim=1) > 0
+            normals = torch.where(away[:, None], -normals, normals)
         rgb = self._background.expand(len(t), 3)
         if colour:
             footprint = _footprint(t, directions, facing, pixel_angle)

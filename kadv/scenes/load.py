@@ -91,13 +91,22 @@ def load_scene(
 
 def ply_part(mesh: PlyMesh, material: int, name: str) -> MeshPart:
     """A :class:`MeshPart` of a PLY mesh: its vertex colours per corner in linear light (PLY stores
-    sRGB-encoded values), shading normals averaged at the vertices, weighted by face area."""
+    sRGB-encoded values), and shading normals that need no consistent winding (a scan's is random):
+    at each vertex the principal axis of its faces' normals, weighted by face area, turned to the
+    side of their area-weighted sum (where a mesh's winding is consistent, its outside)."""
     corners = mesh.vertices[mesh.faces]
     area_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    vertex_normals = np.stack(
-        [np.bincount(mesh.faces.ravel(), np.repeat(area_normals[:, k], 3), len(mesh.vertices)) for k in range(3)],
-        axis=1,
-    )
-    vertex_normals /= np.maximum(np.linalg.norm(vertex_normals, axis=1, keepdims=True), 1e-30)
+    area = np.linalg.norm(area_normals, axis=1)
+    unit = area_normals / np.maximum(area, 1e-30)[:, None]
+
+    def at_vertices(values: np.ndarray) -> np.ndarray:
+        return np.bincount(mesh.faces.ravel(), np.repeat(values, 3), len(mesh.vertices))
+
+    tensor = np.empty((len(mesh.vertices), 3, 3))
+    for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):
+        tensor[:, i, j] = tensor[:, j, i] = at_vertices(area * unit[:, i] * unit[:, j])
+    vertex_normals = np.linalg.eigh(tensor)[1][..., -1]  # the largest eigenvalue's unit eigenvector
+    summed = np.stack([at_vertices(area_normals[:, k]) for k in range(3)], axis=1)
+    vertex_normals *= np.where((vertex_normals * summed).sum(axis=1) < 0, -1.0, 1.0)[:, None]
     colors = None if mesh.colors is None else srgb_to_linear(mesh.colors).astype(np.float32)[mesh.faces]
     return MeshPart(mesh.vertices, mesh.faces, None, vertex_normals[mesh.faces], material, name, colors)
