@@ -13,13 +13,15 @@ from kadv.scenes.ply import PlyMesh, read_ply
 from kadv.scenes.scans import recognise_scan
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 from kadv.scenes.textures import srgb_to_linear
-from kadv.scenes.trimesh_loader import TRIMESH_SUFFIXES, load_mesh_file
+from kadv.scenes.trimesh_loader import TRIMESH_SUFFIXES, gltf_unlit, load_mesh_file
 
-__all__ = ["SUPPORTED_SUFFIXES", "load_scene", "ply_part"]
+__all__ = ["SUPPORTED_SUFFIXES", "UNLIT_GLTF", "load_scene", "ply_part"]
 
 log = logging.getLogger(__name__)
 
 SUPPORTED_SUFFIXES = (".xml", ".ply", *TRIMESH_SUFFIXES)
+# Scene.scan of a glTF whose materials are KHR_materials_unlit: captured colour, in glTF's own frame
+UNLIT_GLTF = "glTF (KHR_materials_unlit)"
 
 
 def load_scene(
@@ -69,12 +71,16 @@ def load_scene(
         )
         log.info("%s: %s", path, chosen.describe())
         up_axis, scale = chosen.up_axis, chosen.scale
+    scan = None if layout is None else layout.dataset
+    if scan is None and suffix in (".glb", ".gltf") and gltf_unlit(path):
+        scan = UNLIT_GLTF
+        log.info("%s: KHR_materials_unlit: its colour is shown as captured", path)
     options = {
         "scale": 1.0 if scale is None else scale,
         "up_axis": up_axis or "y",
         "drop_transparent": drop_transparent,
         "drop_emitters": drop_emitters,
-        "scan": None if layout is None else layout.dataset,
+        "scan": scan,
     }
     if suffix == ".xml":
         parts, materials, cameras, lights, emitters = parse_mitsuba(path, missing=missing)

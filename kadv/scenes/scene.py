@@ -133,7 +133,8 @@ class Scene:
             captured (vertex colours), shown as it is by ``render.lighting=scanned``; NaN on the
             triangles that have none (their material's colour or texel is shown). None: no triangle
             has one.
-        scan: the dataset whose scan layout the file had (:mod:`kadv.scenes.scans`), or None: its
+        scan: the dataset whose scan layout the file had (:mod:`kadv.scenes.scans`), or
+            :data:`kadv.scenes.load.UNLIT_GLTF` for a glTF whose materials are unlit, or None: its
             colour is the light a sensor captured, so ``render.lighting=auto`` shows it as scanned.
     """
 

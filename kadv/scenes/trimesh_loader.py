@@ -78,7 +78,23 @@ def mesh_parts(
     if getattr(mesh.visual, "kind", None) == "vertex" and len(faces):
         stored = np.asarray(mesh.visual.vertex_colors, np.float64)[:, :3] / 255.0
         colors = (stored if linear_colours else srgb_to_linear(stored)).astype(np.float32)[faces]
+    elif _untextured_vertex_colours(mesh) is not None and len(faces):
+        # glTF's COLOR_0 beside a material without a texture: the vertex colour times the base colour
+        colors = _untextured_vertex_colours(mesh).astype(np.float32)[faces]
     return MeshPart(vertices, faces, uvs, normals, material_index, name, colors)
+
+
+def _untextured_vertex_colours(mesh: trimesh.Trimesh) -> np.ndarray | None:
+    """(V, 3) linear colours of a glTF mesh whose material has no texture but whose vertices carry
+    ``COLOR_0`` (trimesh keeps them apart from its material), times the base colour; else None."""
+    attributes = getattr(mesh.visual, "vertex_attributes", None)
+    material = getattr(mesh.visual, "material", None)
+    stored = None if attributes is None else attributes.get("color")
+    if stored is None or getattr(material, "baseColorTexture", None) is not None:
+        return None
+    factor = getattr(material, "baseColorFactor", None)
+    factor = np.ones(3) if factor is None else np.asarray(factor, np.float64)[:3] / 255.0
+    return np.asarray(stored, np.float64)[:, :3] / 255.0 * factor
 
 
 def _gltf_json(path: Path) -> dict:
@@ -94,6 +110,32 @@ def _gltf_json(path: Path) -> dict:
             return json.loads(file.read(struct.unpack("<I", header[12:16])[0]))
     except (OSError, ValueError):
         return {}
+
+
+def gltf_unlit(path: Path) -> bool:
+    """Whether a glTF's materials are ``KHR_materials_unlit``: colour meant to be shown as it is
+    (Habitat's and scan exporters' convention for captured colour), not lit again."""
+    gltf = _gltf_json(path)
+    return any("KHR_materials_unlit" in m.get("extensions", {}) for m in gltf.get("materials", []))
+
+
+def _refuse_miscounted_colours(path: Path) -> None:
+    """A glTF primitive whose ``COLOR_0`` holds another count than its ``POSITION``: refused in one
+    line naming the mesh (trimesh would drop the colours and show the mesh uncoloured)."""
+    gltf = _gltf_json(path)
+    accessors = gltf.get("accessors", [])
+    for index, mesh in enumerate(gltf.get("meshes", [])):
+        for primitive in mesh.get("primitives", []):
+            attributes = primitive.get("attributes", {})
+            if "COLOR_0" not in attributes or "POSITION" not in attributes:
+                continue
+            try:
+                colours, vertices = (accessors[attributes[k]]["count"] for k in ("COLOR_0", "POSITION"))
+            except (IndexError, KeyError, TypeError):
+                continue  # trimesh says what is wrong with the accessors
+            if colours != vertices:
+                name = mesh.get("name") or f"mesh {index}"
+                raise ValueError(f"{path}: {name!r} has {colours} COLOR_0 colours for {vertices} vertices")
 
 
 def _refuse_basis_textures(path: Path) -> None:
@@ -149,6 +191,7 @@ def load_mesh_file(path: Path, materials: list[Material]) -> list[MeshPart]:
     """
     if path.suffix.lower() in (".glb", ".gltf"):
         _refuse_basis_textures(path)
+        _refuse_miscounted_colours(path)
     if path.suffix.lower() == ".obj":
         _refuse_missing_obj_textures(path)
     try:

@@ -11,6 +11,7 @@ import pytest
 import trimesh
 
 from kadv.scenes import load_scene
+from kadv.scenes.load import UNLIT_GLTF
 from kadv.scenes.scans import recognise_scan
 from tests.cli.in_process import call_main
 
@@ -83,19 +84,28 @@ def test_kadv_render_shows_a_recognised_scan_as_scanned_and_names_the_lighting(t
     assert json.loads((tmp_path / "baked" / "render.json").read_text())["lighting"] == "direct", baked.stderr
 
 
-def test_a_gltf_with_basis_universal_textures_is_refused_naming_the_texture(tmp_path: Path) -> None:
-    box = trimesh.creation.box()
-    box.export(tmp_path / "plain.glb")
-    data = (tmp_path / "plain.glb").read_bytes()
+def _patched_glb(source: Path, path: Path, patch) -> Path:
+    """``source`` (a GLB) written to ``path`` with ``patch`` applied to its JSON chunk."""
+    data = source.read_bytes()
     length = int.from_bytes(data[12:16], "little")
     gltf = json.loads(data[20 : 20 + length])
-    gltf["extensionsUsed"] = ["KHR_texture_basisu"]
-    gltf["images"] = [{"name": "floor_atlas", "mimeType": "image/ktx2", "bufferView": 0}]
+    patch(gltf)
     text = json.dumps(gltf).encode()
     text += b" " * (-len(text) % 4)
     patched = data[:12] + len(text).to_bytes(4, "little") + data[16:20] + text + data[20 + length :]
-    path = tmp_path / "00800-TEEsavR23oF.basis.glb"
     path.write_bytes(patched[:8] + len(patched).to_bytes(4, "little") + patched[12:])  # the file's new length
+    return path
+
+
+def test_a_gltf_with_basis_universal_textures_is_refused_naming_the_texture(tmp_path: Path) -> None:
+    box = trimesh.creation.box()
+    box.export(tmp_path / "plain.glb")
+
+    def basis(gltf: dict) -> None:
+        gltf["extensionsUsed"] = ["KHR_texture_basisu"]
+        gltf["images"] = [{"name": "floor_atlas", "mimeType": "image/ktx2", "bufferView": 0}]
+
+    path = _patched_glb(tmp_path / "plain.glb", tmp_path / "00800-TEEsavR23oF.basis.glb", basis)
     with pytest.raises(ValueError, match=r"texture 'floor_atlas' is Basis Universal \(image/ktx2\), which kadv cannot"):
         load_scene(path)
     assert load_scene(tmp_path / "plain.glb").num_triangles == 12  # a glTF without them loads
@@ -117,3 +127,44 @@ def test_an_obj_whose_texture_atlas_is_missing_is_refused_naming_it(tmp_path: Pa
     (tmp_path / "house.mtl").unlink()
     with pytest.raises(ValueError, match=r"house.obj: its material library 'house.mtl' is missing"):
         load_scene(tmp_path / "house.obj")
+
+
+def test_an_unlit_gltf_shows_its_colour_as_captured(tmp_path: Path) -> None:
+    """glTF's KHR_materials_unlit (Habitat's and scan exporters' captured colour): render.lighting=auto
+    shows it as scanned, in glTF's own frame (Y-up metres); a lit glTF stays baked."""
+    from omegaconf import OmegaConf
+
+    from kadv.cli.common import resolve_lighting
+
+    box = trimesh.creation.box()
+    box.visual.vertex_colors = np.tile([[10, 200, 30, 255]], (len(box.vertices), 1))
+    box.export(tmp_path / "lit.glb")
+
+    def unlit(gltf: dict) -> None:
+        gltf["extensionsUsed"] = ["KHR_materials_unlit"]
+        for material in gltf.setdefault("materials", [{}]):
+            material.setdefault("extensions", {})["KHR_materials_unlit"] = {}
+        for mesh in gltf["meshes"]:
+            for primitive in mesh["primitives"]:
+                primitive.setdefault("material", 0)
+
+    scene = load_scene(_patched_glb(tmp_path / "lit.glb", tmp_path / "room.glb", unlit))
+    assert scene.scan == UNLIT_GLTF  # its COLOR_0 is kept beside its material, linear
+    np.testing.assert_allclose(scene.colors[0, 0], np.array([10, 200, 30]) / 255.0, atol=1e-6)
+    np.testing.assert_allclose(scene.bounds, load_scene(tmp_path / "lit.glb").bounds)  # no axes changed
+    render = OmegaConf.create({"lighting": "auto"})
+    assert resolve_lighting(scene, render) == "scanned" and render.lighting == "scanned"
+    assert resolve_lighting(load_scene(tmp_path / "lit.glb"), OmegaConf.create({"lighting": "auto"})) == "baked"
+
+
+def test_a_gltf_whose_colours_are_not_one_per_vertex_is_refused_naming_the_mesh(tmp_path: Path) -> None:
+    box = trimesh.creation.box()
+    box.visual.vertex_colors = np.tile([[10, 200, 30, 255]], (len(box.vertices), 1))
+    box.export(tmp_path / "box.glb")
+
+    def miscounted(gltf: dict) -> None:
+        gltf["accessors"][gltf["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"]]["count"] = 4
+
+    path = _patched_glb(tmp_path / "box.glb", tmp_path / "bad.glb", miscounted)
+    with pytest.raises(ValueError, match=r"bad.glb: 'geometry_0' has 4 COLOR_0 colours for 8 vertices"):
+        load_scene(path)
