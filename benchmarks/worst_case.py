@@ -285,22 +285,25 @@ def regret_part(runs: Runs) -> dict[str, str]:
     return figures
 
 
-def wins_part(runs: Runs) -> dict[str, str]:
-    """Part 4: the default's paired wins at equal evaluations and seconds, and its delta1 drop
-    against random's at equal seconds."""
+def wins_part(runs: Runs, subject: str = "default") -> dict[str, str]:
+    """Part 4: the paired wins of ``subject`` (the default; ``hybrid``, the default before) at equal
+    evaluations and seconds, and its delta1 drop against random's at equal seconds; the figures of
+    the last line are the default's."""
     figures = {}
-    print("\n3. paired wins of the default (1x) per cell and seed: equal evaluations | equal seconds")
+    print(f"\n3. paired wins of {subject} (1x) per cell and seed: equal evaluations | equal seconds")
     print("| against | wins-losses-ties (evaluations) | share | sign test p | wins-losses-ties (seconds) | share | p |")
     print("|---|---|---|---|---|---|---|")
     drops = {k: [0.0, 0.0] for k in range(len(DEFAULT_RADII))}
-    for baseline in (*BASELINES, "hybrid"):
+    for baseline in [m for m in (*BASELINES, "hybrid") if m != subject]:
         tallies = {"evaluations": [0, 0, 0], "seconds": [0, 0, 0]}
         short = 0
         for cell in runs.cells:
             name, view, k = cell
             for seed in runs.seeds:
-                ours = runs.worst(cell, "default", seed)
-                spent = [r["seconds"] for r in runs.runs[name, view, "default", seed, 1]["radii"]]
+                ours = runs.worst(cell, subject, seed)
+                if math.isnan(ours):
+                    continue
+                spent = [r["seconds"] for r in runs.runs[name, view, subject, seed, 1]["radii"]]
                 theirs = {"evaluations": runs.worst(cell, baseline, seed)}
                 long_run = runs.long(cell, baseline, seed) if baseline in BASELINES else None
                 if long_run is not None:
@@ -317,12 +320,13 @@ def wins_part(runs: Runs) -> dict[str, str]:
         for scale, (wins, losses, ties) in tallies.items():
             share = wins / (wins + losses) if wins + losses else math.nan
             text += [f"{wins}-{losses}-{ties}", f"{share:.2f}", f"{sign_test(wins, losses):.1e}"]
-            if baseline in BASELINES:
+            if baseline in BASELINES and subject == "default":
                 figures[f"win_{baseline}" + ("" if scale == "evaluations" else "_s")] = f"{share:.2f}"
         print(f"| {baseline} | " + " | ".join(text) + " |" + (f" ({short} long runs ended first)" if short else ""))
     for k in (0, 1):
-        figures[f"drop_vs_random_r{k}"] = f"{drops[k][0] / drops[k][1]:.2f}" if drops[k][1] > 0 else "inf"
-        ratio = figures[f"drop_vs_random_r{k}"]
+        ratio = f"{drops[k][0] / drops[k][1]:.2f}" if drops[k][1] > 0 else "inf"
+        if subject == "default":
+            figures[f"drop_vs_random_r{k}"] = ratio
         print(f"   delta1 drop over random's at equal seconds within {DEFAULT_RADII[k][0]:g}°: {ratio}")
     return figures
 
@@ -496,6 +500,7 @@ def main() -> None:
             figures |= regret_part(runs)
         if "wins" in parts:
             figures |= wins_part(runs)
+            wins_part(runs, "hybrid")  # the default before, for comparison
     if "proxy" in parts:
         figures |= proxy_part(stores, views, out)
     if "family" in parts:
