@@ -12,7 +12,7 @@ from kadv.datasets.procedural import (
     render_procedural_views,
     training_poses,
 )
-from kadv.datasets.scan_like import SCAN_LAYOUTS, ScanLike, ScanLikeSettings, scan_like, write_scan
+from kadv.datasets.scan_rooms import SCAN_LAYOUTS, ScanLike, ScanLikeSettings, scan_like, write_scan
 
 __all__ = [
     "HELD_OUT_SEED",

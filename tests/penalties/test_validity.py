@@ -186,7 +186,7 @@ def test_a_scan_without_trustworthy_winding_or_ceiling_is_judged_as_its_source_r
     import collections
 
     import kadv
-    from kadv.datasets.scan_like import scan_like, write_scan
+    from kadv.datasets.scan_rooms import scan_like, write_scan
     from kadv.penalties import PenaltyConfig
     from kadv.render import Shading
 

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import kadv
-from kadv.datasets.scan_like import SCAN_LAYOUTS, ScanLike, scan_like, write_scan
+from kadv.datasets.scan_rooms import SCAN_LAYOUTS, ScanLike, scan_like, write_scan
 from kadv.render import ExactRenderer, Shading
 from kadv.scenes.textures import srgb_to_linear
 
