@@ -9,7 +9,9 @@ search's trajectory (a gradient run's best restart, a black-box search's success
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import torch
 
@@ -200,11 +202,16 @@ def separated(a: ViewRecord, b: ViewRecord, min_distance: float, min_angle_deg: 
 
 
 def select_top_views(
-    records: list[ViewRecord], count: int, min_distance: float, min_angle_deg: float
+    records: list[ViewRecord],
+    count: int,
+    min_distance: float,
+    min_angle_deg: float,
+    order: Callable[[ViewRecord], Any] = lambda r: -r.loss,
 ) -> list[ViewRecord]:
-    """Up to ``count`` rankable views of highest loss, each separated from those chosen before it.
+    """Up to ``count`` rankable views first in ``order`` (default: highest loss), each separated
+    from those chosen before it.
 
-    Greedy in order of loss (ties keep evaluation order), so the result is deterministic.
+    Greedy in that order (ties keep evaluation order), so the result is deterministic.
 
     Examples:
         >>> def view(l_depth, x, verdict="valid"):
@@ -214,7 +221,7 @@ def select_top_views(
         [0.5, 0.4]
     """
     chosen: list[ViewRecord] = []
-    for record in sorted((r for r in records if r.rankable), key=lambda r: -r.loss):
+    for record in sorted((r for r in records if r.rankable), key=order):
         if len(chosen) == count:
             break
         if all(separated(record, other, min_distance, min_angle_deg) for other in chosen):

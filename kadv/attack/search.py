@@ -175,11 +175,7 @@ class Clock:
     def allows(self, count: int) -> int:
         """How many of ``count`` views may be evaluated now (0: the search is over)."""
         count = min(count, self.remaining())
-        if count <= 0:
-            return 0
-        if self.seconds is not None and self.elapsed() + self._last_batch > self.seconds:
-            return 0
-        return count
+        return count if count > 0 and not self._out_of_time() else 0
 
     def spent(self, views: int, seconds: float, backward: int = 0, screened: bool = False) -> None:
         """Count a batch of ``views`` forward (and ``backward``) passes that took ``seconds``; a
@@ -195,9 +191,11 @@ class Clock:
         """How many of ``count`` views a screening batch may score now: all of them while the
         seconds budget (if any) still fits a batch, else 0; screened views leave the count budget
         alone."""
-        if self.seconds is not None and self.elapsed() + self._last_batch > self.seconds:
-            return 0
-        return count
+        return 0 if self._out_of_time() else count
+
+    def _out_of_time(self) -> bool:
+        """Whether another batch as long as the last would overrun the seconds budget."""
+        return self.seconds is not None and self.elapsed() + self._last_batch > self.seconds
 
 
 @dataclass
@@ -279,7 +277,7 @@ class SearchContext:
         config: the attack's settings (bounds, budgets).
         starts: warm starts, pose parameters (N, 6) relative to the init view (views found bad
             before: at a smaller radius, by another search); methods that take them
-            (:attr:`SearchMethod.warm_starts`) consider them first, the others leave them.
+            (``halving``) score them exactly first, the others leave them.
     """
 
     def __init__(

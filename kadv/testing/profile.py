@@ -433,15 +433,9 @@ class SeedProfile:
 def worst_views(records: list, count: int, min_distance: float, min_angle_deg: float) -> list:
     """Up to ``count`` rankable records of lowest delta1 (the highest loss among ties), each
     separated from those chosen before it: the views a larger radius's search starts from."""
-    from kadv.attack.records import separated
+    from kadv.attack.records import select_top_views
 
-    chosen: list = []
-    for record in sorted((r for r in records if r.rankable), key=lambda r: (r.delta1, -r.loss)):
-        if len(chosen) == count:
-            break
-        if all(separated(record, other, min_distance, min_angle_deg) for other in chosen):
-            chosen.append(record)
-    return chosen
+    return select_top_views(records, count, min_distance, min_angle_deg, order=lambda r: (r.delta1, -r.loss))
 
 
 def search_radii(

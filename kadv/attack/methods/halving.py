@@ -95,11 +95,12 @@ def check_budget(settings: HalvingSettings, evaluations: int | None, supersample
             f"fidelity, got {settings.screen_supersample}"
         )
     if evaluations is not None:
-        needed = 1 + _rescore_count(settings, evaluations) + settings.lanes
+        rescore = _rescore_count(settings, evaluations)
+        needed = 1 + rescore + settings.lanes
         if evaluations < needed:
             raise ValueError(
                 f"attack.budget_evaluations must be at least {needed} for attack.halving (the init view, "
-                f"{_rescore_count(settings, evaluations)} re-scored screened views and a step of each of "
+                f"{rescore} re-scored screened views and a step of each of "
                 f"{settings.lanes} lanes), got {evaluations}"
             )
 
@@ -169,8 +170,9 @@ def halving_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) 
     settings, clock, config = context.config.settings, context.clock, context.config
     records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64))
     bar.update(1)
-    if len(context.starts) and clock.allows(len(context.starts)):
-        records += context.evaluate(1, context.starts[: clock.allows(len(context.starts))])
+    warm = clock.allows(len(context.starts))
+    if warm:
+        records += context.evaluate(1, context.starts[:warm])
     rescore = _rescore_count(settings, clock.evaluations)
     screen_views = round(settings.screen_factor * (clock.evaluations or settings.batch))
     screened: list[ViewRecord] = []
