@@ -78,9 +78,9 @@ def mesh_parts(
     if getattr(mesh.visual, "kind", None) == "vertex" and len(faces):
         stored = np.asarray(mesh.visual.vertex_colors, np.float64)[:, :3] / 255.0
         colors = (stored if linear_colours else srgb_to_linear(stored)).astype(np.float32)[faces]
-    elif _untextured_vertex_colours(mesh) is not None and len(faces):
+    elif (untextured := _untextured_vertex_colours(mesh)) is not None and len(faces):
         # glTF's COLOR_0 beside a material without a texture: the vertex colour times the base colour
-        colors = _untextured_vertex_colours(mesh).astype(np.float32)[faces]
+        colors = untextured.astype(np.float32)[faces]
     return MeshPart(vertices, faces, uvs, normals, material_index, name, colors)
 
 
@@ -119,10 +119,9 @@ def gltf_unlit(path: Path) -> bool:
     return any("KHR_materials_unlit" in m.get("extensions", {}) for m in gltf.get("materials", []))
 
 
-def _refuse_miscounted_colours(path: Path) -> None:
+def _refuse_miscounted_colours(path: Path, gltf: dict) -> None:
     """A glTF primitive whose ``COLOR_0`` holds another count than its ``POSITION``: refused in one
     line naming the mesh (trimesh would drop the colours and show the mesh uncoloured)."""
-    gltf = _gltf_json(path)
     accessors = gltf.get("accessors", [])
     for index, mesh in enumerate(gltf.get("meshes", [])):
         for primitive in mesh.get("primitives", []):
@@ -138,10 +137,9 @@ def _refuse_miscounted_colours(path: Path) -> None:
                 raise ValueError(f"{path}: {name!r} has {colours} COLOR_0 colours for {vertices} vertices")
 
 
-def _refuse_basis_textures(path: Path) -> None:
+def _refuse_basis_textures(path: Path, gltf: dict) -> None:
     """A glTF whose textures are Basis Universal (HM3D's ``.basis.glb``, ``KHR_texture_basisu``),
     which no decoder here reads: refused in one line naming the texture, not shown untextured."""
-    gltf = _gltf_json(path)
     for index, image in enumerate(gltf.get("images", [])):
         name = image.get("name") or image.get("uri") or f"image {index}"
         if image.get("mimeType") in ("image/ktx2", "image/basis") or str(image.get("uri", "")).endswith(
@@ -190,8 +188,9 @@ def load_mesh_file(path: Path, materials: list[Material]) -> list[MeshPart]:
             (OBJ), or has textures kadv cannot decode (Basis Universal).
     """
     if path.suffix.lower() in (".glb", ".gltf"):
-        _refuse_basis_textures(path)
-        _refuse_miscounted_colours(path)
+        gltf = _gltf_json(path)
+        _refuse_basis_textures(path, gltf)
+        _refuse_miscounted_colours(path, gltf)
     if path.suffix.lower() == ".obj":
         _refuse_missing_obj_textures(path)
     try:

@@ -92,8 +92,7 @@ class Scorecard:
         """The model's area under its ``kind`` curve ("typical" or "worst") per probe and seed, in
         the order of :attr:`probes` then seeds: the units two models are paired on (the same room,
         init views and drawn views)."""
-        areas = "scores" if kind == "typical" else "worst_scores"
-        return [value for probe in self.probes for value in getattr(self.results[probe][model], areas)]
+        return [value for probe in self.probes for value in getattr(self.results[probe][model], _UNITS[kind])]
 
     def difference(self, a: str, b: str, kind: str = "typical") -> PairedDifference:
         """``a``'s area minus ``b``'s, paired probe by probe and seed by seed, with its bootstrap interval."""
