@@ -20,7 +20,7 @@ import trimesh
 from kadv.io import atomic_write
 from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.render.raycast import pixel_angle
-from kadv.scenes.scene import Scene
+from kadv.scenes.scene import Scene, rotation_to_y_up
 
 __all__ = [
     "SCAN_LAYOUTS",
@@ -34,8 +34,6 @@ __all__ = [
     "write_scannet",
 ]
 
-# The scan layouts' frame: Z up (x, y, z) from kadv's y-up (x, y, z) world, metres
-_Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 _VIEW_OFFSET = 0.02  # metres off the surface the colour of a vertex is looked at from
 
 
@@ -177,7 +175,8 @@ def scan_like(room: Scene, seed: int = 0, settings: ScanLikeSettings | None = No
 
 
 def _z_up(vertices: np.ndarray) -> np.ndarray:
-    return vertices @ _Y_UP_TO_Z_UP.T
+    """kadv's y-up world points (N, 3) in the scan layouts' Z-up frame: the loader's rotation undone."""
+    return vertices @ rotation_to_y_up("z")  # its inverse, transposed
 
 
 def _ply_bytes(vertices: np.ndarray, colours: np.ndarray, polygons: list[np.ndarray], normals=None) -> bytes:

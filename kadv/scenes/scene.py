@@ -9,7 +9,7 @@ import numpy as np
 from kadv.geometry.camera import Camera
 from kadv.scenes.emitters import DEFAULT_LAMP_RADIANCE, Emitters
 
-__all__ = ["CONDUCTOR_GREY", "Material", "MeshPart", "Scene", "assemble_scene"]
+__all__ = ["CONDUCTOR_GREY", "Material", "MeshPart", "Scene", "assemble_scene", "rotation_to_y_up"]
 
 # the display grey a metal is shaded with as diffuse, times its reflectance: a mirror is no white wall
 CONDUCTOR_GREY = 0.75
@@ -198,7 +198,7 @@ class Scene:
         return self.interior if self.interior is not None else self.bounds
 
 
-def _rotation_to_y_up(up_axis: str) -> np.ndarray:
+def rotation_to_y_up(up_axis: str) -> np.ndarray:
     """Rotation taking the file's up axis to +y (right-handed, no mirroring)."""
     if up_axis == "y":
         return np.eye(3)
@@ -243,7 +243,7 @@ def assemble_scene(
     """
     if not np.isfinite(scale) or scale <= 0:
         raise ValueError(f"scale must be a positive number, got {scale}")
-    rotation = _rotation_to_y_up(up_axis)
+    rotation = rotation_to_y_up(up_axis)
     light_list = [np.asarray(lights, np.float64).reshape(-1, 3)] if lights is not None else []
     emitters = emitters or Emitters()
     vertices, faces, uvs, normals, material_ids, colors = [], [], [], [], [], []
