@@ -484,15 +484,16 @@ def main() -> None:
     names = list(SCENES) if args.scenes == "all" else args.scenes.split(",")
     common.check_names(parser, {"--parts": (parts, PARTS), "--scenes": (names, SCENES)})
     seeds = [int(s) for s in args.seeds.split(",")]
-    out.mkdir(parents=True, exist_ok=True)
-    stores = {name: Store(out, Cells(name), name) for name in names}
-    views = {name: len(store.cells.views) for name, store in stores.items()}
+    most: dict[str, int] = {}  # checked before any scene is built
     for item in filter(None, args.views.split(",")):
         name, _, count = item.partition(":")
         common.check_names(parser, {"--views": ([name], names)})
         if not count.isdigit() or int(count) < 1:
             parser.error(f"--views: {item!r} is not scene:count with a count of 1 or more")
-        views[name] = min(views[name], int(count))
+        most[name] = int(count)
+    out.mkdir(parents=True, exist_ok=True)
+    stores = {name: Store(out, Cells(name), name) for name in names}
+    views = {name: min(len(store.cells.views), most.get(name, math.inf)) for name, store in stores.items()}
     figures: dict[str, str] = {}
     if {"regret", "wins"} & set(parts):
         runs = Runs(stores, views, seeds, args.budget)
