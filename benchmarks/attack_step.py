@@ -126,7 +126,7 @@ def step_seconds(
 
     StepGraph.__call__ = timed_step  # each step of the run (all but its last evaluation) is a call
     try:
-        config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=restarts), budget_evaluations=None)
+        config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=restarts), budget_passes=None)
         attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
     finally:
         StepGraph.__call__ = run_step
@@ -180,7 +180,7 @@ def kernel_share(objective: Objective, differentiable: DifferentiableRenderer, v
     """The share of a CUDA gradient run's wall time (STEPS steps of one restart, after a warm-up
     run) that the GPU spends in kernels, from torch's profiler: 1 means the device never waits
     for the host."""
-    config = AttackConfig("gradient", GradientSettings(steps=STEPS, restarts=1), budget_evaluations=None)
+    config = AttackConfig("gradient", GradientSettings(steps=STEPS, restarts=1), budget_passes=None)
     attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
     activities = [torch.profiler.ProfilerActivity.CPU, torch.profiler.ProfilerActivity.CUDA]
     with torch.profiler.profile(activities=activities) as profile:

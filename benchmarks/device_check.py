@@ -152,7 +152,7 @@ def main() -> None:
             "scene=file",
             f"scene.path={scene}",
             "init.count=1",
-            "attack.budget_evaluations=24",
+            "attack.budget_passes=24",
             "video=false",
             "progress=false",
             f"hydra.run.dir={attack_dir}",

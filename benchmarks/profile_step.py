@@ -119,7 +119,7 @@ def main() -> None:
     differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(edge_search=args.edge_search), device)
 
     def gradient(steps: int) -> None:
-        config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=1), budget_evaluations=None)
+        config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=1), budget_passes=None)
         attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
 
     generator = torch.Generator().manual_seed(0)

@@ -77,7 +77,7 @@ def profile_cell(out: Path, model: DepthModel, probe: str, seed: int, method: st
         envelope=ENVELOPE,
         seeds=(seed,),
         method=method,
-        budget_evaluations=budget,
+        budget_passes=budget,
         artifacts=out / "views",
     )
     path.parent.mkdir(parents=True, exist_ok=True)

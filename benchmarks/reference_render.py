@@ -58,7 +58,7 @@ _METRICS = ["psnr", "ssim", "pred_delta1"]
 # a default attack (the demo's loss and search) on another scene, made small: kadv-tiny, 2 init views
 # of 123 views at 120x160
 _ATTACK = ["model=kadv_tiny", "render.height=120", "render.width=160", "init.count=2"]
-_ATTACK += ["attack.budget_evaluations=123", "video=false"]
+_ATTACK += ["attack.budget_passes=123", "video=false"]
 
 
 # each lighting compared: its shading, and the attack's overrides that select it

@@ -92,7 +92,7 @@ def run_attack(path: Path, out: Path) -> float:
     sys.argv = ["kadv-attack", "scene=file", f"scene.path={path}", "render.height=96", "render.width=128"]
     sys.argv += [
         "init.count=1",
-        "attack.budget_evaluations=24",
+        "attack.budget_passes=24",
         "video=false",
         "progress=false",
         f"hydra.run.dir={out}",

@@ -91,7 +91,7 @@ def screening_rate(objective: Objective, differentiable, view, height: int, widt
     """Views per second that hybrid's screening evaluates at ``scale`` (batches of 8, after one
     warm-up; the first call also warms the forward passes up for the timed searches)."""
     context = SearchContext(
-        objective, differentiable, view, height, width, AttackConfig(budget_evaluations=None, budget_seconds=60.0)
+        objective, differentiable, view, height, width, AttackConfig(budget_passes=None, budget_seconds=60.0)
     )
     params = context.config.sample_ball(np.random.default_rng(0).random((8, 6)))
     context.evaluate(1, params, scale=scale)
@@ -122,19 +122,19 @@ def run(args: argparse.Namespace) -> dict:
                 for scale in sorted({1.0} | {float(m.partition("@")[2]) for m in methods if "@" in m}, reverse=True)
             }
             print("screening views/s: " + ", ".join(f"scale {k}: {v:.1f}" for k, v in curves["screening"].items()))
-            warm_up = AttackConfig("gradient", GradientSettings(steps=1), budget_evaluations=None)
+            warm_up = AttackConfig("gradient", GradientSettings(steps=1), budget_passes=None)
             attack(first, differentiable, views[:1], args.height, args.width, warm_up, args.seed, progress=False)
         for view in views:
             entry = {"scene": name, "view": view.name, "pairs": {}}
             for loss, objective in objectives.items():
                 for label in methods:
                     method, settings = method_settings(label)
-                    config = AttackConfig(method, settings, budget_evaluations=None, budget_seconds=args.seconds)
+                    config = AttackConfig(method, settings, budget_passes=None, budget_seconds=args.seconds)
                     if method == "gradient":
                         config = AttackConfig(
                             method,
                             get_method(method).settings(steps=2**31),
-                            budget_evaluations=None,
+                            budget_passes=None,
                             budget_seconds=args.seconds,
                         )
                     result = attack(
@@ -145,14 +145,14 @@ def run(args: argparse.Namespace) -> dict:
                     entry["pairs"][f"{label}+{loss}"] = {
                         "init": [init.l_depth, init.delta1, init.abs_rel],
                         "curve": curve,
-                        "evaluations": result.budget.forward,
+                        "passes": result.budget.passes,
                         "uninformative_chosen": sum(r.verdict == "uninformative" for r in result.top),
                     }
                     best = curve[-1]
                     print(
                         f"{name:<20} {view.name:<9} {label + '+' + loss:<22} delta1 {init.delta1:.3f} -> {best[3]:.3f} "
                         f"AbsRel {init.abs_rel:.3f} -> {best[4]:.3f} L_depth {init.l_depth:.4f} -> {best[2]:.4f} "
-                        f"{result.budget.forward:>5} views",
+                        f"{result.budget.passes:>5} model passes",
                         flush=True,
                     )
             curves["views"].append(entry)
@@ -239,12 +239,12 @@ def summarise(curves: dict, out: Path) -> str:
     lines = [
         "| method+loss | "
         + " | ".join(f"delta1 drop {f:.0%}" for f in FRACTIONS)
-        + " | AbsRel rise | L_depth gain | views |",
+        + " | AbsRel rise | L_depth gain | model passes |",
         "|---" * (4 + len(FRACTIONS)) + "|",
     ]
     for pair in sorted(pairs, key=lambda p: -final[p]["delta1 drop"]):
         drop = measure_curves(curves, pair, "delta1 drop", seconds).mean(axis=0)
-        views = np.mean([v["pairs"][pair]["evaluations"] for v in curves["views"]])
+        views = np.mean([v["pairs"][pair]["passes"] for v in curves["views"]])
         lines.append(
             f"| {pair} | "
             + " | ".join(f"{drop[c]:.3f}" for c in columns)

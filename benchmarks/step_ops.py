@@ -94,7 +94,7 @@ def main() -> None:
         "Count the tensor operations of a gradient attack step, phase by phase."
     )
     differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(edge_search=args.edge_search), device)
-    config = AttackConfig("gradient", GradientSettings(steps=STEPS, restarts=1), budget_evaluations=None)
+    config = AttackConfig("gradient", GradientSettings(steps=STEPS, restarts=1), budget_passes=None)
 
     def run() -> None:
         attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)

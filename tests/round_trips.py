@@ -124,7 +124,7 @@ def gradient_measures(
 ) -> list[Measures]:
     """The measures of a gradient run of ``steps`` steps from ``start`` (R, 6) at ``size`` (H, W),
     its steps inside the context ``around`` (None: none), captured on CUDA with ``cuda_graphs``."""
-    config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=len(start)), budget_evaluations=None)
+    config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=len(start)), budget_passes=None)
     render = DiffRenderConfig(edge_search=edge_search, cuda_graphs=cuda_graphs)
     context = SearchContext(
         objective, DifferentiableRenderer(objective.renderer, render, objective.device), view, *size, config

@@ -36,12 +36,22 @@ from kadv.attack.records import (
 )
 from kadv.attack.registry import METHODS, NoSettings, SearchMethod, get_method, register_method
 from kadv.attack.runner import attack
-from kadv.attack.search import DEFAULT_METHOD, AttackConfig, Clock, Measures, SearchContext
+from kadv.attack.search import (
+    DEFAULT_METHOD,
+    DEFAULT_PASSES,
+    RENAMED_BUDGET,
+    AttackConfig,
+    Clock,
+    Measures,
+    SearchContext,
+)
 from kadv.penalties import PenaltyConfig
 
 __all__ = [
     "DEFAULT_METHOD",
+    "DEFAULT_PASSES",
     "METHODS",
+    "RENAMED_BUDGET",
     "AttackConfig",
     "AttackResult",
     "Budget",

@@ -409,9 +409,9 @@ def check_init_views(
             )
 
 
-def save_init_params(path: str | Path, views: list[InitView]) -> Path:
-    """Write init views to ``init_params.json`` (atomically)."""
-    return write_json(path, {"init_views": [v.to_dict() for v in views]})
+def save_init_params(path: str | Path, views: list[InitView], model_passes: int = 0) -> Path:
+    """Write init views to ``init_params.json`` (atomically), with the model passes that chose them."""
+    return write_json(path, {"init_views": [v.to_dict() for v in views], "model_passes": model_passes})
 
 
 def load_init_params(path: str | Path) -> list[InitView]:

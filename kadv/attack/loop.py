@@ -54,7 +54,6 @@ def proposer_search(
     """Run a proposer from one init view within the context's budget."""
     proposer = proposer_class(context, rng)
     records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64))
-    bar.update(1)
     step = 1
     while (left := context.clock.allows(context.clock.remaining())) > 0:
         params = proposer.ask(left)
@@ -65,7 +64,6 @@ def proposer_search(
         records += rows
         proposer.tell(rows)
         bar.set_postfix(loss=f"{max(r.loss for r in records if r.rankable or r is records[0]):.4f}", refresh=False)
-        bar.update(count)
         step += 1
     return context.result(records, incumbent_path(records))
 

@@ -48,6 +48,8 @@ class ViewRecord:
             the exact render (NaN and False for views rendered exactly).
         seconds: wall-clock seconds since the search from this init view began (machine-dependent,
             so ``trajectory.csv`` leaves it out).
+        passes: the model passes (forward and backward) the search had spent once this view was
+            scored, its own forward pass included.
         loss: the attacked loss, which ranks views (L_depth unless the run's loss is another; a
             record built without it takes L_depth).
         scale: the render's size relative to the run's: views screened smaller are never chosen
@@ -75,6 +77,7 @@ class ViewRecord:
     depth_error: float = math.nan
     refreshed: bool = False
     seconds: float = math.nan
+    passes: int = 0
     loss: float = math.nan
     scale: float = 1.0
     screened: bool = False
@@ -106,23 +109,42 @@ class ViewRecord:
 
 @dataclass
 class Budget:
-    """Cost of a search: model forward passes on exact renders (the evaluations a budget counts),
-    backward passes, forward passes on the screening's cheap renders, and wall-clock seconds."""
+    """Cost of a search, in the currency of ``attack.budget_passes``: model forward passes (every
+    image the model ran on, at any fidelity; ``screened`` of them on a search's cheap renders),
+    backward passes through the model, and wall-clock seconds."""
 
     forward: int = 0
     backward: int = 0
     seconds: float = 0.0
     screened: int = 0
 
+    @property
+    def passes(self) -> int:
+        """Forward and backward passes: what ``attack.budget_passes`` bounds."""
+        return self.forward + self.backward
+
     def to_dict(self) -> dict[str, float]:
-        return asdict(self)
+        return asdict(self) | {"passes": self.passes}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Budget:
+        """The budget :meth:`to_dict` wrote (its ``passes`` is derived)."""
+        return cls(**{k: v for k, v in data.items() if k != "passes"})
+
+    def text(self) -> str:
+        """One line: ``123 passes (89 forward, 64 of them screened; 34 backward), 4.1 s``."""
+        screened = f", {self.screened} of them screened" if self.screened else ""
+        return (
+            f"{self.passes} passes ({self.forward} forward{screened}; {self.backward} backward), {self.seconds:.1f} s"
+        )
 
     def __add__(self, other: Budget) -> Budget:
         """The cost of both searches, so that ``sum(budgets, Budget())`` totals a run.
 
         Examples:
-            >>> sum([Budget(10, 2, 1.5, 40), Budget(5, 0, 0.5)], Budget())
-            Budget(forward=15, backward=2, seconds=2.0, screened=40)
+            >>> total = sum([Budget(50, 2, 1.5, 40), Budget(5, 0, 0.5)], Budget())
+            >>> total, total.passes
+            (Budget(forward=55, backward=2, seconds=2.0, screened=40), 57)
         """
         return Budget(
             self.forward + other.forward,
@@ -163,28 +185,20 @@ class AttackResult:
     views: list[InitViewResult] = field(default_factory=list)
 
 
-def _improvements(records: list[ViewRecord]) -> list[tuple[int, ViewRecord]]:
-    """(evaluations so far, view) for the first view and each rankable view that raised the best
-    loss; screened views are not evaluations (the budget does not count them)."""
-    out, best = [(1, records[0])], records[0].loss if records[0].rankable else -math.inf
-    count = 1
+def incumbent_path(records: list[ViewRecord]) -> list[ViewRecord]:
+    """The init view, then each rankable view that raised the best loss so far, in evaluation order."""
+    out, best = [records[0]], records[0].loss if records[0].rankable else -math.inf
     for record in records[1:]:
-        count += not record.screened
         if record.rankable and record.loss > best:
-            out.append((count, record))
+            out.append(record)
             best = record.loss
     return out
 
 
-def incumbent_path(records: list[ViewRecord]) -> list[ViewRecord]:
-    """The init view, then each rankable view that raised the best loss so far, in evaluation order."""
-    return [record for _, record in _improvements(records)]
-
-
 def best_so_far(records: list[ViewRecord]) -> list[tuple[int, float, float, float, float, float]]:
-    """(evaluations, seconds, L_depth, delta1, AbsRel, loss) of the incumbent each time the best
-    rankable loss so far rose: the search's anytime curve, starting at the init view."""
-    return [(count, r.seconds, r.l_depth, r.delta1, r.abs_rel, r.loss) for count, r in _improvements(records)]
+    """(passes, seconds, L_depth, delta1, AbsRel, loss) of the incumbent each time the best
+    rankable loss so far rose: the search's anytime curve in model passes, from the init view."""
+    return [(r.passes, r.seconds, r.l_depth, r.delta1, r.abs_rel, r.loss) for r in incumbent_path(records)]
 
 
 def _angle_between(theta_a: list[float], theta_b: list[float]) -> float:

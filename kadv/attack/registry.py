@@ -32,10 +32,10 @@ class SearchMethod:
         name: its ``attack.method`` name.
         settings: its settings dataclass (the ``attack.<name>`` node).
         search: ``search(context, rng, bar) -> InitViewResult`` for one init view.
-        evaluations: the forward passes it ends after by itself, given its settings (None: it runs
-            until the budget ends).
-        check: ``check(settings, evaluations, supersample=None)`` raises a ValueError naming the
-            key when its settings cannot work within an evaluation budget (None: no count limit)
+        passes: the model passes (forward and backward) it ends after by itself, given its
+            settings (None: it runs until the budget ends).
+        check: ``check(settings, passes, supersample=None)`` raises a ValueError naming the
+            key when its settings cannot work within a budget of model passes (None: no count limit)
             or with the run's rays per pixel side; called when an attack's config is made (without
             ``supersample``) and before an attack starts (with it).
     """
@@ -43,8 +43,8 @@ class SearchMethod:
     name: str
     settings: type
     search: Callable[..., Any]
-    evaluations: Callable[[Any], int | None]
-    check: Callable[..., None] = lambda settings, evaluations, supersample=None: None
+    passes: Callable[[Any], int | None]
+    check: Callable[..., None] = lambda settings, passes, supersample=None: None
 
 
 METHODS: dict[str, SearchMethod] = {}
@@ -53,13 +53,13 @@ METHODS: dict[str, SearchMethod] = {}
 def register_method(
     name: str,
     settings: type = NoSettings,
-    evaluations: Callable[[Any], int | None] = lambda settings: None,
+    passes: Callable[[Any], int | None] = lambda settings: None,
     check: Callable[..., None] | None = None,
 ) -> Callable:
     """Decorator: register ``search(context, rng, bar)`` as method ``name``."""
 
     def decorate(search: Callable) -> Callable:
-        method = SearchMethod(name, settings, search, evaluations)
+        method = SearchMethod(name, settings, search, passes)
         METHODS[name] = method if check is None else dataclasses.replace(method, check=check)
         return search
 

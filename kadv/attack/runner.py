@@ -48,23 +48,23 @@ def attack(
         seed: the run's seed.
         completed: results already computed, by init-view index; they are not recomputed.
         on_result: called with (index, result) as each init view finishes (to save it).
-        progress: show a tqdm bar (in evaluated views; no total under a seconds budget alone).
+        progress: show a tqdm bar (in model passes; no total under a seconds budget alone).
         starts: warm starts by init-view index, pose parameters (N, 6) relative to that init view
             (:class:`~kadv.attack.search.SearchContext`'s ``starts``).
     """
     method = get_method(config.method)
-    method.check(config.settings, config.evaluations, differentiable.config.supersample)
+    method.check(config.settings, config.passes, differentiable.config.supersample)
     # all of them before any search: a view that cannot be moved in is refused before work is spent
     margin = objective.penalty.margin
     init_views = [fit_into_envelope(differentiable.renderer, init, config.envelope, margin) for init in init_views]
     completed = dict(completed or {})
     result = AttackResult(config.method)
-    per_view = config.evaluations
+    per_view = config.passes
     with tqdm(
         total=len(init_views) * per_view if per_view else None,
         desc=f"{config.method} attack",
         disable=not progress,
-        unit="view",
+        unit="pass",
         dynamic_ncols=True,
     ) as bar:
         for index, init in enumerate(init_views):
@@ -76,6 +76,7 @@ def attack(
             bar.set_postfix_str("", refresh=False)  # the previous init view's best is not this one's
             differentiable.reset()
             context = SearchContext(objective, differentiable, init, height, width, config, (starts or {}).get(index))
+            context.clock.progress = bar
             view_result = method.search(context, np.random.default_rng([seed, index]), bar)
             result.views.append(view_result)
             if on_result is not None:

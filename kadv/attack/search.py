@@ -6,7 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import InitVar, dataclass
 from typing import Any
 
 import numpy as np
@@ -21,10 +21,23 @@ from kadv.penalties import ViewValidity, step_guard, view_validity
 from kadv.penalties.envelope import Envelope, get_envelope
 from kadv.render import DifferentiableRenderer, RenderOutput
 
-__all__ = ["DEFAULT_METHOD", "AttackConfig", "Clock", "Measures", "SearchContext", "check_settings", "scaled_size"]
+__all__ = [
+    "DEFAULT_METHOD",
+    "DEFAULT_PASSES",
+    "RENAMED_BUDGET",
+    "AttackConfig",
+    "Clock",
+    "Measures",
+    "SearchContext",
+    "check_settings",
+    "scaled_size",
+]
 
-# The search with the lowest regret and search noise at the default budget (benchmarks/worst_case.py).
+# The search with the lowest held-out regret at equal model passes and at equal seconds
+# (benchmarks/worst_case.py; docs/attack.md#which-search).
 DEFAULT_METHOD = "halving"
+# Model passes per init view of an attack (kadv-attack's attack.budget_passes).
+DEFAULT_PASSES = 123
 
 
 def scaled_size(height: int, width: int, scale: float) -> tuple[int, int]:
@@ -51,6 +64,12 @@ def check_settings(settings: Any, node: str) -> None:
             raise ValueError(f"{node}.{field.name} must be positive, got {value}")
 
 
+RENAMED_BUDGET = (
+    "attack.budget_evaluations was renamed attack.budget_passes: model passes per init view, every "
+    "image the model runs on (screened or exact) and every backward pass counted"
+)
+
+
 @dataclass(frozen=True)
 class AttackConfig:
     """How to search (``conf/attack/``). Angles in degrees, distances in metres.
@@ -58,8 +77,10 @@ class AttackConfig:
     Attributes:
         method: a registered search method (:data:`kadv.attack.METHODS`).
         settings: that method's settings dataclass (the ``attack.<method>`` node); None: its defaults.
-        budget_evaluations: model forward passes per init view, the init view's included (None:
-            no count limit; a method without a natural end then needs ``budget_seconds``).
+        budget_passes: model passes per init view, the init view's included: every image the model
+            runs on is one pass (exact or screened, any size), and every backward pass through it
+            is one more (None: no count limit; a method without a natural end then needs
+            ``budget_seconds``). The passes that choose the init views are counted apart.
         budget_seconds: wall-clock seconds per init view (None: no time limit). A batch starts
             only if the previous one's duration still fits, so the count depends on the machine.
         max_angle_deg, max_distance: how far a pose may turn and move from its init view (None:
@@ -74,7 +95,7 @@ class AttackConfig:
 
     method: str = DEFAULT_METHOD
     settings: Any = None
-    budget_evaluations: int | None = 123
+    budget_passes: int | None = DEFAULT_PASSES
     budget_seconds: float | None = None
     max_angle_deg: float | None = 45.0
     max_distance: float | None = 1.0
@@ -82,8 +103,11 @@ class AttackConfig:
     min_separation: float = 0.05
     min_separation_deg: float = 3.0
     envelope: Envelope | str = "free"
+    budget_evaluations: InitVar[int | None] = None  # renamed: refused with the new name
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, budget_evaluations: int | None) -> None:
+        if budget_evaluations is not None:
+            raise ValueError(RENAMED_BUDGET)
         object.__setattr__(self, "envelope", get_envelope(self.envelope))
         method = get_method(self.method)
         if self.settings is None:
@@ -102,23 +126,21 @@ class AttackConfig:
             value = getattr(self, name)
             if value is not None and not (math.isfinite(value) and value > 0):
                 raise ValueError(f"attack.{name} must be positive or null, got {value}")
-        if self.budget_evaluations is not None and (
-            not isinstance(self.budget_evaluations, int) or self.budget_evaluations < 1
+        if self.budget_passes is not None and (
+            isinstance(self.budget_passes, bool) or not isinstance(self.budget_passes, int) or self.budget_passes < 1
         ):
-            raise ValueError(
-                f"attack.budget_evaluations must be an integer >= 1 or null, got {self.budget_evaluations!r}"
-            )
-        if self.evaluations is None and self.budget_seconds is None:
-            raise ValueError(f"attack.method={self.method} needs attack.budget_evaluations or attack.budget_seconds")
-        method.check(self.settings, self.evaluations)
+            raise ValueError(f"attack.budget_passes must be an integer >= 1 or null, got {self.budget_passes!r}")
+        if self.passes is None and self.budget_seconds is None:
+            raise ValueError(f"attack.method={self.method} needs attack.budget_passes or attack.budget_seconds")
+        method.check(self.settings, self.passes)
 
     @property
-    def evaluations(self) -> int | None:
-        """Forward passes per init view: the budget, or the method's own end (None: unbounded)."""
-        natural = get_method(self.method).evaluations(self.settings)
-        if self.budget_evaluations is None:
+    def passes(self) -> int | None:
+        """Model passes per init view: the budget, or the method's own end (None: unbounded)."""
+        natural = get_method(self.method).passes(self.settings)
+        if self.budget_passes is None:
             return natural
-        return self.budget_evaluations if natural is None else min(natural, self.budget_evaluations)
+        return self.budget_passes if natural is None else min(natural, self.budget_passes)
 
     def search_box(self) -> torch.Tensor:
         """Half-widths (6,) of the region black-box methods sample: the rotation and distance bounds."""
@@ -153,14 +175,17 @@ class AttackConfig:
 
 
 class Clock:
-    """The evaluation and seconds budgets of one init view's search.
+    """The pass and seconds budgets of one init view's search.
 
-    A batch of views may start while the count allows it and the previous batch's duration still
-    fits in ``budget_seconds`` (so a search ends within about one batch of it).
+    The currency is the model pass: each image the model runs on is one forward pass, whatever its
+    fidelity, and each backward pass through the model is one more. A batch of views may start
+    while the passes it may take fit in the count and the previous batch's duration still fits in
+    ``budget_seconds`` (so a search ends within about one batch of it). A ``progress`` bar (tqdm),
+    when set, advances by the passes spent.
     """
 
-    def __init__(self, evaluations: int | None, seconds: float | None) -> None:
-        self.evaluations, self.seconds = evaluations, seconds
+    def __init__(self, passes: int | None, seconds: float | None, progress: Any = None) -> None:
+        self.passes, self.seconds, self.progress = passes, seconds, progress
         self.started = time.perf_counter()
         self.budget = Budget()
         self._last_batch = 0.0
@@ -169,29 +194,24 @@ class Clock:
         return time.perf_counter() - self.started
 
     def remaining(self) -> int:
-        """Evaluations the count budget still allows (a large number when it has none)."""
-        return (self.evaluations if self.evaluations is not None else 2**31) - self.budget.forward
+        """Passes the count budget still allows (a large number when it has none)."""
+        return (self.passes if self.passes is not None else 2**31) - self.budget.passes
 
-    def allows(self, count: int) -> int:
-        """How many of ``count`` views may be evaluated now (0: the search is over)."""
-        count = min(count, self.remaining())
+    def allows(self, count: int, cost: int = 1) -> int:
+        """How many of ``count`` views may be scored now, each taking up to ``cost`` passes (2: a
+        forward and a backward pass); 0: the search is over."""
+        count = min(count, self.remaining() // cost)
         return count if count > 0 and not self._out_of_time() else 0
 
     def spent(self, views: int, seconds: float, backward: int = 0, screened: bool = False) -> None:
-        """Count a batch of ``views`` forward (and ``backward``) passes that took ``seconds``; a
-        screening batch's views count as screened, not against the evaluations."""
-        if screened:
-            self.budget.screened += views
-        else:
-            self.budget.forward += views
+        """Count a batch of ``views`` forward passes (screened ones: at a cheap fidelity) and
+        ``backward`` backward passes that took ``seconds``."""
+        self.budget.forward += views
+        self.budget.screened += views if screened else 0
         self.budget.backward += backward
         self._last_batch = seconds
-
-    def allows_screening(self, count: int) -> int:
-        """How many of ``count`` views a screening batch may score now: all of them while the
-        seconds budget (if any) still fits a batch, else 0; screened views leave the count budget
-        alone."""
-        return 0 if self._out_of_time() else count
+        if self.progress is not None:
+            self.progress.update(views + backward)
 
     def _out_of_time(self) -> bool:
         """Whether another batch as long as the last would overrun the seconds budget."""
@@ -214,6 +234,7 @@ class Measures:
         refreshed: whether the anchor was rendered again at this step.
         seconds: the search's clock when the step was measured.
         scale: the render's size relative to the run's.
+        passes: the model passes the search had spent once these views were scored.
     """
 
     step: int
@@ -223,6 +244,7 @@ class Measures:
     refreshed: bool
     seconds: float
     scale: float
+    passes: int = 0
 
     def records(self) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view."""
@@ -256,6 +278,7 @@ class Measures:
                     depth_error=depth_error,
                     refreshed=self.refreshed,
                     seconds=self.seconds,
+                    passes=self.passes,
                     scale=self.scale,
                     yaw_deg=yaw,
                     pitch_deg=pitch,
@@ -302,7 +325,7 @@ class SearchContext:
         self.K = intrinsics_from_fov(init.fov_x_deg, height, width)
         self.margin = objective.penalty.margin
         self.validity_options = objective.penalty.validity_options()
-        self.clock = Clock(config.evaluations, config.budget_seconds)
+        self.clock = Clock(config.passes, config.budget_seconds)
         self.starts = torch.zeros(0, 6, dtype=torch.float64) if starts is None else starts.double().reshape(-1, 6)
 
     def base(self, batch: int) -> torch.Tensor:
@@ -367,7 +390,8 @@ class SearchContext:
         device = params.device
         table = torch.cat([n.to(device, torch.float64, non_blocking=True) for n in numbers], dim=1)
         lanes = list(lanes) if lanes is not None else list(range(len(pose)))
-        return Measures(step, lanes, table, validity, refreshed, self.clock.elapsed(), scale)
+        passes = self.clock.budget.passes + len(pose)  # this batch's forward passes are done
+        return Measures(step, lanes, table, validity, refreshed, self.clock.elapsed(), scale, passes)
 
     def records(self, *args, **kwargs) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view: :meth:`measure`'s arguments, read to the host at once."""
@@ -391,8 +415,8 @@ class SearchContext:
     ) -> list[ViewRecord]:
         """Move from the init view to each pose (B, 6) through the step guard, render exactly at
         ``scale`` times the run's size (with ``supersample`` rays per pixel side; None: the run's),
-        evaluate and record, counting the views against the budget (or, ``screened``, as screened
-        views: :meth:`screen`)."""
+        evaluate and record, one model pass a view (``screened``: at a cheap fidelity, never ranked:
+        :meth:`screen`)."""
         started = time.perf_counter()
         params = self.project(params.to(self.device))
         reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
@@ -410,18 +434,18 @@ class SearchContext:
         return rows
 
     def screen(
-        self, step: int, params: torch.Tensor, supersample: int, batch: int, bar: Any = None
+        self, step: int, params: torch.Tensor, supersample: int | None, batch: int, bar: Any = None
     ) -> list[ViewRecord]:
-        """:meth:`evaluate` poses (N, 6) at the cheap fidelity of ``supersample`` rays per pixel side,
-        ``batch`` views a render, while the seconds budget allows; the records are screened (never
-        ranked), counted in ``budget.screened``, not against the evaluations. A progress ``bar``
-        (counting exact evaluations) shows the screening's count meanwhile."""
+        """:meth:`evaluate` poses (N, 6), ``batch`` views a render, while the budget allows: at the
+        cheap fidelity of ``supersample`` rays per pixel side (screened records, never ranked), or
+        exactly when ``supersample`` is None. Each view is a model pass like any other
+        (``budget.screened`` counts the cheap ones). A progress ``bar`` shows the count meanwhile."""
         records: list[ViewRecord] = []
         for chunk in params.split(batch):
-            count = self.clock.allows_screening(len(chunk))
+            count = self.clock.allows(len(chunk))
             if count == 0:
                 break
-            records += self.evaluate(step, chunk[:count], supersample=supersample, screened=True)
+            records += self.evaluate(step, chunk[:count], supersample=supersample, screened=supersample is not None)
             if bar is not None:
                 bar.set_postfix_str(f"screened {len(records)}/{len(params)}")
         return records

@@ -10,6 +10,7 @@ configure_runtime()
 import contextlib
 import dataclasses
 import functools
+import json
 import logging
 import os
 import sys
@@ -24,6 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 from kadv.attack import (
     DEFAULT_METHOD,
     METHODS,
+    RENAMED_BUDGET,
     AttackConfig,
     InitViewConfig,
     Objective,
@@ -49,6 +51,7 @@ from kadv.cli.common import (
 )
 from kadv.device import resolve_device
 from kadv.io import atomic_write, remove_temporaries
+from kadv.models import count_passes
 from kadv.penalties import ENVELOPES, Envelope
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
 from kadv.report.run import (
@@ -80,6 +83,8 @@ def attack_settings(cfg: DictConfig, envelope: DictConfig | None = None) -> Atta
             bounds = dataclasses.replace(bounds, name="custom")
         node["envelope"] = bounds
     node.pop("radii", None)  # a profile run's radii: attack_radii
+    if "budget_evaluations" in node:  # a preset written before the rename
+        raise ValueError(RENAMED_BUDGET)
     method = get_method(node.pop("method", DEFAULT_METHOD))
     settings = settings_from_node(method.settings, node.pop(method.name, None), f"attack.{method.name}")
     for name in METHODS:  # the nodes of other methods (a preset may carry several) are not this run's
@@ -107,24 +112,27 @@ def _init_views(
     init_config: InitViewConfig,
     height: int,
     width: int,
-) -> list:
-    """The run's init views: those saved in the run directory (a resumed run), a given file, or chosen now."""
+) -> tuple[list, int]:
+    """The run's init views: those saved in the run directory (a resumed run), a given file, or chosen
+    now; and the model passes that chose them."""
     saved = run_dir / INIT_PARAMS
     if saved.is_file():
-        return load_init_params(saved)
-    if init_config.params:
-        views = load_init_params(init_config.params)
-    else:
-        views = file_init_views(renderer, penalty.margin)[: init_config.count] if init_config.file_cameras else []
-        views += sample_init_views(
-            renderer, model, init_config.count - len(views), seed, init_config, penalty, height, width
-        )
+        return load_init_params(saved), json.loads(saved.read_text()).get("model_passes", 0)
+    with count_passes(model) as count:
+        if init_config.params:
+            views = load_init_params(init_config.params)
+        else:
+            views = file_init_views(renderer, penalty.margin)[: init_config.count] if init_config.file_cameras else []
+            views += sample_init_views(
+                renderer, model, init_config.count - len(views), seed, init_config, penalty, height, width
+            )
     check_init_views(renderer, views, penalty, height, width)
-    save_init_params(saved, views)
-    return views
+    save_init_params(saved, views, count.passes)
+    return views, count.passes
 
 
 def _table(summary: RunSummary) -> str:
+    """The run's table and, under it, what each init view's search cost."""
     lines = ["| init view | L_depth init | L_depth adv | delta1 init | delta1 adv |", "|---|---|---|---|---|"]
     for view in summary.init_views:
         adv = view.adversarial_mean
@@ -132,6 +140,9 @@ def _table(summary: RunSummary) -> str:
             f"| {view.name} | {view.init.l_depth:.4f} | {adv['l_depth']:.4f} | "
             f"{view.init.delta1:.3f} | {adv['delta1']:.3f} |"
         )
+    lines += ["", "model passes and seconds per init view:"]
+    lines += [f"  {view.name}: {view.budget.text()}" for view in summary.init_views]
+    lines.append(f"  (choosing the init views: {summary.init_passes} passes)")
     return "\n".join(lines)
 
 
@@ -205,7 +216,7 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     diff_config = DiffRenderConfig(
         supersample=supersample, **OmegaConf.to_container(cfg.render.differentiable, resolve=True)
     )
-    get_method(attack_config.method).check(attack_config.settings, attack_config.evaluations, supersample)
+    get_method(attack_config.method).check(attack_config.settings, attack_config.passes, supersample)
     scene = scene_from_config(cfg.scene)
     renderer = renderer_from_config(scene, cfg.render, device)
     model = model_from_config(cfg.model)
@@ -213,7 +224,7 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space, device=device)
     config_text = OmegaConf.to_yaml(cfg, resolve=True)
     atomic_write(run_dir / "config.yaml", lambda tmp: tmp.write_text(config_text))
-    views = _init_views(seed, run_dir, renderer, model, penalty, init_config, height, width)
+    views, init_passes = _init_views(seed, run_dir, renderer, model, penalty, init_config, height, width)
     completed = load_partial_results(run_dir)
     progress.update(done=len(completed), total=len(views))
     if completed:
@@ -251,7 +262,9 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
             searched=searched,
         )  # fmt: skip
         profile = Profile.of(model.name, scene.name, attack_config.envelope.name, radii, (seed,), [seeded])
-    info = RunInfo(scene.name, model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed))
+    info = RunInfo(
+        scene.name, model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed), init_passes
+    )
     summary = write_run(run_dir, result, objective, info, supersample, video=cfg.video, profile=profile)
     print(f"run directory: {run_dir}\n{_table(summary)}")
     if profile is not None:

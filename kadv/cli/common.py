@@ -226,6 +226,15 @@ def _open_keys(arguments: list[str]) -> list[str]:
     return [f"++{a}" if any(a.startswith(f"{node}.") for node in OPEN_NODES) else a for a in arguments]
 
 
+def _renamed_key(arguments: list[str]) -> str | None:
+    """The line refusing a key that was renamed, naming the new one; None when no argument sets one."""
+    if any(a.lstrip("+~").partition("=")[0] == "attack.budget_evaluations" for a in arguments):
+        from kadv.attack.search import RENAMED_BUDGET
+
+        return RENAMED_BUDGET
+    return None
+
+
 def checks_overrides(command: str) -> Callable[[Callable[[], Any]], Callable[[], Any]]:
     """Decorate a ``hydra.main`` entry point so that an override Hydra cannot apply (``model=no_such_preset``,
     a key the composed config lacks, a malformed value) prints ``<command>: error: ...`` in one line
@@ -238,7 +247,7 @@ def checks_overrides(command: str) -> Callable[[Callable[[], Any]], Callable[[],
         @functools.wraps(entry)
         def wrapped() -> Any:
             sys.argv[1:] = arguments = _open_keys(sys.argv[1:])
-            message = _unknown_group_option(command, arguments)
+            message = _unknown_group_option(command, arguments) or _renamed_key(arguments)
             if message is None and all(a in _RUN_FLAGS or not a.startswith("-") for a in arguments):
                 message = _composition_error(command.replace("-", "_"), [a for a in arguments if a not in _RUN_FLAGS])
             if message is not None:

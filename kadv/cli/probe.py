@@ -2,6 +2,7 @@
 
     kadv-probe model=kadv_tiny
     kadv-probe model=kadv_tiny,kadv_tiny_dpt seeds=0,1,2 envelope=upright
+    kadv-probe model=kadv_tiny search_seeds=3          (the search noise, apart from the init views)
     kadv-probe model=kadv_tiny probes=thin_structures,window budget=96 out=outputs/probe_tiny
 
 Each model is profiled on each probe scene (:mod:`kadv.probes`), the probe built anew for each
@@ -38,6 +39,7 @@ _KEYS = {
     "seed": None,
     "envelope": "upright",
     "budget": None,
+    "search_seeds": "1",
     "lighting": "baked",
     "out": "outputs/probe",
     "hydra.run.dir": None,
@@ -89,7 +91,7 @@ def main(argv: list[str] | None = None) -> None:
         envelope = get_envelope(values["envelope"])
         budget = DEFAULT_BUDGET if values["budget"] is None else _int(values["budget"], "budget", 2)
         try:
-            AttackConfig(budget_evaluations=budget)  # the default search's own floor
+            AttackConfig(budget_passes=budget)  # the default search's own floor
         except ValueError as error:
             raise ValueError(f"budget={budget} is too small for the default search: {error}") from None
         if values["lighting"] not in ("baked", "direct"):
@@ -100,7 +102,8 @@ def main(argv: list[str] | None = None) -> None:
             probes,
             seeds=seeds,
             envelope=envelope,
-            budget_evaluations=budget,
+            budget_passes=budget,
+            search_seeds=_int(values["search_seeds"], "search_seeds", 1),
             artifacts=out / "views",
             lighting=values["lighting"],
             progress=True,

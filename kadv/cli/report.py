@@ -23,7 +23,7 @@ DESCRIPTION = """kadv-report: turns kadv-attack run directories into the study's
 Writes to OUT (default: <first path>/report), for each search method M in the runs:
 table2_M.{md,csv} (adversarial L_depth and delta1 per model x scene) and table3_M.{md,csv} (change
 from the init views); then methods.{md,csv} (each attack method's
-gain, evaluations and seconds, when the runs hold more than one), transfer_delta1.{md,csv} and
+gain, model passes and seconds, when the runs hold more than one), transfer_delta1.{md,csv} and
 transfer_l_depth.{md,csv} (every model scored on every model's adversarial views, re-rendered from
 their saved poses), curves.png (anytime curves per model and method), and report.html
 (self-contained: tables, curves, gallery, maps); with --reference, reference_<run>.{md,csv} (each

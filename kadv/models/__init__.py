@@ -18,11 +18,13 @@ _EXPORTS = {
     "ModelWeightsUnavailable": "kadv.models.huggingface",
     "ModuleDepthModel": "kadv.models.custom",
     "NetworkLayout": "kadv.models.preprocess",
+    "PassCount": "kadv.models.counting",
     "PRESETS": "kadv.models.presets",
     "Preprocess": "kadv.models.preprocess",
     "Preset": "kadv.models.presets",
     "TinyDepthNet": "kadv.models.tiny",
     "check_depth_model": "kadv.models.custom",
+    "count_passes": "kadv.models.counting",
     "load_custom": "kadv.models.custom",
     "load_huggingface": "kadv.models.huggingface",
     "load_kadv_tiny": "kadv.models.tiny",
@@ -37,6 +39,7 @@ _EXPORTS = {
 
 if TYPE_CHECKING:  # the same names, for type checkers and the API reference
     from kadv.models.base import DepthModel
+    from kadv.models.counting import PassCount, count_passes
     from kadv.models.custom import ModuleDepthModel, check_depth_model, load_custom, wrap_model
     from kadv.models.huggingface import HuggingFaceDepthModel, ModelWeightsUnavailable, load_huggingface
     from kadv.models.preprocess import NetworkLayout, Preprocess, resized_shape
@@ -54,10 +57,12 @@ __all__ = [
     "ModelWeightsUnavailable",
     "ModuleDepthModel",
     "NetworkLayout",
+    "PassCount",
     "Preprocess",
     "Preset",
     "TinyDepthNet",
     "check_depth_model",
+    "count_passes",
     "load_custom",
     "load_huggingface",
     "load_kadv_tiny",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from pathlib import Path
 
@@ -118,14 +119,25 @@ def loss_label(kind: str) -> str:
     return _LOSS_LABELS.get(kind, kind)
 
 
+def _pass_index(records: list) -> dict[int, int]:
+    """Each record's own forward pass in its search's count of model passes (a batch's views, which
+    share the count at the batch's end, in their order; backward passes leave gaps)."""
+    index: dict[int, int] = {}
+    for _, batch in itertools.groupby(records, key=lambda r: r.passes):
+        batch = list(batch)
+        for k, record in enumerate(batch):
+            index[id(record)] = record.passes - len(batch) + k + 1
+    return index
+
+
 def save_curves(path: str | Path, results: list[InitViewResult], label: str = "L_depth") -> Path:
-    """The attacked loss (named ``label``) of every evaluated view (screened ones in grey) in the
-    order they were scored, the best valid one so far and the search's path, per init view, with
+    """The attacked loss (named ``label``) of every evaluated view (screened ones in grey) against
+    the model passes spent, the best valid one so far and the search's path, per init view, with
     the init view's value and the adversarial views marked."""
     rows, columns = _grid(len(results))
     figure, axes = plt.subplots(rows, columns, figsize=(4.6 * columns, 3.2 * rows), squeeze=False)
     for axis, result in zip(axes.flat, results):
-        order = {id(r): count for count, r in enumerate(result.records, start=1)}
+        order = _pass_index(result.records)
         valid = [r for r in result.records if r.valid and not r.screened]
         axis.scatter([order[id(r)] for r in valid], [r.loss for r in valid], s=6, alpha=0.4, label="evaluated views")
         screened = [r for r in result.records if r.valid and r.screened]
@@ -144,7 +156,7 @@ def save_curves(path: str | Path, results: list[InitViewResult], label: str = "L
             )
         curve = incumbent_path(result.records)
         axis.step(
-            [order[id(r)] for r in curve] + [len(result.records)],
+            [order[id(r)] for r in curve] + [max(order.values())],
             [r.loss for r in curve] + [curve[-1].loss],
             where="post",
             color="k",
@@ -169,7 +181,7 @@ def save_curves(path: str | Path, results: list[InitViewResult], label: str = "L
             label="adversarial views",
         )
         axis.set_title(f"{result.init.name}")
-        axis.set_xlabel("views scored" if screened else "evaluated views")
+        axis.set_xlabel("model passes")
         axis.set_ylabel(label)
     for axis in list(axes.flat)[len(results) :]:
         axis.set_axis_off()

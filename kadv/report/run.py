@@ -147,7 +147,7 @@ def read_trajectory(path: str | Path) -> dict[int, list[ViewRecord]]:
     with open(path, newline="") as file:
         rows = list(csv.DictReader(file))
     flag = lambda text: text == "True"
-    parse = {"step": int, "restart": int, "verdict": str, "refreshed": flag, "screened": flag}
+    parse = {"step": int, "restart": int, "passes": int, "verdict": str, "refreshed": flag, "screened": flag}
     records: dict[int, list[ViewRecord]] = {}
     for row in rows:
         values = {f.name: parse.get(f.name, float)(row[f.name]) for f in fields(ViewRecord) if f.name in row}
@@ -343,7 +343,6 @@ def _init_view_summary(index: int, view: InitViewResult, pictures: list[str]) ->
         },
         l_depth_gain=(view.top[0].l_depth - view.init_record.l_depth) if view.top else 0.0,
         anytime=[AnytimePoint(*point) for point in best_so_far(view.records)],
-        evaluations=view.budget.forward,
         invalid_views=sum(not r.valid for r in view.records),
         uninformative_views=sum(r.verdict == UNINFORMATIVE for r in view.records),
         guarded_steps=sum(r.guard_fraction < 1.0 for r in view.records),

@@ -27,7 +27,7 @@ __all__ = [
 ]
 
 # bumped whenever a field below, InitViewResult or ViewRecord changes shape
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 
 def _check_schema(data: object, path: Path) -> dict:
@@ -79,10 +79,10 @@ class ViewMetrics:
 
 @dataclass
 class AnytimePoint:
-    """The best valid view so far (by the run's loss), each time it improved: after how many
-    evaluations and seconds, and its measures."""
+    """The best valid view so far (by the run's loss), each time it improved: after how many model
+    passes and seconds, and its measures."""
 
-    evaluations: int
+    passes: int
     seconds: float
     l_depth: float
     delta1: float
@@ -105,7 +105,6 @@ class InitViewSummary:
     adversarial_mean: dict[str, float | None]
     l_depth_gain: float
     anytime: list[AnytimePoint]
-    evaluations: int
     invalid_views: int
     uninformative_views: int
     guarded_steps: int
@@ -119,14 +118,15 @@ class InitViewSummary:
                 "init": ViewMetrics(**data["init"]),
                 "adversarial": [ViewMetrics(**a) for a in data["adversarial"]],
                 "anytime": [AnytimePoint(**p) for p in data["anytime"]],
-                "budget": Budget(**data["budget"]),
+                "budget": Budget.from_dict(data["budget"]),
             }
         )
 
 
 @dataclass
 class RunInfo:
-    """What a run was: scene, model, loss, seed, device, image size, and the init views it resumed."""
+    """What a run was: scene, model, loss, seed, device, image size, the init views it resumed, and
+    the model passes that chose its init views (counted apart from the searches' budgets)."""
 
     scene: str
     model: str
@@ -136,6 +136,7 @@ class RunInfo:
     height: int
     width: int
     resumed_init_views: list[int]
+    init_passes: int
 
 
 @dataclass
@@ -159,14 +160,19 @@ class RunSummary(RunInfo):
     profile: dict | None = None
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """Everything as plain JSON values, each budget with its passes."""
+        out = asdict(self)
+        out["budget"] = self.budget.to_dict()
+        for view, summary in zip(out["init_views"], self.init_views):
+            view["budget"] = summary.budget.to_dict()
+        return out
 
     @classmethod
     def from_dict(cls, data: dict) -> RunSummary:
         return cls(
             **data
             | {
-                "budget": Budget(**data["budget"]),
+                "budget": Budget.from_dict(data["budget"]),
                 "init_views": [InitViewSummary.from_dict(v) for v in data["init_views"]],
             }
         )
@@ -218,7 +224,7 @@ def read_partial(path: str | Path) -> InitViewResult:
             InitView.from_dict(data["init"]),
             records,
             [by_key[tuple(key)] for key in data["top"]],
-            Budget(**data["budget"]),
+            Budget.from_dict(data["budget"]),
             [by_key[tuple(key)] for key in data["path"]],
         )
     except (KeyError, TypeError) as error:

@@ -2,7 +2,7 @@
 
 Table 2: adversarial L_depth and delta1 per model x scene with averages; Table 3: the change from
 the init views (adversarial - init for L_depth, init - adversarial for delta1); the method table
-(each method's gain, evaluations and seconds per model x scene); the profile tables of profile runs
+(each method's gain, model passes and seconds per model x scene); the profile tables of profile runs
 (``attack.radii``: Table 2's delta1 at each radius); the transfer matrix.
 """
 
@@ -189,7 +189,7 @@ def table3(runs: list[RunRecord], method: str) -> Table:
 
 
 def method_table(runs: list[RunRecord]) -> Table | None:
-    """Per model x scene x method: L_depth gain, evaluations and seconds per init view (None with one method)."""
+    """Per model x scene x method: L_depth gain, model passes and seconds per init view (None with one method)."""
     if len({r.method for r in runs}) < 2:
         return None
     cells: dict[tuple[str, str, str], list[RunRecord]] = defaultdict(list)
@@ -197,7 +197,7 @@ def method_table(runs: list[RunRecord]) -> Table | None:
         cells[run.model, run.scene, run.method].append(run)
     table = Table(
         "Methods at equal budget",
-        ["model", "scene", "method", "L_depth gain", "delta1 drop", "evaluations / init view", "seconds / init view"],
+        ["model", "scene", "method", "L_depth gain", "delta1 drop", "model passes / init view", "seconds / init view"],
     )
     for (model, scene, method), group in sorted(cells.items()):
         views = [v for run in group for v in run.summary.init_views]
@@ -208,7 +208,7 @@ def method_table(runs: list[RunRecord]) -> Table | None:
                 method,
                 statistics.mean(r.summary.adversarial_l_depth - r.summary.init_l_depth for r in group),
                 statistics.mean(r.summary.init_delta1 - r.summary.adversarial_delta1 for r in group),
-                statistics.mean(v.budget.forward for v in views),
+                statistics.mean(v.budget.passes for v in views),
                 statistics.mean(v.budget.seconds for v in views),
             ]
         )

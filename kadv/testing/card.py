@@ -130,27 +130,30 @@ class Scorecard:
         return lines
 
     def markdown(self) -> str:
-        """Per probe and model: the worst delta1 at each radius, the failure rate at the largest, the
-        worst-case area, the resilience and the typical area (mean ± spread over the seeds); the
-        models' means; the paired rankings under both areas and the differences behind them."""
+        """Per probe and model: the worst delta1 at each radius, the search noise at the largest, the
+        failure rate there, the worst-case area, the resilience and the typical area (mean ± spread
+        over the seeds); the models' means and costs; the paired rankings under both areas and the
+        differences behind them."""
         radii = self.results[self.probes[0]][self.models[0]].radii
         largest = f"{radii[-1][0]:g}°/{radii[-1][1]:g} m"
         lines = [
             "| probe | model | "
             + " | ".join(f"worst delta1 {d:g}°/{m:g} m" for d, m in radii)
-            + f" | failure rate {largest} | worst-case area | resilience | typical area |",
-            "|---|---|" + "---|" * (len(radii) + 4),
+            + f" | search noise {largest} | failure rate {largest} | worst-case area | resilience | typical area |",
+            "|---|---|" + "---|" * (len(radii) + 5),
         ]
         for probe in self.probes:
             for model in self.models:
                 profile = self.results[probe][model]
                 worst = " | ".join(f"{v:.3f}" for v in profile.worst)
+                noise = profile.search_noise[-1]
                 lines.append(
-                    f"| {probe} | {model} | {worst} | {profile.failure_rate[-1]:.0%} | "
+                    f"| {probe} | {model} | {worst} | {'n/a' if np.isnan(noise) else f'{noise:.3f}'} | "
+                    f"{profile.failure_rate[-1]:.0%} | "
                     f"{profile.worst_score:.3f} ± {np.ptp(profile.worst_scores):.3f} | {profile.resilience:.3f} | "
                     f"{profile.score:.3f} ± {profile.score_spread:.3f} |"
                 )
-        blank = " | ".join([""] * (len(radii) + 1))
+        blank = " | ".join([""] * (len(radii) + 2))
         for model in self.models:
             worst, typical = self.unit_scores(model, "worst"), self.unit_scores(model, "typical")
             resilience = np.mean([self.results[p][model].resilience for p in self.probes])
@@ -158,10 +161,22 @@ class Scorecard:
                 f"| **mean** | {model} | {blank} | **{np.mean(worst):.3f}** | **{resilience:.3f}** | "
                 f"**{np.mean(typical):.3f}** |"
             )
+        notes = [
+            "search noise: the sd of the worst over the search seeds with the init views fixed (n/a: one search "
+            "seed); ± after an area: its spread over the seeds, init views and searches together"
+        ]
+        for model in self.models:
+            costs = [self.results[p][model].cost for p in self.probes]
+            notes.append(
+                f"cost of {model} per init view (mean over probes): "
+                f"{np.mean([c['search_passes'] for c in costs]):.0f} model passes searching, "
+                f"{np.mean([c['search_seconds'] for c in costs]):.1f} s; "
+                f"{np.mean([c['draw_passes'] for c in costs]):.0f} passes on drawn views"
+            )
         rankings = [self.ranking("worst"), self.ranking("typical")]
         if len(self.models) > 1:
             rankings += self.differences("worst") + self.differences("typical")
-        return "\n".join(lines) + "\n\n" + "\n".join(rankings)
+        return "\n".join(lines) + "\n\n" + "\n".join(notes) + "\n\n" + "\n".join(rankings)
 
     def save_png(self, path: str | Path) -> Path:
         """One panel per probe: each model's worst (solid) and typical (dashed) delta1 against the
@@ -182,6 +197,7 @@ def scorecard(
     radii=DEFAULT_RADII,
     typical_views: int = TYPICAL_VIEWS,
     fail_below: float = FAIL_BELOW,
+    search_seeds: int = 1,
     pool: bool = True,
     progress: bool = False,
     **options,
@@ -193,13 +209,13 @@ def scorecard(
         models: what :func:`kadv.testing.viewpoint_robustness` takes as a model.
         probes: probe names (:data:`kadv.probes.PROBES`); None: all of them.
         seeds: the probes' and the searches' seeds.
-        envelope, radii, typical_views, fail_below: as :func:`kadv.testing.robustness_profile`
-            takes them.
+        envelope, radii, typical_views, fail_below, search_seeds: as
+            :func:`kadv.testing.robustness_profile` takes them.
         pool: score every model also at the worst views the other models' searches found (same
             probe, seed and init views), so that each model's worst case is the worst over all the
             searches (:func:`kadv.testing.profile.pool_worst_views`); False: each its own search's.
         progress: print a line per probe, model and seed as each finishes.
-        options: more of :func:`kadv.testing.robustness_profile`'s arguments (``budget_evaluations``,
+        options: more of :func:`kadv.testing.robustness_profile`'s arguments (``budget_passes``,
             ``artifacts``, ``lighting``, ...).
 
     Raises:
@@ -222,7 +238,7 @@ def scorecard(
     names = [model.name for model in loaded]
     if len(set(names)) != len(names):
         raise RobustnessInputError(f"models: each must have its own name, got {names}")
-    settings = profile_settings(radii, envelope, typical_views, fail_below, options, "scorecard")
+    settings = profile_settings(radii, envelope, typical_views, fail_below, options, "scorecard", search_seeds)
     results: dict[str, dict[str, Profile]] = {}
     for probe in probes:
         profiles: dict[str, list[Profile]] = {name: [] for name in names}

@@ -9,13 +9,13 @@ import tempfile
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from kadv.attack.search import DEFAULT_METHOD
+from kadv.attack.search import DEFAULT_METHOD, RENAMED_BUDGET
 from kadv.testing.inputs import RobustnessInputError, resolve_model, resolve_scene
 from kadv.testing.session import current
 
 __all__ = ["DEFAULT_BUDGET", "CheckOptions", "Setup", "check_radii", "setup", "slug", "worst_record"]
 
-DEFAULT_BUDGET = 48  # model evaluations per init view, the init view's included
+DEFAULT_BUDGET = 48  # model passes per init view (and radius, in a profile), the init view's included
 
 
 def worst_record(records: list) -> object:
@@ -30,7 +30,8 @@ class CheckOptions:
 
     Attributes:
         init_count: init views: the scene's cameras first, then sampled views the model gets right.
-        budget_evaluations: model evaluations per init view (scaled by ``--kadv-budget`` under pytest).
+        budget_passes: model passes per init view, forward and backward, at any fidelity (scaled
+            by ``--kadv-budget`` under pytest).
         seed: the seed of the init views and the search.
         loss: the attacked loss (``"delta1"``, ``"absrel"``, ``"ssim"``, ``"perceptual"``).
         size: (height, width) of the renders.
@@ -45,7 +46,7 @@ class CheckOptions:
     """
 
     init_count: int = 2
-    budget_evaluations: int = DEFAULT_BUDGET
+    budget_passes: int = DEFAULT_BUDGET
     seed: int = 0
     loss: str = "delta1"
     size: tuple[int, int] = (96, 128)
@@ -59,6 +60,8 @@ class CheckOptions:
     @classmethod
     def of(cls, options: dict, taker: str) -> CheckOptions:
         """The options from keyword arguments, or :class:`RobustnessInputError` naming an unknown one."""
+        if "budget_evaluations" in options:
+            raise RobustnessInputError(f"{taker}: {RENAMED_BUDGET.replace('attack.', '')}")
         unknown = sorted(set(options) - {f.name for f in fields(cls)})
         if unknown:
             raise RobustnessInputError(f"{taker} takes no option {', '.join(unknown)}")
@@ -99,13 +102,13 @@ def setup(model, scene, options: CheckOptions) -> Setup:
     from kadv.render import DifferentiableRenderer, ExactRenderer, Shading
     from kadv.report.run import ViewRenderer
 
-    init_count, budget_evaluations = options.init_count, options.budget_evaluations
+    init_count, budget_passes = options.init_count, options.budget_passes
     if isinstance(init_count, bool) or not isinstance(init_count, int) or init_count < 1:
         raise RobustnessInputError(f"init_count must be an integer >= 1, got {init_count!r}")
-    if isinstance(budget_evaluations, bool) or not isinstance(budget_evaluations, int) or budget_evaluations < 2:
-        raise RobustnessInputError(f"budget_evaluations must be an integer >= 2, got {budget_evaluations!r}")
+    if isinstance(budget_passes, bool) or not isinstance(budget_passes, int) or budget_passes < 2:
+        raise RobustnessInputError(f"budget_passes must be an integer >= 2, got {budget_passes!r}")
     settings = current()
-    budget = max(2, round(budget_evaluations * settings.budget_factor))
+    budget = max(2, round(budget_passes * settings.budget_factor))
     height, width = options.size
     depth_model = resolve_model(model)
     built = resolve_scene(scene)

@@ -5,7 +5,7 @@
   ``kadv_artifacts`` (the folder where the worst views' pictures go: under ``tmp_path``, or
   ``--kadv-keep DIR``);
 - the ``kadv`` marker on every test that uses them (``-m "not kadv"`` skips them);
-- ``--kadv-budget FACTOR``, which scales every check's evaluation budget;
+- ``--kadv-budget FACTOR``, which scales every check's budget of model passes;
 - a terminal summary: one line per model x scene checked, delta1 init -> worst, pass or fail.
 
 A check's bad input (an unknown probe, a model of the wrong shape, no threshold) is reported as a
@@ -54,7 +54,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         "--kadv-budget",
         default="1",
         metavar="FACTOR",
-        help="multiply every kadv check's evaluation budget by FACTOR (e.g. 0.5 on each push, 4 nightly)",
+        help="multiply every kadv check's budget of model passes by FACTOR (e.g. 0.5 on each push, 4 nightly)",
     )
     group.addoption(
         "--kadv-keep",
@@ -129,7 +129,7 @@ def _summary_line(result) -> str:
         )
     return (
         f"{result.model} x {result.scene}: delta1 {result.delta1_init:.3f} -> {result.worst.delta1_worst:.3f} "
-        f"(worst of {len(result.views)} init views, {result.budget_evaluations} evaluations each)"
+        f"(worst of {len(result.views)} init views, {result.budget_passes} model passes each)"
     )
 
 

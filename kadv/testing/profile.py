@@ -27,6 +27,7 @@ __all__ = [
     "DEFAULT_RADII",
     "FAIL_BELOW",
     "PROFILE_KEYS",
+    "SEARCH_SEED_STRIDE",
     "TYPICAL_VIEWS",
     "WARM_STARTS",
     "Profile",
@@ -52,9 +53,11 @@ DEFAULT_RADII = ((5.0, 0.1), (15.0, 0.3), (45.0, 1.0))  # (degrees, metres), nes
 FAIL_BELOW = 0.6
 TYPICAL_VIEWS = 16  # uniform draws per init view and radius
 WARM_STARTS = 2  # the worst separated views within the smaller radii that a search at the next starts from
+# search seed j of a profile's seed s (init views fixed) is s + SEARCH_SEED_STRIDE * j
+SEARCH_SEED_STRIDE = 10_000
 _DRAW_ROUNDS = 32  # rounds of 4 x typical_views draws at most, for the envelope to keep enough
 # what a profile takes beyond CheckOptions (whose radius and seed it replaces)
-PROFILE_KEYS = ("radii", "envelope", "seeds", "typical_views", "fail_below")
+PROFILE_KEYS = ("radii", "envelope", "seeds", "typical_views", "fail_below", "search_seeds")
 
 
 @dataclass(frozen=True)
@@ -68,12 +71,17 @@ class Profile:
         seeds: the seeds of the init views and searches.
         delta1_init: mean delta1 at the init views, per seed.
         worst_by_seed: (seeds, radii) mean over init views of the worst valid view's delta1 found
-            within each radius; never rising with the radius.
+            within each radius by the search under the seed itself; never rising with the radius.
         typical_by_seed: (seeds, radii) mean delta1 of views drawn uniformly from each radius.
         failure_by_seed: (seeds, radii) share of those views whose delta1 is below ``fail_below``.
         draws: per radius, the delta1 of every valid drawn view, over init views and seeds.
         fail_below: the delta1 under which a drawn view counts as failed.
         pictures: per radius, the four-panel picture of the worst view found (first seed).
+        search_noise_by_seed: (seeds, radii) the sample standard deviation (ddof 1) of that worst
+            over the searches of ``search_seeds`` search seeds, the init views fixed; empty rows
+            with one search seed (not measured).
+        cost_by_seed: per seed, per init view: the searches' model passes and seconds over all
+            radii (the noise's extra searches left out), and the drawn views' passes.
     """
 
     model: str
@@ -88,6 +96,8 @@ class Profile:
     draws: list[list[float]]
     fail_below: float
     pictures: list[str]
+    search_noise_by_seed: list[list[float]] = dataclasses.field(default_factory=list)
+    cost_by_seed: list[dict[str, float]] = dataclasses.field(default_factory=list)
 
     @property
     def worst(self) -> list[float]:
@@ -140,6 +150,8 @@ class Profile:
             draws=[[v for p in seed_profiles for v in p.draws[k]] for k in range(len(radii))],
             fail_below=float(fail_below),
             pictures=list(pictures or []),
+            search_noise_by_seed=[p.search_noise for p in seed_profiles],
+            cost_by_seed=[p.cost for p in seed_profiles],
         )
 
     @classmethod
@@ -162,6 +174,8 @@ class Profile:
             typical_by_seed=[row for p in profiles for row in p.typical_by_seed],
             failure_by_seed=[row for p in profiles for row in p.failure_by_seed],
             draws=[[v for p in profiles for v in p.draws[k]] for k in range(len(first.radii))],
+            search_noise_by_seed=[row for p in profiles for row in p.search_noise_by_seed],
+            cost_by_seed=[row for p in profiles for row in p.cost_by_seed],
         )
 
     @property
@@ -206,6 +220,40 @@ class Profile:
         """max - min of the score over the seeds."""
         return float(np.ptp(self.scores))
 
+    @property
+    def search_noise(self) -> list[float]:
+        """Per radius, the median over seeds of the search noise (NaN: not measured): how much the
+        worst found moves with the search's seed alone, apart from the init views' spread."""
+        rows = [row for row in self.search_noise_by_seed if row]
+        return np.median(rows, axis=0).tolist() if rows else [math.nan] * len(self.radii)
+
+    @property
+    def cost(self) -> dict[str, float]:
+        """Per init view, mean over seeds: the searches' model passes and seconds, the drawn views' passes."""
+        keys = ("search_passes", "search_seconds", "draw_passes")
+        return {k: float(np.mean([c[k] for c in self.cost_by_seed])) if self.cost_by_seed else math.nan for k in keys}
+
+    def noise_text(self) -> str:
+        """One line: the search noise per radius and its largest, and the init views' spread."""
+        measured = [row for row in self.search_noise_by_seed if row]
+        if measured:
+            per_radius = ", ".join(f"{v:.3f}" for v in self.search_noise)
+            text = (
+                f"search noise (sd of the worst over search seeds, init views fixed): {per_radius} by radius, "
+                f"largest {max(max(row) for row in measured):.3f}"
+            )
+        else:
+            text = "search noise not measured (search_seeds=1; 3 or more measure it)"
+        return f"{text}; init views' spread (worst-case area over seeds): {np.ptp(self.worst_scores):.3f}"
+
+    def cost_text(self) -> str:
+        """One line: what the profile cost per init view."""
+        cost = self.cost
+        return (
+            f"cost per init view: {cost['search_passes']:.0f} model passes searching ({len(self.radii)} radii), "
+            f"{cost['search_seconds']:.1f} s; {cost['draw_passes']:.0f} passes on drawn views"
+        )
+
     def markdown(self) -> str:
         """A table: per radius, the worst and typical delta1, the failure rate; then the score."""
         lines = [
@@ -227,7 +275,10 @@ class Profile:
             f"worst-case area {self.worst_score:.3f} ± {np.ptp(self.worst_scores):.3f}, "
             f"resilience {self.resilience:.3f} (worst-case area / init delta1)",
             f"score {self.score:.3f} ± {self.score_spread:.3f} (typical area; spread over seeds)",
+            self.noise_text(),
         ]
+        if self.cost_by_seed:
+            lines.append(self.cost_text())
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
@@ -353,9 +404,11 @@ def _mean_interval(values: list[float]) -> tuple[float, float]:
     return (mean - half, mean + half)
 
 
-def _typical(objective, differentiable, init, size, config, seed: int, index: int, count: int) -> list[float]:
+def _typical(
+    objective, differentiable, init, size, config, seed: int, index: int, count: int
+) -> tuple[list[float], int]:
     """delta1 of the valid views among ``count`` drawn uniformly (Sobol) from the radius and the
-    envelope around ``init``."""
+    envelope around ``init``, and the model passes spent on them."""
     from scipy.stats import qmc
 
     from kadv.attack import SearchContext
@@ -374,9 +427,9 @@ def _typical(objective, differentiable, init, size, config, seed: int, index: in
         if len(chosen) >= count:
             break
     if not chosen:
-        return []
+        return [], 0
     chosen = torch.stack(chosen[:count])
-    return [r.delta1 for r in context.evaluate(0, chosen) if r.valid]
+    return [r.delta1 for r in context.evaluate(0, chosen) if r.valid], len(chosen)
 
 
 @dataclass
@@ -390,6 +443,8 @@ class SeedProfile:
         found: per radius and init view, the (init view, record) of the worst view found within
             that radius (by its own search, or scored at views other searches found: :meth:`pool`).
         results: per radius, the attack's result within it.
+        search_noise: per radius, the sd (ddof 1) of :attr:`worst` over the search seeds (empty: one).
+        cost: per init view, the searches' passes and seconds over all radii, the draws' passes.
     """
 
     delta1_init: float
@@ -398,6 +453,8 @@ class SeedProfile:
     draws: list[list[float]]
     found: list[list[tuple]]
     results: list
+    search_noise: list[float] = dataclasses.field(default_factory=list)
+    cost: dict[str, float] = dataclasses.field(default_factory=dict)
 
     @property
     def carried(self) -> list[list[tuple]]:
@@ -491,19 +548,24 @@ def profile_views(
     fail_below: float = FAIL_BELOW,
     progress: bool = False,
     searched: dict[int, object] | None = None,
+    search_seeds: int = 1,
 ) -> SeedProfile:
     """One seed's profile of the init ``views``: per radius, the search ``config`` (its bounds set to
     the radius, warm-started from the smaller radii: :func:`search_radii`) and ``typical_views``
     uniform draws per init view; the worst view carried from radius to radius (the radii are
     nested). ``searched`` holds results already found at some radii (by index), which are used
-    instead of searching again."""
+    instead of searching again. With ``search_seeds`` above 1, the search runs again under search
+    seeds ``seed + SEARCH_SEED_STRIDE * j`` from the same init views, for its noise."""
     results = search_radii(objective, differentiable, views, size, config, radii, seed, progress, searched)
     out = SeedProfile(math.nan, [], [], [[] for _ in radii], [], [])
+    draw_passes = 0
     for k, ((degrees, metres), result) in enumerate(zip(radii, results)):
         within = dataclasses.replace(config, max_angle_deg=degrees, max_distance=metres)
         typical: list[float] = []
         for i, view in enumerate(result.views):
-            typical += _typical(objective, differentiable, view.init, size, within, seed, i, typical_views)
+            drawn, passes = _typical(objective, differentiable, view.init, size, within, seed, i, typical_views)
+            typical += drawn
+            draw_passes += passes
         if k == 0:
             out.delta1_init = float(np.mean([v.init_record.delta1 for v in result.views]))
         out.found.append([(view.init, worst_record(view.records)) for view in result.views])
@@ -511,7 +573,31 @@ def profile_views(
         out.failure.append(float(np.mean([d < fail_below for d in typical])) if typical else math.nan)
         out.draws[k] = typical
         out.results.append(result)
+    budgets = [view.budget for result in results for view in result.views]
+    out.cost = {
+        "search_passes": sum(b.passes for b in budgets) / len(views),
+        "search_seconds": sum(b.seconds for b in budgets) / len(views),
+        "draw_passes": draw_passes / len(views),
+    }
+    if search_seeds > 1:
+        worst = [out.worst] + [
+            _worst_of(
+                search_radii(objective, differentiable, views, size, config, radii, seed + SEARCH_SEED_STRIDE * j)
+            )
+            for j in range(1, search_seeds)
+        ]
+        out.search_noise = np.std(worst, axis=0, ddof=1).tolist()
     return out
+
+
+def _worst_of(results: list) -> list[float]:
+    """Per radius, the mean over init views of the worst delta1 within it or a smaller one."""
+    lowest = [math.inf] * len(results[0].views)
+    rows = []
+    for result in results:
+        lowest = [min(low, worst_record(view.records).delta1) for low, view in zip(lowest, result.views)]
+        rows.append(float(np.mean(lowest)))
+    return rows
 
 
 def robustness_profile(
@@ -523,6 +609,7 @@ def robustness_profile(
     seeds=(0,),
     typical_views: int = TYPICAL_VIEWS,
     fail_below: float = FAIL_BELOW,
+    search_seeds: int = 1,
     **options,
 ) -> Profile:
     """The model's :class:`Profile` on ``scene``: per radius, the worst and typical delta1 within it
@@ -536,14 +623,16 @@ def robustness_profile(
         seeds: one profile run per seed (init views and searches); the score's spread is over them.
         typical_views: views drawn per init view and radius for the typical case.
         fail_below: a drawn view whose delta1 is below this counts as failed.
-        options: :class:`kadv.testing.CheckOptions`' other fields (``budget_evaluations``: per init
+        search_seeds: searches per seed from the same init views (the first under the seed
+            itself); two or more measure the search noise apart from the init views' spread.
+        options: :class:`kadv.testing.CheckOptions`' other fields (``budget_passes``: per init
             view and radius for the worst case; ``init_count``, ``size``, ``method``, ``loss``,
             ``lighting``, ``artifacts``, ``progress``).
 
     Raises:
         RobustnessInputError: bad radii, seeds, envelope, model, scene or setting, in one line.
     """
-    settings = profile_settings(radii, envelope, typical_views, fail_below, options, "robustness_profile")
+    settings = profile_settings(radii, envelope, typical_views, fail_below, options, "robustness_profile", search_seeds)
     seeds = tuple(seeds)
     if not seeds or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds):
         raise RobustnessInputError(f"seeds must be one or more integers >= 0, got {list(seeds)}")
@@ -554,13 +643,15 @@ def robustness_profile(
 @dataclass(frozen=True)
 class ProfileSettings:
     """How a profile searches and draws (checked): the check's options, the radii, the search and
-    its envelope, the typical views per init view and radius, the failure threshold."""
+    its envelope, the typical views per init view and radius, the failure threshold, the searches
+    per seed."""
 
     checked: CheckOptions
     radii: tuple[tuple[float, float], ...]
     config: object
     typical_views: int
     fail_below: float
+    search_seeds: int = 1
 
     def profile(self, runs: list[SeedRun], pictures: list[str]) -> Profile:
         """The :class:`Profile` of one model's seed runs."""
@@ -570,7 +661,9 @@ class ProfileSettings:
         return Profile.of(*names, self.radii, seeds, [run.seeded for run in runs], self.fail_below, pictures)
 
 
-def profile_settings(radii, envelope, typical_views, fail_below, options: dict, taker: str) -> ProfileSettings:
+def profile_settings(
+    radii, envelope, typical_views, fail_below, options: dict, taker: str, search_seeds: int = 1
+) -> ProfileSettings:
     """:class:`ProfileSettings` from a profile's arguments, or :class:`RobustnessInputError` naming
     the bad one (``taker``: the function that was given them)."""
     from kadv.attack import AttackConfig
@@ -585,12 +678,14 @@ def profile_settings(radii, envelope, typical_views, fail_below, options: dict, 
         raise RobustnessInputError(f"typical_views must be an integer >= 2, got {typical_views!r}")
     if not (isinstance(fail_below, (int, float)) and 0 < fail_below <= 1):
         raise RobustnessInputError(f"fail_below must be in (0, 1], got {fail_below!r}")
+    if isinstance(search_seeds, bool) or not (isinstance(search_seeds, int) and search_seeds >= 1):
+        raise RobustnessInputError(f"search_seeds must be an integer >= 1, got {search_seeds!r}")
     try:
         bounds = get_envelope(envelope)
         config = AttackConfig(checked.method, envelope=bounds)
     except ValueError as error:
         raise RobustnessInputError(str(error)) from None
-    return ProfileSettings(checked, radii, config, typical_views, float(fail_below))
+    return ProfileSettings(checked, radii, config, typical_views, float(fail_below), search_seeds)
 
 
 @dataclass
@@ -611,12 +706,12 @@ def seed_run(model, scene, settings: ProfileSettings, seed: int) -> SeedRun:
 
     built = setup(model, scene, dataclasses.replace(settings.checked, seed=seed))
     try:
-        config = dataclasses.replace(settings.config, budget_evaluations=built.budget)
+        config = dataclasses.replace(settings.config, budget_passes=built.budget)
         views = [fit_into_envelope(built.renderer, v, config.envelope, built.penalty.margin) for v in built.views]
     except InitViewError as error:
         raise RobustnessInputError(f"scene {built.scene_name!r}: {error}") from None
     except ValueError as error:  # a budget too small for the method
-        raise RobustnessInputError(f"budget_evaluations={built.budget}: {error}") from None
+        raise RobustnessInputError(f"budget_passes={built.budget}: {error}") from None
     seeded = profile_views(
         built.objective,
         built.differentiable,
@@ -628,6 +723,7 @@ def seed_run(model, scene, settings: ProfileSettings, seed: int) -> SeedRun:
         settings.typical_views,
         settings.fail_below,
         settings.checked.progress,
+        search_seeds=settings.search_seeds,
     )
     return SeedRun(seed, built, views, config, seeded)
 

@@ -38,7 +38,8 @@ class InitViewOutcome:
             when nothing was worse).
         centre: the worst view's optical centre, world metres (x, y, z; y up).
         angles_deg: its yaw, pitch (positive: up) and roll, degrees.
-        evaluations: model evaluations spent from this init view.
+        passes: model passes (forward and backward) spent from this init view.
+        seconds: the search's seconds from this init view.
         picture: the worst view's four-panel PNG (image | depth | prediction | error).
         world_T_cam: the worst view's pose (4, 4).
     """
@@ -50,7 +51,8 @@ class InitViewOutcome:
     abs_rel_worst: float
     centre: tuple[float, float, float]
     angles_deg: tuple[float, float, float]
-    evaluations: int
+    passes: int
+    seconds: float = field(compare=False)  # the machine's, not the result's
     picture: Path
     world_T_cam: list[list[float]] = field(repr=False)
 
@@ -72,7 +74,7 @@ class RobustnessResult:
         model: the model's name.
         scene: the scene's name.
         seed: the search's seed.
-        budget_evaluations: evaluations per init view (after ``--kadv-budget``'s factor).
+        budget_passes: model passes per init view (after ``--kadv-budget``'s factor).
         views: one outcome per init view.
         envelope: the camera envelope's name.
         radius: (degrees, metres) the camera could turn and move from each init view.
@@ -81,7 +83,7 @@ class RobustnessResult:
     model: str
     scene: str
     seed: int
-    budget_evaluations: int
+    budget_passes: int
     views: list[InitViewOutcome]
     envelope: str = "free"
     radius: tuple[float, float] = (45.0, 1.0)
@@ -104,7 +106,7 @@ class RobustnessResult:
         """A few lines: the model, the scene, and each init view's delta1 init -> worst."""
         lines = [
             f"{self.model} on {self.scene}: {len(self.views)} init views, "
-            f"{self.budget_evaluations} evaluations each, seed {self.seed}"
+            f"{self.budget_passes} model passes each, seed {self.seed}"
         ]
         for view in self.views:
             lines.append(
@@ -122,7 +124,7 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
             :class:`kadv.models.DepthModel`, or ``(torch module, output kind)``.
         scene: a :class:`kadv.scenes.Scene`, or a name :func:`kadv.testing.scene` takes
             (``"box_room"``, ``"probe/thin_structures"``, a file's path).
-        options: :class:`CheckOptions`' fields (``init_count``, ``budget_evaluations``, ``seed``,
+        options: :class:`CheckOptions`' fields (``init_count``, ``budget_passes``, ``seed``,
             ``loss``, ``size``, ``method``, ``lighting``, ``radius``, ``envelope``, ``artifacts``,
             ``progress``).
 
@@ -139,7 +141,7 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
     try:
         config = AttackConfig(
             checked.method,
-            budget_evaluations=built.budget,
+            budget_passes=built.budget,
             max_angle_deg=degrees,
             max_distance=metres,
             envelope=checked.envelope,
@@ -177,7 +179,8 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
                 abs_rel_worst=worst.abs_rel,
                 centre=tuple(pose[:3, 3].tolist()),
                 angles_deg=tuple(torch.rad2deg(yaw_pitch_roll(pose[:3, :3].double())).tolist()),
-                evaluations=view.budget.forward,
+                passes=view.budget.passes,
+                seconds=view.budget.seconds,
                 picture=picture,
                 world_T_cam=pose.tolist(),
             )
@@ -208,7 +211,7 @@ def assert_viewpoint_robust(
     model's :func:`kadv.testing.robustness_profile` score reaches it.
 
     Takes :func:`viewpoint_robustness`'s arguments (``radius``, ``envelope``, ``init_count``,
-    ``budget_evaluations``, ``seed``, ``loss``, ``size``, ...) and, with ``min_score``,
+    ``budget_passes``, ``seed``, ``loss``, ``size``, ...) and, with ``min_score``,
     :func:`kadv.testing.robustness_profile`'s (``radii``, ``seeds``, ...). Returns the result of the
     one-radius check, or the profile when ``min_score`` alone is set.
 

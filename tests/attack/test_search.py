@@ -35,6 +35,7 @@ from kadv.attack import (
 from kadv.attack.init_views import InitViewError, fit_into_envelope
 from kadv.attack.search import scaled_size
 from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam
+from kadv.models import count_passes
 from kadv.penalties import ENVELOPES, Envelope
 from kadv.render import DiffRenderConfig
 from kadv.report.run import _write_csv, read_trajectory, trajectory_rows
@@ -64,7 +65,7 @@ def test_ten_gradient_steps_raise_l_depth_from_most_restarts(tiny_objective, dif
         [file_view],
         size=(96, 128),
         settings=GradientSettings(steps=10, restarts=3),
-        budget_evaluations=None,
+        budget_passes=None,
     )
     view = result.views[0]
     rose = []
@@ -86,7 +87,7 @@ def test_ten_gradient_steps_raise_l_depth_from_most_restarts(tiny_objective, dif
 
 def test_the_gradient_method_starts_from_given_poses(tiny_objective, differentiable, file_view) -> None:
     start = torch.tensor([[0.0, 0.1, 0.0, 0.05, 0.0, 0.0], [0.0, -0.1, 0.0, 0.0, 0.0, 0.05]], dtype=torch.float64)
-    config = AttackConfig("gradient", GradientSettings(steps=2), budget_evaluations=None)
+    config = AttackConfig("gradient", GradientSettings(steps=2), budget_passes=None)
     context = SearchContext(tiny_objective, differentiable, file_view, H, W, config)
     from tqdm import tqdm
 
@@ -110,7 +111,7 @@ def test_bounds_hold_on_every_visited_pose(tiny_objective, differentiable, file_
             settings=settings,
             max_angle_deg=5.0,
             max_distance=0.1,
-            budget_evaluations=12,
+            budget_passes=12,
         )
         for record in result.views[0].records:
             assert torch.tensor(record.params[:3], dtype=torch.float64).norm() <= math.radians(5.0) + 1e-9
@@ -147,13 +148,21 @@ def test_top_views_skip_invalid_and_uninformative_views_and_keep_their_separatio
     assert select_top_views(records, 2, 0.05, 3.0) == top[:2]
 
 
-@pytest.mark.parametrize("method", BUILT_IN)
-def test_every_method_stays_within_its_evaluation_budget(method, tiny_objective, differentiable, file_view) -> None:
-    result = _run(tiny_objective, differentiable, [file_view], method=method, budget_evaluations=11)
+@pytest.mark.parametrize("method", sorted(METHODS))
+@pytest.mark.parametrize("budget", [11, 30])
+def test_every_method_runs_the_model_no_more_than_its_budget_of_passes(
+    method, budget, tiny_objective, differentiable, file_view
+) -> None:
+    # the model itself counts every image it runs on and every backward pass through it
+    with count_passes(tiny_objective.model) as count:
+        result = _run(tiny_objective, differentiable, [file_view], method=method, budget_passes=budget)
     view = result.views[0]
-    exact = [r for r in view.records if not r.screened]  # screened views are counted apart
-    assert len(exact) == view.budget.forward <= 11 and view.budget.screened == len(view.records) - len(exact)
-    assert view.budget.forward >= 11 - 2  # the gradient's batches of 3 restarts leave at most 2 unspent
+    assert count.forward == view.budget.forward == len(view.records)  # screened views are passes too
+    assert count.backward == view.budget.backward and count.passes == view.budget.passes <= budget
+    assert view.budget.screened == sum(r.screened for r in view.records)
+    # what is left is less than a step: the gradient's 3 restarts' forward and backward passes at most
+    assert view.budget.passes > budget - 6
+    assert [r.passes for r in view.records] == sorted(r.passes for r in view.records) and view.records[-1].passes <= budget
     assert view.init_record.params == [0.0] * 6 and view.path[0].step == 0 and view.path[-1] in view.records
     assert all(r.valid for r in view.top)
     half = AttackConfig().search_box()
@@ -171,13 +180,13 @@ def test_every_method_stays_within_its_time_budget(method, tiny_objective, diffe
         [file_view],
         method=method,
         settings=settings,
-        budget_evaluations=None,
+        budget_passes=None,
         budget_seconds=1.5,
     )
     elapsed = time.perf_counter() - started
     view = result.views[0]
     batches = len({r.step for r in view.records})
-    assert batches >= 2 and view.budget.forward + view.budget.screened == len(view.records)
+    assert batches >= 2 and view.budget.forward == len(view.records)
     # a batch starts only while the previous batch's duration still fits in the budget
     assert view.budget.seconds <= 1.5 + 2 * elapsed / batches
 
@@ -194,12 +203,12 @@ def test_every_method_stays_within_its_time_budget(method, tiny_objective, diffe
 )
 def test_same_seed_gives_identical_trajectories(method, settings, tiny_objective, differentiable, file_view) -> None:
     runs = [
-        _run(tiny_objective, differentiable, [file_view], method=method, settings=settings, budget_evaluations=20)
+        _run(tiny_objective, differentiable, [file_view], method=method, settings=settings, budget_passes=20)
         for _ in range(2)
     ]
     assert trajectory_rows(runs[0]) == trajectory_rows(runs[1])
-    # the whole budget, less what is left when a batch of refined lanes no longer fits
-    assert 20 - 1 <= runs[0].views[0].budget.forward <= 20
+    # the whole budget, less what is left when a lane's step (at most 4 draws and a re-scoring) no longer fits
+    assert 20 - 4 <= runs[0].views[0].budget.passes <= 20
 
 
 def test_same_seed_gives_bit_identical_gradient_records(tiny_objective, differentiable, file_view) -> None:
@@ -218,7 +227,7 @@ def test_the_warp_backend_gives_one_trajectory_per_seed_and_the_open3d_one(tiny_
             DifferentiableRenderer(warp, DiffRenderConfig()),
             [file_view],
             method="hybrid",
-            budget_evaluations=20,
+            budget_passes=20,
         )
         for _ in range(2)
     ]
@@ -231,7 +240,7 @@ def test_the_warp_backend_gives_one_trajectory_per_seed_and_the_open3d_one(tiny_
         DifferentiableRenderer(tiny_objective.renderer, DiffRenderConfig()),
         [file_view],
         method="hybrid",
-        budget_evaluations=20,
+        budget_passes=20,
     )
     shared = [
         (ours, theirs)
@@ -261,7 +270,7 @@ def test_a_method_added_through_the_documented_route_runs(tiny_objective, differ
         def ask(self, count: int) -> torch.Tensor:
             return torch.zeros(min(count, 4), 6, dtype=torch.float64)
 
-    result = _run(tiny_objective, differentiable, [file_view], method="still_test", budget_evaluations=9)
+    result = _run(tiny_objective, differentiable, [file_view], method="still_test", budget_passes=9)
     assert len(result.views[0].records) == 9 and all(r.params == [0.0] * 6 for r in result.views[0].records)
     METHODS.pop("still_test")
 
@@ -273,7 +282,10 @@ def test_a_method_added_through_the_documented_route_runs(tiny_objective, differ
         ({"settings": GradientSettings(restarts=0)}, "attack.gradient.restarts"),
         ({"settings": GradientSettings(lr_rotation=0.0)}, "attack.gradient.lr_rotation"),
         ({"max_distance": -1.0}, "attack.max_distance"),
-        ({"budget_evaluations": 0}, "attack.budget_evaluations"),
+        ({"budget_passes": 0}, "attack.budget_passes"),
+        ({"budget_passes": True}, "attack.budget_passes"),
+        # the old name, whose count left screened views and backward passes out, names the new one
+        ({"budget_evaluations": 48}, r"attack.budget_evaluations was renamed attack.budget_passes"),
     ],
 )
 def test_bad_settings_name_their_key(overrides, key) -> None:
@@ -285,9 +297,9 @@ def test_bad_method_settings_name_their_key() -> None:
     with pytest.raises(ValueError, match=r"attack.nevergrad.optimizer.*NGOpt"):
         NevergradSettings("NoSuchOptimizer")
     with pytest.raises(
-        ValueError, match=r"attack.method=random needs attack.budget_evaluations or attack.budget_seconds"
+        ValueError, match=r"attack.method=random needs attack.budget_passes or attack.budget_seconds"
     ):
-        AttackConfig("random", budget_evaluations=None)
+        AttackConfig("random", budget_passes=None)
 
 
 def test_the_progress_bar_forgets_the_previous_init_views_best(tiny_objective, differentiable, file_view, monkeypatch):
@@ -307,7 +319,7 @@ def test_the_progress_bar_forgets_the_previous_init_views_best(tiny_objective, d
             super().set_postfix(ordered_dict, refresh, **kwargs)
 
     monkeypatch.setattr(runner, "tqdm", Bar)
-    _run(tiny_objective, differentiable, [file_view, file_view], method="random", budget_evaluations=6)
+    _run(tiny_objective, differentiable, [file_view, file_view], method="random", budget_passes=6)
     second = shown.index(("description", "random attack, init view 2/2"))
     before = [value for kind, value in shown[:second] if kind == "postfix"]
     assert before and before[-1].startswith("loss=")  # init view 1 showed its best
@@ -340,7 +352,7 @@ def test_trust_region_steps_from_the_incumbent_undo_failures_and_restart_stalled
     whose step shrinks below stall_scale restarts from a screened view."""
     settings = HybridSettings(screen_fraction=0.4, screen_scale=1.0, population=8, refine_views=2, stall_scale=0.3)
     result = _run(
-        tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_evaluations=40
+        tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_passes=40
     )
     view = result.views[0]
     screened = [r for r in view.records if r.step <= 2]
@@ -370,7 +382,7 @@ def test_screening_at_a_reduced_size_re_scores_its_best_views_at_full_size(
     settings = HybridSettings(screen_fraction=0.5, screen_scale=0.5, population=8, refine_views=2)
     # half of 34 views screens: the init view at full size, then two batches of 8 at half size
     result = _run(
-        tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_evaluations=34
+        tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_passes=34
     )
     view = result.views[0]
     small = [r for r in view.records if r.scale == 0.5]
@@ -386,7 +398,7 @@ def test_screening_at_a_reduced_size_re_scores_its_best_views_at_full_size(
 def test_trajectory_csv_reads_back_the_records_it_was_written_from(
     tiny_objective, differentiable, file_view, tmp_path
 ) -> None:
-    result = _run(tiny_objective, differentiable, [file_view], method="hybrid", budget_evaluations=20)
+    result = _run(tiny_objective, differentiable, [file_view], method="hybrid", budget_passes=20)
     path = _write_csv(tmp_path / "trajectory.csv", trajectory_rows(result))
     written = [dataclasses.replace(r, seconds=math.nan) for r in result.views[0].records]
     assert repr(read_trajectory(path)) == repr({0: written})  # repr: NaN fields compare too
@@ -395,7 +407,7 @@ def test_trajectory_csv_reads_back_the_records_it_was_written_from(
 @pytest.mark.parametrize("method", BUILT_IN)
 def test_every_method_keeps_its_chosen_views_inside_the_envelope(method, tiny_objective, differentiable, file_view):
     robot = ENVELOPES["robot"]  # roll 2 degrees, pitch 15 degrees, height 0.3 to 1.5 m
-    result = _run(tiny_objective, differentiable, [file_view], (24, 32), method, budget_evaluations=12, envelope=robot)
+    result = _run(tiny_objective, differentiable, [file_view], (24, 32), method, budget_passes=12, envelope=robot)
     view = result.views[0]
     for record in view.records:
         inside = abs(record.roll_deg) <= 2 + 1e-5 and abs(record.pitch_deg) <= 15 + 1e-5
@@ -424,12 +436,13 @@ def test_an_init_view_outside_the_envelope_is_moved_into_it_or_refused(tiny_obje
 def test_halving_screens_at_one_ray_per_pixel_and_re_scores_its_best_views_exactly(
     tiny_objective, differentiable, file_view
 ) -> None:
-    settings = HalvingSettings(screen_factor=2.0, rescore_fraction=0.25, lanes=2)
-    result = _run(tiny_objective, differentiable, [file_view], (H, W), "halving", settings, budget_evaluations=20)
+    settings = HalvingSettings(screen_fraction=0.5, rescore_fraction=0.25, lanes=2)
+    result = _run(tiny_objective, differentiable, [file_view], (H, W), "halving", settings, budget_passes=20)
     view = result.views[0]
-    screened = [r for r in view.records if r.screened]
-    # twice the budget screened, counted apart from the 20 exact evaluations
-    assert len(screened) == view.budget.screened == 40 and view.budget.forward == 20
+    screened = [r for r in view.records if r.screened and r.step == 2]
+    # half the budget's passes screened over the bounds, each a pass like an exact view's; the lanes' draws too
+    assert len(screened) == 10 and view.budget.screened == sum(r.screened for r in view.records)
+    assert view.budget.passes == 20  # the last lane step draws fewer views to spend the budget whole
     assert not any(r.rankable for r in screened) and view.init_record.rankable
     rescored = [r for r in view.records if r.step == 3]
     best = select_top_views([dataclasses.replace(r, screened=False) for r in screened], 5, 0.05, 3.0)
@@ -450,8 +463,8 @@ def test_halving_starts_from_warm_starts_and_its_local_lanes_step_within_their_t
     tiny_objective, differentiable, file_view
 ) -> None:
     starts = torch.tensor([[0.1, -0.05, 0.0, 0.1, 0.0, 0.05], [-0.2, 0.1, 0.0, 0.0, 0.0, -0.1]], dtype=torch.float64)
-    settings = HalvingSettings(screen_factor=1.0, refine="local", local_views=4, lanes=2, step_fraction=0.1)
-    config = AttackConfig("halving", settings, budget_evaluations=24)
+    settings = HalvingSettings(refine="local", local_views=4, lanes=2, step_fraction=0.1, rescore_fraction=0.1)
+    config = AttackConfig("halving", settings, budget_passes=40)
     result = attack(tiny_objective, differentiable, [file_view], H, W, config, 0, progress=False, starts={0: starts})
     view = result.views[0]
     first = [r for r in view.records if r.step == 1]
@@ -460,7 +473,8 @@ def test_halving_starts_from_warm_starts_and_its_local_lanes_step_within_their_t
     half = config.search_box().numpy()
     proposals = [r for r in view.records if r.step >= 4 and r.screened]
     exact = [r for r in view.records if r.step >= 4 and not r.screened]
-    assert proposals and exact and len(proposals) == 4 * len(exact)
+    # four draws per lane and step, the last step fewer, each lane's best re-scored exactly
+    assert proposals and exact and 4 * (len(exact) - 1) < len(proposals) <= 4 * len(exact)
     # every lane's step draws around its incumbent: no draw is further than 6 sigma of the widest region
     widest = settings.step_fraction / settings.stall_scale * settings.grow
     assert all(np.max(np.abs(np.asarray(r.params)) / half) < 1.0 + 6 * widest for r in proposals)
@@ -469,7 +483,7 @@ def test_halving_starts_from_warm_starts_and_its_local_lanes_step_within_their_t
 @pytest.mark.parametrize(
     "settings, budget, message",
     [
-        (HalvingSettings(), 4, r"attack.budget_evaluations must be at least 5 for attack.halving"),
+        (HalvingSettings(), 2, r"attack.budget_passes must be at least 3 for attack.halving"),
         (HalvingSettings(screen_supersample=2), 20, r"attack.halving.screen_supersample must be below"),
     ],
 )
@@ -477,19 +491,19 @@ def test_halving_refuses_a_budget_too_small_for_its_screening_or_a_screening_as_
     settings, budget, message, tiny_objective, differentiable, file_view
 ) -> None:
     with pytest.raises(ValueError, match=message):
-        _run(tiny_objective, differentiable, [file_view], (H, W), "halving", settings, budget_evaluations=budget)
+        _run(tiny_objective, differentiable, [file_view], (H, W), "halving", settings, budget_passes=budget)
 
 
 def test_halving_settings_out_of_range_name_their_key() -> None:
-    with pytest.raises(ValueError, match=r"attack.budget_evaluations must be at least 5 for attack.halving"):
-        AttackConfig("halving", budget_evaluations=4)  # refused when the config is made, before any work
+    with pytest.raises(ValueError, match=r"attack.budget_passes must be at least 3 for attack.halving"):
+        AttackConfig("halving", budget_passes=2)  # refused when the config is made, before any work
     with pytest.raises(ValueError, match=r"attack.halving.refine must be 'gradient' or 'local', got 'adam'"):
         HalvingSettings(refine="adam")
-    with pytest.raises(ValueError, match=r"attack.halving.screen_factor must be >= 0, got -1"):
-        HalvingSettings(screen_factor=-1.0)
+    with pytest.raises(ValueError, match=r"attack.halving.screen_fraction must be in \(0, 1\], got 1.5"):
+        HalvingSettings(screen_fraction=1.5)
     with pytest.raises(ValueError, match=r"attack.halving.rescore_fraction must be in \(0, 1\], got 1.5"):
         AttackConfig("halving", HalvingSettings(rescore_fraction=1.5))
-    with pytest.raises(ValueError, match=r"attack.halving.screen_supersample must be an integer >= 1, got 0"):
+    with pytest.raises(ValueError, match=r"attack.halving.screen_supersample must be an integer >= 1 or null, got 0"):
         AttackConfig("halving", HalvingSettings(screen_supersample=0))
 
 

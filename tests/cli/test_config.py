@@ -97,14 +97,14 @@ def test_yaml_defaults_equal_the_library_defaults() -> None:
 def test_experiment_presets() -> None:
     demo = _compose("kadv_attack", "experiment=demo")
     attack = attack_settings(demo.attack)
-    assert (attack.method, attack.evaluations, demo.init.count, demo.loss.kind) == (DEFAULT_METHOD, 123, 2, "delta1")
+    assert (attack.method, attack.passes, demo.init.count, demo.loss.kind) == (DEFAULT_METHOD, 123, 2, "delta1")
     paper = _compose("kadv_attack", "experiment=paper")
     attack = attack_settings(paper.attack)  # the study's protocol keeps the gradient attack
-    assert (attack.method, attack.settings.steps, attack.settings.restarts, attack.evaluations) == (
+    assert (attack.method, attack.settings.steps, attack.settings.restarts, attack.passes) == (
         "gradient",
         400,
         5,
-        2005,
+        4005,  # 5 restarts x (400 forward and backward passes + the last view's forward pass)
     )
     assert (paper.init.count, paper.loss.kind) == (10, "perceptual")
 

@@ -53,10 +53,10 @@ def test_a_two_job_sweep_runs_on_slurm(cluster, tmp_path: Path) -> None:
 
 
 def test_a_job_that_fails_on_slurm_is_reported(cluster, tmp_path: Path) -> None:
-    result = _sweep(cluster, tmp_path, "attack.budget_evaluations=6,-1")
+    result = _sweep(cluster, tmp_path, "attack.budget_passes=6,-1")
     assert result.returncode != 0
     failures = json.loads((tmp_path / "sweep" / "failures.json").read_text())
-    assert len(failures) == 1 and "attack.budget_evaluations=-1" in failures[0]["overrides"]
+    assert len(failures) == 1 and "attack.budget_passes=-1" in failures[0]["overrides"]
     assert len(list((tmp_path / "sweep").glob("*/summary.json"))) == 1
 
 

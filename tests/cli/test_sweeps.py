@@ -22,7 +22,7 @@ BIN = Path(sys.executable).parent
 TINY = [
     "render.height=24",
     "render.width=32",
-    "attack.budget_evaluations=6",
+    "attack.budget_passes=6",
     "init.count=1",
     "init.candidates=4",
     "progress=false",
@@ -135,16 +135,16 @@ def test_an_interrupted_sweep_says_what_it_kept_and_resumes_each_job_once(killed
 
 
 def test_a_failing_job_does_not_stop_the_others(tmp_path: Path) -> None:
-    result = _sweep(tmp_path, "attack.budget_evaluations=6,-1", "scene.seed=0")
+    result = _sweep(tmp_path, "attack.budget_passes=6,-1", "scene.seed=0")
     assert result.returncode != 0
     failures = json.loads((tmp_path / "sweep" / "failures.json").read_text())
     assert len(failures) == 1
     assert (
-        "attack.budget_evaluations=-1" in failures[0]["overrides"]
-        and "attack.budget_evaluations" in failures[0]["error"]
+        "attack.budget_passes=-1" in failures[0]["overrides"]
+        and "attack.budget_passes" in failures[0]["error"]
     )
-    assert len(_summaries(tmp_path)) == 1 and "attack.budget_evaluations=6" in _summaries(tmp_path)[0].parent.name
-    fixed = _sweep(tmp_path, "attack.budget_evaluations=6,7", "scene.seed=0")  # a clean rerun clears the record
+    assert len(_summaries(tmp_path)) == 1 and "attack.budget_passes=6" in _summaries(tmp_path)[0].parent.name
+    fixed = _sweep(tmp_path, "attack.budget_passes=6,7", "scene.seed=0")  # a clean rerun clears the record
     assert fixed.returncode == 0 and not (tmp_path / "sweep" / "failures.json").exists()
 
 

@@ -86,7 +86,7 @@ def test_an_attack_on_a_scan_like_in_scannets_layout_chooses_only_valid_views(wr
 
     built = setup("kadv_tiny", str(written["scannet"]), CheckOptions(lighting="scanned", size=(48, 64)))
     assert built.renderer.shading.lighting == "scanned" and len(built.views) == 2  # drawn in its free space
-    config = AttackConfig(budget_evaluations=16, envelope="upright")
+    config = AttackConfig(budget_passes=16, envelope="upright")
     result = attack(built.objective, built.differentiable, built.views, *built.size, config, 0, progress=False)
     for view in result.views:
         assert view.top and all(r.valid for r in view.top) and all(r.valid for r in view.path[1:])

@@ -94,7 +94,7 @@ def test_kadv_report_reference_scores_each_adversarial_view_on_both_renderers(tm
 
     path = scenes_root() / "modern_hall" / "scene.xml"
     small = ["render.height=24", "render.width=32", "init.count=1", "init.candidates=8", "attack=random"]
-    small += ["attack.budget_evaluations=12", "video=false", "progress=false", "render.lighting=direct"]
+    small += ["attack.budget_passes=12", "video=false", "progress=false", "render.lighting=direct"]
     # the commands' mains in this process: their scripts' own processes are tested in tests/cli
     for name, scene in (("xml", ["scene=file", f"scene.path={path}"]), ("box", ["scene=box_room"])):
         ran = call_main(attack_main, ["kadv-attack", f"hydra.run.dir={tmp_path / name}", *scene, *small], tmp_path)

@@ -124,7 +124,7 @@ def test_two_gradient_steps_move_the_camera(family, room) -> None:
     name, directory = family
     objective = Objective(load_model(directory), depth_loss("ssim"), ExactRenderer(room), PenaltyConfig())
     init = file_init_views(objective.renderer, PenaltyConfig().margin)[0]
-    config = AttackConfig("gradient", GradientSettings(steps=2, restarts=1), budget_evaluations=None)
+    config = AttackConfig("gradient", GradientSettings(steps=2, restarts=1), budget_passes=None)
     result = attack(
         objective, DifferentiableRenderer(objective.renderer), [init], 48, 64, config, seed=0, progress=False
     )

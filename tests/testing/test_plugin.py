@@ -13,7 +13,7 @@ import pytest
 USER_TESTS = """
 from kadv.testing import assert_viewpoint_robust
 
-SMALL = dict(budget_evaluations=8, init_count=1, size=(48, 64), lighting="direct")
+SMALL = dict(budget_passes=8, init_count=1, size=(48, 64), lighting="direct")
 
 def test_lenient(kadv_scene):
     assert_viewpoint_robust("kadv_tiny", kadv_scene("box_room", seed=3), min_delta1=0.0, **SMALL)
@@ -72,7 +72,7 @@ def test_the_kadv_marker_lets_a_run_skip_the_checks(pytester: pytest.Pytester) -
     result.assert_outcomes(passed=1, deselected=2)
 
 
-def test_the_budget_option_scales_the_evaluations_and_one_seed_gives_one_verdict(pytester: pytest.Pytester) -> None:
+def test_the_budget_option_scales_the_passes_and_one_seed_gives_one_verdict(pytester: pytest.Pytester) -> None:
     pytester.makepyfile(
         test_budget="""
 import json
@@ -81,10 +81,10 @@ from kadv.testing import viewpoint_robustness
 def test_budget(kadv_scene, kadv_artifacts, request):
     runs = []
     for _ in range(2):  # one seed, twice
-        result = viewpoint_robustness("kadv_tiny", kadv_scene("box_room", seed=3), budget_evaluations=8,
+        result = viewpoint_robustness("kadv_tiny", kadv_scene("box_room", seed=3), budget_passes=8,
                                       init_count=1, size=(48, 64), lighting="direct")
         view = result.views[0]
-        runs.append([result.budget_evaluations, view.evaluations, view.delta1_worst, list(view.centre)])
+        runs.append([result.budget_passes, view.passes, view.delta1_worst, list(view.centre)])
         assert result.views[0].picture.parent == kadv_artifacts
     out = request.config.rootpath / f"budget-{request.config.getoption('kadv_budget')}.json"
     out.write_text(json.dumps(runs))

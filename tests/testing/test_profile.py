@@ -3,6 +3,7 @@ and the checks that use them."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from kadv.testing.session import settings
 # two small radii, one init view, few views: the profile's arithmetic is the same at any budget
 QUICK = {
     "radii": ((5.0, 0.1), (30.0, 0.6)),
-    "budget_evaluations": 6,
+    "budget_passes": 6,
     "typical_views": 4,
     "init_count": 1,
     "size": (24, 32),
@@ -64,7 +65,9 @@ def test_the_score_is_the_mean_trapezoid_under_the_typical_curve_from_the_init_v
     assert len(merged.draws[0]) == 8
     assert table.endswith(
         "worst-case area 0.550 ± 0.033, resilience 0.648 (worst-case area / init delta1)\n"
-        "score 0.800 ± 0.067 (typical area; spread over seeds)"
+        "score 0.800 ± 0.067 (typical area; spread over seeds)\n"
+        "search noise not measured (search_seeds=1; 3 or more measure it); init views' spread "
+        "(worst-case area over seeds): 0.033"
     )
     assert profile.to_dict()["score"] == pytest.approx(profile.score)
 
@@ -73,12 +76,34 @@ def test_a_profile_never_rises_with_the_radius_and_repeats_for_its_seed(tmp_path
     room = scene("box_room", seed=3)
     first = robustness_profile("kadv_tiny", room, artifacts=tmp_path / "a", **QUICK)
     again = robustness_profile("kadv_tiny", room, artifacts=tmp_path / "b", **QUICK)
-    assert {**first.to_dict(), "pictures": []} == {**again.to_dict(), "pictures": []}
+    def comparable(profile: Profile) -> dict:  # what the seed fixes: not the pictures' paths, not the seconds
+        costs = [{k: v for k, v in c.items() if k != "search_seconds"} for c in profile.cost_by_seed]
+        return {**profile.to_dict(), "pictures": [], "cost_by_seed": costs}
+
+    assert comparable(first) == comparable(again)
+    # what it cost per init view: the search's passes over the radii within their budget, the draws'
+    cost = first.cost_by_seed[0]
+    assert 0 < cost["search_passes"] <= len(first.radii) * QUICK["budget_passes"] and cost["search_seconds"] > 0
+    assert cost["draw_passes"] == len(first.radii) * QUICK["typical_views"] and "cost per init view" in first.markdown()
     worst = first.worst_by_seed[0]
     assert worst[1] <= worst[0] <= first.delta1_init[0]  # nested radii: the larger holds the smaller's worst
     assert all(0 <= v <= 1 for v in [*first.typical, *first.failure_rate]) and 0 <= first.score <= 1
     assert first.envelope == "upright" and len(first.pictures) == 2 and Path(first.pictures[1]).is_file()
     assert first.save_png(tmp_path / "profile.png").stat().st_size > 0
+
+
+def test_search_noise_is_the_spread_of_the_worst_over_search_seeds_from_the_same_init_views(tmp_path: Path) -> None:
+    room = scene("box_room", seed=3)
+    one = robustness_profile("kadv_tiny", room, artifacts=tmp_path / "a", **QUICK)
+    three = robustness_profile("kadv_tiny", room, artifacts=tmp_path / "b", search_seeds=3, **QUICK)
+    # the first search is the seed's own: the profile's figures are those of one search
+    assert three.worst_by_seed == one.worst_by_seed and three.delta1_init == one.delta1_init
+    (noise,) = three.search_noise_by_seed
+    assert len(noise) == len(three.radii) and all(v >= 0 for v in noise) and three.search_noise == noise
+    assert one.search_noise_by_seed == [[]] and all(math.isnan(v) for v in one.search_noise)
+    assert "search noise (sd of the worst over search seeds, init views fixed)" in three.markdown()
+    with pytest.raises(RobustnessInputError, match="search_seeds must be an integer >= 1, got 0"):
+        robustness_profile("kadv_tiny", room, search_seeds=0, **QUICK)
 
 
 def test_each_radius_is_searched_from_the_worst_views_of_the_smaller_ones() -> None:
@@ -87,7 +112,7 @@ def test_each_radius_is_searched_from_the_worst_views_of_the_smaller_ones() -> N
     from kadv.testing.profile import search_radii, worst_views
 
     built = setup("kadv_tiny", "box_room", CheckOptions(init_count=1, size=(24, 32), lighting="direct"))
-    config = AttackConfig(budget_evaluations=8, envelope="upright")
+    config = AttackConfig(budget_passes=8, envelope="upright")
     radii = ((5.0, 0.1), (15.0, 0.3), (30.0, 0.6))
     results = search_radii(built.objective, built.differentiable, built.views, built.size, config, radii, seed=0)
     for k in (1, 2):

@@ -23,10 +23,14 @@ class CMASettings:
     Attributes:
         sigma: initial step size, as a fraction of the search box.
         population: candidates per generation (one evaluated batch).
+        ipop: once the strategy stops (its step or its spread of values has collapsed), start it
+            again from a uniform random mean with twice the population (IPOP-CMA-ES), for as
+            long as the budget lasts; else it keeps sampling its collapsed distribution.
     """
 
     sigma: float = 0.3
     population: int = 8
+    ipop: bool = False
 
 
 @register_proposer("cma", CMASettings)
@@ -34,20 +38,25 @@ class CMAProposer(Proposer):
     """Minimises -objective; a generation cut short by the budget is not told (CMA-ES needs whole ones)."""
 
     def __init__(self, context, rng: np.random.Generator) -> None:
+        super().__init__(context, rng)
+        self.strategy = self._start(np.zeros(6), self.settings.population)
+        self.candidates: list[np.ndarray] = []
+
+    def _start(self, mean: np.ndarray, population: int):
         import cma  # here, not at the top: only a CMA-ES search needs it
 
-        super().__init__(context, rng)
         options = {
-            "seed": int(rng.integers(1, 2**31 - 1)),
-            "popsize": self.settings.population,
+            "seed": int(self.rng.integers(1, 2**31 - 1)),
+            "popsize": population,
             "bounds": [-1.0, 1.0],
             "verbose": -9,
             "CMA_stds": None,
         }
-        self.strategy = cma.CMAEvolutionStrategy(np.zeros(6), self.settings.sigma, options)
-        self.candidates: list[np.ndarray] = []
+        return cma.CMAEvolutionStrategy(mean, self.settings.sigma, options)
 
     def ask(self, count: int) -> torch.Tensor:
+        if self.settings.ipop and self.strategy.stop():
+            self.strategy = self._start(self.rng.uniform(-1.0, 1.0, 6), 2 * self.strategy.popsize)
         self.candidates = self.strategy.ask()
         return torch.from_numpy(np.asarray(self.candidates)) * self.config.search_box()
 

@@ -24,7 +24,8 @@ class GradientSettings:
     """``attack.gradient``. Angles in degrees, distances in metres.
 
     Attributes:
-        steps: Adam steps per restart (each restart evaluates steps + 1 views).
+        steps: Adam steps per restart (each restart evaluates steps + 1 views, a forward and a
+            backward pass at each step and a forward pass at the last view: 2 x steps + 1 passes).
         restarts: runs per init view, batched; restart 0 starts at the init view, the others from
             seeded pose jitter.
         lr_rotation: Adam learning rate of the rotation vector (radians).
@@ -64,7 +65,9 @@ def gradient_ascent(
 
     Each update is pulled back within the pose bounds, then passes the step guard (a move that
     would cross or approach a surface is shortened; the fraction taken is recorded). A step runs
-    only while the budget allows all R views; restart r is lane r, step s is ``first_step + s``.
+    only while the budget allows its forward and backward passes for all R views; where it allows
+    only the forward passes, the views are evaluated and the run ends. Restart r is lane r, step s
+    is ``first_step + s``.
     The poses stay on the context's device and nothing is read back to the host until the run
     ends: :meth:`Measures.records` then makes the records.
     """
@@ -118,16 +121,15 @@ def gradient_ascent(
         if step > 0 and clock.allows(batch) < batch:
             break
         started = time.perf_counter()
-        if step == steps:
+        if step == steps or clock.allows(batch, cost=2) < batch:  # no room for the backward pass
             measures.append(evaluate()[0])
-            bar.update(batch)
             clock.spent(batch, time.perf_counter() - started)
             break
         measured = graph()
         if graph.captured:  # a replay returns what the capture measured, but for the host's numbers
-            measured = dataclasses.replace(measured, step=first_step + step, seconds=clock.elapsed())
+            passes = clock.budget.passes + batch
+            measured = dataclasses.replace(measured, step=first_step + step, seconds=clock.elapsed(), passes=passes)
         measures.append(measured)
-        bar.update(batch)
         clock.spent(batch, time.perf_counter() - started, backward=batch)
     return measures
 
@@ -139,7 +141,7 @@ def best_lane(records: list[ViewRecord]) -> list[ViewRecord]:
     return [r for r in records if r.restart == best]
 
 
-@register_method("gradient", GradientSettings, evaluations=lambda s: s.restarts * (s.steps + 1))
+@register_method("gradient", GradientSettings, passes=lambda s: s.restarts * (2 * s.steps + 1))
 def gradient_search(
     context: SearchContext, rng: np.random.Generator, bar: tqdm, start: torch.Tensor | None = None
 ) -> InitViewResult:

@@ -29,7 +29,7 @@ class HybridSettings:
     """``attack.hybrid``.
 
     Attributes:
-        screen_fraction: share of the budget (evaluations, or seconds) spent screening.
+        screen_fraction: share of the budget (model passes, or seconds) spent screening.
         screen_scale: screening renders and scores at this share of the run's height and width;
             below 1 its best separated views are re-scored at full size before refinement.
         population: screening views per evaluated batch (a power of two keeps Sobol points balanced).
@@ -95,9 +95,13 @@ def trust_region_refine(
     step grows), otherwise it is undone (and the step shrinks). A lane whose step has shrunk below
     ``stall_scale`` restarts from the next view of ``pool``. So no lane's incumbent ever falls.
     Lane ids (records' ``restart``) are new for each restart.
+
+    A step costs a forward pass per lane and, when any lane's trial is accepted, a backward pass
+    through the whole batch (the model's backward runs over every image of it); it starts only
+    while the budget holds both.
     """
     clock = context.clock
-    lanes = clock.allows(len(starts))
+    lanes = clock.allows(len(starts), cost=2)
     if lanes == 0:
         return []
     pool = list(pool)
@@ -111,7 +115,7 @@ def trust_region_refine(
     base = context.base(lanes)
     records: list[ViewRecord] = []
     step = first_step
-    while clock.allows(lanes) == lanes:
+    while clock.allows(lanes, cost=2) == lanes:
         started = time.perf_counter()
         proposal = context.project(current + torch.where(fresh[:, None], 0.0, _steps(gradient, radius, settings)))
         reached, fraction = context.guard(current[:, 3:], proposal[:, 3:])
@@ -134,7 +138,7 @@ def trust_region_refine(
         value = terms.objective.detach().cpu()
         rankable = torch.tensor([r.rankable for r in rows])
         accepted = fresh | (rankable & (value > best))
-        backward = int(accepted.sum())
+        backward = lanes if bool(accepted.any()) else 0
         if backward:
             (terms.objective * accepted.to(terms.objective.device)).sum().backward()
             gradient[accepted] = trial.grad.cpu()[accepted]
@@ -150,7 +154,6 @@ def trust_region_refine(
                 best[lane], fresh[lane] = -math.inf, True
                 ids[lane], next_id = next_id, next_id + 1
         bar.set_postfix(loss=f"{max((r.loss for r in records if r.rankable), default=math.nan):.4f}", refresh=False)
-        bar.update(lanes)
         clock.spent(lanes, time.perf_counter() - started, backward=backward)
         step += 1
     return records
@@ -163,26 +166,24 @@ def hybrid_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) -
     The path is the successive best rankable views (the incumbent never falls).
     """
     settings, clock, config = context.config.settings, context.clock, context.config
-    screen_views = math.ceil(settings.screen_fraction * clock.evaluations) if clock.evaluations is not None else None
+    screen_views = math.ceil(settings.screen_fraction * clock.passes) if clock.passes is not None else None
     screen_seconds = settings.screen_fraction * clock.seconds if clock.seconds is not None else None
     sobol = qmc.Sobol(d=6, scramble=True, rng=rng)
     records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64))
-    bar.update(1)
     step = 1
-    while screen_views is None or clock.budget.forward < screen_views:
+    while screen_views is None or clock.budget.passes < screen_views:
         if screen_seconds is not None and clock.elapsed() >= screen_seconds:
             break
         wanted = (
             settings.population
             if screen_views is None
-            else min(settings.population, screen_views - clock.budget.forward)
+            else min(settings.population, screen_views - clock.budget.passes)
         )
         count = clock.allows(wanted)
         if count == 0:
             break
         unit = sobol.random(settings.population)[:count]
         records += context.evaluate(step, config.sample_ball(unit), scale=settings.screen_scale)
-        bar.update(count)
         step += 1
     candidates = select_top_views(
         [dataclasses.replace(r, scale=1.0) for r in records],  # rank the reduced-size views too
@@ -197,7 +198,6 @@ def hybrid_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) -
         if count:
             params = torch.tensor([r.params for r in small[:count]], dtype=torch.float64)
             records += context.evaluate(step, params)
-            bar.update(count)
             step += 1
         candidates = select_top_views(
             [r for r in records if r.scale == 1.0], len(candidates), config.min_separation, config.min_separation_deg

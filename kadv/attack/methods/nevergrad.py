@@ -73,8 +73,8 @@ class NevergradProposer(Proposer):
         super().__init__(context, rng)
         parametrization = ng.p.Array(shape=(6,), lower=-1.0, upper=1.0)
         parametrization.random_state = np.random.RandomState(int(rng.integers(1, 2**31 - 1)))
-        # the evaluation budget when there is one; else a count that a seconds budget rarely exceeds
-        budget = context.clock.remaining() if context.clock.evaluations is not None else 1000
+        # the pass budget when there is one; else a count that a seconds budget rarely exceeds
+        budget = context.clock.remaining() if context.clock.passes is not None else 1000
         self.optimizer = ng.optimizers.registry[self.settings.optimizer](
             parametrization=parametrization, budget=max(budget, 1), num_workers=self.settings.population
         )
