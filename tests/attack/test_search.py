@@ -521,3 +521,25 @@ def test_a_nevergrad_meta_model_that_numpy_refuses_is_a_failure_its_optimizer_re
     guarded = optimizerlib.learn_on_k_best
     _metamodel_type_errors_as_failures()  # once only
     assert optimizerlib.learn_on_k_best is guarded
+
+
+@pytest.mark.parametrize(
+    "method, settings", [("halving", HalvingSettings(refine="gradient", lanes=3)), ("hybrid", None)]
+)
+def test_gradient_lanes_share_one_model_call_a_step(
+    method, settings, tiny_objective, differentiable, file_view
+) -> None:
+    calls: list[tuple[int, bool]] = []  # (images, with a gradient) per call of the model
+    hook = tiny_objective.model.register_forward_hook(
+        lambda m, args, out: calls.append((len(args[0]), out.requires_grad))
+    )
+    try:
+        result = _run(tiny_objective, differentiable, [file_view], method=method, settings=settings, budget_passes=40)
+    finally:
+        hook.remove()
+    lanes = 3 if method == "halving" else HybridSettings().refine_views
+    steps = [images for images, graded in calls if graded]
+    # every step of the lanes is one call of the model on all of them (its backward pass one too)
+    assert steps and set(steps) == {lanes}
+    through_the_warp = {r.step for r in result.views[0].records if not math.isnan(r.coverage)}
+    assert len(steps) == len(through_the_warp)  # one call per step of the lanes, no more
