@@ -35,6 +35,8 @@ __all__ = [
 ]
 
 _VIEW_OFFSET = 0.02  # metres off the surface the colour of a vertex is looked at from
+_WALL_SIDES = {"x-": (0, 0), "x+": (0, 1), "z-": (2, 0), "z+": (2, 1)}  # side -> (axis, low or high end)
+_WALL_REACH = 0.05  # metres from the room's box within which a face belongs to one of its walls
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,10 @@ class ScanLikeSettings:
         floaters: fragments of surface floating in the room, a few triangles each.
         flip_share: share of triangles whose winding is reversed.
         bake: the baked light the colours are rendered with.
+        cut_height: metres above the floor where the scan stops (an operator who swept at chest
+            height): everything higher is left out, the ceiling with it; None: the whole room.
+        missing_walls: walls left out whole, each named by the side of the room it bounds: ``x-``,
+            ``x+``, ``z-``, ``z+`` (kadv's y-up frame).
     """
 
     edge: float = 0.1
@@ -63,6 +69,13 @@ class ScanLikeSettings:
     floaters: int = 12
     flip_share: float = 0.5
     bake: BakeConfig = dataclasses.field(default_factory=BakeConfig)
+    cut_height: float | None = None
+    missing_walls: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.missing_walls) - set(_WALL_SIDES))
+        if unknown:
+            raise ValueError(f"missing_walls: no side {', '.join(unknown)}; the sides are {', '.join(_WALL_SIDES)}")
 
 
 @dataclass
@@ -149,17 +162,25 @@ def scan_like(room: Scene, seed: int = 0, settings: ScanLikeSettings | None = No
         removed |= ceiling & (np.linalg.norm(centroids - centre, axis=1) < radius)
         patches.append([*centre, radius])
     keep &= ~removed
+    box = room.camera_region
+    if settings.cut_height is not None:  # a sweep at chest height: nothing above it
+        keep &= vertices[faces][:, :, 1].max(axis=1) <= box[0, 1] + settings.cut_height
+    for side in settings.missing_walls:
+        axis, end = _WALL_SIDES[side]
+        keep &= np.abs(centroids[:, axis] - box[end, axis]) > _WALL_REACH
     faces = faces[keep]
     # surface noise and irregular triangles: every vertex moved a little
     # irregular triangles: every vertex slid along its surface; then the surface noise across it
     slide = rng.uniform(-1, 1, vertices.shape) * settings.jitter * settings.edge * 0.5
     slide -= np.einsum("vi,vi->v", slide, normals)[:, None] * normals
     vertices = vertices + slide + rng.normal(0.0, settings.noise, vertices.shape)
-    # floaters: a few small triangles each, in the room's free space
-    box = room.camera_region
+    # floaters: a few small triangles each, in the room's free space, below the cut
+    if settings.cut_height is not None:
+        box = box.copy()
+        box[1, 1] = min(box[1, 1], box[0, 1] + settings.cut_height)
     extra_vertices, extra_faces, extra_colours = [], [], []
     for k in range(settings.floaters):
-        centre = rng.uniform(box[0] + 0.3, box[1] - 0.3)
+        centre = rng.uniform(box[0] + 0.3, np.maximum(box[1] - 0.3, box[0] + 0.3))
         corners = centre + rng.normal(0.0, 0.03, (4, 3))
         start = len(vertices) + 4 * k
         extra_vertices.append(corners)
@@ -171,6 +192,9 @@ def scan_like(room: Scene, seed: int = 0, settings: ScanLikeSettings | None = No
         colours = np.concatenate([colours, *[c.astype(np.uint8) for c in extra_colours]])
     flip = rng.uniform(size=len(faces)) < settings.flip_share
     faces = np.where(flip[:, None], faces[:, ::-1], faces)
+    if settings.cut_height is not None or settings.missing_walls:  # what was cut away leaves no vertex behind
+        used, faces = np.unique(faces, return_inverse=True)
+        vertices, colours, faces = vertices[used], colours[used], faces.reshape(-1, 3)
     return ScanLike(vertices, faces.astype(np.int64), colours, room, np.array(patches).reshape(-1, 4))
 
 
