@@ -15,13 +15,15 @@ from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 from kadv.scenes.textures import srgb_to_linear
 from kadv.scenes.trimesh_loader import TRIMESH_SUFFIXES, gltf_unlit, load_mesh_file
 
-__all__ = ["SUPPORTED_SUFFIXES", "UNLIT_GLTF", "load_scene", "ply_part"]
+__all__ = ["CAPTURED", "SUPPORTED_SUFFIXES", "UNLIT_GLTF", "load_scene", "ply_part"]
 
 log = logging.getLogger(__name__)
 
 SUPPORTED_SUFFIXES = (".xml", ".ply", *TRIMESH_SUFFIXES)
 # Scene.scan of a glTF whose materials are KHR_materials_unlit: captured colour, in glTF's own frame
 UNLIT_GLTF = "glTF (KHR_materials_unlit)"
+# Scene.scan of a file said to be captured (load_scene's captured=True) in no layout kadv knows
+CAPTURED = "captured (scene.options.captured=true)"
 
 
 def load_scene(
@@ -33,6 +35,7 @@ def load_scene(
     drop_emitters: bool = True,
     missing: str = "error",
     name: str | None = None,
+    captured: bool | None = None,
 ) -> Scene:
     """Load a scene file: Mitsuba ``.xml``; ``.ply`` (with its vertex colours, polygons of any size,
     :mod:`kadv.scenes.ply`); or ``.glb/.gltf/.obj/.off/.stl`` through trimesh.
@@ -47,6 +50,11 @@ def load_scene(
         drop_emitters: leave out light-source surfaces; their centres become the renderer's lights.
         missing: Mitsuba only: ``"error"`` or ``"skip"`` for referenced files that do not exist.
         name: label for reports; defaults to the folder name for ``scene.xml``, else the file stem.
+        captured: whether the file's colour is light a sensor captured (a scan, a photo-textured
+            reconstruction), to be shown as it is (``render.lighting=auto`` then renders it
+            ``scanned``): True or False as said; None: the recognised scan layouts and glTFs whose
+            materials are ``KHR_materials_unlit``. The log names the lighting chosen for any other
+            textured or coloured file, and how to ask for the other.
 
     Raises:
         FileNotFoundError: the path (or a file it references) does not exist.
@@ -72,7 +80,9 @@ def load_scene(
         log.info("%s: %s", path, chosen.describe())
         up_axis, scale = chosen.up_axis, chosen.scale
     scan = None if layout is None else layout.dataset
-    if scan is None and suffix in (".glb", ".gltf") and gltf_unlit(path):
+    if captured is not None:
+        scan = (scan or CAPTURED) if captured else None
+    elif scan is None and suffix in (".glb", ".gltf") and gltf_unlit(path):
         scan = UNLIT_GLTF
         log.info("%s: KHR_materials_unlit: its colour is shown as captured", path)
     options = {
@@ -89,10 +99,23 @@ def load_scene(
         mesh = read_ply(path)
         if layout is not None and layout.alignment is not None:  # into the dataset's aligned frame
             mesh.vertices = mesh.vertices @ layout.alignment[:3, :3].T + layout.alignment[:3, 3]
-        return assemble_scene([ply_part(mesh, 0, str(path))], [Material(name)], name=name, **options)
-    materials: list[Material] = []
-    parts = load_mesh_file(path, materials)
+        parts, materials = [ply_part(mesh, 0, str(path))], [Material(name)]
+    else:
+        materials = []
+        parts = load_mesh_file(path, materials)
+    if captured is None and scan is None and _coloured(parts, materials):
+        log.info(
+            "%s: not a scan kadv recognises: its colour is lit as a modelled scene's (render.lighting=auto: "
+            "baked); if it is captured light (a photo-textured scan), scene.options.captured=true shows it as "
+            "captured (scanned)",
+            path,
+        )
     return assemble_scene(parts, materials, name=name, **options)
+
+
+def _coloured(parts: list[MeshPart], materials: list[Material]) -> bool:
+    """Whether a mesh file carries its own colour: a texture or vertex colours."""
+    return any(m.texture is not None for m in materials) or any(p.colors is not None for p in parts)
 
 
 def ply_part(mesh: PlyMesh, material: int, name: str) -> MeshPart:

@@ -162,7 +162,9 @@ def test_every_method_runs_the_model_no_more_than_its_budget_of_passes(
     assert view.budget.screened == sum(r.screened for r in view.records)
     # what is left is less than a step: the gradient's 3 restarts' forward and backward passes at most
     assert view.budget.passes > budget - 6
-    assert [r.passes for r in view.records] == sorted(r.passes for r in view.records) and view.records[-1].passes <= budget
+    assert [r.passes for r in view.records] == sorted(r.passes for r in view.records) and view.records[
+        -1
+    ].passes <= budget
     assert view.init_record.params == [0.0] * 6 and view.path[0].step == 0 and view.path[-1] in view.records
     assert all(r.valid for r in view.top)
     half = AttackConfig().search_box()
@@ -296,9 +298,7 @@ def test_bad_settings_name_their_key(overrides, key) -> None:
 def test_bad_method_settings_name_their_key() -> None:
     with pytest.raises(ValueError, match=r"attack.nevergrad.optimizer.*NGOpt"):
         NevergradSettings("NoSuchOptimizer")
-    with pytest.raises(
-        ValueError, match=r"attack.method=random needs attack.budget_passes or attack.budget_seconds"
-    ):
+    with pytest.raises(ValueError, match=r"attack.method=random needs attack.budget_passes or attack.budget_seconds"):
         AttackConfig("random", budget_passes=None)
 
 
@@ -351,9 +351,7 @@ def test_trust_region_steps_from_the_incumbent_undo_failures_and_restart_stalled
     that failed) with the step length the grow/shrink rule gives, so no incumbent falls; a lane
     whose step shrinks below stall_scale restarts from a screened view."""
     settings = HybridSettings(screen_fraction=0.4, screen_scale=1.0, population=8, refine_views=2, stall_scale=0.3)
-    result = _run(
-        tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_passes=40
-    )
+    result = _run(tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_passes=40)
     view = result.views[0]
     screened = [r for r in view.records if r.step <= 2]
     refined = [r for r in view.records if r.step > 2]
@@ -381,9 +379,7 @@ def test_screening_at_a_reduced_size_re_scores_its_best_views_at_full_size(
 ) -> None:
     settings = HybridSettings(screen_fraction=0.5, screen_scale=0.5, population=8, refine_views=2)
     # half of 34 views screens: the init view at full size, then two batches of 8 at half size
-    result = _run(
-        tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_passes=34
-    )
+    result = _run(tiny_objective, differentiable, [file_view], method="hybrid", settings=settings, budget_passes=34)
     view = result.views[0]
     small = [r for r in view.records if r.scale == 0.5]
     assert len(small) == 16 and view.init_record.scale == 1.0

@@ -232,7 +232,11 @@ BAD_INPUTS = [
         ["attack=hybrid", "attack.hybrid.screen_scale=2"],
         "attack.hybrid.screen_scale must be in (0, 1], got 2",
     ),
-    ("kadv-attack", ["attack.halving.screen_fraction=1.5"], "attack.halving.screen_fraction must be in (0, 1], got 1.5"),
+    (
+        "kadv-attack",
+        ["attack.halving.screen_fraction=1.5"],
+        "attack.halving.screen_fraction must be in (0, 1], got 1.5",
+    ),
     ("kadv-attack", ["attack.budget_evaluations=48"], "attack.budget_evaluations was renamed attack.budget_passes"),
     ("kadv-attack", ["attack.halving.refine=adam"], "attack.halving.refine must be 'gradient' or 'local', got 'adam'"),
     ("kadv-attack", ["attack.budget_passes=2"], "attack.budget_passes must be at least 3 for attack.halving"),

@@ -139,10 +139,7 @@ def test_a_failing_job_does_not_stop_the_others(tmp_path: Path) -> None:
     assert result.returncode != 0
     failures = json.loads((tmp_path / "sweep" / "failures.json").read_text())
     assert len(failures) == 1
-    assert (
-        "attack.budget_passes=-1" in failures[0]["overrides"]
-        and "attack.budget_passes" in failures[0]["error"]
-    )
+    assert "attack.budget_passes=-1" in failures[0]["overrides"] and "attack.budget_passes" in failures[0]["error"]
     assert len(_summaries(tmp_path)) == 1 and "attack.budget_passes=6" in _summaries(tmp_path)[0].parent.name
     fixed = _sweep(tmp_path, "attack.budget_passes=6,7", "scene.seed=0")  # a clean rerun clears the record
     assert fixed.returncode == 0 and not (tmp_path / "sweep" / "failures.json").exists()

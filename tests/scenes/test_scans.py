@@ -168,3 +168,34 @@ def test_a_gltf_whose_colours_are_not_one_per_vertex_is_refused_naming_the_mesh(
     path = _patched_glb(tmp_path / "box.glb", tmp_path / "bad.glb", miscounted)
     with pytest.raises(ValueError, match=r"bad.glb: 'geometry_0' has 4 COLOR_0 colours for 8 vertices"):
         load_scene(path)
+
+
+def test_a_photo_textured_mesh_in_no_known_layout_says_its_lighting_and_can_be_said_captured(tmp_path, caplog) -> None:
+    """A textured OBJ named as no dataset names its files: lit as a modelled scene, and the log says
+    so and how to show it as captured; scene.options.captured=true makes it a scan (scanned under
+    render.lighting=auto), captured=false lights a recognised scan again."""
+    import logging
+
+    from omegaconf import OmegaConf
+
+    import kadv
+    from kadv.cli.common import resolve_lighting
+    from kadv.datasets.scan_rooms import scan_like, write_scan
+    from kadv.scenes.load import CAPTURED
+
+    obj = write_scan(scan_like(kadv.box_room(seed=0), seed=0), tmp_path, "matterport")
+    renamed = obj.with_name("my_phone_scan.obj")
+    renamed.write_text(obj.read_text())
+    renamed.with_suffix(".mtl").write_text(obj.with_suffix(".mtl").read_text())
+    with caplog.at_level(logging.INFO, logger="kadv.scenes.load"):
+        plain = load_scene(renamed)
+    assert plain.scan is None and "scene.options.captured=true shows it as captured" in caplog.text
+    assert resolve_lighting(plain, OmegaConf.create({"lighting": "auto"})) == "baked"
+    captured = load_scene(renamed, captured=True)
+    assert captured.scan == CAPTURED
+    assert resolve_lighting(captured, OmegaConf.create({"lighting": "auto"})) == "scanned"
+    assert load_scene(obj, captured=False).scan is None  # a recognised scan, lit again on request
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="kadv.scenes.load"):
+        load_scene(obj)
+    assert "captured=true" not in caplog.text  # a recognised scan needs no word

@@ -76,6 +76,7 @@ def test_a_profile_never_rises_with_the_radius_and_repeats_for_its_seed(tmp_path
     room = scene("box_room", seed=3)
     first = robustness_profile("kadv_tiny", room, artifacts=tmp_path / "a", **QUICK)
     again = robustness_profile("kadv_tiny", room, artifacts=tmp_path / "b", **QUICK)
+
     def comparable(profile: Profile) -> dict:  # what the seed fixes: not the pictures' paths, not the seconds
         costs = [{k: v for k, v in c.items() if k != "search_seconds"} for c in profile.cost_by_seed]
         return {**profile.to_dict(), "pictures": [], "cost_by_seed": costs}

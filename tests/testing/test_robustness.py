@@ -75,9 +75,7 @@ def test_a_model_that_outputs_a_constant_map_fails_every_probe(probe: str, tmp_p
 
 def test_the_budget_factor_in_force_scales_the_passes(tmp_path: Path) -> None:
     with settings(budget_factor=0.5):
-        result = viewpoint_robustness(
-            "kadv_tiny", "box_room", artifacts=tmp_path, **{**QUICK, "budget_passes": 16}
-        )
+        result = viewpoint_robustness("kadv_tiny", "box_room", artifacts=tmp_path, **{**QUICK, "budget_passes": 16})
     assert result.budget_passes == 8 and 8 - 3 <= result.views[0].passes <= 8
 
 
