@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kadv.scenes.gravity import estimate_up, rotation_onto_y
 from kadv.scenes.mitsuba import parse_mitsuba
 from kadv.scenes.ply import PlyMesh, read_ply
 from kadv.scenes.scans import recognise_scan
@@ -44,8 +45,11 @@ def load_scene(
         path: the scene file.
         scale: metres per file unit; None: a recognised scan's (:func:`kadv.scenes.scans.recognise_scan`,
             metres), else 1.
-        up_axis: the file's up axis (``"y"`` or ``"z"``), rotated to kadv's y-up world; None: a
-            recognised scan's (``"z"``), else ``"y"``. The log says what was chosen for a scan.
+        up_axis: the file's up axis (``"y"`` or ``"z"``), rotated to kadv's y-up world, or
+            ``"auto"``: estimated from the mesh (:func:`kadv.scenes.gravity.estimate_up`: its floor
+            and dominant planes), for a reconstruction left in its first camera's frame; None: a
+            recognised scan's (``"z"``), else ``"y"``. The log says what was chosen for a scan, and
+            the angle ``auto`` turned the file.
         drop_transparent: leave out glass-like materials (they would hide what is behind them).
         drop_emitters: leave out light-source surfaces; their centres become the renderer's lights.
         missing: Mitsuba only: ``"error"`` or ``"skip"`` for referenced files that do not exist.
@@ -85,6 +89,8 @@ def load_scene(
     elif scan is None and suffix in (".glb", ".gltf") and gltf_unlit(path):
         scan = UNLIT_GLTF
         log.info("%s: KHR_materials_unlit: its colour is shown as captured", path)
+    if up_axis not in (None, "y", "z", "auto"):
+        raise ValueError(f"scene.options.up_axis must be y, z or auto, got {up_axis!r}")
     options = {
         "scale": 1.0 if scale is None else scale,
         "up_axis": up_axis or "y",
@@ -94,6 +100,7 @@ def load_scene(
     }
     if suffix == ".xml":
         parts, materials, cameras, lights, emitters = parse_mitsuba(path, missing=missing)
+        options["up_axis"] = _up(parts, options, path)
         return assemble_scene(parts, materials, cameras, lights, name=name, emitters=emitters, **options)
     if suffix == ".ply":
         mesh = read_ply(path)
@@ -103,6 +110,7 @@ def load_scene(
     else:
         materials = []
         parts = load_mesh_file(path, materials)
+    options["up_axis"] = _up(parts, options, path)
     if captured is None and scan is None and _coloured(parts, materials):
         log.info(
             "%s: not a scan kadv recognises: its colour is lit as a modelled scene's (render.lighting=auto: "
@@ -111,6 +119,24 @@ def load_scene(
             path,
         )
     return assemble_scene(parts, materials, name=name, **options)
+
+
+def _up(parts: list[MeshPart], options: dict, path: Path) -> str | np.ndarray:
+    """The up axis the options name, or for ``auto`` the rotation of the up the mesh implies
+    (:func:`kadv.scenes.gravity.estimate_up`), logged with the angle it turns the file."""
+    if options["up_axis"] != "auto":
+        return options["up_axis"]
+    offsets = np.cumsum([0] + [len(p.vertices) for p in parts])
+    vertices = np.concatenate([np.asarray(p.vertices, np.float64) for p in parts])
+    faces = np.concatenate([np.asarray(p.faces, np.int64).reshape(-1, 3) + o for p, o in zip(parts, offsets)])
+    estimate = estimate_up(vertices, faces, options["scale"])
+    angle = np.degrees(np.arccos(np.clip(estimate.up[1], -1.0, 1.0)))
+    frame = "a Manhattan axis" if estimate.manhattan else "its planes' normals"
+    log.info(
+        "%s: up_axis=auto: up is %s in the file's frame (%s; floor %.1f m²), %.1f° from its y: turned so",
+        path, np.round(estimate.up, 3).tolist(), frame, estimate.floor_area, angle,
+    )  # fmt: skip
+    return rotation_onto_y(estimate.up)
 
 
 def _coloured(parts: list[MeshPart], materials: list[Material]) -> bool:

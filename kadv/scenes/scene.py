@@ -198,13 +198,16 @@ class Scene:
         return self.interior if self.interior is not None else self.bounds
 
 
-def rotation_to_y_up(up_axis: str) -> np.ndarray:
-    """Rotation taking the file's up axis to +y (right-handed, no mirroring)."""
+def rotation_to_y_up(up_axis: str | np.ndarray) -> np.ndarray:
+    """Rotation taking the file's up axis to +y (right-handed, no mirroring); a (3, 3) rotation is
+    taken as it is (:func:`kadv.scenes.gravity.rotation_onto_y` of an estimated up)."""
+    if isinstance(up_axis, np.ndarray):
+        return up_axis
     if up_axis == "y":
         return np.eye(3)
     if up_axis == "z":
         return np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-    raise ValueError(f"up_axis must be 'y' or 'z', got {up_axis!r}")
+    raise ValueError(f"up_axis must be 'y', 'z' or 'auto', got {up_axis!r}")
 
 
 def assemble_scene(
@@ -215,7 +218,7 @@ def assemble_scene(
     *,
     name: str = "scene",
     scale: float = 1.0,
-    up_axis: str = "y",
+    up_axis: str | np.ndarray = "y",
     drop_transparent: bool = True,
     drop_emitters: bool = True,
     interior: np.ndarray | None = None,
@@ -230,7 +233,7 @@ def assemble_scene(
         cameras: file cameras in file coordinates.
         lights: (L, 3) light positions in file coordinates.
         scale: metres per file unit.
-        up_axis: the file's up axis, ``"y"`` or ``"z"``; the scene is rotated to y-up.
+        up_axis: the file's up axis, ``"y"`` or ``"z"``, or a (3, 3) rotation; the scene is rotated to y-up.
         drop_transparent: leave out triangles of transparent (glass) materials.
         drop_emitters: leave out light-source surfaces (their centroids become lights and their
             triangles area emitters).
@@ -292,8 +295,10 @@ def assemble_scene(
         pose[:3, 3] = rotation @ pose[:3, 3] * scale
         moved_cameras.append(Camera(pose, camera.fov_x_deg, camera.width, camera.height, camera.name))
     all_lights = np.concatenate(light_list) if light_list else np.zeros((0, 3))
-    if interior is not None:  # the rotated box's bounds: the rotation only permutes and flips axes
-        turned = np.asarray(interior, np.float64).reshape(2, 3) @ rotation.T * scale
+    if interior is not None:  # the rotated box's bounds: all eight corners, for any rotation
+        box = np.asarray(interior, np.float64).reshape(2, 3)
+        corners = np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3)
+        turned = corners @ rotation.T * scale
         interior = np.stack([turned.min(axis=0), turned.max(axis=0)])
     return Scene(
         vertices=all_vertices,
