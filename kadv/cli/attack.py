@@ -42,6 +42,7 @@ from kadv.cli.common import (
     check_render_config,
     checks_overrides,
     config_int,
+    frame_note,
     loss_from_config,
     model_from_config,
     renderer_from_config,
@@ -218,6 +219,8 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     )
     get_method(attack_config.method).check(attack_config.settings, attack_config.passes, supersample)
     scene = scene_from_config(cfg.scene)
+    if (note := frame_note(scene)) is not None:
+        log.info(note)
     renderer = renderer_from_config(scene, cfg.render, device)
     model = model_from_config(cfg.model)
     loss = loss_from_config(cfg.loss)

@@ -118,7 +118,10 @@ def load_scene(
             "captured (scanned)",
             path,
         )
-    return assemble_scene(parts, materials, name=name, **options)
+    scene = assemble_scene(parts, materials, name=name, **options)
+    if suffix == ".ply" and layout is not None and layout.alignment is not None:
+        scene.world_T_file = scene.world_T_file @ layout.alignment  # the file's own frame is before alignment
+    return scene
 
 
 def _up(parts: list[MeshPart], options: dict, path: Path) -> str | np.ndarray:

@@ -9,7 +9,7 @@ import numpy as np
 from kadv.geometry.camera import Camera
 from kadv.scenes.emitters import DEFAULT_LAMP_RADIANCE, Emitters
 
-__all__ = ["CONDUCTOR_GREY", "Material", "MeshPart", "Scene", "assemble_scene", "rotation_to_y_up"]
+__all__ = ["CONDUCTOR_GREY", "Material", "MeshPart", "Scene", "assemble_scene", "rotation_to_y_up", "world_from_file"]
 
 # the display grey a metal is shaded with as diffuse, times its reflectance: a mirror is no white wall
 CONDUCTOR_GREY = 0.75
@@ -136,6 +136,9 @@ class Scene:
         scan: the dataset whose scan layout the file had (:mod:`kadv.scenes.scans`), or
             :data:`kadv.scenes.load.UNLIT_GLTF` for a glTF whose materials are unlit, or None: its
             colour is the light a sensor captured, so ``render.lighting=auto`` shows it as scanned.
+        world_T_file: (4, 4) the map from the file's coordinates (file units, its own axes, before a
+            dataset's alignment) to kadv's world (metres, y up): the scale, the turn to y-up and any
+            alignment (:func:`world_from_file`). Identity for a generated room.
     """
 
     vertices: np.ndarray
@@ -151,6 +154,7 @@ class Scene:
     emitters: Emitters = field(default_factory=Emitters)
     colors: np.ndarray | None = None
     scan: str | None = None
+    world_T_file: np.ndarray = field(default_factory=lambda: np.eye(4))
 
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, np.float64).reshape(-1, 3)
@@ -314,4 +318,12 @@ def assemble_scene(
         emitters=emitters.transformed(rotation, scale),
         colors=None if all(part.colors is None for part in parts) else np.concatenate(colors).astype(np.float32),
         scan=scan,
+        world_T_file=world_from_file(rotation, scale),
     )
+
+
+def world_from_file(rotation: np.ndarray, scale: float) -> np.ndarray:
+    """(4, 4): a point in file units, turned by ``rotation`` (3, 3) and scaled to metres."""
+    out = np.eye(4)
+    out[:3, :3] = rotation * scale
+    return out
