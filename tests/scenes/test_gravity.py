@@ -50,5 +50,5 @@ def test_an_empty_box_is_level_either_way_and_the_rotation_is_proper() -> None:
 def test_an_unknown_up_axis_is_refused_naming_the_key(tmp_path: Path) -> None:
     path = tmp_path / "room.ply"
     path.write_bytes(_ply_bytes(np.eye(3), np.zeros((3, 3), np.uint8), [np.array([[0, 1, 2]])]))
-    with pytest.raises(ValueError, match="scene.options.up_axis must be y, z or auto, got 'x'"):
+    with pytest.raises(ValueError, match=r"scene.options.up_axis must be y, z or auto, got 'x'"):
         kadv.load_scene(path, up_axis="x")
