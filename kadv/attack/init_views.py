@@ -1,12 +1,13 @@
 """Init views (the study's "init-params"): benign starting views where the model is accurate.
 
-Sources: the scene file's cameras (moved along their optical axis until clear of surfaces), an
-automatic seeded sampler that keeps the candidates the model predicts best, or an
-``init_params.json`` written by an earlier run.
+Sources: the scene file's cameras (moved along their optical axis until clear of surfaces), a
+scan's capture trajectory, an automatic seeded sampler that keeps the candidates the model predicts
+best, or an ``init_params.json`` written by an earlier run.
 """
 
 from __future__ import annotations
 
+import collections
 import json
 import math
 from dataclasses import asdict, dataclass, field, replace
@@ -38,6 +39,7 @@ __all__ = [
     "InitViewConfig",
     "InitViewError",
     "ViewScores",
+    "captured_init_views",
     "check_init_views",
     "clear_file_camera",
     "file_init_views",
@@ -116,6 +118,11 @@ class InitViewConfig:
         min_hit_fraction: a sampled view must see a surface in at least this fraction of pixels.
         content_weight: weight of what a sampled view shows (distinct surfaces, depth range, image
             structure; each scored in [0, 1]) beside the model's delta1 when ranking candidates.
+        source: where the views after the file's cameras come from: ``captured`` (the scan's
+            capture trajectory, :attr:`kadv.scenes.Scene.trajectory`), ``sampled`` (drawn in the
+            free space), or ``auto``: captured where the scene has a trajectory, else sampled.
+        spacing: captured candidates lie at least this far apart, metres, or turned this many
+            times 10 degrees from each other (a trajectory's neighbouring frames show one view).
     """
 
     count: int = 3
@@ -129,6 +136,8 @@ class InitViewConfig:
     fov_x_deg: float = 70.0
     min_hit_fraction: float = 0.8
     content_weight: float = 0.5
+    source: str = "auto"
+    spacing: float = 0.5
 
     def __post_init__(self) -> None:
         if self.count < 1:
@@ -143,6 +152,10 @@ class InitViewConfig:
             raise ValueError(f"init.min_hit_fraction must be in [0, 1], got {self.min_hit_fraction}")
         if not (math.isfinite(self.content_weight) and self.content_weight >= 0):
             raise ValueError(f"init.content_weight must be >= 0, got {self.content_weight}")
+        if self.source not in ("auto", "captured", "sampled"):
+            raise ValueError(f"init.source must be auto, captured or sampled, got {self.source!r}")
+        if not (math.isfinite(self.spacing) and self.spacing > 0):
+            raise ValueError(f"init.spacing must be positive, got {self.spacing}")
         intrinsics_from_fov(self.fov_x_deg, 1, 1)
 
 
@@ -438,6 +451,82 @@ def sample_init_views(
             float(scores.delta1[i]),
             note=f"best {rank + 1} of {len(poses)} candidates by delta1 + {config.content_weight} x content "
             f"(content {float(content[i]):.2f})",
+        )
+        for rank, i in enumerate(order)
+    ]
+
+
+def _spaced(poses: np.ndarray, spacing: float) -> list[int]:
+    """Indices of poses (N, 4, 4), in order, each at least ``spacing`` metres or ``spacing`` x 10
+    degrees from every one kept before it."""
+    kept: list[int] = []
+    for i, pose in enumerate(poses):
+        for j in kept:
+            turn = np.degrees(np.arccos(np.clip((np.trace(poses[j, :3, :3].T @ pose[:3, :3]) - 1) / 2, -1.0, 1.0)))
+            if np.linalg.norm(pose[:3, 3] - poses[j, :3, 3]) < spacing and turn < 10.0 * spacing:
+                break
+        else:
+            kept.append(i)
+    return kept
+
+
+def captured_init_views(
+    renderer: ExactRenderer,
+    model: DepthModel,
+    count: int,
+    config: InitViewConfig,
+    penalty: PenaltyConfig,
+    height: int,
+    width: int,
+) -> list[InitView]:
+    """The ``count`` best views of the scan's capture trajectory (:attr:`Scene.trajectory`): its
+    poses thinned to ones ``config.spacing`` apart, then evenly to at most ``config.candidates``,
+    the valid ones scored by the model and ranked as sampled candidates are (delta1 +
+    ``content_weight`` x content), at the configured field of view.
+
+    Raises:
+        InitViewError: the scene has no trajectory, or too few of its poses make valid views.
+    """
+    scene = renderer.scene
+    if count <= 0:
+        return []
+    if scene.trajectory is None:
+        raise InitViewError(
+            f"scene {scene.name!r} has no captured camera path (init.source=captured): its layout keeps none beside "
+            "it; use init.source=sampled"
+        )
+    thinned = _spaced(scene.trajectory, config.spacing)
+    picks = [thinned[i] for i in np.unique(np.linspace(0, len(thinned) - 1, config.candidates).round().astype(int))]
+    poses = torch.from_numpy(scene.trajectory[picks])
+    scale = max(0.25, 8.0 / min(height, width))  # validity at a quarter of the size, as sampled views
+    small_h, small_w = max(8, round(scale * height)), max(8, round(scale * width))
+    validity = view_validity(
+        renderer, poses, intrinsics_from_fov(config.fov_x_deg, small_h, small_w), small_h, small_w,
+        **penalty.validity_options(),
+    )  # fmt: skip
+    keep = validity.valid.tolist()
+    if sum(keep) < count:
+        dropped = collections.Counter(v for v in validity.verdicts if v != VALID)
+        reasons = ", ".join(f"{n} {verdict}" for verdict, n in dropped.most_common())
+        raise InitViewError(
+            f"scene {scene.name!r}: only {sum(keep)} of {count} captured init views are valid ({len(picks)} poses "
+            f"of {len(scene.trajectory)} in {scene.trajectory_source} tried; dropped: {reasons}); set "
+            "init.source=sampled, or init.params=<init_params.json>"
+        )
+    chosen = [i for i, k in zip(picks, keep) if k]
+    fov = torch.full((len(chosen),), config.fov_x_deg, dtype=torch.float64)
+    scores = score_views(model, renderer, torch.from_numpy(scene.trajectory[chosen]), fov, height, width)
+    rank_by = scores.delta1 + config.content_weight * scores.content()
+    order = sorted(range(len(chosen)), key=lambda i: -float(rank_by[i]))[:count]
+    return [
+        InitView(
+            f"captured{rank}",
+            "captured",
+            torch.from_numpy(scene.trajectory[chosen[i]]),
+            config.fov_x_deg,
+            float(scores.delta1[i]),
+            note=f"pose {chosen[i]} of {len(scene.trajectory)} in {scene.trajectory_source}, best {rank + 1} of "
+            f"{len(chosen)} valid ones by delta1 + {config.content_weight} x content",
         )
         for rank, i in enumerate(order)
     ]

@@ -14,6 +14,7 @@ from kadv.scenes.ply import PlyMesh, read_ply
 from kadv.scenes.scans import recognise_scan
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 from kadv.scenes.textures import srgb_to_linear
+from kadv.scenes.trajectories import find_captured_path
 from kadv.scenes.trimesh_loader import TRIMESH_SUFFIXES, gltf_unlit, load_mesh_file
 
 __all__ = ["CAPTURED", "SUPPORTED_SUFFIXES", "UNLIT_GLTF", "load_scene", "ply_part"]
@@ -121,6 +122,11 @@ def load_scene(
     scene = assemble_scene(parts, materials, name=name, **options)
     if suffix == ".ply" and layout is not None and layout.alignment is not None:
         scene.world_T_file = scene.world_T_file @ layout.alignment  # the file's own frame is before alignment
+    captured_path = find_captured_path(path, None if layout is None else layout.dataset)
+    if captured_path is not None:
+        scene.trajectory = scene.to_world(captured_path.file_T_cam)
+        scene.trajectory_source = str(captured_path.source)
+        log.info("%s: %d captured camera poses from %s", path, len(scene.trajectory), captured_path.source)
     return scene
 
 

@@ -139,6 +139,9 @@ class Scene:
         world_T_file: (4, 4) the map from the file's coordinates (file units, its own axes, before a
             dataset's alignment) to kadv's world (metres, y up): the scale, the turn to y-up and any
             alignment (:func:`world_from_file`). Identity for a generated room.
+        trajectory: (N, 4, 4) world_T_cam (OpenCV camera) along which the scan was captured, in
+            kadv's world (:mod:`kadv.scenes.trajectories`), or None.
+        trajectory_source: the file the trajectory was read from.
     """
 
     vertices: np.ndarray
@@ -155,6 +158,17 @@ class Scene:
     colors: np.ndarray | None = None
     scan: str | None = None
     world_T_file: np.ndarray = field(default_factory=lambda: np.eye(4))
+    trajectory: np.ndarray | None = None
+    trajectory_source: str | None = None
+
+    def to_world(self, file_T_cam: np.ndarray) -> np.ndarray:
+        """Camera poses (N, 4, 4) in the file's own frame as world_T_cam in kadv's world: the
+        rotation turned (not scaled), the centre mapped by :attr:`world_T_file`."""
+        scale = np.cbrt(abs(np.linalg.det(self.world_T_file[:3, :3])))
+        out = np.array(file_T_cam, np.float64).copy()
+        out[:, :3, :3] = self.world_T_file[:3, :3] / scale @ out[:, :3, :3]
+        out[:, :3, 3] = out[:, :3, 3] @ self.world_T_file[:3, :3].T + self.world_T_file[:3, 3]
+        return out
 
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, np.float64).reshape(-1, 3)
