@@ -147,7 +147,8 @@ def test_every_function_on_the_init_views_path_takes_an_empty_batch(lighting) ->
     assert validity.verdicts == [] and validity.valid.dtype == torch.bool and len(validity.valid) == 0
     assert renderer.render(none, K, 12, 16).rgb.shape == (0, 3, 12, 16)
     assert [len(x) for x in renderer.intersections(points, points)] == [0, 0, 0, 0]
-    assert len(distance_to_surface(renderer, points)) == 0 and len(step_guard(renderer, points, points, 0.1).allowed) == 0
+    assert len(distance_to_surface(renderer, points)) == 0
+    assert len(step_guard(renderer, points, points, 0.1).allowed) == 0
     scores = score_views(kadv.load_model("kadv_tiny"), renderer, none, torch.zeros(0), 12, 16)
     assert len(scores.delta1) == 0 and len(scores.content()) == 0
     assert captured_init_views(renderer, None, 0, InitViewConfig(), PenaltyConfig(), 12, 16) == []
