@@ -90,6 +90,8 @@ def load_scene(
     elif scan is None and suffix in (".glb", ".gltf") and gltf_unlit(path):
         scan = UNLIT_GLTF
         log.info("%s: KHR_materials_unlit: its colour is shown as captured", path)
+    if captured is not None and not isinstance(captured, bool):
+        raise ValueError(f"scene.options.captured must be true, false or null, got {captured!r}")
     if up_axis not in (None, "y", "z", "auto"):
         raise ValueError(f"scene.options.up_axis must be y, z or auto, got {up_axis!r}")
     options = {

@@ -195,6 +195,8 @@ def test_a_photo_textured_mesh_in_no_known_layout_says_its_lighting_and_can_be_s
     assert captured.scan == CAPTURED
     assert resolve_lighting(captured, OmegaConf.create({"lighting": "auto"})) == "scanned"
     assert load_scene(obj, captured=False).scan is None  # a recognised scan, lit again on request
+    with pytest.raises(ValueError, match=r"scene.options.captured must be true, false or null, got 'maybe'"):
+        load_scene(obj, captured="maybe")
     caplog.clear()
     with caplog.at_level(logging.INFO, logger="kadv.scenes.load"):
         load_scene(obj)
