@@ -1,15 +1,16 @@
 """Init views (the study's "init-params"): benign starting views where the model is accurate.
 
-Sources: the scene file's cameras (moved along their optical axis until clear of surfaces), an
-automatic seeded sampler that keeps the candidates the model predicts best, or an
-``init_params.json`` written by an earlier run.
+Sources: the scene file's cameras (moved along their optical axis until clear of surfaces), a
+scan's capture trajectory, an automatic seeded sampler that keeps the candidates the model predicts
+best, or an ``init_params.json`` written by an earlier run.
 """
 
 from __future__ import annotations
 
+import collections
 import json
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import kornia
@@ -29,13 +30,16 @@ from kadv.losses import depth_metrics
 from kadv.models import DepthModel
 from kadv.penalties import PenaltyConfig, distance_to_surface, plane_counts, step_guard, view_validity
 from kadv.penalties.envelope import Envelope
+from kadv.penalties.validity import SCAN_TOP_TOLERANCE, VALID
 from kadv.render import ExactRenderer
 
 __all__ = [
+    "CandidateTally",
     "InitView",
     "InitViewConfig",
     "InitViewError",
     "ViewScores",
+    "captured_init_views",
     "check_init_views",
     "clear_file_camera",
     "file_init_views",
@@ -114,6 +118,11 @@ class InitViewConfig:
         min_hit_fraction: a sampled view must see a surface in at least this fraction of pixels.
         content_weight: weight of what a sampled view shows (distinct surfaces, depth range, image
             structure; each scored in [0, 1]) beside the model's delta1 when ranking candidates.
+        source: where the views after the file's cameras come from: ``captured`` (the scan's
+            capture trajectory, :attr:`kadv.scenes.Scene.trajectory`), ``sampled`` (drawn in the
+            free space), or ``auto``: captured where the scene has a trajectory, else sampled.
+        spacing: captured candidates lie at least this far apart, metres, or turned this many
+            times 10 degrees from each other (a trajectory's neighbouring frames show one view).
     """
 
     count: int = 3
@@ -127,6 +136,8 @@ class InitViewConfig:
     fov_x_deg: float = 70.0
     min_hit_fraction: float = 0.8
     content_weight: float = 0.5
+    source: str = "auto"
+    spacing: float = 0.5
 
     def __post_init__(self) -> None:
         if self.count < 1:
@@ -141,6 +152,10 @@ class InitViewConfig:
             raise ValueError(f"init.min_hit_fraction must be in [0, 1], got {self.min_hit_fraction}")
         if not (math.isfinite(self.content_weight) and self.content_weight >= 0):
             raise ValueError(f"init.content_weight must be >= 0, got {self.content_weight}")
+        if self.source not in ("auto", "captured", "sampled"):
+            raise ValueError(f"init.source must be auto, captured or sampled, got {self.source!r}")
+        if not (math.isfinite(self.spacing) and self.spacing > 0):
+            raise ValueError(f"init.spacing must be positive, got {self.spacing}")
         intrinsics_from_fov(self.fov_x_deg, 1, 1)
 
 
@@ -251,12 +266,13 @@ def score_views(
             far = torch.where(out.mask, depth, torch.zeros_like(depth)).amax(dim=(1, 2, 3))
             near = torch.where(out.mask, depth, torch.full_like(depth, torch.inf)).amin(dim=(1, 2, 3))
             scores["depth_range"].append(torch.log(far.clamp_min(_MIN_DEPTH) / near.clamp_min(_MIN_DEPTH)))
-            ids = out.triangle_ids.reshape(len(depth), -1)
+            ids = out.triangle_ids.reshape(len(depth), height * width)
             least = _SURFACE_SHARE * (ids >= 0).sum(dim=1).clamp_min(1).double()
             scores["surfaces"].append((plane_counts(renderer, ids) >= least[:, None]).sum(dim=1).double())
             gradient = kornia.filters.sobel(kornia.color.rgb_to_grayscale(out.rgb.float()))
             scores["structure"].append(gradient.mean(dim=(1, 2, 3)).double())
-    return ViewScores(**{key: torch.cat(values).cpu() for key, values in scores.items()})
+    empty = torch.zeros(0, dtype=torch.float64)
+    return ViewScores(**{key: torch.cat([empty, *values]).cpu() for key, values in scores.items()})
 
 
 def _inside_points(
@@ -293,14 +309,26 @@ def _inside_points(
 
 def _candidate_poses(
     renderer: ExactRenderer, config: InitViewConfig, count: int, rng: np.random.Generator, clearance: float
-) -> torch.Tensor:
+) -> tuple[torch.Tensor, int, int]:
     """Up to ``count`` candidate poses; their centres stand at eye height above the floor under a
-    point of the walkable inside (:func:`_inside_points`)."""
+    point of the walkable inside (:func:`_inside_points`), ``clearance`` below the top of the
+    camera region: a centre above it is dropped, except in a scan (``render.lighting=scanned``),
+    whose eye height is held just under its top, where ``clearance`` above the floor allows (a scan
+    that stops below eye height gets views within it). Also how many points were drawn, and how
+    many of them had no room under the top."""
     hi = renderer.scene.camera_region[1]
     centres, floor = _inside_points(renderer, count, rng, clearance)
+    drawn = len(centres)
     centres = centres.copy()
-    centres[:, 1] = floor + rng.uniform(*config.eye_height, len(centres))
-    centres = centres[centres[:, 1] < hi[1] - clearance]
+    low, high = config.eye_height
+    if renderer.shading.lighting == "scanned":  # under its top, open or not, whatever the eye height asked
+        room = hi[1] - 2 * SCAN_TOP_TOLERANCE - floor
+        low, high = np.minimum(low, room), np.minimum(high, room)
+        under = room > clearance
+    centres[:, 1] = floor + rng.uniform(low, high, len(centres))
+    if renderer.shading.lighting != "scanned":
+        under = centres[:, 1] < hi[1] - clearance
+    centres = centres[under]
     count = len(centres)
     yaw = rng.uniform(0.0, 2.0 * math.pi, count)
     pitch = np.radians(rng.uniform(*config.pitch_deg, count))
@@ -310,7 +338,25 @@ def _candidate_poses(
     zeros = torch.zeros(count, dtype=torch.float64)
     rolled = axis_angle_to_matrix(torch.stack([zeros, zeros, torch.from_numpy(roll)], dim=1))
     poses[:, :3, :3] = poses[:, :3, :3] @ rolled
-    return poses
+    return poses, drawn, drawn - count
+
+
+@dataclass
+class CandidateTally:
+    """What became of the candidate views a sampler drew: how many, and how many were dropped for
+    each reason (a view's validity verdict, or the sampler's own tests)."""
+
+    drawn: int = 0
+    dropped: dict[str, int] = field(default_factory=dict)
+
+    def drop(self, reason: str, count: int) -> None:
+        if count:
+            self.dropped[reason] = self.dropped.get(reason, 0) + count
+
+    def text(self) -> str:
+        """``drew 640 candidates; dropped: 300 outside the scene, 12 inside an object, ...``."""
+        reasons = ", ".join(f"{n} {reason}" for reason, n in sorted(self.dropped.items(), key=lambda kv: -kv[1]))
+        return f"drew {self.drawn} candidates" + (f"; dropped: {reasons}" if reasons else "")
 
 
 def sample_valid_views(
@@ -321,12 +367,15 @@ def sample_valid_views(
     penalty: PenaltyConfig,
     height: int,
     width: int,
+    tally: CandidateTally | None = None,
 ) -> torch.Tensor:
     """Up to ``count`` seeded candidate poses (N, 4, 4), unranked, in the order drawn: centres in free
     space with clearance above ``config.clearance`` (default 2 * d_th), height, pitch and roll within
     the configured ranges, views valid (an uninformative view is not) and hitting a surface in at
-    least ``config.min_hit_fraction`` of their pixels."""
+    least ``config.min_hit_fraction`` of their pixels (of those not past a scan's top). ``tally``,
+    when given, counts the candidates drawn and why each dropped one was."""
     rng = np.random.default_rng([seed, 7919])
+    tally = tally if tally is not None else CandidateTally()
     clearance = 2.0 * penalty.d_th if config.clearance is None else config.clearance
     # validity is checked at a quarter of the size (at least 8 pixels a side), keeping the aspect: a
     # squarer frame would see more of the room than the view does
@@ -338,11 +387,21 @@ def sample_valid_views(
         needed = count - len(accepted)
         if needed <= 0:
             break
-        poses = _candidate_poses(renderer, config, 8 * needed, rng, clearance)
+        poses, drawn, no_room = _candidate_poses(renderer, config, 8 * needed, rng, clearance)
+        tally.drawn += drawn
+        tally.drop("with no room for the eye height under the scene's top", no_room)
         distance = distance_to_surface(renderer, poses[:, :3, 3])
         validity = view_validity(renderer, poses, K, small_h, small_w, **penalty.validity_options())
-        hits_enough = 1.0 - validity.miss_fraction.cpu() >= config.min_hit_fraction
-        keep = validity.valid & (distance > clearance) & hits_enough
+        clear = distance.cpu() > clearance
+        hits_enough = validity.surface_fraction.cpu() >= config.min_hit_fraction
+        for verdict in sorted(set(validity.verdicts) - {VALID}):
+            tally.drop(verdict, sum(v == verdict for v in validity.verdicts))
+        tally.drop(f"within {clearance:g} m of a surface", int((validity.valid & ~clear).sum()))
+        tally.drop(
+            f"seeing a surface in under {config.min_hit_fraction:.0%} of their pixels",
+            int((validity.valid & clear & ~hits_enough).sum()),
+        )
+        keep = validity.valid & clear & hits_enough
         accepted += list(poses[keep][:needed])
     return torch.stack(accepted) if accepted else torch.zeros(0, 4, 4, dtype=torch.float64)
 
@@ -369,12 +428,14 @@ def sample_init_views(
     """
     if count <= 0:
         return []
-    poses = sample_valid_views(renderer, config.candidates, seed, config, penalty, height, width)
+    tally = CandidateTally()
+    poses = sample_valid_views(renderer, config.candidates, seed, config, penalty, height, width, tally)
     if len(poses) < count:
-        clearance = 2.0 * penalty.d_th if config.clearance is None else config.clearance
+        low, high = config.eye_height
         raise InitViewError(
-            f"scene {renderer.scene.name!r}: only {len(poses)} of {count} sampled init views are "
-            f"valid with clearance {clearance} m (check init.eye_height and the scene's scale)"
+            f"scene {renderer.scene.name!r}: only {len(poses)} of {count} sampled init views are valid "
+            f"({tally.text()}); set init.eye_height (now [{low:g}, {high:g}] m above the floor), the "
+            "scene's scale, or the init views themselves (init.params=<init_params.json>)"
         )
     fov = torch.full((len(poses),), config.fov_x_deg, dtype=torch.float64)
     scores = score_views(model, renderer, poses, fov, height, width)
@@ -390,6 +451,82 @@ def sample_init_views(
             float(scores.delta1[i]),
             note=f"best {rank + 1} of {len(poses)} candidates by delta1 + {config.content_weight} x content "
             f"(content {float(content[i]):.2f})",
+        )
+        for rank, i in enumerate(order)
+    ]
+
+
+def _spaced(poses: np.ndarray, spacing: float) -> list[int]:
+    """Indices of poses (N, 4, 4), in order, each at least ``spacing`` metres or ``spacing`` x 10
+    degrees from every one kept before it."""
+    kept: list[int] = []
+    for i, pose in enumerate(poses):
+        for j in kept:
+            turn = np.degrees(np.arccos(np.clip((np.trace(poses[j, :3, :3].T @ pose[:3, :3]) - 1) / 2, -1.0, 1.0)))
+            if np.linalg.norm(pose[:3, 3] - poses[j, :3, 3]) < spacing and turn < 10.0 * spacing:
+                break
+        else:
+            kept.append(i)
+    return kept
+
+
+def captured_init_views(
+    renderer: ExactRenderer,
+    model: DepthModel,
+    count: int,
+    config: InitViewConfig,
+    penalty: PenaltyConfig,
+    height: int,
+    width: int,
+) -> list[InitView]:
+    """The ``count`` best views of the scan's capture trajectory (:attr:`Scene.trajectory`): its
+    poses thinned to ones ``config.spacing`` apart, then evenly to at most ``config.candidates``,
+    the valid ones scored by the model and ranked as sampled candidates are (delta1 +
+    ``content_weight`` x content), at the configured field of view.
+
+    Raises:
+        InitViewError: the scene has no trajectory, or too few of its poses make valid views.
+    """
+    scene = renderer.scene
+    if count <= 0:
+        return []
+    if scene.trajectory is None:
+        raise InitViewError(
+            f"scene {scene.name!r} has no captured camera path (init.source=captured): its layout keeps none beside "
+            "it; use init.source=sampled"
+        )
+    thinned = _spaced(scene.trajectory, config.spacing)
+    picks = [thinned[i] for i in np.unique(np.linspace(0, len(thinned) - 1, config.candidates).round().astype(int))]
+    poses = torch.from_numpy(scene.trajectory[picks])
+    scale = max(0.25, 8.0 / min(height, width))  # validity at a quarter of the size, as sampled views
+    small_h, small_w = max(8, round(scale * height)), max(8, round(scale * width))
+    validity = view_validity(
+        renderer, poses, intrinsics_from_fov(config.fov_x_deg, small_h, small_w), small_h, small_w,
+        **penalty.validity_options(),
+    )  # fmt: skip
+    keep = validity.valid.tolist()
+    if sum(keep) < count:
+        dropped = collections.Counter(v for v in validity.verdicts if v != VALID)
+        reasons = ", ".join(f"{n} {verdict}" for verdict, n in dropped.most_common())
+        raise InitViewError(
+            f"scene {scene.name!r}: only {sum(keep)} of {count} captured init views are valid ({len(picks)} poses "
+            f"of {len(scene.trajectory)} in {scene.trajectory_source} tried; dropped: {reasons}); set "
+            "init.source=sampled, or init.params=<init_params.json>"
+        )
+    chosen = [i for i, k in zip(picks, keep) if k]
+    fov = torch.full((len(chosen),), config.fov_x_deg, dtype=torch.float64)
+    scores = score_views(model, renderer, torch.from_numpy(scene.trajectory[chosen]), fov, height, width)
+    rank_by = scores.delta1 + config.content_weight * scores.content()
+    order = sorted(range(len(chosen)), key=lambda i: -float(rank_by[i]))[:count]
+    return [
+        InitView(
+            f"captured{rank}",
+            "captured",
+            torch.from_numpy(scene.trajectory[chosen[i]]),
+            config.fov_x_deg,
+            float(scores.delta1[i]),
+            note=f"pose {chosen[i]} of {len(scene.trajectory)} in {scene.trajectory_source}, best {rank + 1} of "
+            f"{len(chosen)} valid ones by delta1 + {config.content_weight} x content",
         )
         for rank, i in enumerate(order)
     ]

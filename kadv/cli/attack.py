@@ -31,6 +31,7 @@ from kadv.attack import (
     Objective,
     PenaltyConfig,
     attack,
+    captured_init_views,
     check_init_views,
     file_init_views,
     get_method,
@@ -42,6 +43,7 @@ from kadv.cli.common import (
     check_render_config,
     checks_overrides,
     config_int,
+    frame_note,
     loss_from_config,
     model_from_config,
     renderer_from_config,
@@ -123,9 +125,18 @@ def _init_views(
             views = load_init_params(init_config.params)
         else:
             views = file_init_views(renderer, penalty.margin)[: init_config.count] if init_config.file_cameras else []
-            views += sample_init_views(
-                renderer, model, init_config.count - len(views), seed, init_config, penalty, height, width
+            captured = init_config.source == "captured" or (
+                init_config.source == "auto" and renderer.scene.trajectory is not None
             )
+            choose = captured_init_views if captured else functools.partial(sample_init_views, seed=seed)
+            if captured:
+                log.info(
+                    "init.source=captured: init views from the capture path in %s", renderer.scene.trajectory_source
+                )
+            views += choose(
+                renderer, model, init_config.count - len(views), config=init_config, penalty=penalty,
+                height=height, width=width,
+            )  # fmt: skip
     check_init_views(renderer, views, penalty, height, width)
     save_init_params(saved, views, count.passes)
     return views, count.passes
@@ -218,6 +229,8 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     )
     get_method(attack_config.method).check(attack_config.settings, attack_config.passes, supersample)
     scene = scene_from_config(cfg.scene)
+    if (note := frame_note(scene)) is not None:
+        log.info(note)
     renderer = renderer_from_config(scene, cfg.render, device)
     model = model_from_config(cfg.model)
     loss = loss_from_config(cfg.loss)

@@ -20,6 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 from hydra import compose, initialize_config_module
 from hydra.core.hydra_config import HydraConfig
@@ -408,13 +409,38 @@ def _vector(cfg: DictConfig, key: str) -> torch.Tensor:
     return torch.tensor(numbers, dtype=torch.float64)
 
 
+def frame_note(scene: Scene) -> str | None:
+    """One line saying which frame poses are in, when the scene file's coordinates are not kadv's
+    world (a z-up scan, an alignment, ``up_axis=auto``, a scale); None when they are."""
+    if np.allclose(scene.world_T_file, np.eye(4)):
+        return None
+    matrix = np.array2string(np.round(scene.world_T_file, 6), separator=", ").replace("\n", "")
+    return (
+        f"poses (camera.*, render.json, init_params.json) are in kadv's world, y up in metres; a point p "
+        f"of {scene.name}'s file is world_T_file @ p there, world_T_file = {' '.join(matrix.split())} "
+        "(kadv-render's camera.frame=file takes camera.* in the file's coordinates)"
+    )
+
+
 def camera_from_config(cfg: DictConfig, scene: Scene) -> tuple[torch.Tensor, float]:
-    """(world_T_cam (4, 4), fov_x_deg) from an explicit pose, a look-at, or a file camera index."""
+    """(world_T_cam (4, 4), fov_x_deg) from an explicit pose, a look-at, or a file camera index;
+    ``camera.frame=file`` takes the pose or look-at in the scene file's coordinates
+    (:attr:`Scene.world_T_file` maps them)."""
     fov = cfg.get("fov_x_deg")
+    frame = cfg.get("frame", "world")
+    if frame not in ("world", "file"):
+        raise ValueError(f"camera.frame must be world or file, got {frame!r}")
+    to_world = torch.from_numpy(scene.world_T_file if frame == "file" else np.eye(4))
+    turn = to_world[:3, :3] / torch.linalg.det(to_world[:3, :3]).abs() ** (1 / 3)  # the rotation, scale left out
     if cfg.get("world_T_cam") is not None:
         pose = torch.tensor(OmegaConf.to_container(cfg.world_T_cam), dtype=torch.float64)
+        pose = torch.cat([torch.cat([turn @ pose[:3, :3], (to_world @ pose[:, 3])[:3, None]], dim=1), pose[3:]])
     elif cfg.get("eye") is not None:
-        pose = look_at(_vector(cfg, "eye"), _vector(cfg, "target"), _vector(cfg, "up"))
+
+        def point(key: str) -> torch.Tensor:
+            return (to_world @ torch.cat([_vector(cfg, key), torch.ones(1, dtype=torch.float64)]))[:3]
+
+        pose = look_at(point("eye"), point("target"), turn @ _vector(cfg, "up"))
     else:
         if not scene.cameras:
             raise ValueError(f"scene {scene.name!r} defines no camera: give camera.world_T_cam or camera.eye/target")

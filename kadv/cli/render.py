@@ -29,6 +29,7 @@ from kadv.cli.common import (
     camera_from_config,
     check_render_config,
     checks_overrides,
+    frame_note,
     renderer_from_config,
     reports_user_errors,
     scene_from_config,
@@ -48,6 +49,8 @@ def main(cfg: DictConfig) -> None:
     """Render the configured scene from the configured camera."""
     out_dir = Path(HydraConfig.get().runtime.output_dir)
     scene = scene_from_config(cfg.scene)
+    if (note := frame_note(scene)) is not None:
+        log.info(note)
     world_T_cam, fov = camera_from_config(cfg.camera, scene)
     height, width, supersample = check_render_config(cfg.render)
     penalty = PenaltyConfig(**OmegaConf.to_container(cfg.penalty, resolve=True))
@@ -77,6 +80,7 @@ def main(cfg: DictConfig) -> None:
         "scene": scene.name,
         "triangles": scene.num_triangles,
         "world_T_cam": world_T_cam.tolist(),
+        "world_T_file": scene.world_T_file.tolist(),
         "camera": note,
         "K": K.tolist(),
         "fov_x_deg": fov,

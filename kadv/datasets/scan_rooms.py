@@ -10,13 +10,16 @@ ceiling, floating fragments, and a winding that nothing keeps consistent.
 from __future__ import annotations
 
 import dataclasses
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 import trimesh
+from scipy.spatial.transform import Rotation
 
+from kadv.geometry import look_at
 from kadv.io import atomic_write
 from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.render.raycast import pixel_angle
@@ -32,9 +35,12 @@ __all__ = [
     "write_replica",
     "write_scan",
     "write_scannet",
+    "write_scannetpp",
 ]
 
 _VIEW_OFFSET = 0.02  # metres off the surface the colour of a vertex is looked at from
+_WALL_SIDES = {"x-": (0, 0), "x+": (0, 1), "z-": (2, 0), "z+": (2, 1)}  # side -> (axis, low or high end)
+_WALL_REACH = 0.05  # metres from the room's box within which a face belongs to one of its walls
 
 
 @dataclass(frozen=True)
@@ -52,6 +58,12 @@ class ScanLikeSettings:
         floaters: fragments of surface floating in the room, a few triangles each.
         flip_share: share of triangles whose winding is reversed.
         bake: the baked light the colours are rendered with.
+        cut_height: metres above the floor where the scan stops (an operator who swept at chest
+            height): everything higher is left out, the ceiling with it; None: the whole room.
+        missing_walls: walls left out whole, each named by the side of the room it bounds: ``x-``,
+            ``x+``, ``z-``, ``z+`` (kadv's y-up frame).
+        capture_views: camera poses along the synthetic path it was "captured" along (a loop
+            round the room at chest height, looking in), written in each layout's trajectory format.
     """
 
     edge: float = 0.1
@@ -63,6 +75,14 @@ class ScanLikeSettings:
     floaters: int = 12
     flip_share: float = 0.5
     bake: BakeConfig = dataclasses.field(default_factory=BakeConfig)
+    cut_height: float | None = None
+    missing_walls: tuple[str, ...] = ()
+    capture_views: int = 48
+
+    def __post_init__(self) -> None:
+        unknown = sorted(set(self.missing_walls) - set(_WALL_SIDES))
+        if unknown:
+            raise ValueError(f"missing_walls: no side {', '.join(unknown)}; the sides are {', '.join(_WALL_SIDES)}")
 
 
 @dataclass
@@ -75,6 +95,7 @@ class ScanLike:
         colors: (V, 3) uint8 sRGB colour captured at each vertex.
         source: the room it was made from.
         missing_ceiling: (P, 4) the ceiling's missing patches: centre x, y, z and radius, metres.
+        trajectory: (N, 4, 4) world_T_cam (OpenCV camera) of the synthetic capture path.
     """
 
     vertices: np.ndarray
@@ -82,6 +103,7 @@ class ScanLike:
     colors: np.ndarray
     source: Scene
     missing_ceiling: np.ndarray
+    trajectory: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 4, 4)))
 
 
 def _interior(room: Scene) -> np.ndarray:
@@ -149,17 +171,25 @@ def scan_like(room: Scene, seed: int = 0, settings: ScanLikeSettings | None = No
         removed |= ceiling & (np.linalg.norm(centroids - centre, axis=1) < radius)
         patches.append([*centre, radius])
     keep &= ~removed
+    box = room.camera_region
+    if settings.cut_height is not None:  # a sweep at chest height: nothing above it
+        keep &= vertices[faces][:, :, 1].max(axis=1) <= box[0, 1] + settings.cut_height
+    for side in settings.missing_walls:
+        axis, end = _WALL_SIDES[side]
+        keep &= np.abs(centroids[:, axis] - box[end, axis]) > _WALL_REACH
     faces = faces[keep]
     # surface noise and irregular triangles: every vertex moved a little
     # irregular triangles: every vertex slid along its surface; then the surface noise across it
     slide = rng.uniform(-1, 1, vertices.shape) * settings.jitter * settings.edge * 0.5
     slide -= np.einsum("vi,vi->v", slide, normals)[:, None] * normals
     vertices = vertices + slide + rng.normal(0.0, settings.noise, vertices.shape)
-    # floaters: a few small triangles each, in the room's free space
-    box = room.camera_region
+    # floaters: a few small triangles each, in the room's free space, below the cut
+    if settings.cut_height is not None:
+        box = box.copy()
+        box[1, 1] = min(box[1, 1], box[0, 1] + settings.cut_height)
     extra_vertices, extra_faces, extra_colours = [], [], []
     for k in range(settings.floaters):
-        centre = rng.uniform(box[0] + 0.3, box[1] - 0.3)
+        centre = rng.uniform(box[0] + 0.3, np.maximum(box[1] - 0.3, box[0] + 0.3))
         corners = centre + rng.normal(0.0, 0.03, (4, 3))
         start = len(vertices) + 4 * k
         extra_vertices.append(corners)
@@ -171,7 +201,35 @@ def scan_like(room: Scene, seed: int = 0, settings: ScanLikeSettings | None = No
         colours = np.concatenate([colours, *[c.astype(np.uint8) for c in extra_colours]])
     flip = rng.uniform(size=len(faces)) < settings.flip_share
     faces = np.where(flip[:, None], faces[:, ::-1], faces)
-    return ScanLike(vertices, faces.astype(np.int64), colours, room, np.array(patches).reshape(-1, 4))
+    if settings.cut_height is not None or settings.missing_walls:  # what was cut away leaves no vertex behind
+        used, faces = np.unique(faces, return_inverse=True)
+        vertices, colours, faces = vertices[used], colours[used], faces.reshape(-1, 3)
+    scan = ScanLike(vertices, faces.astype(np.int64), colours, room, np.array(patches).reshape(-1, 4))
+    scan.trajectory = _capture_path(room.camera_region, settings)
+    return scan
+
+
+def _capture_path(box: np.ndarray, settings: ScanLikeSettings) -> np.ndarray:
+    """world_T_cam (N, 4, 4): a loop round the room's middle, a quarter of its size in from its
+    walls, at chest height (below a cut), each view looking across the room, a little down."""
+    centre, half = (box[0] + box[1]) / 2, (box[1] - box[0]) / 2
+    height = box[0, 1] + min(1.3, 0.8 * (settings.cut_height or np.inf))
+    angle = np.linspace(0.0, 2.0 * np.pi, settings.capture_views, endpoint=False)
+    eyes = np.stack([centre[0] + 0.5 * half[0] * np.cos(angle), np.full_like(angle, height),
+                     centre[2] + 0.5 * half[2] * np.sin(angle)], axis=1)  # fmt: skip
+    targets = np.stack([centre[0] - half[0] * np.cos(angle + 0.6), np.full_like(angle, height - 0.4),
+                        centre[2] - half[2] * np.sin(angle + 0.6)], axis=1)  # fmt: skip
+    return look_at(torch.from_numpy(eyes), torch.from_numpy(targets)).numpy()
+
+
+def _file_poses(world_T_cam: np.ndarray, file_T_world: np.ndarray) -> np.ndarray:
+    """Camera poses (N, 4, 4) in a layout's file frame (``file_T_world`` rigid)."""
+    return file_T_world[None] @ world_T_cam
+
+
+# kadv's y-up world to the scan layouts' Z-up frame, as a (4, 4) map
+_Z_UP_FROM_WORLD = np.eye(4)
+_Z_UP_FROM_WORLD[:3, :3] = rotation_to_y_up("z").T
 
 
 def _z_up(vertices: np.ndarray) -> np.ndarray:
@@ -207,11 +265,15 @@ def _ply_bytes(vertices: np.ndarray, colours: np.ndarray, polygons: list[np.ndar
     return ("\n".join(header) + "\n").encode() + vertex.tobytes() + b"".join(rows)
 
 
-def write_scannet(scan: ScanLike, folder: str | Path, scene: str = "scene0000_00", yaw_deg: float = 30.0) -> Path:
+def write_scannet(
+    scan: ScanLike, folder: str | Path, scene: str = "scene0000_00", yaw_deg: float = 30.0, sens: bool = False
+) -> Path:
     """ScanNet's layout: ``<scene>/<scene>_vh_clean_2.ply`` (binary, vertex x y z, red green blue
     alpha; triangles) in the sensor's own frame, Z up, metres, and ``<scene>/<scene>.txt`` whose
     ``axisAlignment`` (row-major 4 x 4) maps it into the aligned frame (here: the room's, turned by
-    ``yaw_deg`` about z and shifted). Returns the mesh's path."""
+    ``yaw_deg`` about z and shifted); the capture path as SensReader exports it, ``pose/<i>.txt``
+    (camera-to-world in the sensor's frame), or with ``sens`` as ``<scene>.sens`` (its frames'
+    colour and depth a few stand-in bytes each). Returns the mesh's path."""
     folder = Path(folder) / scene
     folder.mkdir(parents=True, exist_ok=True)
     angle = np.radians(yaw_deg)
@@ -224,17 +286,67 @@ def write_scannet(scan: ScanLike, folder: str | Path, scene: str = "scene0000_00
     atomic_write(mesh, lambda tmp: tmp.write_bytes(data))
     text = "axisAlignment = " + " ".join(f"{v:.9g}" for v in alignment.ravel()) + "\nsceneType = Living room\n"
     atomic_write(folder / f"{scene}.txt", lambda tmp: tmp.write_text(text))
+    poses = _file_poses(scan.trajectory, np.linalg.inv(alignment) @ _Z_UP_FROM_WORLD)
+    if sens:
+        atomic_write(folder / f"{scene}.sens", lambda tmp: tmp.write_bytes(_sens_bytes(poses)))
+    else:
+        (folder / "pose").mkdir(exist_ok=True)
+        for i, pose in enumerate(poses):
+            text = "\n".join(" ".join(f"{v:.9g}" for v in row) for row in pose) + "\n"
+            atomic_write(folder / "pose" / f"{i}.txt", lambda tmp, t=text: tmp.write_text(t))
     return mesh
+
+
+def _sens_bytes(poses: np.ndarray) -> bytes:
+    """A ScanNet ``.sens`` (version 4) holding ``poses`` (N, 4, 4), each frame's colour and depth a
+    few stand-in bytes (a reader must skip them)."""
+    header = struct.pack("<IQ", 4, 6) + b"kadv-s" + struct.pack("<64f", *np.eye(4).ravel().tolist() * 4)
+    header += struct.pack("<ii4If", 2, 1, 32, 24, 32, 24, 1000.0) + struct.pack("<Q", len(poses))
+    frames = [
+        struct.pack("<16f", *pose.ravel().tolist()) + struct.pack("<QQQQ", i, i, 7, 5) + bytes(range(7)) + bytes(5)
+        for i, pose in enumerate(poses)
+    ]
+    return header + b"".join(frames)
 
 
 def write_arkitscenes(scan: ScanLike, folder: str | Path, video_id: str = "41069025") -> Path:
     """ARKitScenes' layout: ``<video_id>/<video_id>_3dod_mesh.ply`` (binary, vertex x y z, red
-    green blue alpha; triangles), Z up, metres. Returns the mesh's path."""
+    green blue alpha; triangles), Z up, metres, and the capture path as ``lowres_wide.traj`` (per
+    line a timestamp, the world-to-camera axis-angle and translation). Returns the mesh's path."""
     folder = Path(folder) / video_id
     folder.mkdir(parents=True, exist_ok=True)
     mesh = folder / f"{video_id}_3dod_mesh.ply"
     data = _ply_bytes(_z_up(scan.vertices), scan.colors, [scan.faces])
     atomic_write(mesh, lambda tmp: tmp.write_bytes(data))
+    lines = []
+    for i, pose in enumerate(_file_poses(scan.trajectory, _Z_UP_FROM_WORLD)):
+        camera_T_world = np.linalg.inv(pose)
+        values = [*Rotation.from_matrix(camera_T_world[:3, :3]).as_rotvec(), *camera_T_world[:3, 3]]
+        lines.append(f"{1000 + 0.1 * i:.3f} " + " ".join(f"{v:.9g}" for v in values))
+    text = "\n".join(lines) + "\n"
+    atomic_write(folder / "lowres_wide.traj", lambda tmp: tmp.write_text(text))
+    return mesh
+
+
+def write_scannetpp(scan: ScanLike, folder: str | Path, scene: str = "0a5c013435") -> Path:
+    """ScanNet++'s layout: ``<scene>/scans/mesh_aligned_0.05.ply`` (binary, vertex x y z, red green
+    blue alpha; triangles), Z up, metres, and the capture path as COLMAP's
+    ``<scene>/dslr/colmap/images.txt`` (world-to-camera quaternions and translations). Returns the
+    mesh's path."""
+    folder = Path(folder) / scene
+    (folder / "scans").mkdir(parents=True, exist_ok=True)
+    mesh = folder / "scans" / "mesh_aligned_0.05.ply"
+    data = _ply_bytes(_z_up(scan.vertices), scan.colors, [scan.faces])
+    atomic_write(mesh, lambda tmp: tmp.write_bytes(data))
+    lines = ["# Image list with two lines of data per image:"]
+    for i, pose in enumerate(_file_poses(scan.trajectory, _Z_UP_FROM_WORLD)):
+        camera_T_world = np.linalg.inv(pose)
+        x, y, z, w = Rotation.from_matrix(camera_T_world[:3, :3]).as_quat()
+        values = " ".join(f"{v:.9g}" for v in (w, x, y, z, *camera_T_world[:3, 3]))
+        lines += [f"{i + 1} {values} 1 DSC{i:05d}.JPG", "12.5 20.5 -1"]
+    (folder / "dslr" / "colmap").mkdir(parents=True, exist_ok=True)
+    text = "\n".join(lines) + "\n"
+    atomic_write(folder / "dslr" / "colmap" / "images.txt", lambda tmp: tmp.write_text(text))
     return mesh
 
 
@@ -318,6 +430,13 @@ def write_matterport(
         Image.fromarray(image).save(folder / f"{name}.jpg", quality=95)
         mtl += [f"newmtl {name}", "Ka 1 1 1", "Kd 1 1 1", f"map_Kd {name}.jpg", ""]
     atomic_write(folder / f"{house}.mtl", lambda tmp: tmp.write_text("\n".join(mtl)))
+    conf = ["dataset matterport", f"n_images {len(scan.trajectory)}"]
+    for i, pose in enumerate(_file_poses(scan.trajectory, _Z_UP_FROM_WORLD)):
+        gl = pose @ np.diag([1.0, -1.0, -1.0, 1.0])  # OpenGL's camera axes, as Matterport writes them
+        conf.append(f"scan d{i}.png i{i}.jpg " + " ".join(f"{v:.9g}" for v in gl.ravel()))
+    (folder / "undistorted_camera_parameters").mkdir(exist_ok=True)
+    text = "\n".join(conf) + "\n"
+    atomic_write(folder / "undistorted_camera_parameters" / f"{house}.conf", lambda tmp: tmp.write_text(text))
     path = folder / f"{house}.obj"
     text = "\n".join([*obj, *uv_lines, *face_lines]) + "\n"
     atomic_write(path, lambda tmp: tmp.write_text(text))
@@ -326,6 +445,7 @@ def write_matterport(
 
 SCAN_LAYOUTS = {
     "scannet": write_scannet,
+    "scannetpp": write_scannetpp,
     "arkitscenes": write_arkitscenes,
     "replica": write_replica,
     "matterport": write_matterport,

@@ -19,7 +19,14 @@ optical centre instead:
 - *too close*: the centre is nearer than ``min_distance`` to a surface or some of the view's
   pixels are nearer than the near plane.
 - *uninformative*: a view that is otherwise valid but where one plane (a wall seen close, the
-  floor) covers more than ``max_plane_share`` of the pixels that hit a surface. A lone plane's
+  floor) covers more than ``max_plane_share`` of the pixels that hit a surface.
+
+A scan (``render.lighting=scanned``) may stop below eye height, with no ceiling, and miss whole
+walls: operators sweep at chest height. In such a scan (:func:`scan_has_ceiling` is False) a ray
+that leaves its bounds over its top or through a side is what the scan looks like, not a hole: the
+probe counts only rays that escape through its floor, and the hole test only pixels whose rays do
+(the others stay out of the mask all the same). A centre above its top or beyond its bounds is
+outside the scene. A lone plane's
   ground truth, min-max normalised, is a ramp that a model's nearly flat guess misses by a wide
   margin while its delta1 stays near 1, so the view's L_depth says nothing about the model.
 """
@@ -46,6 +53,7 @@ from kadv.render.raycast import ExactRenderer, RenderOutput
 __all__ = [
     "SCAN_PLANE_TOLERANCE",
     "SCAN_PROBE_ELEVATION",
+    "SCAN_TOP_TOLERANCE",
     "ValidityLimits",
     "ViewValidity",
     "dominant_plane_shares",
@@ -54,6 +62,8 @@ __all__ = [
     "plane_labels",
     "plane_shares",
     "probe_directions_hits",
+    "scan_exits",
+    "scan_has_ceiling",
     "view_validity",
 ]
 
@@ -63,11 +73,15 @@ UNINFORMATIVE = "uninformative"
 SCAN_PROBE_ELEVATION = 15.0
 # metres from a scan's dominant plane within which a hit counts as on it (a scan's noise is millimetres)
 SCAN_PLANE_TOLERANCE = 0.03
+# metres below a scan's top within which a ray leaving its bounds counts as leaving over the top
+SCAN_TOP_TOLERANCE = 0.05
 # Triangles lie in one plane when their unit normals agree to ~1 degree and their offsets to 2 cm:
 # coarse enough for a wall split into many triangles, fine enough to part a table top from the floor.
 _PLANE_NORMAL_STEP, _PLANE_OFFSET_STEP = 0.02, 0.02
 _PLANE_LABELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_SCAN_CEILINGS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 _DEVICE_PLANE_LABELS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_SCAN_CEILINGS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 @dataclass(frozen=True)
@@ -98,6 +112,11 @@ class ViewValidity:
             (:meth:`~kadv.render.ExactRenderer.hidden_side`: with direct lighting a back face).
         distance: distance from the optical centre to the nearest surface, metres.
         plane_share: share of the pixels that hit a surface which lie on the most common plane.
+        past_top_fraction, past_side_fraction: fractions of the view's pixels that see nothing and
+            whose ray leaves a scan with no ceiling over its top, or through a side of its bounds
+            (a missing wall; :func:`scan_exits`); None: 0 (any other scene).
+        off_scan: whether the centre stands above such a scan's top or beyond its bounds (None:
+            no scene of that kind).
         limits: what the figures are judged by.
         envelope: the views' pose figures when a search bounds them: a view that is otherwise
             valid but lies outside the envelope is "outside the envelope".
@@ -110,6 +129,9 @@ class ViewValidity:
     probe_back_fraction: torch.Tensor
     distance: torch.Tensor
     plane_share: torch.Tensor
+    past_top_fraction: torch.Tensor | None = None
+    past_side_fraction: torch.Tensor | None = None
+    off_scan: torch.Tensor | None = None
     limits: ValidityLimits = field(default_factory=ValidityLimits)
     envelope: EnvelopeFigures | None = None
 
@@ -127,24 +149,44 @@ class ViewValidity:
     @property
     def valid(self) -> torch.Tensor:
         """(B,) bool on the CPU, True where the verdict is "valid"."""
-        return torch.tensor([v == VALID for v in self.verdicts])
+        return torch.tensor([v == VALID for v in self.verdicts], dtype=torch.bool)
+
+    def _share(self, figure: torch.Tensor | None) -> torch.Tensor:
+        return torch.zeros_like(self.miss_fraction) if figure is None else figure.to(self.miss_fraction.device)
+
+    @property
+    def hole_fraction(self) -> torch.Tensor:
+        """(B,) the fraction of pixels that see nothing where a scan has a surface to see: the misses
+        less those past a ceilingless scan's top and its sides."""
+        return self.miss_fraction - self._share(self.past_top_fraction) - self._share(self.past_side_fraction)
+
+    @property
+    def surface_fraction(self) -> torch.Tensor:
+        """(B,) the fraction of the pixels a surface could be seen at (those not past a ceilingless
+        scan's top) that hit one."""
+        return (1.0 - self.miss_fraction) / (1.0 - self._share(self.past_top_fraction)).clamp_min(1e-12)
 
     @functools.cached_property
     def _judged(self) -> tuple[list[str], list[str]]:
+        above = self.off_scan if self.off_scan is not None else torch.zeros_like(self.distance, dtype=torch.bool)
         figures = [
             self.probe_miss_fraction,
             self.probe_back_fraction,
             self.distance,
             self.near_fraction,
             self.plane_share,
-            self.miss_fraction,
+            self.hole_fraction,
+            above.to(self.distance.device, self.distance.dtype),
         ]
-        probe_miss, probe_back, distance, near_fraction, share, missed = torch.stack(figures).cpu()  # one copy
+        probe_miss, probe_back, distance, near_fraction, share, missed, above = torch.stack(figures).cpu()  # one copy
         limits, verdicts, reasons = self.limits, [], []
         outside_envelope = self.envelope.reasons() if self.envelope is not None else [None] * len(distance)
         for b in range(len(distance)):
             miss_frac, back_frac = float(probe_miss[b]), float(probe_back[b])
-            if miss_frac > limits.outside_threshold:
+            if above[b]:
+                verdicts.append(OUTSIDE)
+                reasons.append("the centre stands above the scan's top or beyond its bounds")
+            elif miss_frac > limits.outside_threshold:
                 verdicts.append(OUTSIDE)
                 reasons.append(f"{miss_frac:.0%} of probe rays escape the scene (> {limits.outside_threshold:.0%})")
             elif back_frac > limits.inside_threshold:
@@ -339,13 +381,62 @@ def probe_directions_hits(
     return ~hits.hit.reshape(shape), renderer.hidden_side(hits, rays).reshape(shape)
 
 
+def scan_has_ceiling(renderer: ExactRenderer) -> bool:
+    """Whether a scan's top is a ceiling: horizontal surfaces within :data:`SCAN_TOP_TOLERANCE` of its
+    top cover a fifth of its footprint (a room with a few patches of ceiling missing), rather than
+    the top of walls that stop below it (a sweep at chest height). Computed once per scene."""
+    if renderer not in _SCAN_CEILINGS:
+        scene = renderer.scene
+        corners = scene.vertices[scene.faces]
+        normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        area = np.linalg.norm(normal, axis=1) / 2
+        flat = np.abs(normal[:, 1]) > 0.9 * np.maximum(2 * area, 1e-300)
+        lo, hi = scene.bounds
+        high = corners[:, :, 1].min(axis=1) >= hi[1] - SCAN_TOP_TOLERANCE
+        footprint = (hi[0] - lo[0]) * (hi[2] - lo[2])
+        _SCAN_CEILINGS[renderer] = bool(area[flat & high].sum() >= 0.2 * footprint)
+    return _SCAN_CEILINGS[renderer]
+
+
+def scan_exits(
+    renderer: ExactRenderer, origins: torch.Tensor, directions: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(over the top, through a side) booleans (N,): where each ray (origins and directions (N, 3))
+    would leave the scene's bounds, the top taken within :data:`SCAN_TOP_TOLERANCE` of it; neither:
+    through the bottom.
+
+    Examples:
+        >>> import kadv
+        >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
+        >>> origin = torch.tensor([[2.0, 1.5, 2.5]] * 3, dtype=torch.float64)
+        >>> up, level, down = [0.3, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.2]
+        >>> top, side = scan_exits(room, origin, torch.tensor([up, level, down], dtype=torch.float64))
+        >>> top.tolist(), side.tolist()
+        ([True, False, False], [False, True, False])
+    """
+    lo, hi = (torch.as_tensor(b, dtype=torch.float64, device=origins.device) for b in renderer.scene.bounds)
+    origins, directions = origins.double(), directions.double()
+    with torch.no_grad():
+        step = torch.where(directions.abs() > 1e-12, directions, torch.full_like(directions, 1e-12))
+        far = torch.maximum((lo - origins) / step, (hi - origins) / step)
+        leave = far.amin(dim=-1).clamp_min(0.0)
+        height = origins[..., 1] + leave * directions[..., 1]
+    top = height >= hi[1] - SCAN_TOP_TOLERANCE
+    return top, ~top & (height > lo[1] + SCAN_TOP_TOLERANCE)
+
+
 def _scan_probe(renderer: ExactRenderer, centres: torch.Tensor, directions: torch.Tensor) -> tuple:
     """The probe of a scan, whose winding and closedness nothing keeps: only the directions at most
     :data:`SCAN_PROBE_ELEVATION` above the horizon (a scan's ceiling may be missing), and instead of
     the side a ray meets, the parity of the surfaces it crosses: from the free space of a room a ray
     crosses its shell once (or once more through each closed object on its way), from inside an
     object twice (the object's surface, then the shell). (miss, even) booleans (B, N') on the
-    renderer's device: the ray escapes; it crosses an even, non-zero number of surfaces."""
+    renderer's device: the ray escapes; it crosses an even, non-zero number of surfaces.
+
+    A scan with no ceiling (:func:`scan_has_ceiling`) may stop below eye height and lack walls: a
+    ray that leaves its bounds over the top passed over a wall, crossing no shell, so one crossing
+    is counted for it; neither it nor one that leaves through a side (where a wall may be missing)
+    counts as escaping: only a ray that leaves through the floor does."""
     low = directions[directions[:, 1] <= math.sin(math.radians(SCAN_PROBE_ELEVATION))]
     origins = centres[:, None, :].expand(len(centres), len(low), 3).reshape(-1, 3)
     rays = low[None].expand(len(centres), len(low), 3).reshape(-1, 3)
@@ -354,8 +445,14 @@ def _scan_probe(renderer: ExactRenderer, centres: torch.Tensor, directions: torc
     t64 = t.double()
     repeated = torch.zeros_like(ray_ids, dtype=torch.bool)
     repeated[1:] = (ray_ids[1:] == ray_ids[:-1]) & ((t64[1:] - t64[:-1]).abs() <= 1e-3)
-    crossings = torch.bincount(ray_ids[~repeated], minlength=len(origins)).reshape(len(centres), len(low))
-    return crossings == 0, (crossings > 0) & (crossings % 2 == 0)
+    crossings = torch.bincount(ray_ids[~repeated], minlength=len(origins))
+    escaped = crossings == 0
+    if not scan_has_ceiling(renderer):
+        top, side = scan_exits(renderer, origins, rays)
+        crossings = crossings + top.to(crossings.dtype)
+        escaped &= ~(top | side)
+    shape = (len(centres), len(low))
+    return escaped.reshape(shape), ((crossings > 0) & (crossings % 2 == 0)).reshape(shape)
 
 
 def view_validity(
@@ -387,7 +484,7 @@ def view_validity(
             fraction above which it is inside an object), ``max_plane_share`` (a view whose most
             common plane covers more of its hit pixels is "uninformative"; None: never),
             ``max_miss_share`` (so is a scan's view, ``render.lighting=scanned``, where more of
-            the pixels see nothing; None, or any other scene: never).
+            the pixels see nothing below the scan's top; None, or any other scene: never).
 
     Examples:
         >>> import kadv
@@ -406,25 +503,38 @@ def view_validity(
     if not scanned:
         limits = dataclasses.replace(limits, max_miss_share=None)
     centres = pose[:, :3, 3].detach().double().to(device, non_blocking=True)
-    if render is None:
+    partial = scanned and not scan_has_ceiling(renderer)
+    if render is None or partial:
         origins, directions = pixel_rays(pose, K, height, width, device=device)
+    if render is None:
         hits = renderer.cast(origins, directions)
-        view_back = renderer.back_facing(hits, directions).reshape(batch, -1)
-        triangle_ids = hits.triangle_ids.reshape(batch, -1)
-        near_hit = (triangle_ids >= 0) & (hits.t.double().reshape(batch, -1) < limits.near)
+        view_back = renderer.back_facing(hits, directions).reshape(batch, height * width)
+        triangle_ids = hits.triangle_ids.reshape(batch, height * width)
+        near_hit = (triangle_ids >= 0) & (hits.t.double().reshape(batch, height * width) < limits.near)
         if scanned:
             reach = torch.where(hits.hit, hits.t, 0.0).double()[:, None]
-            points = (origins.reshape(-1, 3) + directions.reshape(-1, 3) * reach).reshape(batch, -1, 3)
+            points = (origins.reshape(-1, 3) + directions.reshape(-1, 3) * reach).reshape(batch, height * width, 3)
     else:
         check_shape(render.depth, f"B 1 {height} {width}", "render.depth", {"B": batch})
-        triangle_ids = render.triangle_ids.reshape(batch, -1).to(device)
-        view_back = render.back_face.reshape(batch, -1).to(device)
-        near_hit = (triangle_ids >= 0) & (render.depth.reshape(batch, -1).double().to(device) < limits.near)
+        triangle_ids = render.triangle_ids.reshape(batch, height * width).to(device)
+        view_back = render.back_face.reshape(batch, height * width).to(device)
+        near_hit = (triangle_ids >= 0) & (render.depth.reshape(batch, height * width).double().to(device) < limits.near)
         if scanned:
             points = render.points.to(device).flatten(2).transpose(1, 2)
+    past_top, past_side, off_scan = None, None, None
     if scanned:  # a scan's noisy triangles share no plane exactly
         plane_share = dominant_plane_shares(points.double(), triangle_ids >= 0)
-    else:
+    if partial:  # no ceiling: past its walls' tops and its missing walls is no hole
+        top, side = scan_exits(renderer, origins.reshape(-1, 3), directions.reshape(-1, 3))
+        missed = triangle_ids < 0
+        past_top = (missed & top.reshape(batch, height * width)).double().mean(dim=1)
+        past_side = (missed & side.reshape(batch, height * width)).double().mean(dim=1)
+        lo, hi = (torch.as_tensor(b, dtype=torch.float64, device=device) for b in renderer.scene.bounds)
+        off_scan = (centres[:, 1] >= hi[1] - SCAN_TOP_TOLERANCE) | (centres < lo).any(dim=1) | (centres > hi).any(dim=1)
+        # an opening where a wall is missing fills the view as that wall would: one plane more
+        hits = 1.0 - missed.double().mean(dim=1)
+        plane_share = torch.maximum(plane_share * hits, past_side) / (hits + past_side).clamp_min(1e-12)
+    if not scanned:
         plane_share = plane_shares(renderer, triangle_ids)
     probe_miss, probe_back = probe_directions_hits(renderer, centres, _probe_directions(probe_rays, device))
     return ViewValidity(
@@ -435,6 +545,9 @@ def view_validity(
         probe_back_fraction=probe_back.double().mean(dim=1),
         distance=distance_to_surface(renderer, centres).detach(),
         plane_share=plane_share,
+        past_top_fraction=past_top,
+        past_side_fraction=past_side,
+        off_scan=off_scan,
         limits=limits,
     )
 

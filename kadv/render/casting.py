@@ -116,6 +116,8 @@ class Open3DCaster(RayCaster):
         return torch.where(live, t, torch.inf), torch.where(live, ids, -1), torch.where(live[:, None], bary, 0.0)
 
     def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        if len(origins) == 0:  # Open3D's list_intersections crashes the process on no rays
+            return torch.zeros(0, dtype=torch.long), torch.zeros(0), torch.zeros(0, dtype=torch.long), torch.zeros(0, 2)
         result = self.scene.list_intersections(self._rays(origins, directions))
         return (
             torch.from_numpy(result["ray_ids"].numpy()).long(),

@@ -8,20 +8,24 @@ from pathlib import Path
 
 import numpy as np
 
+from kadv.scenes.gravity import estimate_up, rotation_onto_y
 from kadv.scenes.mitsuba import parse_mitsuba
 from kadv.scenes.ply import PlyMesh, read_ply
 from kadv.scenes.scans import recognise_scan
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 from kadv.scenes.textures import srgb_to_linear
+from kadv.scenes.trajectories import find_captured_path
 from kadv.scenes.trimesh_loader import TRIMESH_SUFFIXES, gltf_unlit, load_mesh_file
 
-__all__ = ["SUPPORTED_SUFFIXES", "UNLIT_GLTF", "load_scene", "ply_part"]
+__all__ = ["CAPTURED", "SUPPORTED_SUFFIXES", "UNLIT_GLTF", "load_scene", "ply_part"]
 
 log = logging.getLogger(__name__)
 
 SUPPORTED_SUFFIXES = (".xml", ".ply", *TRIMESH_SUFFIXES)
 # Scene.scan of a glTF whose materials are KHR_materials_unlit: captured colour, in glTF's own frame
 UNLIT_GLTF = "glTF (KHR_materials_unlit)"
+# Scene.scan of a file said to be captured (load_scene's captured=True) in no layout kadv knows
+CAPTURED = "captured (scene.options.captured=true)"
 
 
 def load_scene(
@@ -33,6 +37,7 @@ def load_scene(
     drop_emitters: bool = True,
     missing: str = "error",
     name: str | None = None,
+    captured: bool | None = None,
 ) -> Scene:
     """Load a scene file: Mitsuba ``.xml``; ``.ply`` (with its vertex colours, polygons of any size,
     :mod:`kadv.scenes.ply`); or ``.glb/.gltf/.obj/.off/.stl`` through trimesh.
@@ -41,12 +46,20 @@ def load_scene(
         path: the scene file.
         scale: metres per file unit; None: a recognised scan's (:func:`kadv.scenes.scans.recognise_scan`,
             metres), else 1.
-        up_axis: the file's up axis (``"y"`` or ``"z"``), rotated to kadv's y-up world; None: a
-            recognised scan's (``"z"``), else ``"y"``. The log says what was chosen for a scan.
+        up_axis: the file's up axis (``"y"`` or ``"z"``), rotated to kadv's y-up world, or
+            ``"auto"``: estimated from the mesh (:func:`kadv.scenes.gravity.estimate_up`: its floor
+            and dominant planes), for a reconstruction left in its first camera's frame; None: a
+            recognised scan's (``"z"``), else ``"y"``. The log says what was chosen for a scan, and
+            the angle ``auto`` turned the file.
         drop_transparent: leave out glass-like materials (they would hide what is behind them).
         drop_emitters: leave out light-source surfaces; their centres become the renderer's lights.
         missing: Mitsuba only: ``"error"`` or ``"skip"`` for referenced files that do not exist.
         name: label for reports; defaults to the folder name for ``scene.xml``, else the file stem.
+        captured: whether the file's colour is light a sensor captured (a scan, a photo-textured
+            reconstruction), to be shown as it is (``render.lighting=auto`` then renders it
+            ``scanned``): True or False as said; None: the recognised scan layouts and glTFs whose
+            materials are ``KHR_materials_unlit``. The log names the lighting chosen for any other
+            textured or coloured file, and how to ask for the other.
 
     Raises:
         FileNotFoundError: the path (or a file it references) does not exist.
@@ -72,9 +85,15 @@ def load_scene(
         log.info("%s: %s", path, chosen.describe())
         up_axis, scale = chosen.up_axis, chosen.scale
     scan = None if layout is None else layout.dataset
-    if scan is None and suffix in (".glb", ".gltf") and gltf_unlit(path):
+    if captured is not None:
+        scan = (scan or CAPTURED) if captured else None
+    elif scan is None and suffix in (".glb", ".gltf") and gltf_unlit(path):
         scan = UNLIT_GLTF
         log.info("%s: KHR_materials_unlit: its colour is shown as captured", path)
+    if captured is not None and not isinstance(captured, bool):
+        raise ValueError(f"scene.options.captured must be true, false or null, got {captured!r}")
+    if up_axis not in (None, "y", "z", "auto"):
+        raise ValueError(f"scene.options.up_axis must be y, z or auto, got {up_axis!r}")
     options = {
         "scale": 1.0 if scale is None else scale,
         "up_axis": up_axis or "y",
@@ -84,15 +103,56 @@ def load_scene(
     }
     if suffix == ".xml":
         parts, materials, cameras, lights, emitters = parse_mitsuba(path, missing=missing)
+        options["up_axis"] = _up(parts, options, path)
         return assemble_scene(parts, materials, cameras, lights, name=name, emitters=emitters, **options)
     if suffix == ".ply":
         mesh = read_ply(path)
         if layout is not None and layout.alignment is not None:  # into the dataset's aligned frame
             mesh.vertices = mesh.vertices @ layout.alignment[:3, :3].T + layout.alignment[:3, 3]
-        return assemble_scene([ply_part(mesh, 0, str(path))], [Material(name)], name=name, **options)
-    materials: list[Material] = []
-    parts = load_mesh_file(path, materials)
-    return assemble_scene(parts, materials, name=name, **options)
+        parts, materials = [ply_part(mesh, 0, str(path))], [Material(name)]
+    else:
+        materials = []
+        parts = load_mesh_file(path, materials)
+    options["up_axis"] = _up(parts, options, path)
+    if captured is None and scan is None and _coloured(parts, materials):
+        log.info(
+            "%s: not a scan kadv recognises: its colour is lit as a modelled scene's (render.lighting=auto: "
+            "baked); if it is captured light (a photo-textured scan), scene.options.captured=true shows it as "
+            "captured (scanned)",
+            path,
+        )
+    scene = assemble_scene(parts, materials, name=name, **options)
+    if suffix == ".ply" and layout is not None and layout.alignment is not None:
+        scene.world_T_file = scene.world_T_file @ layout.alignment  # the file's own frame is before alignment
+    captured_path = find_captured_path(path, None if layout is None else layout.dataset)
+    if captured_path is not None:
+        scene.trajectory = scene.to_world(captured_path.file_T_cam)
+        scene.trajectory_source = str(captured_path.source)
+        log.info("%s: %d captured camera poses from %s", path, len(scene.trajectory), captured_path.source)
+    return scene
+
+
+def _up(parts: list[MeshPart], options: dict, path: Path) -> str | np.ndarray:
+    """The up axis the options name, or for ``auto`` the rotation of the up the mesh implies
+    (:func:`kadv.scenes.gravity.estimate_up`), logged with the angle it turns the file."""
+    if options["up_axis"] != "auto":
+        return options["up_axis"]
+    offsets = np.cumsum([0] + [len(p.vertices) for p in parts])
+    vertices = np.concatenate([np.asarray(p.vertices, np.float64) for p in parts])
+    faces = np.concatenate([np.asarray(p.faces, np.int64).reshape(-1, 3) + o for p, o in zip(parts, offsets)])
+    estimate = estimate_up(vertices, faces, options["scale"])
+    angle = np.degrees(np.arccos(np.clip(estimate.up[1], -1.0, 1.0)))
+    frame = "a Manhattan axis" if estimate.manhattan else "its planes' normals"
+    log.info(
+        "%s: up_axis=auto: up is %s in the file's frame (%s; floor %.1f m²), %.1f° from its y: turned so",
+        path, np.round(estimate.up, 3).tolist(), frame, estimate.floor_area, angle,
+    )  # fmt: skip
+    return rotation_onto_y(estimate.up)
+
+
+def _coloured(parts: list[MeshPart], materials: list[Material]) -> bool:
+    """Whether a mesh file carries its own colour: a texture or vertex colours."""
+    return any(m.texture is not None for m in materials) or any(p.colors is not None for p in parts)
 
 
 def ply_part(mesh: PlyMesh, material: int, name: str) -> MeshPart:

@@ -9,7 +9,7 @@ import numpy as np
 from kadv.geometry.camera import Camera
 from kadv.scenes.emitters import DEFAULT_LAMP_RADIANCE, Emitters
 
-__all__ = ["CONDUCTOR_GREY", "Material", "MeshPart", "Scene", "assemble_scene", "rotation_to_y_up"]
+__all__ = ["CONDUCTOR_GREY", "Material", "MeshPart", "Scene", "assemble_scene", "rotation_to_y_up", "world_from_file"]
 
 # the display grey a metal is shaded with as diffuse, times its reflectance: a mirror is no white wall
 CONDUCTOR_GREY = 0.75
@@ -136,6 +136,12 @@ class Scene:
         scan: the dataset whose scan layout the file had (:mod:`kadv.scenes.scans`), or
             :data:`kadv.scenes.load.UNLIT_GLTF` for a glTF whose materials are unlit, or None: its
             colour is the light a sensor captured, so ``render.lighting=auto`` shows it as scanned.
+        world_T_file: (4, 4) the map from the file's coordinates (file units, its own axes, before a
+            dataset's alignment) to kadv's world (metres, y up): the scale, the turn to y-up and any
+            alignment (:func:`world_from_file`). Identity for a generated room.
+        trajectory: (N, 4, 4) world_T_cam (OpenCV camera) along which the scan was captured, in
+            kadv's world (:mod:`kadv.scenes.trajectories`), or None.
+        trajectory_source: the file the trajectory was read from.
     """
 
     vertices: np.ndarray
@@ -151,6 +157,18 @@ class Scene:
     emitters: Emitters = field(default_factory=Emitters)
     colors: np.ndarray | None = None
     scan: str | None = None
+    world_T_file: np.ndarray = field(default_factory=lambda: np.eye(4))
+    trajectory: np.ndarray | None = None
+    trajectory_source: str | None = None
+
+    def to_world(self, file_T_cam: np.ndarray) -> np.ndarray:
+        """Camera poses (N, 4, 4) in the file's own frame as world_T_cam in kadv's world: the
+        rotation turned (not scaled), the centre mapped by :attr:`world_T_file`."""
+        scale = np.cbrt(abs(np.linalg.det(self.world_T_file[:3, :3])))
+        out = np.array(file_T_cam, np.float64).copy()
+        out[:, :3, :3] = self.world_T_file[:3, :3] / scale @ out[:, :3, :3]
+        out[:, :3, 3] = out[:, :3, 3] @ self.world_T_file[:3, :3].T + self.world_T_file[:3, 3]
+        return out
 
     def __post_init__(self) -> None:
         self.vertices = np.asarray(self.vertices, np.float64).reshape(-1, 3)
@@ -198,13 +216,16 @@ class Scene:
         return self.interior if self.interior is not None else self.bounds
 
 
-def rotation_to_y_up(up_axis: str) -> np.ndarray:
-    """Rotation taking the file's up axis to +y (right-handed, no mirroring)."""
+def rotation_to_y_up(up_axis: str | np.ndarray) -> np.ndarray:
+    """Rotation taking the file's up axis to +y (right-handed, no mirroring); a (3, 3) rotation is
+    taken as it is (:func:`kadv.scenes.gravity.rotation_onto_y` of an estimated up)."""
+    if isinstance(up_axis, np.ndarray):
+        return up_axis
     if up_axis == "y":
         return np.eye(3)
     if up_axis == "z":
         return np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-    raise ValueError(f"up_axis must be 'y' or 'z', got {up_axis!r}")
+    raise ValueError(f"up_axis must be 'y', 'z' or 'auto', got {up_axis!r}")
 
 
 def assemble_scene(
@@ -215,7 +236,7 @@ def assemble_scene(
     *,
     name: str = "scene",
     scale: float = 1.0,
-    up_axis: str = "y",
+    up_axis: str | np.ndarray = "y",
     drop_transparent: bool = True,
     drop_emitters: bool = True,
     interior: np.ndarray | None = None,
@@ -230,7 +251,7 @@ def assemble_scene(
         cameras: file cameras in file coordinates.
         lights: (L, 3) light positions in file coordinates.
         scale: metres per file unit.
-        up_axis: the file's up axis, ``"y"`` or ``"z"``; the scene is rotated to y-up.
+        up_axis: the file's up axis, ``"y"`` or ``"z"``, or a (3, 3) rotation; the scene is rotated to y-up.
         drop_transparent: leave out triangles of transparent (glass) materials.
         drop_emitters: leave out light-source surfaces (their centroids become lights and their
             triangles area emitters).
@@ -292,8 +313,10 @@ def assemble_scene(
         pose[:3, 3] = rotation @ pose[:3, 3] * scale
         moved_cameras.append(Camera(pose, camera.fov_x_deg, camera.width, camera.height, camera.name))
     all_lights = np.concatenate(light_list) if light_list else np.zeros((0, 3))
-    if interior is not None:  # the rotated box's bounds: the rotation only permutes and flips axes
-        turned = np.asarray(interior, np.float64).reshape(2, 3) @ rotation.T * scale
+    if interior is not None:  # the rotated box's bounds: all eight corners, for any rotation
+        box = np.asarray(interior, np.float64).reshape(2, 3)
+        corners = np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3)
+        turned = corners @ rotation.T * scale
         interior = np.stack([turned.min(axis=0), turned.max(axis=0)])
     return Scene(
         vertices=all_vertices,
@@ -309,4 +332,12 @@ def assemble_scene(
         emitters=emitters.transformed(rotation, scale),
         colors=None if all(part.colors is None for part in parts) else np.concatenate(colors).astype(np.float32),
         scan=scan,
+        world_T_file=world_from_file(rotation, scale),
     )
+
+
+def world_from_file(rotation: np.ndarray, scale: float) -> np.ndarray:
+    """(4, 4): a point in file units, turned by ``rotation`` (3, 3) and scaled to metres."""
+    out = np.eye(4)
+    out[:3, :3] = rotation * scale
+    return out

@@ -130,3 +130,25 @@ def test_sampled_centres_lie_inside_the_room_not_on_a_large_outdoor_ground() -> 
     centres = poses[:, :3, 3].numpy()
     inside = ((centres > room_lo) & (centres < room_hi)).all(axis=1)
     assert inside.all(), centres[~inside]
+
+
+@pytest.mark.parametrize("lighting", ["direct", "scanned"])
+def test_every_function_on_the_init_views_path_takes_an_empty_batch(lighting) -> None:
+    """A scene where no candidate is left must end in a sentence, not in a reshape of nothing."""
+    import kadv
+    from kadv.attack import InitViewConfig, PenaltyConfig, captured_init_views, score_views
+    from kadv.penalties import distance_to_surface, step_guard, view_validity
+
+    renderer = kadv.ExactRenderer(kadv.box_room(seed=0), kadv.Shading(lighting=lighting))
+    none = torch.zeros(0, 4, 4, dtype=torch.float64)
+    points = torch.zeros(0, 3, dtype=torch.float64)
+    K = kadv.intrinsics_from_fov(70.0, 12, 16)
+    validity = view_validity(renderer, none, K, 12, 16, **PenaltyConfig().validity_options())
+    assert validity.verdicts == [] and validity.valid.dtype == torch.bool and len(validity.valid) == 0
+    assert renderer.render(none, K, 12, 16).rgb.shape == (0, 3, 12, 16)
+    assert [len(x) for x in renderer.intersections(points, points)] == [0, 0, 0, 0]
+    assert len(distance_to_surface(renderer, points)) == 0
+    assert len(step_guard(renderer, points, points, 0.1).allowed) == 0
+    scores = score_views(kadv.load_model("kadv_tiny"), renderer, none, torch.zeros(0), 12, 16)
+    assert len(scores.delta1) == 0 and len(scores.content()) == 0
+    assert captured_init_views(renderer, None, 0, InitViewConfig(), PenaltyConfig(), 12, 16) == []

@@ -168,3 +168,77 @@ def test_a_gltf_whose_colours_are_not_one_per_vertex_is_refused_naming_the_mesh(
     path = _patched_glb(tmp_path / "box.glb", tmp_path / "bad.glb", miscounted)
     with pytest.raises(ValueError, match=r"bad.glb: 'geometry_0' has 4 COLOR_0 colours for 8 vertices"):
         load_scene(path)
+
+
+def test_a_photo_textured_mesh_in_no_known_layout_says_its_lighting_and_can_be_said_captured(tmp_path, caplog) -> None:
+    """A textured OBJ named as no dataset names its files: lit as a modelled scene, and the log says
+    so and how to show it as captured; scene.options.captured=true makes it a scan (scanned under
+    render.lighting=auto), captured=false lights a recognised scan again."""
+    import logging
+
+    from omegaconf import OmegaConf
+
+    import kadv
+    from kadv.cli.common import resolve_lighting
+    from kadv.datasets.scan_rooms import scan_like, write_scan
+    from kadv.scenes.load import CAPTURED
+
+    obj = write_scan(scan_like(kadv.box_room(seed=0), seed=0), tmp_path, "matterport")
+    renamed = obj.with_name("my_phone_scan.obj")
+    renamed.write_text(obj.read_text())
+    renamed.with_suffix(".mtl").write_text(obj.with_suffix(".mtl").read_text())
+    with caplog.at_level(logging.INFO, logger="kadv.scenes.load"):
+        plain = load_scene(renamed)
+    assert plain.scan is None and "scene.options.captured=true shows it as captured" in caplog.text
+    assert resolve_lighting(plain, OmegaConf.create({"lighting": "auto"})) == "baked"
+    captured = load_scene(renamed, captured=True)
+    assert captured.scan == CAPTURED
+    assert resolve_lighting(captured, OmegaConf.create({"lighting": "auto"})) == "scanned"
+    assert load_scene(obj, captured=False).scan is None  # a recognised scan, lit again on request
+    with pytest.raises(ValueError, match=r"scene.options.captured must be true, false or null, got 'maybe'"):
+        load_scene(obj, captured="maybe")
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="kadv.scenes.load"):
+        load_scene(obj)
+    assert "captured=true" not in caplog.text  # a recognised scan needs no word
+
+
+def test_a_camera_in_the_files_own_coordinates_renders_what_the_same_camera_in_kadvs_world_does(tmp_path) -> None:
+    """A z-up scan (ARKitScenes) and a ScanNet scan moved by its axisAlignment: camera.frame=file
+    takes the camera as any viewer of the file would give it; the same numbers in kadv's world land
+    elsewhere, and the log says which frame is which, with the matrix between them."""
+    import kadv
+    from kadv.cli.render import main as render_main
+    from kadv.datasets.scan_rooms import write_scan
+
+    arkit = tmp_path / "41069025_3dod_mesh.ply"
+    _room_ply(arkit)
+    scannet = write_scan(kadv.datasets.scan_rooms.scan_like(kadv.box_room(seed=0), seed=0), tmp_path, "scannet")
+    for path, eye, target in ((arkit, [2.0, 1.2, -1.0], [2.0, 0.0, -4.0]), (scannet, [1.0, 1.5, 1.0], [4.0, 1.0, 2.5])):
+        world_T_file = kadv.load_scene(path).world_T_file
+        file_T_world = np.linalg.inv(world_T_file)
+        in_file = [(file_T_world @ [*p, 1.0])[:3].round(9).tolist() for p in (eye, target)]
+        up = (file_T_world[:3, :3] @ [0.0, 1.0, 0.0]).round(9).tolist()
+        base = ["kadv-render", "scene=file", f"scene.path={path}", "render.height=24", "render.width=32"]
+        base += ["camera.fov_x_deg=60", "render.lighting=direct"]
+        world = call_main(
+            render_main, [*base, "hydra.run.dir=w", f"camera.eye={eye}", f"camera.target={target}"], cwd=tmp_path
+        )
+        file_args = [f"camera.eye={in_file[0]}", f"camera.target={in_file[1]}", f"camera.up={up}", "camera.frame=file"]
+        from_file = call_main(render_main, [*base, "hydra.run.dir=f", *file_args], cwd=tmp_path)
+        assert world.returncode == 0 and from_file.returncode == 0, from_file.stderr
+        poses = [json.loads((tmp_path / d / "render.json").read_text()) for d in ("w", "f")]
+        np.testing.assert_allclose(poses[0]["world_T_cam"], poses[1]["world_T_cam"], atol=1e-6)
+        np.testing.assert_allclose(poses[1]["world_T_file"], world_T_file)
+        logged = from_file.stdout + from_file.stderr
+        assert "a point p of" in logged and "camera.frame=file" in logged
+        # the file's numbers read as kadv's world: another view (outside the room, for the z-up scan)
+        misread = call_main(
+            render_main, [*base, "hydra.run.dir=m", *file_args[:2], "camera.allow_invalid=true"], cwd=tmp_path
+        )
+        assert misread.returncode == 0
+        assert not np.allclose(
+            json.loads((tmp_path / "m" / "render.json").read_text())["world_T_cam"], poses[0]["world_T_cam"]
+        )
+    bad = call_main(render_main, [*base, "hydra.run.dir=b", "camera.frame=viewer"], cwd=tmp_path)
+    assert bad.returncode == 2 and "camera.frame must be world or file, got 'viewer'" in bad.stderr
