@@ -179,16 +179,17 @@ class Clock:
 
     The currency is the model pass: each image the model runs on is one forward pass, whatever its
     fidelity, and each backward pass through the model is one more. A batch of views may start
-    while the passes it may take fit in the count and the previous batch's duration still fits in
-    ``budget_seconds`` (so a search ends within about one batch of it). A ``progress`` bar (tqdm),
-    when set, advances by the passes spent.
+    while the passes it may take fit in the count and, at the last batch's seconds per pass, in
+    what is left of ``budget_seconds`` (so a search ends within about one batch of it, and a small
+    batch after a large one, a lane's step after a screening, still starts). A ``progress`` bar
+    (tqdm), when set, advances by the passes spent.
     """
 
     def __init__(self, passes: int | None, seconds: float | None, progress: Any = None) -> None:
         self.passes, self.seconds, self.progress = passes, seconds, progress
         self.started = time.perf_counter()
         self.budget = Budget()
-        self._last_batch = 0.0
+        self._pass_seconds = 0.0  # the last batch's seconds per pass
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.started
@@ -201,7 +202,10 @@ class Clock:
         """How many of ``count`` views may be scored now, each taking up to ``cost`` passes (2: a
         forward and a backward pass); 0: the search is over."""
         count = min(count, self.remaining() // cost)
-        return count if count > 0 and not self._out_of_time() else 0
+        if self.seconds is not None and self._pass_seconds > 0.0:
+            left = self.seconds - self.elapsed()
+            count = min(count, max(0, math.floor(left / (self._pass_seconds * cost))))
+        return max(count, 0)
 
     def spent(self, views: int, seconds: float, backward: int = 0, screened: bool = False) -> None:
         """Count a batch of ``views`` forward passes (screened ones: at a cheap fidelity) and
@@ -209,13 +213,9 @@ class Clock:
         self.budget.forward += views
         self.budget.screened += views if screened else 0
         self.budget.backward += backward
-        self._last_batch = seconds
+        self._pass_seconds = seconds / max(views + backward, 1)
         if self.progress is not None:
             self.progress.update(views + backward)
-
-    def _out_of_time(self) -> bool:
-        """Whether another batch as long as the last would overrun the seconds budget."""
-        return self.seconds is not None and self.elapsed() + self._last_batch > self.seconds
 
 
 @dataclass

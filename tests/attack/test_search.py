@@ -33,7 +33,7 @@ from kadv.attack import (
     separated,
 )
 from kadv.attack.init_views import InitViewError, fit_into_envelope
-from kadv.attack.search import scaled_size
+from kadv.attack.search import Clock, scaled_size
 from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam
 from kadv.models import count_passes
 from kadv.penalties import ENVELOPES, Envelope
@@ -171,6 +171,20 @@ def test_every_method_runs_the_model_no_more_than_its_budget_of_passes(
         assert all(abs(p) <= h + 1e-9 for p, h in zip(record.params, half.tolist()))
 
 
+def test_the_clock_predicts_a_batch_by_its_passes() -> None:
+    clock = Clock(None, 10.0)
+    clock.started -= 6.0  # six seconds gone, then a screening of 32 passes took five
+    clock.spent(32, 5.0, screened=True)
+    # four seconds left at 5/32 s a pass: a two-lane step (forward and backward) fits, 32 more do not
+    assert clock.allows(2, cost=2) == 2
+    most = math.floor((10.0 - clock.elapsed()) / (5.0 / 32))
+    allowed = clock.allows(32)
+    assert math.floor((10.0 - clock.elapsed()) / (5.0 / 32)) <= allowed <= most < 32
+    clock.started -= 4.0  # the budget is spent
+    assert clock.allows(1) == 0
+    assert Clock(8, None).allows(5, cost=2) == 4 and Clock(8, None).allows(100) == 8
+
+
 @pytest.mark.parametrize("method", BUILT_IN)
 def test_every_method_stays_within_its_time_budget(method, tiny_objective, differentiable, file_view) -> None:
     started = time.perf_counter()
@@ -187,7 +201,9 @@ def test_every_method_stays_within_its_time_budget(method, tiny_objective, diffe
     elapsed = time.perf_counter() - started
     view = result.views[0]
     batches = len({r.step for r in view.records})
-    assert batches >= 2 and view.budget.forward == len(view.records)
+    assert view.budget.forward == len(view.records)
+    # a second batch is drawn unless the first took over half the budget (a loaded machine)
+    assert batches >= 2 or view.budget.seconds > 1.5 / 2
     # a batch starts only while the previous batch's duration still fits in the budget
     assert view.budget.seconds <= 1.5 + 2 * elapsed / batches
 
