@@ -7,7 +7,6 @@ best, or an ``init_params.json`` written by an earlier run.
 
 from __future__ import annotations
 
-import collections
 import json
 import math
 from dataclasses import asdict, dataclass, field, replace
@@ -28,7 +27,14 @@ from kadv.geometry import (
 from kadv.io import write_json
 from kadv.losses import depth_metrics
 from kadv.models import DepthModel
-from kadv.penalties import PenaltyConfig, distance_to_surface, plane_counts, step_guard, view_validity
+from kadv.penalties import (
+    PenaltyConfig,
+    ViewValidity,
+    distance_to_surface,
+    plane_counts,
+    step_guard,
+    view_validity,
+)
 from kadv.penalties.envelope import Envelope
 from kadv.penalties.validity import SCAN_TOP_TOLERANCE, VALID
 from kadv.render import ExactRenderer
@@ -321,14 +327,12 @@ def _candidate_poses(
     drawn = len(centres)
     centres = centres.copy()
     low, high = config.eye_height
-    if renderer.shading.lighting == "scanned":  # under its top, open or not, whatever the eye height asked
+    scan = renderer.shading.lighting == "scanned"
+    if scan:  # under its top, open or not, whatever the eye height asked
         room = hi[1] - 2 * SCAN_TOP_TOLERANCE - floor
         low, high = np.minimum(low, room), np.minimum(high, room)
-        under = room > clearance
     centres[:, 1] = floor + rng.uniform(low, high, len(centres))
-    if renderer.shading.lighting != "scanned":
-        under = centres[:, 1] < hi[1] - clearance
-    centres = centres[under]
+    centres = centres[room > clearance if scan else centres[:, 1] < hi[1] - clearance]
     count = len(centres)
     yaw = rng.uniform(0.0, 2.0 * math.pi, count)
     pitch = np.radians(rng.uniform(*config.pitch_deg, count))
@@ -353,10 +357,30 @@ class CandidateTally:
         if count:
             self.dropped[reason] = self.dropped.get(reason, 0) + count
 
+    def drop_invalid(self, validity: ViewValidity) -> None:
+        """Count the views of a batch that its validity verdicts drop, per verdict."""
+        for verdict in sorted(set(validity.verdicts) - {VALID}):
+            self.drop(verdict, sum(v == verdict for v in validity.verdicts))
+
+    def reasons(self) -> str:
+        """``300 outside the scene, 12 inside an object, ...``: the most frequent first."""
+        return ", ".join(f"{n} {reason}" for reason, n in sorted(self.dropped.items(), key=lambda kv: -kv[1]))
+
     def text(self) -> str:
         """``drew 640 candidates; dropped: 300 outside the scene, 12 inside an object, ...``."""
-        reasons = ", ".join(f"{n} {reason}" for reason, n in sorted(self.dropped.items(), key=lambda kv: -kv[1]))
+        reasons = self.reasons()
         return f"drew {self.drawn} candidates" + (f"; dropped: {reasons}" if reasons else "")
+
+
+def _small_validity(
+    renderer: ExactRenderer, poses: torch.Tensor, fov_x_deg: float, penalty: PenaltyConfig, height: int, width: int
+) -> ViewValidity:
+    """The validity of candidate views (N, 4, 4), checked at a quarter of the size (at least 8
+    pixels a side), keeping the aspect: a squarer frame would see more of the room than the view does."""
+    scale = max(0.25, 8.0 / min(height, width))
+    small_h, small_w = max(8, round(scale * height)), max(8, round(scale * width))
+    K = intrinsics_from_fov(fov_x_deg, small_h, small_w)
+    return view_validity(renderer, poses, K, small_h, small_w, **penalty.validity_options())
 
 
 def sample_valid_views(
@@ -377,11 +401,6 @@ def sample_valid_views(
     rng = np.random.default_rng([seed, 7919])
     tally = tally if tally is not None else CandidateTally()
     clearance = 2.0 * penalty.d_th if config.clearance is None else config.clearance
-    # validity is checked at a quarter of the size (at least 8 pixels a side), keeping the aspect: a
-    # squarer frame would see more of the room than the view does
-    scale = max(0.25, 8.0 / min(height, width))
-    small_h, small_w = max(8, round(scale * height)), max(8, round(scale * width))
-    K = intrinsics_from_fov(config.fov_x_deg, small_h, small_w)
     accepted: list[torch.Tensor] = []
     for _ in range(_SAMPLING_ROUNDS):
         needed = count - len(accepted)
@@ -391,11 +410,10 @@ def sample_valid_views(
         tally.drawn += drawn
         tally.drop("with no room for the eye height under the scene's top", no_room)
         distance = distance_to_surface(renderer, poses[:, :3, 3])
-        validity = view_validity(renderer, poses, K, small_h, small_w, **penalty.validity_options())
+        validity = _small_validity(renderer, poses, config.fov_x_deg, penalty, height, width)
         clear = distance.cpu() > clearance
         hits_enough = validity.surface_fraction.cpu() >= config.min_hit_fraction
-        for verdict in sorted(set(validity.verdicts) - {VALID}):
-            tally.drop(verdict, sum(v == verdict for v in validity.verdicts))
+        tally.drop_invalid(validity)
         tally.drop(f"within {clearance:g} m of a surface", int((validity.valid & ~clear).sum()))
         tally.drop(
             f"seeing a surface in under {config.min_hit_fraction:.0%} of their pixels",
@@ -498,19 +516,14 @@ def captured_init_views(
     thinned = _spaced(scene.trajectory, config.spacing)
     picks = [thinned[i] for i in np.unique(np.linspace(0, len(thinned) - 1, config.candidates).round().astype(int))]
     poses = torch.from_numpy(scene.trajectory[picks])
-    scale = max(0.25, 8.0 / min(height, width))  # validity at a quarter of the size, as sampled views
-    small_h, small_w = max(8, round(scale * height)), max(8, round(scale * width))
-    validity = view_validity(
-        renderer, poses, intrinsics_from_fov(config.fov_x_deg, small_h, small_w), small_h, small_w,
-        **penalty.validity_options(),
-    )  # fmt: skip
+    validity = _small_validity(renderer, poses, config.fov_x_deg, penalty, height, width)
     keep = validity.valid.tolist()
     if sum(keep) < count:
-        dropped = collections.Counter(v for v in validity.verdicts if v != VALID)
-        reasons = ", ".join(f"{n} {verdict}" for verdict, n in dropped.most_common())
+        tally = CandidateTally(len(picks))
+        tally.drop_invalid(validity)
         raise InitViewError(
             f"scene {scene.name!r}: only {sum(keep)} of {count} captured init views are valid ({len(picks)} poses "
-            f"of {len(scene.trajectory)} in {scene.trajectory_source} tried; dropped: {reasons}); set "
+            f"of {len(scene.trajectory)} in {scene.trajectory_source} tried; dropped: {tally.reasons()}); set "
             "init.source=sampled, or init.params=<init_params.json>"
         )
     chosen = [i for i, k in zip(picks, keep) if k]

@@ -73,6 +73,10 @@ def load_scene(
     suffix = path.suffix.lower()
     if suffix not in SUPPORTED_SUFFIXES:
         raise ValueError(f"unsupported scene format {suffix!r} for {path}; supported: {', '.join(SUPPORTED_SUFFIXES)}")
+    if captured is not None and not isinstance(captured, bool):
+        raise ValueError(f"scene.options.captured must be true, false or null, got {captured!r}")
+    if up_axis not in (None, "y", "z", "auto"):
+        raise ValueError(f"scene.options.up_axis must be y, z or auto, got {up_axis!r}")
     if name is None:
         name = path.parent.name if path.stem == "scene" else path.stem
     layout = recognise_scan(path)
@@ -90,10 +94,6 @@ def load_scene(
     elif scan is None and suffix in (".glb", ".gltf") and gltf_unlit(path):
         scan = UNLIT_GLTF
         log.info("%s: KHR_materials_unlit: its colour is shown as captured", path)
-    if captured is not None and not isinstance(captured, bool):
-        raise ValueError(f"scene.options.captured must be true, false or null, got {captured!r}")
-    if up_axis not in (None, "y", "z", "auto"):
-        raise ValueError(f"scene.options.up_axis must be y, z or auto, got {up_axis!r}")
     options = {
         "scale": 1.0 if scale is None else scale,
         "up_axis": up_axis or "y",
