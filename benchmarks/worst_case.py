@@ -13,15 +13,16 @@ Two regimes, one currency each:
 - network-bound, **equal passes**: every method gets ``--budget`` model passes per init view and
   radius, every image the model runs on and every backward pass counted (the regime of every real
   model, where passes are the seconds);
-- render-bound, **equal seconds**: every other method runs in the same process right after the
-  default, under ``budget_seconds`` equal to the seconds the default took at each radius (kadv-tiny on
-  this CPU, where rendering dominates).
+- render-bound, **equal seconds**: every method, the default included, runs in the same process
+  right after the default's pass-budget run, under ``budget_seconds`` equal to the seconds that run
+  took at each radius (kadv-tiny on this CPU, where rendering dominates).
 
-Methods: ``default`` (kadv's default search now) and the candidates for it: ``halving`` (black-box
-lanes, a screen at one ray per pixel), ``halving_gradient`` (gradient lanes, the same screen),
-``halving_exact`` (black-box lanes, every view exact), ``hybrid``, ``random``, ``cma``, ``nevergrad``;
-each over the same ``--seeds`` (five by default) in both regimes. A label whose config is the
-default's shares its runs.
+Methods: ``default`` (kadv's default search now: its screening's fidelity is ``auto``) and the
+candidates for it: ``halving`` (black-box lanes, a screen at one ray per pixel), ``halving_gradient``
+(gradient lanes, the same screen), ``halving_exact`` (black-box lanes, every view exact), ``hybrid``,
+``random``, ``cma``, ``nevergrad``; each over the same ``--seeds`` (five by default) in both regimes.
+The default takes halving_exact's settings under a pass budget (those runs are shared) and, here,
+halving's under a seconds budget: the three are one method for W*.
 
 1. Best known worst case W*, held out: for a method, the lowest delta1 that the *other* methods'
    runs found in the cell (both regimes), and a reference attack at ``REFERENCE`` times the budget
@@ -84,14 +85,19 @@ PARTS = ("regret", "proxy")
 BASELINES = ("random", "cma", "nevergrad")
 # label -> (method, settings); "default" is kadv's default search with its defaults
 CANDIDATES = {
-    "halving": ("halving", HalvingSettings()),
-    "halving_gradient": ("halving", HalvingSettings(refine="gradient")),
+    "halving": ("halving", HalvingSettings(screen_supersample=1)),
+    "halving_gradient": ("halving", HalvingSettings(screen_supersample=1, refine="gradient")),
     "halving_exact": ("halving", HalvingSettings(screen_supersample=None)),
     "hybrid": ("hybrid", None),
     "random": ("random", None),
     "cma": ("cma", None),
     "nevergrad": ("nevergrad", None),
 }
+# The default screens exactly under a pass budget (halving_exact's config, so its runs at equal
+# passes are the default's) and at one ray per pixel under a seconds budget when the render
+# outweighs the model (halving's): one method, never the other's W*.
+PASSES_TWIN = "halving_exact"
+DEFAULT_FAMILY = {"default", "halving", "halving_exact"}
 REFERENCE = 10  # the reference attack's budget, in budgets
 REFERENCE_METHODS = {"ref_random": ("random", None), "ref_cma": ("cma", CMASettings(ipop=True))}
 PROXY_VIEWS, TOP_K, PROXY_SIZE = 32, 8, (240, 320)
@@ -206,8 +212,9 @@ def bootstrap_median(values: list[float], rng: np.random.Generator, draws: int =
 
 
 class Runs:
-    """Every run the regret part needs, made in order (the default, then each other method at equal
-    passes and at the default's seconds, cell view by cell view, seed by seed) or read back."""
+    """Every run the regret part needs, made in order (the default at equal passes and then at its
+    own seconds, then each other method at equal passes and at those seconds, cell view by cell
+    view, seed by seed) or read back."""
 
     def __init__(self, store: Store, cells: dict[str, Cells], views: dict[str, int], seeds, budget, labels,
                  reference_seeds) -> None:  # fmt: skip
@@ -215,19 +222,18 @@ class Runs:
         self.passes: dict = {}  # (scene, view, label, seed) -> run at equal passes
         self.seconds: dict = {}  # the same, at the default's seconds
         self.reference: dict = {}  # (scene, view) -> reference runs
-        default = repr(method_config("default", budget))
-        twins = [label for label in labels if label != "default" and repr(method_config(label, budget)) == default]
-        self.default_twin = twins[0] if twins else None  # a candidate that is the default: its runs are the default's
         for name, cell in cells.items():
             for view in range(views[name]):
                 for seed in seeds:
                     own = store.run(cell, view, "default", seed, budget)
                     self.passes[name, view, "default", seed] = own
                     spent = [r["seconds"] for r in own["radii"]]
+                    self.seconds[name, view, "default", seed] = store.run(cell, view, "default", seed, budget, spent)
                     for label in labels:
-                        if label in ("default", self.default_twin):
+                        if label == "default":
                             continue
-                        self.passes[name, view, label, seed] = store.run(cell, view, label, seed, budget)
+                        if label != PASSES_TWIN:  # its runs at equal passes are the default's
+                            self.passes[name, view, label, seed] = store.run(cell, view, label, seed, budget)
                         self.seconds[name, view, label, seed] = store.run(cell, view, label, seed, budget, spent)
                 reference = list(REFERENCE_METHODS)  # the seeds taken in turn by random search and IPOP-CMA-ES
                 self.reference[name, view] = [
@@ -238,16 +244,14 @@ class Runs:
         self.cells = [(name, view, k) for name in cells for view in range(views[name]) for k in radii]
 
     def family(self, label: str) -> set[str]:
-        """The labels that are one method with ``label`` (the default and its twin candidate)."""
-        pair = {"default", self.default_twin} - {None}
-        return pair if label in pair else {label}
+        """The labels that are one method with ``label``: the default and the settings it takes."""
+        return DEFAULT_FAMILY if label in DEFAULT_FAMILY else {label}
 
     def worst(self, cell: tuple, label: str, seed: int, regime: str) -> float:
         name, view, k = cell
-        table = self.passes if regime == "passes" or label == "default" else self.seconds
-        run = table.get((name, view, label, seed))
-        if run is None and label == self.default_twin:
-            run = self.passes.get((name, view, "default", seed))
+        if regime == "passes" and label == PASSES_TWIN:
+            label = "default"
+        run = (self.passes if regime == "passes" else self.seconds).get((name, view, label, seed))
         return math.nan if run is None else worst_within(run, k)
 
     def init(self, cell: tuple) -> float:
@@ -304,9 +308,7 @@ def regret_part(runs: Runs) -> dict[str, str]:
         passes, seconds = runs.regrets(label, "passes"), runs.regrets(label, "seconds")
         noise = runs.noise(label)
         lo, hi = bootstrap_median(noise, rng)
-        seconds_text = (
-            f"{np.median(seconds):.3f} | {np.percentile(seconds, 90):.3f}" if label != "default" else "(its own) | "
-        )
+        seconds_text = f"{np.median(seconds):.3f} | {np.percentile(seconds, 90):.3f}"
         print(f"| {label} | {np.median(passes):.3f} | {np.percentile(passes, 90):.3f} | {seconds_text} | "
               f"{np.median(noise):.3f} ({lo:.3f}-{hi:.3f}) | {np.max(noise):.3f} | {len(noise)} |")  # fmt: skip
         if label == "default":
@@ -323,7 +325,7 @@ def regret_part(runs: Runs) -> dict[str, str]:
         cells = []
         for k in range(len(DEFAULT_RADII)):
             noise = runs.noise(label, k)
-            seconds = "-" if label == "default" else f"{np.median(runs.regrets(label, 'seconds', k)):.3f}"
+            seconds = f"{np.median(runs.regrets(label, 'seconds', k)):.3f}"
             cells.append(
                 f"{np.median(runs.regrets(label, 'passes', k)):.3f} / {seconds}; "
                 f"noise {np.median(noise):.3f}, {np.max(noise):.3f} ({len(noise)})"

@@ -190,6 +190,7 @@ class Clock:
         self.started = time.perf_counter()
         self.budget = Budget()
         self._pass_seconds = 0.0  # the last batch's seconds per pass
+        self.render_s = self.model_s = 0.0
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.started
@@ -422,16 +423,28 @@ class SearchContext:
         reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
         params = torch.cat([params[:, :3], reached], dim=1)
         K, height, width = self.size(scale)
+        exact = scale == 1.0 and supersample in (None, self.differentiable.config.supersample)
         supersample = supersample or self.differentiable.config.supersample
         with torch.no_grad():
             pose = perturb_world_T_cam(self.base(len(params)), params[:, :3], params[:, 3:])
+            rendering = self._now()
             out = self.renderer.render(pose, K, height, width, supersample=supersample)
+            modelling = self._now()
             terms = self.objective(out.rgb, out.depth, out.mask, pose, K)
+            if exact:
+                self.clock.render_s = (modelling - rendering) / len(pose)
+                self.clock.model_s = (self._now() - modelling) / len(pose)
         rows = self.records(step, params, pose, terms, fraction, lanes=lanes, render=out, scale=scale)
         if screened:
             rows = [dataclasses.replace(row, screened=True) for row in rows]
         self.clock.spent(len(params), time.perf_counter() - started, screened=screened)
         return rows
+
+    def _now(self) -> float:
+        """The clock, once the device's queued work is done (a GPU's work runs after its call returns)."""
+        if self.device.type == "cuda":
+            torch.cuda.synchronize(self.device)
+        return time.perf_counter()
 
     def screen(
         self, step: int, params: torch.Tensor, supersample: int | None, batch: int, bar: Any = None

@@ -33,6 +33,7 @@ from kadv.attack import (
     separated,
 )
 from kadv.attack.init_views import InitViewError, fit_into_envelope
+from kadv.attack.methods.halving import screen_fidelity
 from kadv.attack.search import Clock, scaled_size
 from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam
 from kadv.models import count_passes
@@ -447,7 +448,7 @@ def test_an_init_view_outside_the_envelope_is_moved_into_it_or_refused(tiny_obje
 def test_halving_screens_at_one_ray_per_pixel_and_re_scores_its_best_views_exactly(
     tiny_objective, differentiable, file_view
 ) -> None:
-    settings = HalvingSettings(screen_fraction=0.5, rescore_fraction=0.25, lanes=2)
+    settings = HalvingSettings(screen_fraction=0.5, screen_supersample=1, rescore_fraction=0.25, lanes=2)
     result = _run(tiny_objective, differentiable, [file_view], (H, W), "halving", settings, budget_passes=20)
     view = result.views[0]
     screened = [r for r in view.records if r.screened and r.step == 2]
@@ -470,11 +471,57 @@ def test_halving_screens_at_one_ray_per_pixel_and_re_scores_its_best_views_exact
     assert float(terms.delta1[0]) == pytest.approx(record.delta1, abs=1e-9)
 
 
+def test_auto_screening_is_exact_under_passes_and_cheap_under_seconds_where_the_render_outweighs_the_model() -> None:
+    auto = HalvingSettings()
+    assert auto.screen_supersample == "auto"
+    assert screen_fidelity(auto, 2, None, render_s=1.0, model_s=0.01) is None  # passes: a cheap view costs one too
+    assert screen_fidelity(auto, 2, 60.0, render_s=0.3, model_s=0.02) == 1  # render-bound: cheap views a second
+    assert screen_fidelity(auto, 2, 60.0, render_s=0.3, model_s=2.3) is None  # network-bound: exact
+    assert screen_fidelity(auto, 1, 60.0, render_s=0.3, model_s=0.02) is None  # nothing cheaper than the run's
+    for fixed in (1, None):  # a fidelity set is kept
+        assert screen_fidelity(HalvingSettings(screen_supersample=fixed), 2, None, 1.0, 0.01) == fixed
+
+
+def test_the_default_search_scores_every_view_exactly_under_a_pass_budget(
+    tiny_objective, differentiable, file_view
+) -> None:
+    view = _run(tiny_objective, differentiable, [file_view], (H, W), "halving", budget_passes=20).views[0]
+    assert view.budget.passes == 20 and view.budget.screened == 0
+    assert all(not r.screened for r in view.records) and not any(r.step == 3 for r in view.records)  # no re-score
+    screening = [r for r in view.records if r.step == 2]
+    assert len(screening) == 10 and all(r.rankable or not r.valid for r in screening)
+
+
+@pytest.mark.parametrize("slow, screened", [("model", False), ("render", True)])
+def test_the_default_search_under_a_seconds_budget_screens_cheaply_only_when_the_render_outweighs_the_model(
+    slow, screened, tiny_objective, differentiable, file_view, monkeypatch
+) -> None:
+    # a part made 50 ms a view slower decides, whatever this machine's speeds of the other
+    renderer = tiny_objective.renderer
+    part, name = (tiny_objective.model, "forward") if slow == "model" else (renderer, "render")
+    original = getattr(part, name)
+
+    def slowed(*args, **kwargs):
+        out = original(*args, **kwargs)
+        views = out.shape[0] if isinstance(out, torch.Tensor) else out.rgb.shape[0]
+        time.sleep(0.05 * views)
+        return out
+
+    monkeypatch.setattr(part, name, slowed)
+    view = _run(
+        tiny_objective, differentiable, [file_view], (H, W), "halving", budget_passes=None, budget_seconds=4.0
+    ).views[0]
+    assert (view.budget.screened > 0) is screened
+    assert any(r.step == 3 for r in view.records) is screened  # the cheap screen's best re-scored exactly
+
+
 def test_halving_starts_from_warm_starts_and_its_local_lanes_step_within_their_trust_regions(
     tiny_objective, differentiable, file_view
 ) -> None:
     starts = torch.tensor([[0.1, -0.05, 0.0, 0.1, 0.0, 0.05], [-0.2, 0.1, 0.0, 0.0, 0.0, -0.1]], dtype=torch.float64)
-    settings = HalvingSettings(refine="local", local_views=4, lanes=2, step_fraction=0.1, rescore_fraction=0.1)
+    settings = HalvingSettings(
+        screen_supersample=1, refine="local", local_views=4, lanes=2, step_fraction=0.1, rescore_fraction=0.1
+    )
     config = AttackConfig("halving", settings, budget_passes=40)
     result = attack(tiny_objective, differentiable, [file_view], H, W, config, 0, progress=False, starts={0: starts})
     view = result.views[0]
@@ -514,7 +561,9 @@ def test_halving_settings_out_of_range_name_their_key() -> None:
         HalvingSettings(screen_fraction=1.5)
     with pytest.raises(ValueError, match=r"attack.halving.rescore_fraction must be in \(0, 1\], got 1.5"):
         AttackConfig("halving", HalvingSettings(rescore_fraction=1.5))
-    with pytest.raises(ValueError, match=r"attack.halving.screen_supersample must be an integer >= 1 or null, got 0"):
+    with pytest.raises(
+        ValueError, match=r"attack.halving.screen_supersample must be 'auto', an integer >= 1 or null, got 0"
+    ):
         AttackConfig("halving", HalvingSettings(screen_supersample=0))
 
 

@@ -4,9 +4,10 @@ taken along the gradient.
 
 Every image the model runs on is a model pass of ``attack.budget_passes``, screened or exact, and
 so is every backward pass. The cheap fidelity (fewer rays per pixel) saves render time, not model
-passes: on a CPU with a small model (render-bound) it buys more views a second; with a real model
-(network-bound) its views cost what exact ones do, and ``screen_supersample: null`` scores them
-exactly, with no re-scoring (docs/attack.md measures both regimes).
+passes: it pays only where seconds are the budget and the render costs more than the model (a small
+model on a CPU). ``screen_supersample: auto`` (the default) screens exactly under a pass budget and
+chooses by the init view's measured render and model seconds under a seconds budget; the choice
+has the lowest held-out regret in each regime (docs/attack.md#which-search).
 """
 
 from __future__ import annotations
@@ -25,7 +26,9 @@ from kadv.attack.records import InitViewResult, ViewRecord, incumbent_path, sele
 from kadv.attack.registry import register_method
 from kadv.attack.search import SearchContext
 
-__all__ = ["HalvingSettings", "check_budget", "halving_search", "local_refine"]
+__all__ = ["AUTO", "HalvingSettings", "check_budget", "halving_search", "local_refine", "screen_fidelity"]
+
+AUTO = "auto"  # attack.halving.screen_supersample chosen per init view (screen_fidelity)
 
 
 @dataclass(frozen=True)
@@ -36,7 +39,8 @@ class HalvingSettings:
         screen_fraction: share of the budget's passes that scores Sobol poses over the bounds
             (under a seconds budget alone: ``batch`` poses).
         screen_supersample: rays per pixel side of the cheap fidelity, below the run's
-            ``render.supersample``; None: the screening scores exactly (and nothing is re-scored).
+            ``render.supersample``; None: the screening scores exactly (and nothing is re-scored);
+            ``auto``: :func:`screen_fidelity` chooses per init view.
         batch: views per screening render.
         rescore_fraction: share of the budget that re-scores the best separated screened views
             exactly (a cheap fidelity only).
@@ -55,7 +59,7 @@ class HalvingSettings:
     """
 
     screen_fraction: float = 0.5
-    screen_supersample: int | None = 1
+    screen_supersample: int | str | None = AUTO
     batch: int = 32
     rescore_fraction: float = 0.25
     refine: str = "local"
@@ -70,18 +74,15 @@ class HalvingSettings:
         if self.refine not in ("gradient", "local"):
             raise ValueError(f"attack.halving.refine must be 'gradient' or 'local', got {self.refine!r}")
         check_trust_region(self, "attack.halving", ("screen_fraction", "step_fraction", "shrink", "stall_scale"))
-        if self.screen_supersample is not None and (
-            isinstance(self.screen_supersample, bool)
-            or not isinstance(self.screen_supersample, int)
-            or self.screen_supersample < 1
-        ):
+        value = self.screen_supersample
+        if value not in (None, AUTO) and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
             raise ValueError(
-                f"attack.halving.screen_supersample must be an integer >= 1 or null, got {self.screen_supersample!r}"
+                f"attack.halving.screen_supersample must be 'auto', an integer >= 1 or null, got {value!r}"
             )
 
     @property
     def cheap(self) -> bool:
-        """Whether the screening scores at a cheap fidelity (its best are then re-scored exactly)."""
+        """Whether the screening may score at a cheap fidelity (its best are then re-scored exactly)."""
         return self.screen_supersample is not None
 
     def gradient_lanes(self) -> HybridSettings:
@@ -109,7 +110,11 @@ def check_budget(settings: HalvingSettings, passes: int | None, supersample: int
     """Refuse, naming the key, a budget without room for the init view and the re-scoring, and a
     screening fidelity not cheaper than the run's ``supersample`` rays per pixel side. (A budget
     with no room left for the lanes ends after the re-scoring.)"""
-    if supersample is not None and settings.cheap and settings.screen_supersample >= supersample:
+    if (
+        supersample is not None
+        and isinstance(settings.screen_supersample, int)
+        and settings.screen_supersample >= supersample
+    ):
         raise ValueError(
             f"attack.halving.screen_supersample must be below render.supersample ({supersample}) to be a cheap "
             f"fidelity (null: screen exactly), got {settings.screen_supersample}"
@@ -122,6 +127,22 @@ def check_budget(settings: HalvingSettings, passes: int | None, supersample: int
                 f"attack.budget_passes must be at least {needed} for attack.halving (the init view and "
                 f"{rescore or 1} screened views{' re-scored' if rescore else ''}), got {passes}"
             )
+
+
+def screen_fidelity(
+    settings: HalvingSettings, supersample: int, seconds: float | None, render_s: float, model_s: float
+) -> int | None:
+    """The screening's rays per pixel side (None: exact) for ``attack.halving.screen_supersample``.
+
+    ``auto``: exact under a pass budget alone, where a cheap view costs a pass as an exact one does
+    and its best must be scored again; under ``budget_seconds``, one ray per pixel when the run's
+    exact render of a view (``render_s`` seconds, ``supersample`` rays per pixel side) takes longer
+    than the model's pass on it (``model_s``), the render-bound case where cheap views buy more
+    views a second; exact otherwise. Any other setting is kept.
+    """
+    if settings.screen_supersample != AUTO:
+        return settings.screen_supersample
+    return 1 if seconds is not None and supersample > 1 and render_s > model_s else None
 
 
 def local_refine(
@@ -193,8 +214,11 @@ def halving_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) 
 
     The path is the successive best rankable views (the incumbent never falls).
     """
-    settings, clock, config = context.config.settings, context.clock, context.config
+    clock, config = context.clock, context.config
     records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64))
+    run_supersample = context.differentiable.config.supersample
+    fidelity = screen_fidelity(config.settings, run_supersample, clock.seconds, clock.render_s, clock.model_s)
+    settings = dataclasses.replace(config.settings, screen_supersample=fidelity)
     warm = clock.allows(len(context.starts))
     if warm:
         records += context.evaluate(1, context.starts[:warm])
