@@ -205,11 +205,51 @@ def main(cfg: DictConfig) -> float:
         sys.exit(interruption.exit_status)
 
 
+# keys that change how a run shows its progress, not what it finds: a run may resume without them
+_PRESENTATION = frozenset({"progress"})
+# keys whose ``auto`` a run writes back resolved (render.lighting: resolve_lighting)
+_RESOLVED = frozenset({"render.lighting"})
+
+
+def _leaves(node: Any, prefix: str = "") -> dict[str, Any]:
+    """A config's leaves by dotted key (lists are leaves)."""
+    if not isinstance(node, dict) or not node:
+        return {prefix: node}
+    return {
+        k: v for key, value in node.items() for k, v in _leaves(value, f"{prefix}.{key}" if prefix else key).items()
+    }
+
+
+def _check_same_settings(run_dir: Path, config_text: str) -> None:
+    """Refuse to skip or resume a run directory whose run (its ``config.yaml``) was made with other
+    settings, naming them: its results would pass for this config's."""
+    path = run_dir / "config.yaml"
+    if not path.is_file():
+        return
+    old, new = (_leaves(OmegaConf.to_container(OmegaConf.create(text))) for text in (path.read_text(), config_text))
+    changed = [
+        key
+        for key in sorted(old.keys() | new.keys())
+        if old.get(key) != new.get(key)
+        and key not in _PRESENTATION
+        and not (key in _RESOLVED and new.get(key) == "auto")
+    ]
+    if changed:
+        listed = ", ".join(f"{k}: {old.get(k, '(unset)')} -> {new.get(k, '(unset)')}" for k in changed[:3])
+        more = f" and {len(changed) - 3} more" if len(changed) > 3 else ""
+        raise ValueError(
+            f"{run_dir} holds a run made with other settings ({listed}{more}): remove it to run again, "
+            "or set hydra.run.dir to another folder"
+        )
+
+
 def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     """The run itself; ``progress`` counts the init views done (for the line an interruption prints)."""
     # a run killed mid-write (SIGKILL, a lost node) leaves the file it was writing as a temporary
     for path in remove_temporaries(run_dir):
         log.info("removed %s, left by a run killed while writing it", path)
+    config_text = OmegaConf.to_yaml(cfg, resolve=True)
+    _check_same_settings(run_dir, config_text)
     if is_complete(run_dir):
         remove_partial_results(run_dir)  # left by a run killed between its summary and their removal
         summary = RunSummary.read(run_dir / SUMMARY)
@@ -235,7 +275,6 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     model = model_from_config(cfg.model)
     loss = loss_from_config(cfg.loss)
     objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space, device=device)
-    config_text = OmegaConf.to_yaml(cfg, resolve=True)
     atomic_write(run_dir / "config.yaml", lambda tmp: tmp.write_text(config_text))
     views, init_passes = _init_views(seed, run_dir, renderer, model, penalty, init_config, height, width)
     completed = load_partial_results(run_dir)

@@ -154,6 +154,21 @@ def test_a_complete_run_is_skipped(demo_runs: Path) -> None:
     assert before == {p: p.stat().st_mtime_ns for p in run.rglob("*") if p.is_file() and ".hydra" not in p.parts}
 
 
+def test_a_run_directory_made_with_other_settings_is_refused_naming_them(demo_runs: Path, tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    shutil.copytree(demo_runs / "second", run)
+    before = {p: p.read_bytes() for p in run.rglob("*") if p.is_file() and ".hydra" not in p.parts}
+    # a changed setting (here a changed default would do the same): the old results must not pass for these
+    result = _run_in_process("kadv-attack", run, *SMALL, "video=false", "attack.top_n=2")
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    line = f"kadv-attack: error: {run} holds a run made with other settings (attack.top_n: 5 -> 2): remove it"
+    assert line in result.stderr and "already complete" not in result.stdout
+    assert before == {p: p.read_bytes() for p in run.rglob("*") if p.is_file() and ".hydra" not in p.parts}
+    # how it shows its progress is not a setting of what it finds
+    shown = _run_in_process("kadv-attack", run, *SMALL, "video=false", "progress=false")
+    assert shown.returncode == 0 and "already complete" in shown.stdout
+
+
 def test_a_complete_run_removes_the_partial_results_a_kill_left_after_its_summary(
     demo_runs: Path, tmp_path: Path
 ) -> None:
