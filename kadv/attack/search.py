@@ -34,7 +34,7 @@ __all__ = [
 ]
 
 # The search with the lowest held-out regret at equal model passes and at equal seconds
-# (benchmarks/worst_case.py; docs/attack.md#which-search).
+# (benchmarks/worst_case.py; docs/attack.md#the-worst-case-as-a-measurement).
 DEFAULT_METHOD = "halving"
 # Model passes per init view of an attack (kadv-attack's attack.budget_passes).
 DEFAULT_PASSES = 123

@@ -248,8 +248,7 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     # a run killed mid-write (SIGKILL, a lost node) leaves the file it was writing as a temporary
     for path in remove_temporaries(run_dir):
         log.info("removed %s, left by a run killed while writing it", path)
-    config_text = OmegaConf.to_yaml(cfg, resolve=True)
-    _check_same_settings(run_dir, config_text)
+    _check_same_settings(run_dir, OmegaConf.to_yaml(cfg, resolve=True))
     if is_complete(run_dir):
         remove_partial_results(run_dir)  # left by a run killed between its summary and their removal
         summary = RunSummary.read(run_dir / SUMMARY)
@@ -275,6 +274,7 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     model = model_from_config(cfg.model)
     loss = loss_from_config(cfg.loss)
     objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space, device=device)
+    config_text = OmegaConf.to_yaml(cfg, resolve=True)  # render.lighting resolved
     atomic_write(run_dir / "config.yaml", lambda tmp: tmp.write_text(config_text))
     views, init_passes = _init_views(seed, run_dir, renderer, model, penalty, init_config, height, width)
     completed = load_partial_results(run_dir)

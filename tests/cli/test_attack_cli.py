@@ -12,6 +12,7 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 import torch
+from omegaconf import OmegaConf
 from PIL import Image
 from transformers import CHMv2Config
 
@@ -164,6 +165,8 @@ def test_a_run_directory_made_with_other_settings_is_refused_naming_them(demo_ru
     line = f"kadv-attack: error: {run} holds a run made with other settings (attack.top_n: 5 -> 2): remove it"
     assert line in result.stderr and "already complete" not in result.stdout
     assert before == {p: p.read_bytes() for p in run.rglob("*") if p.is_file() and ".hydra" not in p.parts}
+    # config.yaml names the lighting render.lighting=auto chose, and auto still matches it
+    assert OmegaConf.load(run / "config.yaml").render.lighting == "baked"
     # how it shows its progress is not a setting of what it finds
     shown = _run_in_process("kadv-attack", run, *SMALL, "video=false", "progress=false")
     assert shown.returncode == 0 and "already complete" in shown.stdout

@@ -7,7 +7,7 @@ so is every backward pass. The cheap fidelity (fewer rays per pixel) saves rende
 passes: it pays only where seconds are the budget and the render costs more than the model (a small
 model on a CPU). ``screen_supersample: auto`` (the default) screens exactly under a pass budget and
 chooses by the init view's measured render and model seconds under a seconds budget; the choice
-has the lowest held-out regret in each regime (docs/attack.md#which-search).
+has the lowest held-out regret in each regime (docs/attack.md#the-worst-case-as-a-measurement).
 """
 
 from __future__ import annotations
