@@ -22,6 +22,7 @@ from kadv.geometry import (
     intrinsics_from_fov,
     look_at,
     perturb_world_T_cam,
+    scaled_size,
     yaw_pitch_roll,
 )
 from kadv.io import write_json
@@ -377,8 +378,7 @@ def _small_validity(
 ) -> ViewValidity:
     """The validity of candidate views (N, 4, 4), checked at a quarter of the size (at least 8
     pixels a side), keeping the aspect: a squarer frame would see more of the room than the view does."""
-    scale = max(0.25, 8.0 / min(height, width))
-    small_h, small_w = max(8, round(scale * height)), max(8, round(scale * width))
+    small_h, small_w = scaled_size(height, width, max(0.25, 8.0 / min(height, width)))
     K = intrinsics_from_fov(fov_x_deg, small_h, small_w)
     return view_validity(renderer, poses, K, small_h, small_w, **penalty.validity_options())
 

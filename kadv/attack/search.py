@@ -16,7 +16,13 @@ from kadv.attack.init_views import InitView
 from kadv.attack.objective import Objective, ObjectiveTerms
 from kadv.attack.records import Budget, InitViewResult, ViewRecord, select_top_views
 from kadv.attack.registry import get_method
-from kadv.geometry import intrinsics_from_fov, matrix_to_axis_angle, perturb_world_T_cam, yaw_pitch_roll
+from kadv.geometry import (
+    intrinsics_from_fov,
+    matrix_to_axis_angle,
+    perturb_world_T_cam,
+    scaled_size,
+    yaw_pitch_roll,
+)
 from kadv.penalties import ViewValidity, step_guard, view_validity
 from kadv.penalties.envelope import Envelope, get_envelope
 from kadv.render import DifferentiableRenderer, RenderOutput
@@ -30,7 +36,6 @@ __all__ = [
     "Measures",
     "SearchContext",
     "check_settings",
-    "scaled_size",
 ]
 
 # The search with the lowest held-out regret at equal model passes and at equal seconds
@@ -38,11 +43,6 @@ __all__ = [
 DEFAULT_METHOD = "halving"
 # Model passes per init view of an attack (kadv-attack's attack.budget_passes).
 DEFAULT_PASSES = 123
-
-
-def scaled_size(height: int, width: int, scale: float) -> tuple[int, int]:
-    """The height and width of renders at ``scale`` times ``height`` x ``width`` (at least 8 pixels each)."""
-    return max(8, round(scale * height)), max(8, round(scale * width))
 
 
 def check_settings(settings: Any, node: str) -> None:

@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
-from kadv.geometry.camera import Camera, batched_intrinsics, intrinsics_from_fov, pixel_rays, to_open3d_pinhole
+from kadv.geometry.camera import (
+    Camera,
+    batched_intrinsics,
+    intrinsics_from_fov,
+    pixel_rays,
+    scaled_size,
+    to_open3d_pinhole,
+)
 from kadv.geometry.pose import (
     axis_angle_to_matrix,
     check_world_T_cam,
@@ -27,6 +34,7 @@ __all__ = [
     "pixel_rays",
     "rc_from_world_T_cam",
     "rotation_from_yaw_pitch_roll",
+    "scaled_size",
     "to_open3d_pinhole",
     "world_T_cam_from_rc",
     "yaw_pitch_roll",

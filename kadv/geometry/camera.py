@@ -16,9 +16,15 @@ __all__ = [
     "camera_rays",
     "intrinsics_from_fov",
     "pixel_rays",
+    "scaled_size",
     "to_open3d_pinhole",
     "world_rays",
 ]
+
+
+def scaled_size(height: int, width: int, scale: float) -> tuple[int, int]:
+    """The height and width of renders at ``scale`` times ``height`` x ``width`` (at least 8 pixels each)."""
+    return max(8, round(scale * height)), max(8, round(scale * width))
 
 
 def intrinsics_from_fov(fov_x_deg: float, height: int, width: int) -> torch.Tensor:

@@ -34,8 +34,8 @@ from kadv.attack import (
 )
 from kadv.attack.init_views import InitViewError, fit_into_envelope
 from kadv.attack.methods.halving import screen_fidelity
-from kadv.attack.search import Clock, scaled_size
-from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam
+from kadv.attack.search import Clock
+from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam, scaled_size
 from kadv.models import count_passes
 from kadv.penalties import ENVELOPES, Envelope
 from kadv.render import DiffRenderConfig
