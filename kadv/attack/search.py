@@ -190,6 +190,7 @@ class Clock:
         self.started = time.perf_counter()
         self.budget = Budget()
         self._pass_seconds = 0.0  # the last batch's seconds per pass
+        # seconds per view of the render and of the model passes of the last batch evaluated ``timed``
         self.render_s = self.model_s = 0.0
 
     def elapsed(self) -> float:
@@ -413,25 +414,26 @@ class SearchContext:
         scale: float = 1.0,
         supersample: int | None = None,
         screened: bool = False,
+        timed: bool = False,
     ) -> list[ViewRecord]:
         """Move from the init view to each pose (B, 6) through the step guard, render exactly at
         ``scale`` times the run's size (with ``supersample`` rays per pixel side; None: the run's),
         evaluate and record, one model pass a view (``screened``: at a cheap fidelity, never ranked:
-        :meth:`screen`)."""
+        :meth:`screen`). ``timed``: the render's and the model's seconds per view go to the clock
+        (each waits for the device, so only where a search asks for them)."""
         started = time.perf_counter()
         params = self.project(params.to(self.device))
         reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
         params = torch.cat([params[:, :3], reached], dim=1)
         K, height, width = self.size(scale)
-        exact = scale == 1.0 and supersample in (None, self.differentiable.config.supersample)
         supersample = supersample or self.differentiable.config.supersample
         with torch.no_grad():
             pose = perturb_world_T_cam(self.base(len(params)), params[:, :3], params[:, 3:])
-            rendering = self._now()
+            rendering = self._now() if timed else 0.0
             out = self.renderer.render(pose, K, height, width, supersample=supersample)
-            modelling = self._now()
+            modelling = self._now() if timed else 0.0
             terms = self.objective(out.rgb, out.depth, out.mask, pose, K)
-            if exact:
+            if timed:
                 self.clock.render_s = (modelling - rendering) / len(pose)
                 self.clock.model_s = (self._now() - modelling) / len(pose)
         rows = self.records(step, params, pose, terms, fraction, lanes=lanes, render=out, scale=scale)

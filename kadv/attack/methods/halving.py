@@ -215,7 +215,7 @@ def halving_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) 
     The path is the successive best rankable views (the incumbent never falls).
     """
     clock, config = context.clock, context.config
-    records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64))
+    records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64), timed=True)
     run_supersample = context.differentiable.config.supersample
     fidelity = screen_fidelity(config.settings, run_supersample, clock.seconds, clock.render_s, clock.model_s)
     settings = dataclasses.replace(config.settings, screen_supersample=fidelity)
