@@ -220,13 +220,14 @@ def _leaves(node: Any, prefix: str = "") -> dict[str, Any]:
     }
 
 
-def _check_same_settings(run_dir: Path, config_text: str) -> None:
+def _check_same_settings(run_dir: Path, cfg: DictConfig) -> None:
     """Refuse to skip or resume a run directory whose run (its ``config.yaml``) was made with other
-    settings, naming them: its results would pass for this config's."""
+    settings than ``cfg``, naming them: its results would pass for this config's."""
     path = run_dir / "config.yaml"
     if not path.is_file():
         return
-    old, new = (_leaves(OmegaConf.to_container(OmegaConf.create(text))) for text in (path.read_text(), config_text))
+    old = _leaves(OmegaConf.to_container(OmegaConf.load(path)))
+    new = _leaves(OmegaConf.to_container(cfg, resolve=True))
     changed = [
         key
         for key in sorted(old.keys() | new.keys())
@@ -248,7 +249,7 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     # a run killed mid-write (SIGKILL, a lost node) leaves the file it was writing as a temporary
     for path in remove_temporaries(run_dir):
         log.info("removed %s, left by a run killed while writing it", path)
-    _check_same_settings(run_dir, OmegaConf.to_yaml(cfg, resolve=True))
+    _check_same_settings(run_dir, cfg)
     if is_complete(run_dir):
         remove_partial_results(run_dir)  # left by a run killed between its summary and their removal
         summary = RunSummary.read(run_dir / SUMMARY)
