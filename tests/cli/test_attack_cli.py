@@ -167,8 +167,8 @@ def test_a_run_directory_made_with_other_settings_is_refused_naming_them(demo_ru
     assert before == {p: p.read_bytes() for p in run.rglob("*") if p.is_file() and ".hydra" not in p.parts}
     # config.yaml names the lighting render.lighting=auto chose, and auto still matches it
     assert OmegaConf.load(run / "config.yaml").render.lighting == "baked"
-    # how it shows its progress is not a setting of what it finds
-    shown = _run_in_process("kadv-attack", run, *SMALL, "video=false", "progress=false")
+    # how it shows its progress is not a setting of what it finds (SMALL has progress=false)
+    shown = _run_in_process("kadv-attack", run, *SMALL, "video=false", "progress=true")
     assert shown.returncode == 0 and "already complete" in shown.stdout
 
 
