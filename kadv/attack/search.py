@@ -334,6 +334,14 @@ class SearchContext:
         """The init view's pose (batch, 4, 4) float64 on :attr:`device`."""
         return self._base[None].expand(batch, 4, 4)
 
+    def differentiable_at(self, supersample: int | None) -> DifferentiableRenderer:
+        """The differentiable renderer at ``supersample`` rays per pixel side (None: the run's): a
+        cheap fidelity gets a renderer of its own (its own anchor), on the same scene and device."""
+        if supersample is None or supersample == self.differentiable.config.supersample:
+            return self.differentiable
+        config = dataclasses.replace(self.differentiable.config, supersample=supersample)
+        return DifferentiableRenderer(self.renderer, config, self.device)
+
     def project(self, params: torch.Tensor) -> torch.Tensor:
         """Pose parameters (B, 6) pulled back within the rotation and distance bounds, then moved
         into the envelope (on the parameters' device); the step guard has yet to pass the move."""
@@ -416,15 +424,34 @@ class SearchContext:
         screened: bool = False,
         timed: bool = False,
     ) -> list[ViewRecord]:
-        """Move from the init view to each pose (B, 6) through the step guard, render exactly at
-        ``scale`` times the run's size (with ``supersample`` rays per pixel side; None: the run's),
-        evaluate and record, one model pass a view (``screened``: at a cheap fidelity, never ranked:
-        :meth:`screen`). ``timed``: the render's and the model's seconds per view go to the clock
-        (each waits for the device, so only where a search asks for them)."""
+        """Move from the init view to each pose (B, 6) through the step guard, then :meth:`score`
+        the poses reached."""
         started = time.perf_counter()
         params = self.project(params.to(self.device))
         reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
         params = torch.cat([params[:, :3], reached], dim=1)
+        return self.score(step, params, fraction, lanes, scale, supersample, screened, timed, started)
+
+    def score(
+        self,
+        step: int,
+        params: torch.Tensor,
+        fraction: torch.Tensor,
+        lanes: list[int] | range | None = None,
+        scale: float = 1.0,
+        supersample: int | None = None,
+        screened: bool = False,
+        timed: bool = False,
+        started: float | None = None,
+    ) -> list[ViewRecord]:
+        """Render poses (B, 6) already through the step guard (``fraction``: the share of each move
+        taken) exactly at ``scale`` times the run's size (with ``supersample`` rays per pixel side;
+        None: the run's), evaluate and record, one model pass a view (``screened``: at a cheap
+        fidelity, never ranked: :meth:`screen`). ``timed``: the render's and the model's seconds per
+        view go to the clock (each waits for the device, so only where a search asks for them).
+        ``started``: when the batch's work began (its seconds go to the clock), if before this call."""
+        started = time.perf_counter() if started is None else started
+        params = params.to(self.device)
         K, height, width = self.size(scale)
         supersample = supersample or self.differentiable.config.supersample
         with torch.no_grad():

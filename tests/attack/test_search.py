@@ -390,6 +390,59 @@ def test_trust_region_steps_from_the_incumbent_undo_failures_and_restart_stalled
     assert path == sorted(path) and view.path[-1].loss == max(r.loss for r in view.records if r.rankable)
 
 
+def test_cheap_gradient_lanes_take_a_step_only_once_the_exact_render_confirms_it(
+    tiny_objective, differentiable, file_view
+) -> None:
+    """Replays each gradient lane of a search screening at one ray per pixel: the lanes step and
+    take their gradients at that fidelity; exactly the trials that raise the lane's objective there
+    are scored again exactly (a model pass each, counted), and a trial becomes the incumbent, its
+    step growing, only if its exact objective beats the incumbent's."""
+    settings = HalvingSettings(
+        screen_fraction=0.25, screen_supersample=1, rescore_fraction=0.1, refine="gradient", lanes=2, stall_scale=0.3
+    )
+    with count_passes(tiny_objective.model) as count:
+        result = _run(tiny_objective, differentiable, [file_view], (H, W), "halving", settings, budget_passes=60)
+    view = result.views[0]
+    assert count.forward == view.budget.forward == len(view.records) and count.passes == view.budget.passes <= 60
+    refined = [r for r in view.records if r.step >= 4]
+    trials, checks = [r for r in refined if r.screened], [r for r in refined if not r.screened]
+    assert trials and checks  # some trials rose at the cheap fidelity and were checked
+    # the trials went through the differentiable render (its warp's agreement), the checks did not
+    assert all(not math.isnan(r.coverage) for r in trials) and all(math.isnan(r.coverage) for r in checks)
+    exact_before = {tuple(r.params): r for r in view.records if r.step < 4 and r.rankable}
+    lanes, validated, taken = settings.gradient_lanes(), 0, 0
+    for lane in _lanes(refined).values():
+        steps = [r for r in lane if r.screened]
+        checked = {r.step: r for r in lane if not r.screened}
+        incumbent, radius = steps[0], 1.0  # a lane starts at an exact view, rendered cheaply for its gradient
+        level = incumbent.objective if incumbent.valid else -math.inf
+        best = exact_before[tuple(incumbent.params)].objective
+        for trial in steps[1:]:
+            moved = float(np.linalg.norm(np.subtract(trial.params[:3], incumbent.params[:3])))
+            assert moved == pytest.approx(lanes.lr_rotation * radius, rel=1e-9)
+            rose = trial.valid and trial.objective > level
+            assert (trial.step in checked) == rose  # checked exactly when, and only when, it rose cheaply
+            if rose:
+                validated += 1
+                assert checked[trial.step].params == trial.params
+            check = checked.get(trial.step)
+            if rose and check.rankable and check.objective > best:
+                incumbent, level, best, radius = trial, trial.objective, check.objective, radius * lanes.grow
+                taken += 1
+            else:
+                radius *= lanes.shrink
+            if radius < lanes.stall_scale:
+                radius = 1.0
+    assert validated == len(checks) and taken >= 1
+    assert all(not r.screened for r in view.top + view.path)  # only exact views are chosen or followed
+    K = intrinsics_from_fov(file_view.fov_x_deg, H, W)
+    for record, supersample in ((trials[-1], 1), (checks[-1], differentiable.config.supersample)):
+        pose = record.world_T_cam(file_view.world_T_cam)[None]  # the trial at one ray per pixel, the check exactly
+        out = tiny_objective.renderer.render(pose, K, H, W, supersample=supersample)
+        terms = tiny_objective(out.rgb, out.depth, out.mask, pose, K)
+        assert float(terms.delta1[0]) == pytest.approx(record.delta1, abs=1e-6)
+
+
 def test_screening_at_a_reduced_size_re_scores_its_best_views_at_full_size(
     tiny_objective, differentiable, file_view
 ) -> None:

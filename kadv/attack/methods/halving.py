@@ -1,6 +1,6 @@
 """Successive halving: many poses scored at a cheap fidelity, the best re-scored exactly, then
 trust-region lanes from the best exact views, each step drawn around the lane's incumbent or
-taken along the gradient.
+taken along the gradient (at the screening's fidelity: the exact render validates what a lane takes).
 
 Every image the model runs on is a model pass of ``attack.budget_passes``, screened or exact, and
 so is every backward pass. The cheap fidelity (fewer rays per pixel) saves render time, not model
@@ -46,8 +46,10 @@ class HalvingSettings:
             exactly (a cheap fidelity only).
         refine: how the lanes step: ``gradient`` (along the normalised gradient through the
             differentiable renderer, :func:`~kadv.attack.methods.hybrid.trust_region_refine`; a
-            forward and a backward pass per lane) or ``local`` (``local_views`` poses drawn around
-            the lane's incumbent within its trust region and screened, the best re-scored exactly).
+            forward and a backward pass per lane, at the screening's fidelity, a trial it would
+            take re-scored exactly first when that is cheap) or ``local`` (``local_views`` poses
+            drawn around the lane's incumbent within its trust region and screened, the best
+            re-scored exactly).
         lanes: trust-region lanes, from the best separated exact views.
         local_views: poses screened per lane and step with ``refine=local``.
         step_fraction: a ``local`` lane's first trust region, as a share of the bounds (rotation
@@ -101,9 +103,9 @@ def _rescore_count(settings: HalvingSettings, passes: int | None) -> int:
 
 
 def _lane_step(settings: HalvingSettings) -> int:
-    """The passes of one lane's step: a forward and a backward pass along the gradient; the draws
-    (and the best's re-scoring, after a cheap screening) without it."""
-    return 2 if settings.refine == "gradient" else settings.local_views + settings.cheap
+    """The passes of one lane's step: a forward and a backward pass along the gradient, the draws
+    without it, and at a cheap fidelity the exact re-scoring of what the lane takes."""
+    return (2 if settings.refine == "gradient" else settings.local_views) + settings.cheap
 
 
 def check_budget(settings: HalvingSettings, passes: int | None, supersample: int | None = None) -> None:
@@ -243,7 +245,8 @@ def halving_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) 
     starts, pool = candidates[: settings.lanes], candidates[settings.lanes :]
     if starts:
         if settings.refine == "gradient":
-            records += trust_region_refine(context, starts, pool, settings.gradient_lanes(), bar, 4)
+            lanes = settings.gradient_lanes()
+            records += trust_region_refine(context, starts, pool, lanes, bar, 4, settings.screen_supersample)
         else:
             records += local_refine(context, starts, pool, settings, rng, 4)
     return context.result(records, incumbent_path(records))

@@ -86,6 +86,7 @@ def trust_region_refine(
     settings: HybridSettings,
     bar: tqdm,
     first_step: int,
+    supersample: int | None = None,
 ) -> list[ViewRecord]:
     """Batched trust-region gradient ascent from ``starts`` within the context's budget; its records.
 
@@ -96,32 +97,42 @@ def trust_region_refine(
     ``stall_scale`` restarts from the next view of ``pool``. So no lane's incumbent ever falls.
     Lane ids (records' ``restart``) are new for each restart.
 
-    A step costs a forward pass per lane and, when any lane's trial is accepted, a backward pass
-    through the whole batch (the model's backward runs over every image of it); it starts only
-    while the budget holds both.
+    ``supersample``: the lanes render and take their gradients at this cheap fidelity (rays per
+    pixel side; None: the run's, exactly). A trial that raises its lane's objective at that fidelity
+    is then rendered and scored exactly, and becomes the incumbent only if its exact objective beats
+    the incumbent's: the exact render validates each accepted step, and every incumbent is an exact
+    view. The cheap trials are screened records (never chosen or followed).
+
+    A step costs a forward pass per lane and, when any lane's trial may be accepted, a backward
+    pass through the whole batch (the model's backward runs over every image of it), and at a
+    cheap fidelity a forward pass per trial validated; it starts only while the budget holds them all.
     """
     clock = context.clock
-    lanes = clock.allows(len(starts), cost=2)
+    cheap = supersample is not None
+    cost = 3 if cheap else 2
+    lanes = clock.allows(len(starts), cost=cost)
     if lanes == 0:
         return []
+    differentiable = context.differentiable_at(supersample)
     pool = list(pool)
     ids = list(range(lanes))
     next_id = lanes
     current = torch.tensor([r.params for r in starts[:lanes]], dtype=torch.float64)  # incumbents
-    best = torch.full((lanes,), -math.inf, dtype=torch.float64)
+    level = torch.full((lanes,), -math.inf, dtype=torch.float64)  # their objective at the lanes' fidelity
+    exact = torch.tensor([r.objective for r in starts[:lanes]], dtype=torch.float64)  # and exactly (a cheap lane)
     gradient = torch.zeros(lanes, 6, dtype=torch.float64)
     radius = torch.ones(lanes, dtype=torch.float64)
     fresh = torch.ones(lanes, dtype=torch.bool)  # the trial is the incumbent itself: evaluate for its gradient
     base = context.base(lanes)
     records: list[ViewRecord] = []
     step = first_step
-    while clock.allows(lanes, cost=2) == lanes:
+    while clock.allows(lanes, cost=cost) == lanes:
         started = time.perf_counter()
         proposal = context.project(current + torch.where(fresh[:, None], 0.0, _steps(gradient, radius, settings)))
         reached, fraction = context.guard(current[:, 3:], proposal[:, 3:])
         # the lanes' bookkeeping stays on the host, where its decisions are made; the trial goes to the device
         trial = torch.cat([proposal[:, :3].to(context.device), reached], dim=1).requires_grad_(True)
-        out = context.differentiable(trial, base, context.K, context.height, context.width)
+        out = differentiable(trial, base, context.K, context.height, context.width)
         terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
         rows = context.records(
             step,
@@ -134,27 +145,37 @@ def trust_region_refine(
             lanes=list(ids),
             render=out.exact,
         )
-        records += rows
         value = terms.objective.detach().cpu()
         rankable = torch.tensor([r.rankable for r in rows])
-        accepted = fresh | (rankable & (value > best))
-        backward = lanes if bool(accepted.any()) else 0
+        records += [dataclasses.replace(r, screened=True) for r in rows] if cheap else rows
+        risen = ~fresh & rankable & (value > level)
+        backward = lanes if bool((fresh | risen).any()) else 0
         if backward:
-            (terms.objective * accepted.to(terms.objective.device)).sum().backward()
+            (terms.objective * (fresh | risen).to(terms.objective.device)).sum().backward()
+        clock.spent(lanes, time.perf_counter() - started, backward=backward, screened=cheap)
+        if cheap and bool(risen.any()):
+            chosen = torch.nonzero(risen).flatten().tolist()
+            scored = context.score(step, trial.detach()[chosen], fraction[chosen], lanes=[ids[i] for i in chosen])
+            records += scored
+            for lane, row in zip(chosen, scored):
+                risen[lane] = row.rankable and row.objective > exact[lane]
+                exact[lane] = row.objective if risen[lane] else exact[lane]
+        accepted = fresh | risen
+        if backward:
             gradient[accepted] = trial.grad.cpu()[accepted]
             current[accepted] = trial.detach().cpu()[accepted]
-            best[accepted] = torch.where(rankable, value, torch.full_like(value, -math.inf))[accepted]
-        radius = torch.where(accepted & ~fresh, radius * settings.grow, radius)
+            level[accepted] = torch.where(rankable, value, torch.full_like(value, -math.inf))[accepted]
+        radius = torch.where(risen, radius * settings.grow, radius)
         radius = torch.where(accepted, radius, radius * settings.shrink)
         fresh = torch.zeros_like(fresh)
         for lane in torch.nonzero(radius < settings.stall_scale).flatten().tolist():
             radius[lane] = 1.0
             if pool:
-                current[lane] = torch.tensor(pool.pop(0).params, dtype=torch.float64)
-                best[lane], fresh[lane] = -math.inf, True
+                restart = pool.pop(0)
+                current[lane], exact[lane] = torch.tensor(restart.params, dtype=torch.float64), restart.objective
+                level[lane], fresh[lane] = -math.inf, True
                 ids[lane], next_id = next_id, next_id + 1
         bar.set_postfix(loss=f"{max((r.loss for r in records if r.rankable), default=math.nan):.4f}", refresh=False)
-        clock.spent(lanes, time.perf_counter() - started, backward=backward)
         step += 1
     return records
 
