@@ -594,7 +594,8 @@ def test_halving_starts_from_warm_starts_and_its_local_lanes_step_within_their_t
 @pytest.mark.parametrize(
     "settings, budget, message",
     [
-        (HalvingSettings(), 2, r"attack.budget_passes must be at least 3 for attack.halving"),
+        (HalvingSettings(), 1, r"attack.budget_passes must be at least 2 for attack.halving"),
+        (HalvingSettings(screen_supersample=1), 2, r"attack.budget_passes must be at least 3 for attack.halving"),
         (HalvingSettings(screen_supersample=2), 20, r"attack.halving.screen_supersample must be below"),
     ],
 )
@@ -605,9 +606,17 @@ def test_halving_refuses_a_budget_too_small_for_its_screening_or_a_screening_as_
         _run(tiny_objective, differentiable, [file_view], (H, W), "halving", settings, budget_passes=budget)
 
 
+def test_the_default_search_runs_on_two_passes_the_floor_kadv_probe_takes(
+    tiny_objective, differentiable, file_view
+) -> None:
+    # auto screens exactly under a pass budget: nothing to re-score, so the init view and one more
+    view = _run(tiny_objective, differentiable, [file_view], method="halving", budget_passes=2).views[0]
+    assert view.budget.passes == len(view.records) == 2 and not any(r.screened for r in view.records)
+
+
 def test_halving_settings_out_of_range_name_their_key() -> None:
-    with pytest.raises(ValueError, match=r"attack.budget_passes must be at least 3 for attack.halving"):
-        AttackConfig("halving", budget_passes=2)  # refused when the config is made, before any work
+    with pytest.raises(ValueError, match=r"attack.budget_passes must be at least 2 for attack.halving"):
+        AttackConfig("halving", budget_passes=1)  # refused when the config is made, before any work
     with pytest.raises(ValueError, match=r"attack.halving.refine must be 'gradient' or 'local', got 'adam'"):
         HalvingSettings(refine="adam")
     with pytest.raises(ValueError, match=r"attack.halving.screen_fraction must be in \(0, 1\], got 1.5"):

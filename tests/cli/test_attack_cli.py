@@ -257,7 +257,7 @@ BAD_INPUTS = [
     ),
     ("kadv-attack", ["attack.budget_evaluations=48"], "attack.budget_evaluations was renamed attack.budget_passes"),
     ("kadv-attack", ["attack.halving.refine=adam"], "attack.halving.refine must be 'gradient' or 'local', got 'adam'"),
-    ("kadv-attack", ["attack.budget_passes=2"], "attack.budget_passes must be at least 3 for attack.halving"),
+    ("kadv-attack", ["attack.budget_passes=1"], "attack.budget_passes must be at least 2 for attack.halving"),
     ("kadv-attack", ["attack.halving.screen_supersample=2"], "attack.halving.screen_supersample must be below render"),
     ("kadv-attack", ["loss=delta1", "loss.temperature=0"], "loss.temperature must be positive, got 0"),
     ("kadv-attack", ["loss.kind=rmse"], "loss.kind must be one of perceptual, ssim, absrel, delta1, got 'rmse'"),

@@ -29,7 +29,6 @@ def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_pat
         ("model=", "scorecard needs at least one model"),
         ("model=no_such_model", "unknown model 'no_such_model': not a preset"),
         ("budget=1", "budget must be an integer >= 2, got 1"),
-        ("budget=2", "budget=2 is too small for the default search: attack.budget_passes must be at least 3"),
         ("seed=x", "seed must be an integer >= 0, got 'x'"),
         ("seeds=", "seeds is empty: give one or more integers >= 0"),
         ("seeds=0,-1", "seeds must be an integer >= 0, got -1"),

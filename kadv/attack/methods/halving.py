@@ -84,8 +84,9 @@ class HalvingSettings:
 
     @property
     def cheap(self) -> bool:
-        """Whether the screening may score at a cheap fidelity (its best are then re-scored exactly)."""
-        return self.screen_supersample is not None
+        """Whether the screening scores at a cheap fidelity (its best are then re-scored exactly);
+        ``auto`` counts as exact, what it is under a pass budget alone."""
+        return isinstance(self.screen_supersample, int)
 
     def gradient_lanes(self) -> HybridSettings:
         """The gradient lanes' settings (their first step lengths are hybrid's)."""
