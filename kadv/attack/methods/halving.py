@@ -128,7 +128,8 @@ def check_budget(settings: HalvingSettings, passes: int | None, supersample: int
         if passes < needed:
             raise ValueError(
                 f"attack.budget_passes must be at least {needed} for attack.halving (the init view and "
-                f"{rescore or 1} screened views{' re-scored' if rescore else ''}), got {passes}"
+                f"{rescore or 1} screened view{'s' if rescore > 1 else ''}{' re-scored' if rescore else ''}), "
+                f"got {passes}"
             )
 
 
