@@ -237,6 +237,7 @@ class Measures:
         seconds: the search's clock when the step was measured.
         scale: the render's size relative to the run's.
         passes: the model passes the search had spent once these views were scored.
+        screened: scored at a search's cheap fidelity (never chosen or followed).
     """
 
     step: int
@@ -247,6 +248,7 @@ class Measures:
     seconds: float
     scale: float
     passes: int = 0
+    screened: bool = False
 
     def records(self) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view."""
@@ -282,6 +284,7 @@ class Measures:
                     seconds=self.seconds,
                     passes=self.passes,
                     scale=self.scale,
+                    screened=self.screened,
                     yaw_deg=yaw,
                     pitch_deg=pitch,
                     roll_deg=roll,
@@ -378,10 +381,11 @@ class SearchContext:
         lanes: list[int] | range | None = None,
         render: RenderOutput | None = None,
         scale: float = 1.0,
+        screened: bool = False,
     ) -> Measures:
         """What the records of B views will hold, left where it was computed (see :class:`Measures`):
-        the view's validity (from ``render``, the views' exact render, when given, at ``scale`` times
-        the run's size) and the search's clock."""
+        the view's validity (from ``render``, the views' render, when given, at ``scale`` times the
+        run's size; ``screened``: at a cheap fidelity) and the search's clock."""
         pose = world_T_cam.detach()
         K, height, width = self.size(scale)
         validity = view_validity(self.renderer, pose, K, height, width, render=render, **self.validity_options)
@@ -401,7 +405,7 @@ class SearchContext:
         table = torch.cat([n.to(device, torch.float64, non_blocking=True) for n in numbers], dim=1)
         lanes = list(lanes) if lanes is not None else list(range(len(pose)))
         passes = self.clock.budget.passes + len(pose)  # this batch's forward passes are done
-        return Measures(step, lanes, table, validity, refreshed, self.clock.elapsed(), scale, passes)
+        return Measures(step, lanes, table, validity, refreshed, self.clock.elapsed(), scale, passes, screened)
 
     def records(self, *args, **kwargs) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view: :meth:`measure`'s arguments, read to the host at once."""
@@ -430,7 +434,17 @@ class SearchContext:
         params = self.project(params.to(self.device))
         reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
         params = torch.cat([params[:, :3], reached], dim=1)
-        return self.score(step, params, fraction, lanes, scale, supersample, screened, timed, started)
+        return self.score(
+            step,
+            params,
+            fraction,
+            lanes,
+            scale=scale,
+            supersample=supersample,
+            screened=screened,
+            timed=timed,
+            started=started,
+        )
 
     def score(
         self,
@@ -463,9 +477,9 @@ class SearchContext:
             if timed:
                 self.clock.render_s = (modelling - rendering) / len(pose)
                 self.clock.model_s = (self._now() - modelling) / len(pose)
-        rows = self.records(step, params, pose, terms, fraction, lanes=lanes, render=out, scale=scale)
-        if screened:
-            rows = [dataclasses.replace(row, screened=True) for row in rows]
+        rows = self.records(
+            step, params, pose, terms, fraction, lanes=lanes, render=out, scale=scale, screened=screened
+        )
         self.clock.spent(len(params), time.perf_counter() - started, screened=screened)
         return rows
 

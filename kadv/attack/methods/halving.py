@@ -247,8 +247,8 @@ def halving_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) 
     starts, pool = candidates[: settings.lanes], candidates[settings.lanes :]
     if starts:
         if settings.refine == "gradient":
-            lanes = settings.gradient_lanes()
-            records += trust_region_refine(context, starts, pool, lanes, bar, 4, settings.screen_supersample)
+            gradient = settings.gradient_lanes()
+            records += trust_region_refine(context, starts, pool, gradient, bar, 4, settings.screen_supersample)
         else:
             records += local_refine(context, starts, pool, settings, rng, 4)
     return context.result(records, incumbent_path(records))

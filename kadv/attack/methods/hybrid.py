@@ -144,11 +144,12 @@ def trust_region_refine(
             out.refreshed,
             lanes=list(ids),
             render=out.exact,
+            screened=cheap,
         )
+        records += rows
         value = terms.objective.detach().cpu()
-        rankable = torch.tensor([r.rankable for r in rows])
-        records += [dataclasses.replace(r, screened=True) for r in rows] if cheap else rows
-        risen = ~fresh & rankable & (value > level)
+        valid = torch.tensor([r.valid for r in rows])  # rankable at the lanes' fidelity (full size)
+        risen = ~fresh & valid & (value > level)
         backward = lanes if bool((fresh | risen).any()) else 0
         if backward:
             (terms.objective * (fresh | risen).to(terms.objective.device)).sum().backward()
@@ -158,13 +159,15 @@ def trust_region_refine(
             scored = context.score(step, trial.detach()[chosen], fraction[chosen], lanes=[ids[i] for i in chosen])
             records += scored
             for lane, row in zip(chosen, scored):
-                risen[lane] = row.rankable and row.objective > exact[lane]
-                exact[lane] = row.objective if risen[lane] else exact[lane]
+                if row.rankable and row.objective > exact[lane]:
+                    exact[lane] = row.objective
+                else:
+                    risen[lane] = False  # the exact render does not confirm the step
         accepted = fresh | risen
         if backward:
             gradient[accepted] = trial.grad.cpu()[accepted]
             current[accepted] = trial.detach().cpu()[accepted]
-            level[accepted] = torch.where(rankable, value, torch.full_like(value, -math.inf))[accepted]
+            level[accepted] = torch.where(valid, value, torch.full_like(value, -math.inf))[accepted]
         radius = torch.where(risen, radius * settings.grow, radius)
         radius = torch.where(accepted, radius, radius * settings.shrink)
         fresh = torch.zeros_like(fresh)
