@@ -502,8 +502,8 @@ class SearchContext:
             if count == 0:
                 break
             records += self.evaluate(step, chunk[:count], supersample=supersample, screened=supersample is not None)
-            if bar is not None:
-                bar.set_postfix_str(f"screened {len(records)}/{len(params)}")
+            if bar is not None:  # "screened" as in the budget's count: at the cheap fidelity only
+                bar.set_postfix_str(f"{'scored' if supersample is None else 'screened'} {len(records)}/{len(params)}")
         return records
 
     def result(self, records: list[ViewRecord], path: list[ViewRecord]) -> InitViewResult:

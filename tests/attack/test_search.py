@@ -318,7 +318,8 @@ def test_bad_method_settings_name_their_key() -> None:
         AttackConfig("random", budget_passes=None)
 
 
-def test_the_progress_bar_forgets_the_previous_init_views_best(tiny_objective, differentiable, file_view, monkeypatch):
+def _shown(monkeypatch) -> list[tuple[str, str]]:
+    """What the attack's progress bars will show, recorded as (kind, text) pairs."""
     shown: list[tuple[str, str]] = []
 
     class Bar(tqdm):
@@ -335,11 +336,30 @@ def test_the_progress_bar_forgets_the_previous_init_views_best(tiny_objective, d
             super().set_postfix(ordered_dict, refresh, **kwargs)
 
     monkeypatch.setattr(runner, "tqdm", Bar)
+    return shown
+
+
+def test_the_progress_bar_forgets_the_previous_init_views_best(tiny_objective, differentiable, file_view, monkeypatch):
+    shown = _shown(monkeypatch)
     _run(tiny_objective, differentiable, [file_view, file_view], method="random", budget_passes=6)
     second = shown.index(("description", "random attack, init view 2/2"))
     before = [value for kind, value in shown[:second] if kind == "postfix"]
     assert before and before[-1].startswith("loss=")  # init view 1 showed its best
     assert shown[second + 1] == ("postfix", "")  # and init view 2 starts without it
+
+
+@pytest.mark.parametrize(("fidelity", "word"), [("auto", "scored"), (1, "screened")])
+def test_the_progress_bar_calls_screened_only_the_cheap_views(
+    tiny_objective, differentiable, file_view, monkeypatch, fidelity, word
+) -> None:
+    """The screening's count says "screened" as the budget's count does: at the cheap fidelity only
+    (``auto`` under a pass budget scores exactly)."""
+    shown = _shown(monkeypatch)
+    settings = HalvingSettings(screen_supersample=fidelity, batch=4)
+    result = _run(tiny_objective, differentiable, [file_view], method="halving", settings=settings, budget_passes=12)
+    counts = [value for kind, value in shown if kind == "postfix" and value.split(" ")[0] in ("scored", "screened")]
+    assert counts and all(value.startswith(f"{word} ") for value in counts)
+    assert (result.views[0].budget.screened > 0) == (word == "screened")
 
 
 def test_the_search_modules_import_each_other_in_one_direction() -> None:
