@@ -43,8 +43,9 @@ halving's under a seconds budget: the three are one method for W*.
    reprojection's: the one-ray cast it needs for the view's depth, the warp, and the model).
 
 Runs are kept as JSON under ``--out/runs``, keyed by the method's config, budget, seed, the seconds
-it was given, and a hash of kadv's source: a run made by other code, settings or budget is never
-read, and a rerun resumes. Last line: ``worst_case regret_median=... noise_median=... win_*_passes=...
+it was given, and a hash of the kadv source it depends on (every search method's module left out
+but its own and those it imports): a run made by other code, settings or budget is never read, a
+rerun resumes, and a change to one method reruns only the runs that depend on it. Last line: ``worst_case regret_median=... noise_median=... win_*_passes=...
 win_*_s=... drop_vs_random_r0=... screen_spearman_r0=... reproject_ms=... exact_ms=...``.
 
 Run: .venv/bin/python benchmarks/worst_case.py [--out outputs/worst_case] [--parts regret,proxy]
@@ -54,6 +55,7 @@ Run: .venv/bin/python benchmarks/worst_case.py [--out outputs/worst_case] [--par
 from __future__ import annotations
 
 import argparse
+import ast
 import dataclasses
 import hashlib
 import json
@@ -114,14 +116,41 @@ VERSIONED = ("attack", "geometry", "losses", "models", "penalties", "render", "s
              "testing/profile.py")  # fmt: skip
 
 
-def source_version() -> str:
-    """A hash of the kadv source a run's numbers come from: a run made by other code is never read back."""
+def source_version(method: str | None = None) -> str:
+    """A hash of the kadv source a run's numbers come from: a run made by other code is never read back.
+
+    ``method``: the source a run of that search method depends on, the search methods' modules left
+    out but its own and those it imports (a change to one method keeps the others' runs, and the
+    reference attack's); None: every module."""
     root = Path(__file__).resolve().parents[1] / "kadv"
+    paths = [
+        p
+        for part in VERSIONED
+        for p in (sorted((root / part).rglob("*.py")) if (root / part).is_dir() else [root / part])
+    ]
+    if method is not None:
+        methods = root / "attack" / "methods"
+        paths = [p for p in paths if p.parent != methods] + [
+            methods / f"{m}.py" for m in _method_modules(methods, method)
+        ]
     digest = hashlib.sha256()
-    for part in VERSIONED:
-        for path in sorted((root / part).rglob("*.py")) if (root / part).is_dir() else [root / part]:
-            digest.update(str(path.relative_to(root)).encode() + path.read_bytes())
+    for path in paths:
+        digest.update(str(path.relative_to(root)).encode() + path.read_bytes())
     return digest.hexdigest()[:12]
+
+
+def _method_modules(folder: Path, name: str) -> list[str]:
+    """The modules of kadv.attack.methods that method module ``name`` is made of: itself and those
+    it imports, in turn, sorted."""
+    found, todo = set(), [name]
+    while todo:
+        module = todo.pop()
+        found.add(module)
+        tree = ast.parse((folder / f"{module}.py").read_text())
+        imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+        todo += [m.rsplit(".", 1)[1] for m in imported if m.startswith("kadv.attack.methods.")]
+        todo = [m for m in todo if m not in found]
+    return sorted(found)
 
 
 def method_config(label: str, budget: int | None, seconds: float | None = None) -> AttackConfig:
@@ -175,15 +204,15 @@ def worst_within(run: dict, radius: int) -> float:
 
 
 class Store:
-    """Runs on disk under ``out/runs``, keyed by config, budget, seed, seconds and source version."""
+    """Runs on disk under ``out/runs``, keyed by config, budget, seed, seconds and the version of the
+    source the method depends on."""
 
     def __init__(self, out: Path) -> None:
         self.folder = out / "runs"
-        self.version = source_version()
 
     def run(self, cells: Cells, view: int, label: str, seed: int, budget: int, seconds=None) -> dict:
         config = method_config(label, budget)
-        key = json.dumps([repr(config), seed, seconds, self.version, cells.name, view])
+        key = json.dumps([repr(config), seed, seconds, source_version(config.method), cells.name, view])
         digest = hashlib.sha256(key.encode()).hexdigest()[:16]
         path = self.folder / f"{cells.name}-v{view}-{label}-s{seed}-{'s' if seconds else 'p'}-{digest}.json"
         if path.is_file():
