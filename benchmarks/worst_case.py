@@ -41,15 +41,19 @@ halving's under a seconds budget: the three are one method for W*.
    the reprojection of anchor layers against the exact render, over ``PROXY_VIEWS`` poses per
    cell (the first init view of each scene), and each one's milliseconds per view at 240x320 (the
    reprojection's: the one-ray cast it needs for the view's depth, the warp, and the model).
+6. (``--parts budgets``, not run by default) The default alone at ``--budgets`` passes per init
+   view and radius: its search noise per radius and its mean worst, which more passes lower.
 
 Runs are kept as JSON under ``--out/runs``, keyed by the method's config, budget, seed, the seconds
 it was given, and a hash of the kadv source it depends on (every search method's module left out
 but its own and those it imports): a run made by other code, settings or budget is never read, a
-rerun resumes, and a change to one method reruns only the runs that depend on it. Last line: ``worst_case regret_median=... noise_median=... win_*_passes=...
-win_*_s=... drop_vs_random_r0=... screen_spearman_r0=... reproject_ms=... exact_ms=...``.
+rerun resumes, and a change to one method reruns only the runs that depend on it. Last line:
+``worst_case regret_median=... noise_median=... win_*_passes=... win_*_s=... drop_vs_random_r0=...
+screen_spearman_r0=... reproject_ms=... exact_ms=...`` (and ``noise_median_<budget>=...``).
 
-Run: .venv/bin/python benchmarks/worst_case.py [--out outputs/worst_case] [--parts regret,proxy]
+Run: .venv/bin/python benchmarks/worst_case.py [--out outputs/worst_case] [--parts regret,proxy,budgets]
      [--scenes all|a,b] [--views scene:count,...] [--seeds 0,1,2,3,4] [--budget 48] [--methods ...]
+     [--budgets 48,96,192]
 """
 
 from __future__ import annotations
@@ -86,7 +90,7 @@ from kadv.testing.profile import DEFAULT_RADII, WARM_STARTS, warm_starts
 
 ENVELOPE = "upright"
 SCENES = (*PROBES, "box_room", "grey_white_room")
-PARTS = ("regret", "proxy")
+PARTS = ("regret", "proxy", "budgets")
 BASELINES = ("random", "cma", "nevergrad")
 # label -> (method, settings); "default" is kadv's default search with its defaults
 CANDIDATES = {
@@ -322,11 +326,17 @@ class Runs:
         for cell in self.cells:
             if radius is not None and cell[2] != radius:
                 continue
-            values = [self.worst(cell, label, seed, "passes") for seed in self.seeds]
-            values = [v for v in values if not math.isnan(v)]
-            if len(values) >= 2 and max(values) > SATURATED:
-                out.append(float(np.std(values, ddof=1)))
+            sd = seed_noise([self.worst(cell, label, seed, "passes") for seed in self.seeds])
+            if sd is not None:
+                out.append(sd)
         return out
+
+
+def seed_noise(values: list[float]) -> float | None:
+    """The sample sd (ddof 1) of one cell's worst over the seeds (NaN: a run missing), or None where
+    it is not measured: fewer than two runs, or every worst 0 (saturated)."""
+    values = [v for v in values if not math.isnan(v)]
+    return float(np.std(values, ddof=1)) if len(values) >= 2 and max(values) > SATURATED else None
 
 
 def regret_part(runs: Runs) -> dict[str, str]:
@@ -511,16 +521,39 @@ def _proxy_cell(cell: Cells, degrees: float, metres: float) -> dict:
     return out
 
 
+def budgets_part(store: Store, cells: dict[str, Cells], views: dict[str, int], seeds, budgets) -> dict[str, str]:
+    """Part 6: the default alone at each of ``budgets`` passes per init view and radius (the init
+    views fixed): its search noise per radius (median and largest over the unsaturated cells) and
+    its mean worst, which more passes lower."""
+    figures: dict[str, str] = {}
+    by_budget = {budget: [[store.run(cells[n], v, "default", seed, budget) for seed in seeds]
+                          for n in cells for v in range(views[n])] for budget in budgets}  # fmt: skip
+    print("\n6. the default at more passes: search noise median, max (unsaturated cells); mean worst, per radius")
+    print("| passes a radius | " + " | ".join(f"{d:g}°/{m:g} m" for d, m in DEFAULT_RADII) + " | noise median |")
+    print("|---|" + "---|" * (len(DEFAULT_RADII) + 1))
+    for budget, runs in by_budget.items():
+        row, pooled = [], []
+        for k in range(len(DEFAULT_RADII)):
+            worsts = [[worst_within(run, k) for run in cell] for cell in runs]
+            noise = [sd for sd in map(seed_noise, worsts) if sd is not None]
+            pooled += noise
+            row.append(f"{np.median(noise):.3f}, {np.max(noise):.3f}; worst {np.mean(worsts):.3f}")
+        print(f"| {budget} | " + " | ".join(row) + f" | {np.median(pooled):.3f} |")
+        figures[f"noise_median_{budget}"] = f"{np.median(pooled):.3f}"
+    return figures
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="outputs/worst_case")
-    parser.add_argument("--parts", default=",".join(PARTS))
+    parser.add_argument("--parts", default="regret,proxy", help=f"of {', '.join(PARTS)}")
     parser.add_argument("--scenes", default="all")
     parser.add_argument("--seeds", default="0,1,2,3,4")
     parser.add_argument("--budget", type=int, default=48, help="model passes per init view and radius")
     parser.add_argument("--views", default="", help="scene:count,...: measure only a scene's first init views")
     parser.add_argument("--methods", default=",".join(["default", *CANDIDATES]), help="the methods compared")
     parser.add_argument("--reference-seeds", default="100,101,102,103", help="the reference attack's seeds (none: '')")
+    parser.add_argument("--budgets", default="48,96,192", help="part budgets: the default's passes a radius")
     args = parser.parse_args()
     out, parts = Path(args.out), args.parts.split(",")
     names = list(SCENES) if args.scenes == "all" else args.scenes.split(",")
@@ -531,6 +564,9 @@ def main() -> None:
         parser.error("--methods: the default is what the benchmark scores; name it")
     if args.budget < 7:
         parser.error(f"--budget: at least 7 model passes (the default search's floor), got {args.budget}")
+    budgets = [int(b) for b in args.budgets.split(",") if b.strip().isdigit()]
+    if not budgets or len(budgets) != len(args.budgets.split(",")) or min(budgets) < 7:
+        parser.error(f"--budgets: integers of at least 7, comma-separated, got {args.budgets!r}")
     seeds = [int(s) for s in args.seeds.split(",")]
     if len(seeds) < 2:
         parser.error("--seeds: at least two, for the search noise")
@@ -550,6 +586,8 @@ def main() -> None:
         figures |= regret_part(Runs(Store(out), cells, views, seeds, args.budget, labels, reference))
     if "proxy" in parts:
         figures |= proxy_part(cells, out)
+    if "budgets" in parts:
+        figures |= budgets_part(Store(out), cells, views, seeds, budgets)
     print("worst_case " + " ".join(f"{k}={v}" for k, v in figures.items()))
 
 
