@@ -126,9 +126,10 @@ def check_budget(settings: HalvingSettings, passes: int | None, supersample: int
         rescore = _rescore_count(settings, passes)
         needed = 1 + max(rescore, 1)
         if passes < needed:
+            # "screened": at the cheap fidelity, as the budget counts them; an exact screening scores its views
+            rest = f"{rescore} screened views re-scored" if rescore else "1 view of its screening"
             raise ValueError(
-                f"attack.budget_passes must be at least {needed} for attack.halving (the init view and "
-                f"{rescore or 1} screened view{'s' if rescore > 1 else ''}{' re-scored' if rescore else ''}), "
+                f"attack.budget_passes must be at least {needed} for attack.halving (the init view and {rest}), "
                 f"got {passes}"
             )
 
