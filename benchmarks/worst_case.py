@@ -61,6 +61,7 @@ from __future__ import annotations
 import argparse
 import ast
 import dataclasses
+import functools
 import hashlib
 import json
 import math
@@ -112,6 +113,7 @@ REFERENCE = 10  # the reference attack's budget, in budgets
 REFERENCE_METHODS = {"ref_random": ("random", None), "ref_cma": ("cma", CMASettings(ipop=True))}
 PROXY_VIEWS, TOP_K, PROXY_SIZE = 32, 8, (240, 320)
 ANCHOR_LAYERS = 2  # the proxy's anchor: a second layer fills what the first hides from the init view
+MIN_BUDGET = 7  # model passes per init view and radius at least (the default search's floor)
 SATURATED = 1e-9  # a worst of delta1 at most this under every seed: nothing left to find
 
 
@@ -120,6 +122,7 @@ VERSIONED = ("attack", "geometry", "losses", "models", "penalties", "render", "s
              "testing/profile.py")  # fmt: skip
 
 
+@functools.cache  # read once: the code this process runs, even if the files change while it runs
 def source_version(method: str | None = None) -> str:
     """A hash of the kadv source a run's numbers come from: a run made by other code is never read back.
 
@@ -562,11 +565,11 @@ def main() -> None:
                                 "--methods": (labels, ("default", *CANDIDATES))})  # fmt: skip
     if "default" not in labels:
         parser.error("--methods: the default is what the benchmark scores; name it")
-    if args.budget < 7:
-        parser.error(f"--budget: at least 7 model passes (the default search's floor), got {args.budget}")
+    if args.budget < MIN_BUDGET:
+        parser.error(f"--budget: at least {MIN_BUDGET} model passes (the default search's floor), got {args.budget}")
     budgets = [int(b) for b in args.budgets.split(",") if b.strip().isdigit()]
-    if not budgets or len(budgets) != len(args.budgets.split(",")) or min(budgets) < 7:
-        parser.error(f"--budgets: integers of at least 7, comma-separated, got {args.budgets!r}")
+    if not budgets or len(budgets) != len(args.budgets.split(",")) or min(budgets) < MIN_BUDGET:
+        parser.error(f"--budgets: integers of at least {MIN_BUDGET}, comma-separated, got {args.budgets!r}")
     seeds = [int(s) for s in args.seeds.split(",")]
     if len(seeds) < 2:
         parser.error("--seeds: at least two, for the search noise")
