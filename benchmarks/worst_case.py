@@ -22,7 +22,8 @@ candidates for it: ``halving`` (black-box lanes, a screen at one ray per pixel),
 (gradient lanes through the render at one ray per pixel, each step they take validated exactly; the
 same screen), ``halving_exact`` (black-box lanes, every view exact), ``halving_gradient_exact``
 (gradient lanes through the exact render, every view exact), ``hybrid``, ``random``, ``cma``,
-``nevergrad``; each over the same ``--seeds`` (five by default) in both regimes.
+``nevergrad``, ``turbo`` (a Gaussian process in a trust region, BoTorch); each over the same
+``--seeds`` (five by default) in both regimes.
 The default takes halving_exact's settings under a pass budget (those runs are shared) and, here,
 halving's under a seconds budget: the three are one method for W*.
 
@@ -43,17 +44,24 @@ halving's under a seconds budget: the three are one method for W*.
    reprojection's: the one-ray cast it needs for the view's depth, the warp, and the model).
 6. (``--parts budgets``, not run by default) The default alone at ``--budgets`` passes per init
    view and radius: its search noise per radius and its mean worst, which more passes lower.
+7. (``--parts study``, not run by default) The study's own protocol, ``attack=gradient`` with 5
+   restarts of 400 steps from the init view (the best restart kept; 4,005 passes), at the largest
+   radius from the first init view of each probe and the box room, under ``--study-seeds``; the
+   default's paired wins against it there at ``--budget`` passes a radius (a quarter of the
+   protocol's passes or less): its worst at most as high counts as a win.
 
 Runs are kept as JSON under ``--out/runs``, keyed by the method's config, budget, seed, the seconds
 it was given, and a hash of the kadv source it depends on (every search method's module left out
 but its own and those it imports): a run made by other code, settings or budget is never read, a
 rerun resumes, and a change to one method reruns only the runs that depend on it. Last line:
-``worst_case regret_median=... noise_median=... win_*_passes=... win_*_s=... drop_vs_random_r0=...
-screen_spearman_r0=... reproject_ms=... exact_ms=...`` (and ``noise_median_<budget>=...``).
+``worst_case passes_per_view=... regret_median=... noise_median=... noise_max=... agreement_median=...
+win_*_passes=... win_*_s=... drop_vs_random_r0=... screen_spearman_r0=... reproject_ms=... exact_ms=...``
+(and ``noise_median_<budget>=...``, ``win_study_passes=...``). ``agreement_median``: the median over
+the default's runs, at the largest radius, of the share of its restarts that reached its worst.
 
-Run: .venv/bin/python benchmarks/worst_case.py [--out outputs/worst_case] [--parts regret,proxy,budgets]
+Run: .venv/bin/python benchmarks/worst_case.py [--out outputs/worst_case] [--parts regret,proxy,budgets,study]
      [--scenes all|a,b] [--views scene:count,...] [--seeds 0,1,2,3,4] [--budget 48] [--methods ...]
-     [--budgets 48,96,192]
+     [--budgets 48,96,192] [--study-seeds 0,1]
 """
 
 from __future__ import annotations
@@ -77,7 +85,7 @@ from scipy.stats import binomtest, qmc, spearmanr
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from kadv.attack import AttackConfig, CMASettings, HalvingSettings, attack
+from kadv.attack import AttackConfig, CMASettings, GradientSettings, HalvingSettings, attack
 from kadv.attack.init_views import fit_into_envelope
 from kadv.attack.search import DEFAULT_METHOD, SearchContext
 from kadv.geometry import perturb_world_T_cam
@@ -91,7 +99,7 @@ from kadv.testing.profile import DEFAULT_RADII, WARM_STARTS, warm_starts
 
 ENVELOPE = "upright"
 SCENES = (*PROBES, "box_room", "grey_white_room")
-PARTS = ("regret", "proxy", "budgets")
+PARTS = ("regret", "proxy", "budgets", "study")
 BASELINES = ("random", "cma", "nevergrad")
 # label -> (method, settings); "default" is kadv's default search with its defaults
 CANDIDATES = {
@@ -103,6 +111,7 @@ CANDIDATES = {
     "random": ("random", None),
     "cma": ("cma", None),
     "nevergrad": ("nevergrad", None),
+    "turbo": ("turbo", None),
 }
 # The default screens exactly under a pass budget (halving_exact's config, so its runs at equal
 # passes are the default's) and at one ray per pixel under a seconds budget when the render
@@ -111,6 +120,11 @@ PASSES_TWIN = "halving_exact"
 DEFAULT_FAMILY = {"default", "halving", "halving_exact"}
 REFERENCE = 10  # the reference attack's budget, in budgets
 REFERENCE_METHODS = {"ref_random": ("random", None), "ref_cma": ("cma", CMASettings(ipop=True))}
+# label -> restarts of the default search (attack.restarts), each on a share of the budget
+RESTARTED = {"default_r3": 3, "default_r5": 5}
+# the study's protocol: 5 restarts x 400 gradient steps from the init view, the best restart kept
+STUDY = {"study": ("gradient", GradientSettings(steps=400, restarts=5))}
+STUDY_SCENES = (*PROBES, "box_room")
 PROXY_VIEWS, TOP_K, PROXY_SIZE = 32, 8, (240, 320)
 ANCHOR_LAYERS = 2  # the proxy's anchor: a second layer fills what the first hides from the init view
 MIN_BUDGET = 7  # model passes per init view and radius at least (the default search's floor)
@@ -162,8 +176,12 @@ def _method_modules(folder: Path, name: str) -> list[str]:
 
 def method_config(label: str, budget: int | None, seconds: float | None = None) -> AttackConfig:
     """The attack config of a label: ``budget`` passes per init view and radius, or ``seconds``."""
-    method, settings = (DEFAULT_METHOD, None) if label == "default" else {**CANDIDATES, **REFERENCE_METHODS}[label]
-    return AttackConfig(method, settings, budget_passes=budget, budget_seconds=seconds, envelope=ENVELOPE)
+    if label == "default" or label in RESTARTED:
+        method, settings = DEFAULT_METHOD, None
+    else:
+        method, settings = {**CANDIDATES, **REFERENCE_METHODS, **STUDY}[label]
+    return AttackConfig(method, settings, budget_passes=budget, budget_seconds=seconds, envelope=ENVELOPE,
+                        restarts=RESTARTED.get(label, 1))  # fmt: skip
 
 
 class Cells:
@@ -179,19 +197,21 @@ class Cells:
         margin = self.built.penalty.margin
         self.views = [fit_into_envelope(self.built.renderer, v, envelope, margin) for v in self.built.views]
 
-    def run(self, view: int, config: AttackConfig, seed: int, seconds: list[float] | None = None) -> dict:
+    def run(self, view: int, config: AttackConfig, seed: int, seconds: list[float] | None = None,
+            radii=DEFAULT_RADII) -> dict:  # fmt: skip
         """The nested-radii search of one init view (``seconds``: per radius, replacing the pass
-        budget); per radius its curve of improvements, passes and seconds."""
+        budget); per radius its curve of improvements, passes, seconds and agreement (the share of
+        its restarts that reached its worst)."""
         b = self.built
         results: list = []
-        for k, (degrees, metres) in enumerate(DEFAULT_RADII):
+        for k, (degrees, metres) in enumerate(radii):
             within = dataclasses.replace(config, max_angle_deg=degrees, max_distance=metres)
             if seconds is not None:
                 within = dataclasses.replace(within, budget_passes=None, budget_seconds=seconds[k])
             starts = warm_starts(results, 1, WARM_STARTS, config) if results else None
             results.append(attack(b.objective, b.differentiable, [self.views[view]], *b.size, within, seed,
                                   progress=False, starts=starts))  # fmt: skip
-        radii = []
+        rows = []
         for result in results:
             view_result = result.views[0]
             curve, best = [], math.inf
@@ -199,10 +219,10 @@ class Cells:
                 if record.rankable and record.delta1 < best:
                     best = record.delta1
                     curve.append([record.passes, record.seconds, best])
-            budget = view_result.budget
+            budget, agreed = view_result.budget, view_result.agreement
             spent = {"passes": budget.passes, "screened": budget.screened, "seconds": budget.seconds}
-            radii.append({"curve": curve} | spent)
-        return {"init": results[0].views[0].init_record.delta1, "radii": radii}
+            rows.append({"curve": curve, "agreement": agreed.reached / agreed.runs} | spent)
+        return {"init": results[0].views[0].init_record.delta1, "radii": rows}
 
 
 def worst_within(run: dict, radius: int) -> float:
@@ -217,19 +237,21 @@ class Store:
     def __init__(self, out: Path) -> None:
         self.folder = out / "runs"
 
-    def run(self, cells: Cells, view: int, label: str, seed: int, budget: int, seconds=None) -> dict:
+    def run(self, cells: Cells, view: int, label: str, seed: int, budget: int | None, seconds=None,
+            radii=DEFAULT_RADII) -> dict:  # fmt: skip
         config = method_config(label, budget)
-        key = json.dumps([repr(config), seed, seconds, source_version(config.method), cells.name, view])
+        key = [repr(config), seed, seconds, source_version(config.method), cells.name, view]
+        key = json.dumps(key + ([] if radii == DEFAULT_RADII else [radii]))  # the profile's radii: keys as before
         digest = hashlib.sha256(key.encode()).hexdigest()[:16]
         path = self.folder / f"{cells.name}-v{view}-{label}-s{seed}-{'s' if seconds else 'p'}-{digest}.json"
         if path.is_file():
             return json.loads(path.read_text())
         started = time.perf_counter()
-        run = cells.run(view, config, seed, seconds) | {"key": key}
+        run = cells.run(view, config, seed, seconds, radii) | {"key": key}
         text = json.dumps(run)
         atomic_write(path, lambda tmp: tmp.write_text(text))
-        worst = " ".join(f"{worst_within(run, k):.3f}" for k in range(len(DEFAULT_RADII)))
-        regime = "equal seconds" if seconds else f"{budget} passes"
+        worst = " ".join(f"{worst_within(run, k):.3f}" for k in range(len(radii)))
+        regime = "equal seconds" if seconds else f"{run['radii'][-1]['passes'] if budget is None else budget} passes"
         print(f"  {cells.name} v{view} {label} seed {seed} ({regime}): worst {worst} "
               f"({time.perf_counter() - started:.0f} s)", flush=True)  # fmt: skip
         return run
@@ -359,11 +381,13 @@ def regret_part(runs: Runs) -> dict[str, str]:
         print(f"| {label} | {np.median(passes):.3f} | {np.percentile(passes, 90):.3f} | {seconds_text} | "
               f"{np.median(noise):.3f} ({lo:.3f}-{hi:.3f}) | {np.max(noise):.3f} | {len(noise)} |")  # fmt: skip
         if label == "default":
+            agreed = [run["radii"][-1]["agreement"] for (*_, other, _), run in runs.passes.items() if other == label]
             figures |= {
                 "regret_median": f"{np.median(passes):.3f}",
                 "regret_p90": f"{np.percentile(passes, 90):.3f}",
                 "noise_median": f"{np.median(noise):.3f}",
                 "noise_max": f"{np.max(noise):.3f}",
+                "agreement_median": f"{np.median(agreed):.2f}",
             }
     print("\n   per radius: regret median at equal passes / at equal seconds; noise median, max (unsaturated cells)")
     print("| method | " + " | ".join(f"{d:g}°/{m:g} m" for d, m in DEFAULT_RADII) + " |")
@@ -524,26 +548,62 @@ def _proxy_cell(cell: Cells, degrees: float, metres: float) -> dict:
     return out
 
 
-def budgets_part(store: Store, cells: dict[str, Cells], views: dict[str, int], seeds, budgets) -> dict[str, str]:
-    """Part 6: the default alone at each of ``budgets`` passes per init view and radius (the init
-    views fixed): its search noise per radius (median and largest over the unsaturated cells) and
-    its mean worst, which more passes lower."""
+def budgets_part(
+    store: Store, cells: dict[str, Cells], views: dict[str, int], seeds, budgets, labels=("default",)
+) -> dict[str, str]:
+    """Part 6: the default (and the other ``labels``: ``default_r3``, its three restarts) alone at
+    each of ``budgets`` passes per init view and radius (the init views fixed): its search noise per
+    radius (median and largest over the unsaturated cells), its mean worst, which more passes
+    lower, and the mean share of its restarts that reached each worst."""
     figures: dict[str, str] = {}
-    by_budget = {budget: [[store.run(cells[n], v, "default", seed, budget) for seed in seeds]
-                          for n in cells for v in range(views[n])] for budget in budgets}  # fmt: skip
-    print("\n6. the default at more passes: search noise median, max (unsaturated cells); mean worst, per radius")
-    print("| passes a radius | " + " | ".join(f"{d:g}°/{m:g} m" for d, m in DEFAULT_RADII) + " | noise median |")
-    print("|---|" + "---|" * (len(DEFAULT_RADII) + 1))
-    for budget, runs in by_budget.items():
-        row, pooled = [], []
-        for k in range(len(DEFAULT_RADII)):
-            worsts = [[worst_within(run, k) for run in cell] for cell in runs]
-            noise = [sd for sd in map(seed_noise, worsts) if sd is not None]
-            pooled += noise
-            row.append(f"{np.median(noise):.3f}, {np.max(noise):.3f}; worst {np.mean(worsts):.3f}")
-        print(f"| {budget} | " + " | ".join(row) + f" | {np.median(pooled):.3f} |")
-        figures[f"noise_median_{budget}"] = f"{np.median(pooled):.3f}"
+    print("\n6. at more passes: search noise median, max (unsaturated cells); mean worst; agreement, per radius")
+    print(
+        "| method | passes a radius | " + " | ".join(f"{d:g}°/{m:g} m" for d, m in DEFAULT_RADII) + " | noise median |"
+    )
+    print("|---|---|" + "---|" * (len(DEFAULT_RADII) + 1))
+    for label in labels:
+        for budget in budgets:
+            runs = [[store.run(cells[n], v, label, seed, budget) for seed in seeds]
+                    for n in cells for v in range(views[n])]  # fmt: skip
+            row, pooled = [], []
+            for k in range(len(DEFAULT_RADII)):
+                worsts = [[worst_within(run, k) for run in cell] for cell in runs]
+                noise = [sd for sd in map(seed_noise, worsts) if sd is not None]
+                pooled += noise
+                agreed = np.mean([run["radii"][k]["agreement"] for cell in runs for run in cell])
+                row.append(f"{np.median(noise):.3f}, {np.max(noise):.3f}; worst {np.mean(worsts):.3f}; "
+                           f"agreed {agreed:.2f}")  # fmt: skip
+            print(f"| {label} | {budget} | " + " | ".join(row) + f" | {np.median(pooled):.3f} |")
+            suffix = "" if label == "default" else f"_{label}"
+            figures[f"noise_median_{budget}{suffix}"] = f"{np.median(pooled):.3f}"
     return figures
+
+
+def study_part(store: Store, cells: dict[str, Cells], seeds: list[int], budget: int) -> dict[str, str]:
+    """Part 7: the study's protocol against the default at the largest radius, per scene's first init
+    view and seed."""
+    largest = DEFAULT_RADII[-1]
+    within = f"{largest[0]:g}°/{largest[1]:g} m"
+    print(f"\n7. the study's protocol (gradient, 5 restarts x 400 steps) against the default at {budget} passes "
+          f"a radius, within {within} (first init view; worst delta1, passes, seconds)")  # fmt: skip
+    print("| scene | seed | study: worst | passes | s | default: worst | passes | s |")
+    print("|---|---|---|---|---|---|---|---|")
+    tally = [0, 0]  # the default's worst at most as high, higher
+    for name, cell in cells.items():
+        if name not in STUDY_SCENES:
+            continue
+        for seed in seeds:
+            study = store.run(cell, 0, "study", seed, None, radii=(largest,))
+            own = store.run(cell, 0, "default", seed, budget)
+            ours, theirs = worst_within(own, len(DEFAULT_RADII) - 1), worst_within(study, 0)
+            tally[0 if ours <= theirs + 1e-9 else 1] += 1
+            spent = sum(r["passes"] for r in own["radii"]), sum(r["seconds"] for r in own["radii"])
+            protocol = study["radii"][0]
+            print(f"| {name} | {seed} | {theirs:.3f} | {protocol['passes']} | {protocol['seconds']:.0f} "
+                  f"| {ours:.3f} | {spent[0]} | {spent[1]:.0f} |")  # fmt: skip
+    share = tally[0] / sum(tally) if sum(tally) else math.nan
+    print(f"   the default's worst at most as high as the protocol's on {tally[0]} of {sum(tally)} cell-seeds")
+    return {"win_study_passes": f"{share:.2f}"}
 
 
 def main() -> None:
@@ -557,12 +617,15 @@ def main() -> None:
     parser.add_argument("--methods", default=",".join(["default", *CANDIDATES]), help="the methods compared")
     parser.add_argument("--reference-seeds", default="100,101,102,103", help="the reference attack's seeds (none: '')")
     parser.add_argument("--budgets", default="48,96,192", help="part budgets: the default's passes a radius")
+    parser.add_argument("--study-seeds", default="0,1", help="part study: the seeds of both searches")
+    parser.add_argument("--budget-methods", default="default", help=f"part budgets: default, {', '.join(RESTARTED)}")
     args = parser.parse_args()
     out, parts = Path(args.out), args.parts.split(",")
     names = list(SCENES) if args.scenes == "all" else args.scenes.split(",")
     labels = args.methods.split(",")
     common.check_names(parser, {"--parts": (parts, PARTS), "--scenes": (names, SCENES),
                                 "--methods": (labels, ("default", *CANDIDATES))})  # fmt: skip
+    common.check_names(parser, {"--budget-methods": (args.budget_methods.split(","), ("default", *RESTARTED))})
     if "default" not in labels:
         parser.error("--methods: the default is what the benchmark scores; name it")
     if args.budget < MIN_BUDGET:
@@ -583,14 +646,16 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     cells = {name: Cells(name) for name in names}
     views = {name: min(len(cell.views), most.get(name, math.inf)) for name, cell in cells.items()}
-    figures: dict[str, str] = {}
+    figures = {"passes_per_view": str(args.budget * len(DEFAULT_RADII))}
     if "regret" in parts:
         reference = [int(s) for s in args.reference_seeds.split(",") if s]
         figures |= regret_part(Runs(Store(out), cells, views, seeds, args.budget, labels, reference))
     if "proxy" in parts:
         figures |= proxy_part(cells, out)
     if "budgets" in parts:
-        figures |= budgets_part(Store(out), cells, views, seeds, budgets)
+        figures |= budgets_part(Store(out), cells, views, seeds, budgets, args.budget_methods.split(","))
+    if "study" in parts:
+        figures |= study_part(Store(out), cells, [int(s) for s in args.study_seeds.split(",")], args.budget)
     print("worst_case " + " ".join(f"{k}={v}" for k, v in figures.items()))
 
 

@@ -24,18 +24,23 @@ from kadv.attack.methods.halving import HalvingSettings
 from kadv.attack.methods.hybrid import HybridSettings
 from kadv.attack.methods.nevergrad import NevergradSettings
 from kadv.attack.methods.random import RandomSettings
+from kadv.attack.methods.turbo import TurboSettings
 from kadv.attack.objective import Objective, ObjectiveTerms
 from kadv.attack.records import (
+    Agreement,
     AttackResult,
     Budget,
     InitViewResult,
     ViewRecord,
+    agreement,
+    agreement_text,
     best_so_far,
     incumbent_path,
     select_top_views,
     separated,
 )
 from kadv.attack.registry import METHODS, NoSettings, SearchMethod, get_method, register_method
+from kadv.attack.restarts import restarted_search
 from kadv.attack.runner import attack
 from kadv.attack.search import (
     DEFAULT_METHOD,
@@ -53,6 +58,7 @@ __all__ = [
     "DEFAULT_PASSES",
     "METHODS",
     "RENAMED_BUDGET",
+    "Agreement",
     "AttackConfig",
     "AttackResult",
     "Budget",
@@ -75,8 +81,11 @@ __all__ = [
     "RandomSettings",
     "SearchContext",
     "SearchMethod",
+    "TurboSettings",
     "ViewRecord",
     "ViewScores",
+    "agreement",
+    "agreement_text",
     "attack",
     "best_so_far",
     "captured_init_views",
@@ -92,6 +101,7 @@ __all__ = [
     "proposer_search",
     "register_method",
     "register_proposer",
+    "restarted_search",
     "sample_init_views",
     "sample_valid_views",
     "save_init_params",

@@ -68,12 +68,14 @@ def proposer_search(
     return context.result(records, incumbent_path(records))
 
 
-def register_proposer(name: str, settings: type = NoSettings) -> Callable[[type], type]:
+def register_proposer(
+    name: str, settings: type = NoSettings, check: Callable[..., None] | None = None
+) -> Callable[[type], type]:
     """Class decorator: register an ask/tell :class:`Proposer` as method ``name``, driven by
-    :func:`proposer_search`."""
+    :func:`proposer_search` (``check``: as :func:`~kadv.attack.registry.register_method`'s)."""
 
     def decorate(proposer: type) -> type:
-        register_method(name, settings)(functools.partial(proposer_search, proposer))
+        register_method(name, settings, check=check)(functools.partial(proposer_search, proposer))
         return proposer
 
     return decorate

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import torch
@@ -19,10 +19,13 @@ from kadv.attack.init_views import InitView
 from kadv.geometry import axis_angle_to_matrix, perturb_world_T_cam, yaw_pitch_roll
 
 __all__ = [
+    "Agreement",
     "AttackResult",
     "Budget",
     "InitViewResult",
     "ViewRecord",
+    "agreement",
+    "agreement_text",
     "best_so_far",
     "incumbent_path",
     "select_top_views",
@@ -58,6 +61,8 @@ class ViewRecord:
             another scale, never chosen or ranked; their best are re-scored exactly.
         yaw_deg, pitch_deg, roll_deg: the camera's heading, elevation and bank in degrees
             (:func:`kadv.geometry.yaw_pitch_roll`); made from ``theta`` when not given.
+        run: the independent run of the init view's search it belongs to (``attack.restarts``;
+            0: the first).
     """
 
     step: int
@@ -84,6 +89,7 @@ class ViewRecord:
     yaw_deg: float = math.nan
     pitch_deg: float = math.nan
     roll_deg: float = math.nan
+    run: int = 0
 
     def __post_init__(self) -> None:
         if math.isnan(self.loss):
@@ -154,6 +160,63 @@ class Budget:
         )
 
 
+@dataclass(frozen=True)
+class Agreement:
+    """How many independent runs of a search reached its worst view.
+
+    Attributes:
+        reached: runs whose worst delta1 lies within ``tolerance`` of the best run's.
+        runs: runs made.
+        planned: runs the budget was split into (``attack.restarts``).
+        worsts: each run's worst delta1 (its lowest over rankable views), in run order.
+        tolerance: the delta1 within which two worsts agree.
+    """
+
+    reached: int
+    runs: int
+    planned: int
+    worsts: list[float]
+    tolerance: float
+
+    @property
+    def alone(self) -> bool:
+        """The worst was found by one run alone (or only one ran): nothing confirms it."""
+        return self.reached < 2
+
+    @property
+    def stopped_early(self) -> bool:
+        """Two runs agreed before the budget's share of every planned run was spent."""
+        return self.runs < self.planned and not self.alone
+
+    def text(self) -> str:
+        """``3/5``, ``2/2 (stopped early, of 5)``, or ``1/3 (alone)``."""
+        notes = [f"stopped early, of {self.planned}"] if self.stopped_early else []
+        notes += ["alone"] if self.alone else []
+        return f"{self.reached}/{self.runs}" + (f" ({'; '.join(notes)})" if notes else "")
+
+    def to_dict(self) -> dict:
+        return asdict(self) | {"alone": self.alone, "stopped_early": self.stopped_early}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Agreement:
+        return cls(**{f.name: data[f.name] for f in fields(cls)})
+
+
+def agreement_text(agreement: Agreement | None) -> str:
+    """:meth:`Agreement.text`, or ``-`` where there is none."""
+    return "-" if agreement is None else agreement.text()
+
+
+def agreement(results: list[InitViewResult], planned: int, tolerance: float) -> Agreement:
+    """The agreement of the runs ``results`` of one init view's search (a run with no rankable
+    view counts its worst as 1: no failure found)."""
+    worsts = [min((r.delta1 for r in result.records if r.rankable), default=1.0) for result in results]
+    best = min(worsts)
+    # within the tolerance as written: 0.33 is within 0.03 of 0.30, whatever the sum's rounding
+    reached = sum(w - best <= tolerance + 1e-9 for w in worsts)
+    return Agreement(reached, len(results), planned, worsts, tolerance)
+
+
 @dataclass
 class InitViewResult:
     """The search from one init view.
@@ -164,6 +227,8 @@ class InitViewResult:
         top: the adversarial views, highest loss first.
         budget: what the search cost.
         path: the views a report follows as the search's trajectory, in order.
+        agreement: how many of the search's independent runs reached its worst view (None: a
+            result made by a search method alone, before :func:`~kadv.attack.restarts.restarted_search`).
     """
 
     init: InitView
@@ -171,6 +236,7 @@ class InitViewResult:
     top: list[ViewRecord]
     budget: Budget
     path: list[ViewRecord]
+    agreement: Agreement | None = None
 
     @property
     def init_record(self) -> ViewRecord:

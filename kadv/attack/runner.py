@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-import numpy as np
 import torch
 from tqdm import tqdm
 
@@ -12,6 +11,7 @@ from kadv.attack.init_views import InitView, fit_into_envelope
 from kadv.attack.objective import Objective
 from kadv.attack.records import AttackResult, InitViewResult
 from kadv.attack.registry import get_method
+from kadv.attack.restarts import restarted_search
 from kadv.attack.search import AttackConfig, SearchContext
 from kadv.render import DifferentiableRenderer
 
@@ -53,7 +53,7 @@ def attack(
             (:class:`~kadv.attack.search.SearchContext`'s ``starts``).
     """
     method = get_method(config.method)
-    method.check(config.settings, config.passes, differentiable.config.supersample)
+    config.check_run(method.check, differentiable.config.supersample)
     # all of them before any search: a view that cannot be moved in is refused before work is spent
     margin = objective.penalty.margin
     init_views = [fit_into_envelope(differentiable.renderer, init, config.envelope, margin) for init in init_views]
@@ -74,10 +74,13 @@ def attack(
                 continue
             bar.set_description(f"{config.method} attack, init view {index + 1}/{len(init_views)}")
             bar.set_postfix_str("", refresh=False)  # the previous init view's best is not this one's
-            differentiable.reset()
-            context = SearchContext(objective, differentiable, init, height, width, config, (starts or {}).get(index))
-            context.clock.progress = bar
-            view_result = method.search(context, np.random.default_rng([seed, index]), bar)
+            warm = (starts or {}).get(index)
+
+            def make_context(share: AttackConfig, first: bool, init=init, warm=warm) -> SearchContext:
+                differentiable.reset()  # each run from its own anchor: runs are independent
+                return SearchContext(objective, differentiable, init, height, width, share, warm if first else None)
+
+            view_result = restarted_search(method.search, make_context, config, [seed, index], bar)
             result.views.append(view_result)
             if on_result is not None:
                 on_result(index, view_result)

@@ -91,6 +91,10 @@ class AttackConfig:
         envelope: bounds on the pose itself (roll, pitch, height; :mod:`kadv.penalties.envelope`),
             a preset's name or an :class:`Envelope`; every method's views are moved into it, and
             those that still lie outside are recorded, never chosen. ``free``: the study's protocol.
+        restarts: independent runs of the search per init view, at most, each under an equal share
+            of the budgets (:func:`~kadv.attack.restarts.restarted_search`): the search stops once
+            two runs' worsts agree, and reports how many runs reached its worst (its agreement).
+        agreement_delta1: two runs agree when their worst views' delta1 differ by at most this.
     """
 
     method: str = DEFAULT_METHOD
@@ -103,6 +107,8 @@ class AttackConfig:
     min_separation: float = 0.05
     min_separation_deg: float = 3.0
     envelope: Envelope | str = "free"
+    restarts: int = 1
+    agreement_delta1: float = 0.03
     budget_evaluations: InitVar[int | None] = None  # renamed: refused with the new name
 
     def __post_init__(self, budget_evaluations: int | None) -> None:
@@ -132,7 +138,33 @@ class AttackConfig:
             raise ValueError(f"attack.budget_passes must be an integer >= 1 or null, got {self.budget_passes!r}")
         if self.passes is None and self.budget_seconds is None:
             raise ValueError(f"attack.method={self.method} needs attack.budget_passes or attack.budget_seconds")
-        method.check(self.settings, self.passes)
+        if isinstance(self.restarts, bool) or not isinstance(self.restarts, int) or self.restarts < 1:
+            raise ValueError(f"attack.restarts must be an integer >= 1, got {self.restarts!r}")
+        if not (math.isfinite(self.agreement_delta1) and 0.0 <= self.agreement_delta1 <= 1.0):
+            raise ValueError(f"attack.agreement_delta1 must be in [0, 1], got {self.agreement_delta1}")
+        self.check_run(method.check)
+
+    def check_run(self, check: Any, supersample: int | None = None) -> None:
+        """Call a method's ``check`` with one run's share of the passes, the share named in its error."""
+        try:
+            check(self.settings, self.run_passes, supersample)
+        except ValueError as error:
+            if self.restarts == 1:
+                raise
+            share = f"attack.budget_passes={self.passes} split over attack.restarts={self.restarts}"
+            raise ValueError(f"{error} ({share}: {self.run_passes} a run)") from None
+
+    @property
+    def run_passes(self) -> int | None:
+        """Model passes of one of the ``restarts`` runs: an equal share of :attr:`passes`."""
+        return None if self.passes is None else self.passes // self.restarts
+
+    def restart_config(self) -> AttackConfig:
+        """The config of one run of :attr:`restarts`: its share of the budgets, and no restarts."""
+        if self.restarts == 1:
+            return self
+        seconds = None if self.budget_seconds is None else self.budget_seconds / self.restarts
+        return dataclasses.replace(self, budget_passes=self.run_passes, budget_seconds=seconds, restarts=1)
 
     @property
     def passes(self) -> int | None:

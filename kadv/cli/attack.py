@@ -30,6 +30,7 @@ from kadv.attack import (
     InitViewConfig,
     Objective,
     PenaltyConfig,
+    agreement_text,
     attack,
     captured_init_views,
     check_init_views,
@@ -144,12 +145,15 @@ def _init_views(
 
 def _table(summary: RunSummary) -> str:
     """The run's table and, under it, what each init view's search cost."""
-    lines = ["| init view | L_depth init | L_depth adv | delta1 init | delta1 adv |", "|---|---|---|---|---|"]
+    lines = [
+        "| init view | L_depth init | L_depth adv | delta1 init | delta1 adv | agreement |",
+        "|---|---|---|---|---|---|",
+    ]
     for view in summary.init_views:
         adv = view.adversarial_mean
         lines.append(
             f"| {view.name} | {view.init.l_depth:.4f} | {adv['l_depth']:.4f} | "
-            f"{view.init.delta1:.3f} | {adv['delta1']:.3f} |"
+            f"{view.init.delta1:.3f} | {adv['delta1']:.3f} | {agreement_text(view.agreement)} |"
         )
     lines += ["", "model passes and seconds per init view:"]
     lines += [f"  {view.name}: {view.budget.text()}" for view in summary.init_views]

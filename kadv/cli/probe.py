@@ -3,6 +3,7 @@
     kadv-probe model=kadv_tiny
     kadv-probe model=kadv_tiny,kadv_tiny_dpt seeds=0,1,2 envelope=upright
     kadv-probe model=kadv_tiny search_seeds=3          (the search noise, apart from the init views)
+    kadv-probe model=kadv_tiny restarts=3 budget=144   (three runs a search: the agreement of each worst)
     kadv-probe model=kadv_tiny probes=thin_structures,window budget=96 out=outputs/probe_tiny
 
 Each model is profiled on each probe scene (:mod:`kadv.probes`), the probe built anew for each
@@ -40,6 +41,7 @@ _KEYS = {
     "envelope": "upright",
     "budget": None,
     "search_seeds": "1",
+    "restarts": "1",
     "lighting": "baked",
     "out": "outputs/probe",
     "hydra.run.dir": None,
@@ -100,6 +102,7 @@ def main(argv: list[str] | None = None) -> None:
             envelope=envelope,
             budget_passes=budget,
             search_seeds=_int(values["search_seeds"], "search_seeds", 1),
+            restarts=_int(values["restarts"], "restarts", 1),
             artifacts=out / "views",
             lighting=values["lighting"],
             progress=True,

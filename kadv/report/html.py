@@ -11,9 +11,10 @@ import jinja2
 import matplotlib.pyplot as plt
 import numpy as np
 
+from kadv.attack.records import agreement_text
 from kadv.io import atomic_write
 from kadv.report.figures import loss_label
-from kadv.report.summary import ViewMetrics
+from kadv.report.summary import InitViewSummary, ViewMetrics
 from kadv.report.sweep import RunRecord, Table
 from kadv.testing.profile import Profile, save_profile_panels
 
@@ -86,6 +87,7 @@ def _worst_video(runs: list[RunRecord], out_dir: Path) -> dict | None:
         "method": run.method,
         "init_delta1": view.init.delta1,
         "delta1": view.adversarial[0].delta1,
+        "agreement": agreement_text(view.agreement),
         "video": _data_uri(run.path / "trajectory.mp4", "video/mp4"),
         "href": Path(os.path.relpath(run.path, out_dir)).as_posix() + "/",
     }
@@ -94,14 +96,14 @@ def _worst_video(runs: list[RunRecord], out_dir: Path) -> dict | None:
 def _gallery(runs: list[RunRecord], out_dir: Path) -> list[dict]:
     """Per model x scene: the strongest adversarial view of any method (adversarial views are valid,
     so never uninformative)."""
-    best: dict[tuple[str, str], tuple[float, RunRecord, ViewMetrics]] = {}
+    best: dict[tuple[str, str], tuple[float, RunRecord, ViewMetrics, InitViewSummary]] = {}
     for run in runs:
         for view in run.summary.init_views:
             if view.adversarial:
                 top = view.adversarial[0]
                 key = (run.model, run.scene)
                 if key not in best or top.l_depth > best[key][0]:
-                    best[key] = (top.l_depth, run, top)
+                    best[key] = (top.l_depth, run, top, view)
     return [
         {
             "model": model,
@@ -109,11 +111,12 @@ def _gallery(runs: list[RunRecord], out_dir: Path) -> list[dict]:
             "method": run.method,
             "l_depth": l_depth,
             "delta1": top.delta1,
+            "agreement": agreement_text(view.agreement),
             "image": _data_uri(run.path / top.png),
             "map": _data_uri(run.path / "map.png"),
             "href": Path(os.path.relpath(run.path, out_dir)).as_posix() + "/",
         }
-        for (model, scene), (l_depth, run, top) in sorted(best.items())
+        for (model, scene), (l_depth, run, top, view) in sorted(best.items())
     ]
 
 

@@ -121,7 +121,7 @@ def trajectory_rows(result: AttackResult) -> list[dict]:
     rows = []
     for index, view in enumerate(result.views):
         for r in view.records:
-            row = {"init_view": index, "step": r.step, "restart": r.restart}
+            row = {"init_view": index, "run": r.run, "step": r.step, "restart": r.restart}
             row.update({f"theta_{a}": v for a, v in zip("xyz", r.theta)})
             row.update({f"c_{a}": v for a, v in zip("xyz", r.centre)})
             row.update({f"omega_{a}": v for a, v in zip("xyz", r.params[:3])})
@@ -130,7 +130,7 @@ def trajectory_rows(result: AttackResult) -> list[dict]:
                 {
                     f.name: getattr(r, f.name)
                     for f in fields(r)
-                    if f.name not in ("step", "restart", "params", "theta", "centre", "seconds")
+                    if f.name not in ("run", "step", "restart", "params", "theta", "centre", "seconds")
                 }
             )
             rows.append(row)
@@ -147,7 +147,8 @@ def read_trajectory(path: str | Path) -> dict[int, list[ViewRecord]]:
     with open(path, newline="") as file:
         rows = list(csv.DictReader(file))
     flag = lambda text: text == "True"
-    parse = {"step": int, "restart": int, "passes": int, "verdict": str, "refreshed": flag, "screened": flag}
+    parse = {"step": int, "restart": int, "run": int, "passes": int, "verdict": str}
+    parse |= {"refreshed": flag, "screened": flag}
     records: dict[int, list[ViewRecord]] = {}
     for row in rows:
         values = {f.name: parse.get(f.name, float)(row[f.name]) for f in fields(ViewRecord) if f.name in row}
@@ -347,4 +348,5 @@ def _init_view_summary(index: int, view: InitViewResult, pictures: list[str]) ->
         uninformative_views=sum(r.verdict == UNINFORMATIVE for r in view.records),
         guarded_steps=sum(r.guard_fraction < 1.0 for r in view.records),
         budget=view.budget,
+        agreement=view.agreement,
     )

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from kadv.attack import InitView, InitViewResult, ViewRecord
-from kadv.attack.records import Budget
+from kadv.attack.records import Agreement, Budget
 from kadv.io import write_json
 
 __all__ = [
@@ -27,7 +27,7 @@ __all__ = [
 ]
 
 # bumped whenever a field below, InitViewResult or ViewRecord changes shape
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 
 def _check_schema(data: object, path: Path) -> dict:
@@ -92,7 +92,9 @@ class AnytimePoint:
 
 @dataclass
 class InitViewSummary:
-    """One init view's search: where it started, the adversarial views kept and what it cost."""
+    """One init view's search: where it started, the adversarial views kept, what it cost, and how
+    many of its independent runs reached its worst view (``agreement``; None in a result made
+    without :func:`~kadv.attack.restarts.restarted_search`)."""
 
     index: int
     name: str
@@ -109,9 +111,11 @@ class InitViewSummary:
     uninformative_views: int
     guarded_steps: int
     budget: Budget
+    agreement: Agreement | None = None
 
     @classmethod
     def from_dict(cls, data: dict) -> InitViewSummary:
+        agreement = data.get("agreement")
         return cls(
             **data
             | {
@@ -119,6 +123,7 @@ class InitViewSummary:
                 "adversarial": [ViewMetrics(**a) for a in data["adversarial"]],
                 "anytime": [AnytimePoint(**p) for p in data["anytime"]],
                 "budget": Budget.from_dict(data["budget"]),
+                "agreement": None if agreement is None else Agreement.from_dict(agreement),
             }
         )
 
@@ -165,6 +170,7 @@ class RunSummary(RunInfo):
         out["budget"] = self.budget.to_dict()
         for view, summary in zip(out["init_views"], self.init_views):
             view["budget"] = summary.budget.to_dict()
+            view["agreement"] = None if summary.agreement is None else summary.agreement.to_dict()
         return out
 
     @classmethod
@@ -202,9 +208,10 @@ def write_partial(path: str | Path, result: InitViewResult) -> Path:
             "schema": SCHEMA_VERSION,
             "init": result.init.to_dict(),
             "records": [asdict(r) for r in result.records],
-            "top": [[r.step, r.restart] for r in result.top],
-            "path": [[r.step, r.restart] for r in result.path],
+            "top": [[r.run, r.step, r.restart] for r in result.top],
+            "path": [[r.run, r.step, r.restart] for r in result.path],
             "budget": result.budget.to_dict(),
+            "agreement": None if result.agreement is None else result.agreement.to_dict(),
         },
     )
 
@@ -219,13 +226,15 @@ def read_partial(path: str | Path) -> InitViewResult:
     data = _read_json(path)
     try:
         records = [ViewRecord(**r) for r in data["records"]]
-        by_key = {(r.step, r.restart): r for r in records}
+        by_key = {(r.run, r.step, r.restart): r for r in records}
+        agreement = data["agreement"]
         return InitViewResult(
             InitView.from_dict(data["init"]),
             records,
             [by_key[tuple(key)] for key in data["top"]],
             Budget.from_dict(data["budget"]),
             [by_key[tuple(key)] for key in data["path"]],
+            None if agreement is None else Agreement.from_dict(agreement),
         )
     except (KeyError, TypeError) as error:
         raise ValueError(f"{path}: not a kadv partial result ({error})") from error

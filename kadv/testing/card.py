@@ -139,8 +139,9 @@ class Scorecard:
         lines = [
             "| probe | model | "
             + " | ".join(f"worst delta1 {d:g}°/{m:g} m" for d, m in radii)
-            + f" | search noise {largest} | failure rate {largest} | worst-case area | resilience | typical area |",
-            "|---|---|" + "---|" * (len(radii) + 5),
+            + f" | agreement {largest} | search noise {largest} | failure rate {largest} | worst-case area | "
+            "resilience | typical area |",
+            "|---|---|" + "---|" * (len(radii) + 6),
         ]
         for probe in self.probes:
             for model in self.models:
@@ -148,12 +149,13 @@ class Scorecard:
                 worst = " | ".join(f"{v:.3f}" for v in profile.worst)
                 noise = profile.search_noise[-1]
                 lines.append(
-                    f"| {probe} | {model} | {worst} | {'n/a' if np.isnan(noise) else f'{noise:.3f}'} | "
+                    f"| {probe} | {model} | {worst} | {profile.agreement_text(len(radii) - 1)} | "
+                    f"{'n/a' if np.isnan(noise) else f'{noise:.3f}'} | "
                     f"{profile.failure_rate[-1]:.0%} | "
                     f"{profile.worst_score:.3f} ± {np.ptp(profile.worst_scores):.3f} | {profile.resilience:.3f} | "
                     f"{profile.score:.3f} ± {profile.score_spread:.3f} |"
                 )
-        blank = " | ".join([""] * (len(radii) + 2))
+        blank = " | ".join([""] * (len(radii) + 3))
         for model in self.models:
             worst, typical = self.unit_scores(model, "worst"), self.unit_scores(model, "typical")
             resilience = np.mean([self.results[p][model].resilience for p in self.probes])
@@ -162,8 +164,10 @@ class Scorecard:
                 f"**{np.mean(typical):.3f}** |"
             )
         notes = [
-            "search noise: the sd of the worst over the search seeds with the init views fixed (n/a: one search "
-            "seed); ± after an area: its spread over the seeds, init views and searches together"
+            "agreement: the searches' runs that reached their worst, of the runs made, over seeds and init views "
+            "(alone: init views whose worst one run found and none confirmed; attack.restarts); search noise: the "
+            "sd of the worst over the search seeds with the init views fixed (n/a: one search seed); ± after an "
+            "area: its spread over the seeds, init views and searches together"
         ]
         for model in self.models:
             costs = [self.results[p][model].cost for p in self.probes]

@@ -43,6 +43,8 @@ class CheckOptions:
         artifacts: the folder for the worst views' pictures; None: the pytest plugin's folder for
             this test, else a new temporary folder.
         progress: show progress bars.
+        restarts: independent runs of the search per init view at most, each a share of the
+            budget (``attack.restarts``; their agreement is reported beside the worst).
     """
 
     init_count: int = 2
@@ -56,6 +58,7 @@ class CheckOptions:
     envelope: object = "free"
     artifacts: str | Path | None = None
     progress: bool = False
+    restarts: int = 1
 
     @classmethod
     def of(cls, options: dict, taker: str) -> CheckOptions:

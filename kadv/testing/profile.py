@@ -82,6 +82,9 @@ class Profile:
             with one search seed (not measured).
         cost_by_seed: per seed, per init view: the searches' model passes and seconds over all
             radii (the noise's extra searches left out), and the drawn views' passes.
+        agreement_by_seed: (seeds, radii) the agreement of the searches at each radius, summed over
+            the init views: [runs that reached their worst, runs made, init views whose worst one
+            run alone found] (:class:`kadv.attack.Agreement`).
     """
 
     model: str
@@ -98,6 +101,7 @@ class Profile:
     pictures: list[str]
     search_noise_by_seed: list[list[float]] = dataclasses.field(default_factory=list)
     cost_by_seed: list[dict[str, float]] = dataclasses.field(default_factory=list)
+    agreement_by_seed: list[list[list[int]]] = dataclasses.field(default_factory=list)
 
     @property
     def worst(self) -> list[float]:
@@ -152,6 +156,7 @@ class Profile:
             pictures=list(pictures or []),
             search_noise_by_seed=[p.search_noise for p in seed_profiles],
             cost_by_seed=[p.cost for p in seed_profiles],
+            agreement_by_seed=[p.agreement for p in seed_profiles],
         )
 
     @classmethod
@@ -176,6 +181,7 @@ class Profile:
             draws=[[v for p in profiles for v in p.draws[k]] for k in range(len(first.radii))],
             search_noise_by_seed=[row for p in profiles for row in p.search_noise_by_seed],
             cost_by_seed=[row for p in profiles for row in p.cost_by_seed],
+            agreement_by_seed=[row for p in profiles for row in p.agreement_by_seed],
         )
 
     @property
@@ -233,6 +239,14 @@ class Profile:
         keys = ("search_passes", "search_seconds", "draw_passes")
         return {k: float(np.mean([c[k] for c in self.cost_by_seed])) if self.cost_by_seed else math.nan for k in keys}
 
+    def agreement_text(self, radius: int) -> str:
+        """The agreement at a radius over seeds and init views: ``3/4``, ``1/2 (1 alone)``; ``-``
+        where none was recorded."""
+        if not self.agreement_by_seed:
+            return "-"
+        reached, runs, alone = (sum(row[radius][i] for row in self.agreement_by_seed) for i in range(3))
+        return f"{reached}/{runs}" + (f" ({alone} alone)" if alone else "")
+
     def noise_text(self) -> str:
         """One line: the search noise per radius and its largest, and the init views' spread."""
         measured = [row for row in self.search_noise_by_seed if row]
@@ -260,15 +274,16 @@ class Profile:
             f"{self.model} on {self.scene}, envelope {self.envelope}, seeds {list(self.seeds)}: "
             f"delta1 {np.mean(self.delta1_init):.3f} at the init views",
             "",
-            f"| radius | worst delta1 | typical delta1 (95%) | failure rate, delta1 < {self.fail_below:g} (95%) |",
-            "|---|---|---|---|",
+            f"| radius | worst delta1 | agreement | typical delta1 (95%) | failure rate, delta1 < {self.fail_below:g} "
+            "(95%) |",
+            "|---|---|---|---|---|",
         ]
         for k, (degrees, metres) in enumerate(self.radii):
             lo, hi = self.typical_interval[k]
             flo, fhi = self.failure_interval[k]
             lines.append(
-                f"| {degrees:g}°, {metres:g} m | {self.worst[k]:.3f} | {self.typical[k]:.3f} ({lo:.3f}-{hi:.3f}) | "
-                f"{self.failure_rate[k]:.0%} ({flo:.0%}-{fhi:.0%}) |"
+                f"| {degrees:g}°, {metres:g} m | {self.worst[k]:.3f} | {self.agreement_text(k)} | "
+                f"{self.typical[k]:.3f} ({lo:.3f}-{hi:.3f}) | {self.failure_rate[k]:.0%} ({flo:.0%}-{fhi:.0%}) |"
             )
         lines += [
             "",
@@ -445,6 +460,7 @@ class SeedProfile:
         results: per radius, the attack's result within it.
         search_noise: per radius, the sd (ddof 1) of :attr:`worst` over the search seeds (empty: one).
         cost: per init view, the searches' passes and seconds over all radii, the draws' passes.
+        agreement: per radius, as :class:`Profile`'s ``agreement_by_seed`` rows.
     """
 
     delta1_init: float
@@ -455,6 +471,7 @@ class SeedProfile:
     results: list
     search_noise: list[float] = dataclasses.field(default_factory=list)
     cost: dict[str, float] = dataclasses.field(default_factory=dict)
+    agreement: list[list[int]] = dataclasses.field(default_factory=list)
 
     @property
     def carried(self) -> list[list[tuple]]:
@@ -573,6 +590,7 @@ def profile_views(
         out.failure.append(float(np.mean([d < fail_below for d in typical])) if typical else math.nan)
         out.draws[k] = typical
         out.results.append(result)
+        out.agreement.append(_agreement_row([view.agreement for view in result.views]))
     budgets = [view.budget for result in results for view in result.views]
     out.cost = {
         "search_passes": sum(b.passes for b in budgets) / len(views),
@@ -588,6 +606,15 @@ def profile_views(
         ]
         out.search_noise = np.std(worst, axis=0, ddof=1).tolist()
     return out
+
+
+def _agreement_row(agreements: list) -> list[int]:
+    """[runs that reached their worst, runs made, init views whose worst one run alone found]
+    over the init views' agreements (a result without one counts as one run alone)."""
+    known = [a for a in agreements if a is not None]
+    missing = len(agreements) - len(known)
+    return [sum(a.reached for a in known) + missing, sum(a.runs for a in known) + missing,
+            sum(a.alone for a in known) + missing]  # fmt: skip
 
 
 def _worst_of(results: list) -> list[float]:
@@ -682,7 +709,7 @@ def profile_settings(
         raise RobustnessInputError(f"search_seeds must be an integer >= 1, got {search_seeds!r}")
     try:
         bounds = get_envelope(envelope)
-        config = AttackConfig(checked.method, envelope=bounds)
+        config = AttackConfig(checked.method, envelope=bounds, restarts=checked.restarts)
     except ValueError as error:
         raise RobustnessInputError(str(error)) from None
     return ProfileSettings(checked, radii, config, typical_views, float(fail_below), search_seeds)

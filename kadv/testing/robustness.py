@@ -145,6 +145,7 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
             max_angle_deg=degrees,
             max_distance=metres,
             envelope=checked.envelope,
+            restarts=checked.restarts,
         )
         result = attack(
             built.objective,

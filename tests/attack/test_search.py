@@ -23,6 +23,7 @@ from kadv.attack import (
     PenaltyConfig,
     Proposer,
     SearchContext,
+    TurboSettings,
     ViewRecord,
     attack,
     get_method,
@@ -40,9 +41,10 @@ from kadv.models import count_passes
 from kadv.penalties import ENVELOPES, Envelope
 from kadv.render import DiffRenderConfig
 from kadv.report.run import _write_csv, read_trajectory, trajectory_rows
+from kadv.testing import DEFAULT_RADII
 
 H, W = 48, 64
-BUILT_IN = ("gradient", "random", "cma", "nevergrad", "hybrid", "halving")
+BUILT_IN = ("gradient", "random", "cma", "nevergrad", "hybrid", "halving", "turbo")
 
 
 def _run(objective, differentiable, views, size=(H, W), method="gradient", settings=None, **overrides):
@@ -172,6 +174,29 @@ def test_every_method_runs_the_model_no_more_than_its_budget_of_passes(
         assert all(abs(p) <= h + 1e-9 for p, h in zip(record.params, half.tolist()))
 
 
+@pytest.mark.parametrize("method", sorted(METHODS))
+def test_48_more_budgeted_passes_buy_at_most_48_more_model_passes_at_every_profile_radius(
+    method, tiny_objective, differentiable, file_view
+) -> None:
+    for angle, distance in DEFAULT_RADII:
+        passes = []
+        for budget in (48, 96):
+            with count_passes(tiny_objective.model) as count:  # a backward pass through an image counts one
+                result = _run(
+                    tiny_objective,
+                    differentiable,
+                    [file_view],
+                    (24, 32),
+                    method,
+                    budget_passes=budget,
+                    max_angle_deg=angle,
+                    max_distance=distance,
+                )
+            assert count.passes == result.views[0].budget.passes <= budget, (angle, budget)
+            passes.append(count.passes)
+        assert passes[1] - passes[0] <= 48, (angle, passes)
+
+
 def test_the_clock_predicts_a_batch_by_its_passes() -> None:
     clock = Clock(None, 10.0)
     clock.started -= 6.0  # six seconds gone, then a screening of 32 passes took five
@@ -217,6 +242,7 @@ def test_every_method_stays_within_its_time_budget(method, tiny_objective, diffe
         ("halving", HalvingSettings(refine="local", local_views=4)),
         ("nevergrad", NevergradSettings("TwoPointsDE")),
         ("nevergrad", None),
+        ("turbo", TurboSettings(init_views=8)),
     ],
 )
 def test_same_seed_gives_identical_trajectories(method, settings, tiny_objective, differentiable, file_view) -> None:
@@ -690,3 +716,51 @@ def test_gradient_lanes_share_one_model_call_a_step(
     assert steps and set(steps) == {lanes}
     through_the_warp = {r.step for r in result.views[0].records if not math.isnan(r.coverage)}
     assert len(steps) == len(through_the_warp)  # one call per step of the lanes, no more
+
+
+def test_turbo_closes_in_on_an_analytic_maximum_where_its_design_alone_does_not(
+    tiny_objective, differentiable, file_view
+) -> None:
+    from kadv.attack.methods.turbo import TurboProposer
+
+    config = AttackConfig("turbo", TurboSettings(init_views=8), budget_passes=None, budget_seconds=1.0)
+    context = SearchContext(tiny_objective, differentiable, file_view, H, W, config)
+    target = torch.tensor([0.3, -0.2, 0.1, 0.4, 0.2, -0.3], dtype=torch.float64) * config.search_box()
+
+    def told(params: torch.Tensor) -> list[ViewRecord]:
+        misses = ((params - target) / config.search_box()).square().sum(dim=1)  # a smooth bowl in the unit box
+        return [
+            dataclasses.replace(_record(0.0, [0.0] * 3), params=p.tolist(), objective=-m)
+            for p, m in zip(params, misses.tolist())
+        ]
+
+    proposer = TurboProposer(context, np.random.default_rng(0))
+    best = []
+    for _ in range(14):
+        params = proposer.ask(8)
+        assert len(params) <= 8 and (params.abs() <= config.search_box() + 1e-9).all()
+        proposer.tell(told(params))
+        best.append(float(proposer.y.max()))
+    assert best == sorted(best)  # the best seen never falls
+    # the design's best miss, then the process's: the trust region closes in on the bowl's bottom
+    assert -best[-1] < 0.02 < -best[0]
+
+
+def test_turbo_refuses_a_trust_region_that_cannot_shrink_to_its_restart_in_one_line() -> None:
+    with pytest.raises(
+        ValueError, match=r"^attack.turbo needs 0 < length_min < length_init <= length_max, got 0.9, 0.8, 1.6$"
+    ):
+        TurboSettings(length_min=0.9)
+    with pytest.raises(ValueError, match=r"^attack.turbo.candidates must be at least attack.turbo.batch \(4\), got 2$"):
+        TurboSettings(candidates=2)
+
+
+def test_turbo_scores_its_warm_starts_first(tiny_objective, differentiable, file_view) -> None:
+    start = torch.tensor([[0.0, 0.1, 0.0, 0.05, 0.0, 0.0], [0.0, -0.1, 0.0, 0.0, 0.0, 0.05]], dtype=torch.float64)
+    config = AttackConfig("turbo", TurboSettings(init_views=4), budget_passes=9)
+    result = attack(
+        tiny_objective, differentiable, [file_view], H, W, config, seed=0, progress=False, starts={0: start}
+    )
+    first = [r.params for r in result.views[0].records if r.step == 1]
+    assert torch.allclose(torch.tensor(first[:2], dtype=torch.float64), start)  # inside the bounds: taken as they are
+    assert len(first) == 6 and result.views[0].budget.passes == 9  # the starts, then the design, then one batch of 2

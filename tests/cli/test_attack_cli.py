@@ -109,6 +109,10 @@ def test_run_directory_holds_every_artefact(demo_runs: Path) -> None:
     assert [v["name"] for v in init_params] == [v["name"] for v in summary["init_views"]]
     for view in summary["init_views"]:
         assert view["budget"]["forward"] == 10 and view["budget"]["backward"] == 8
+        assert view["agreement"] | {"worsts": None} == {
+            "reached": 1, "runs": 1, "planned": 1, "worsts": None, "tolerance": 0.03, "alone": True,
+            "stopped_early": False,
+        }  # fmt: skip
         for entry in [view["init"], *view["adversarial"]]:
             with Image.open(run / entry["png"]) as image:
                 assert image.size[0] > 4 * 64
@@ -255,6 +259,14 @@ BAD_INPUTS = [
         ["attack.halving.screen_fraction=1.5"],
         "attack.halving.screen_fraction must be in (0, 1], got 1.5",
     ),
+    (
+        "kadv-attack",
+        ["attack=turbo", "attack.turbo.length_min=2"],
+        "attack.turbo needs 0 < length_min < length_init <= length_max, got 2, 0.8, 1.6",
+    ),
+    ("kadv-attack", ["attack=turbo", "attack.turbo.batch=0"], "attack.turbo.batch must be an integer >= 1, got 0"),
+    ("kadv-attack", ["attack.restarts=0"], "attack.restarts must be an integer >= 1, got 0"),
+    ("kadv-attack", ["attack.agreement_delta1=-1"], "attack.agreement_delta1 must be in [0, 1], got -1"),
     ("kadv-attack", ["attack.budget_evaluations=48"], "attack.budget_evaluations was renamed attack.budget_passes"),
     ("kadv-attack", ["attack.halving.refine=adam"], "attack.halving.refine must be 'gradient' or 'local', got 'adam'"),
     ("kadv-attack", ["attack.budget_passes=1"], "attack.budget_passes must be at least 2 for attack.halving"),
@@ -401,3 +413,17 @@ def test_a_profile_run_records_its_profile_in_the_summary(tmp_path: Path) -> Non
     assert max(np.linalg.norm(r.params[3:]) for r in records) <= 0.3 + 1e-6
     assert "score " in result.stdout and "| 15°, 0.3 m |" in result.stdout
     assert (tmp_path / "run" / "profile.png").stat().st_size > 5_000
+
+
+def test_a_run_with_restarts_says_beside_each_worst_how_many_runs_reached_it(tmp_path: Path) -> None:
+    overrides = ["attack=halving", "attack.budget_passes=30", "attack.restarts=3", "attack.agreement_delta1=1"]
+    small = [o for o in SMALL if not o.startswith("attack")]
+    result = _run_in_process("kadv-attack", tmp_path / "run", *small, "render.lighting=direct", *overrides)
+    assert result.returncode == 0, result.stderr
+    assert "| delta1 adv | agreement |" in result.stdout
+    assert result.stdout.count("| 2/2 (stopped early, of 3) |") == 2  # any two runs agree within 1
+    summary = RunSummary.read(tmp_path / "run" / "summary.json")
+    for view in summary.init_views:
+        assert view.agreement.runs == 2 and view.agreement.planned == 3 and view.budget.passes == 20
+    rows = list(csv.DictReader((tmp_path / "run" / "trajectory.csv").open()))
+    assert {row["run"] for row in rows} == {"0", "1"}

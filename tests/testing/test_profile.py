@@ -58,7 +58,7 @@ def test_the_score_is_the_mean_trapezoid_under_the_typical_curve_from_the_init_v
     assert profile.resilience == pytest.approx(((1.7 / 3) / 0.9 + (1.6 / 3) / 0.8) / 2)
     table = profile.markdown()
     # the draws' intervals: 0.8 ± 1.96 * 0.0816 / 2; Wilson's for 0 of 4 and 1 of 4 failed
-    assert "| 15°, 0.3 m | 0.450 | 0.800 (0.720-0.880) | 5% (0%-49%) |" in table
+    assert "| 15°, 0.3 m | 0.450 | - | 0.800 (0.720-0.880) | 5% (0%-49%) |" in table  # no agreement recorded
     assert profile.failure_interval[2] == pytest.approx((0.0456, 0.6994), abs=1e-4)
     merged = Profile.merge([profile, profile])
     assert merged.seeds == (0, 1, 0, 1) and merged.score == pytest.approx(profile.score)
@@ -219,3 +219,26 @@ def test_a_seed_without_valid_draws_leaves_the_others_mean() -> None:
     typical = profile.typical
     assert typical[0] == pytest.approx(0.85) and typical[2] == pytest.approx(0.7) and typical[1] != typical[1]
     assert profile.failure_rate[2] == pytest.approx(0.2)
+
+
+def test_the_agreement_per_radius_sums_the_runs_over_seeds_and_init_views() -> None:
+    # per seed and radius: [runs that reached their worst, runs made, init views whose worst one run alone found]
+    rows = [[[1, 1, 1], [2, 3, 0], [1, 3, 1]], [[1, 1, 1], [2, 2, 0], [3, 3, 0]]]
+    profile = _profile(agreement_by_seed=rows)
+    assert [profile.agreement_text(k) for k in range(3)] == ["2/2 (2 alone)", "4/5", "4/6 (1 alone)"]
+    assert "| 15°, 0.3 m | 0.450 | 4/5 | 0.800" in profile.markdown()
+    assert Profile.from_dict(profile.to_dict()).agreement_by_seed == rows
+    assert Profile.merge([profile, profile]).agreement_text(1) == "8/10"
+
+
+def test_a_profile_with_restarts_records_each_radius_agreement(tmp_path: Path) -> None:
+    room = scene("box_room", seed=3)
+    budget = {**QUICK, "budget_passes": 2 * QUICK["budget_passes"]}
+    profile = robustness_profile("kadv_tiny", room, artifacts=tmp_path, restarts=2, **budget)
+    ((first, second),) = profile.agreement_by_seed
+    # two runs a search: both made (they agree or the second was the last), summed over the init views
+    views = budget.get("init_count", 2)
+    assert first[1] == second[1] == 2 * views and views <= first[0] <= 2 * views
+    assert profile.agreement_text(1) in profile.markdown()
+    with pytest.raises(RobustnessInputError, match=r"attack\.restarts must be an integer >= 1, got 0"):
+        robustness_profile("kadv_tiny", room, restarts=0, **QUICK)

@@ -107,10 +107,11 @@ def test_the_scorecard_profiles_each_model_on_each_probe_and_ranks_them(tmp_path
     )
     table = card.markdown().splitlines()
     assert table[0] == (
-        "| probe | model | worst delta1 5°/0.1 m | worst delta1 30°/0.6 m | search noise 30°/0.6 m "
-        "| failure rate 30°/0.6 m | worst-case area | resilience | typical area |"
+        "| probe | model | worst delta1 5°/0.1 m | worst delta1 30°/0.6 m | agreement 30°/0.6 m | search noise "
+        "30°/0.6 m | failure rate 30°/0.6 m | worst-case area | resilience | typical area |"
     )
-    assert all(row.split(" | ")[4] == "n/a" for row in table[2:6])  # one search seed: noise not measured
+    # one run a search: each seed's worst found by one run alone; one search seed: noise not measured
+    assert all(row.split(" | ")[4:6] == ["2/2 (2 alone)", "n/a"] for row in table[2:6])
     assert any(line.startswith("cost of kadv_tiny per init view (mean over probes): ") for line in table)
     assert [row.split(" | ")[:2] for row in table[2:8]] == [
         ["| window", "kadv_tiny"],
