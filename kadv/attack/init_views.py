@@ -257,8 +257,10 @@ def score_views(
     height: int,
     width: int,
     batch_size: int = 8,
+    alignment: str = "scale_shift",
 ) -> ViewScores:
-    """Score N views at poses (N, 4, 4) with fields of view (N,) at the given size."""
+    """Score N views at poses (N, 4, 4) with fields of view (N,) at the given size (delta1 after
+    ``alignment``, :func:`kadv.losses.depth_metrics`)."""
     scores: dict[str, list[torch.Tensor]] = {"delta1": [], "surfaces": [], "depth_range": [], "structure": []}
     with torch.no_grad():
         for start in range(0, len(poses), batch_size):
@@ -267,7 +269,9 @@ def score_views(
             out = renderer.render(poses[chunk], K, height, width)
             prediction = model(out.rgb, K)
             scores["delta1"].append(
-                depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)["delta1"]
+                depth_metrics(
+                    prediction.double(), out.depth.double(), out.mask, model.output_kind, alignment=alignment
+                )["delta1"]
             )
             depth = out.depth.double()
             far = torch.where(out.mask, depth, torch.zeros_like(depth)).amax(dim=(1, 2, 3))
@@ -433,9 +437,10 @@ def sample_init_views(
     penalty: PenaltyConfig,
     height: int,
     width: int,
+    alignment: str = "scale_shift",
 ) -> list[InitView]:
     """Draw ``config.candidates`` seeded candidate views and keep the ``count`` best: views the model
-    predicts well that show something.
+    predicts well (its delta1 after ``alignment``: under ``none``, in metres) that show something.
 
     Candidates come from :func:`sample_valid_views` and are ranked by delta1 + ``content_weight`` *
     :meth:`ViewScores.content`: ranking by accuracy alone rewards views with nothing in them (a bare
@@ -456,7 +461,7 @@ def sample_init_views(
             "scene's scale, or the init views themselves (init.params=<init_params.json>)"
         )
     fov = torch.full((len(poses),), config.fov_x_deg, dtype=torch.float64)
-    scores = score_views(model, renderer, poses, fov, height, width)
+    scores = score_views(model, renderer, poses, fov, height, width, alignment=alignment)
     content = scores.content()
     rank_by = scores.delta1 + config.content_weight * content
     order = sorted(range(len(poses)), key=lambda i: -float(rank_by[i]))[:count]
@@ -496,11 +501,12 @@ def captured_init_views(
     penalty: PenaltyConfig,
     height: int,
     width: int,
+    alignment: str = "scale_shift",
 ) -> list[InitView]:
     """The ``count`` best views of the scan's capture trajectory (:attr:`Scene.trajectory`): its
     poses thinned to ones ``config.spacing`` apart, then evenly to at most ``config.candidates``,
-    the valid ones scored by the model and ranked as sampled candidates are (delta1 +
-    ``content_weight`` x content), at the configured field of view.
+    the valid ones scored by the model and ranked as sampled candidates are (delta1 after
+    ``alignment`` + ``content_weight`` x content), at the configured field of view.
 
     Raises:
         InitViewError: the scene has no trajectory, or too few of its poses make valid views.
@@ -528,7 +534,8 @@ def captured_init_views(
         )
     chosen = [i for i, k in zip(picks, keep) if k]
     fov = torch.full((len(chosen),), config.fov_x_deg, dtype=torch.float64)
-    scores = score_views(model, renderer, torch.from_numpy(scene.trajectory[chosen]), fov, height, width)
+    trajectory = torch.from_numpy(scene.trajectory[chosen])
+    scores = score_views(model, renderer, trajectory, fov, height, width, alignment=alignment)
     rank_by = scores.delta1 + config.content_weight * scores.content()
     order = sorted(range(len(chosen)), key=lambda i: -float(rank_by[i]))[:count]
     return [

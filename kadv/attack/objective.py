@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import torch
 
 from kadv.device import resolve_device
-from kadv.losses import AlignedLoss, depth_metrics, minmax_normalize, ssim_loss, to_comparison_space
+from kadv.losses import AlignedLoss, check_alignment, depth_metrics, minmax_normalize, ssim_loss, to_comparison_space
 from kadv.models import DepthModel
 from kadv.penalties import PenaltyConfig, distance_to_surface, shortcut_penalty
 from kadv.render import ExactRenderer
@@ -34,7 +34,7 @@ class ObjectiveTerms:
         l_depth: L_depth, the study's depth discrepancy (differentiable when it is the loss).
         l_dist: shortcut penalty, differentiable.
         distance: optical centre to nearest surface, metres.
-        delta1, abs_rel: the prediction's accuracy after scale-and-shift alignment (no gradient).
+        delta1, abs_rel: the prediction's accuracy after the objective's alignment (no gradient).
         prediction: (B, 1, H, W) the model's raw output (no gradient).
     """
 
@@ -63,6 +63,11 @@ class Objective:
         renderer: the scene's exact renderer (for the distance to the nearest surface).
         penalty: d_th and lambda.
         space: "disparity" or "depth".
+        alignment: how the prediction meets the ground truth before the aligned losses and the
+            metrics score it (``loss.alignment``): ``scale_shift`` (least squares in ``space``; the
+            study's protocol), ``scale`` (least squares on scale alone) or ``none`` (the prediction
+            as metric depth: a relative model is refused). L_depth compares min-max normalised maps
+            whatever it is.
         device: where the model and the loss run (see :mod:`kadv.device`); they are moved there.
             Inputs may live anywhere; the terms stay on that device (nothing is read back to the host).
     """
@@ -75,9 +80,12 @@ class Objective:
         penalty: PenaltyConfig,
         space: str = "disparity",
         device: str | torch.device = "cpu",
+        alignment: str = "scale_shift",
     ) -> None:
         if space not in ("disparity", "depth"):
             raise ValueError(f"loss.space must be 'disparity' or 'depth', got {space!r}")
+        check_alignment(alignment, model.output_kind, f"model {getattr(model, 'name', type(model).__name__)}")
+        self.alignment = alignment
         self.device = resolve_device(device)
         self.model = model.to(self.device)
         self.loss = loss.to(self.device) if isinstance(loss, torch.nn.Module) else loss
@@ -96,7 +104,9 @@ class Objective:
     def attacked_loss(self, depth: torch.Tensor, prediction: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
         """The loss the search climbs (B,) between ground-truth z-depth and a prediction (B, 1, H, W)."""
         if isinstance(self.loss, AlignedLoss):
-            return self.loss(prediction.double(), depth.double(), mask, self.model.output_kind, self.space)
+            return self.loss(
+                prediction.double(), depth.double(), mask, self.model.output_kind, self.space, self.alignment
+            )
         return self.l_depth(depth, prediction, mask)
 
     def __call__(
@@ -137,7 +147,9 @@ class Objective:
         distance = distance_to_surface(self.renderer, world_T_cam[:, :3, 3].to(self.device))
         l_dist = shortcut_penalty(distance, self.penalty.d_th)
         with torch.no_grad():
-            metrics = depth_metrics(prediction.double(), depth.double(), mask, self.model.output_kind)
+            metrics = depth_metrics(
+                prediction.double(), depth.double(), mask, self.model.output_kind, alignment=self.alignment
+            )
         return ObjectiveTerms(
             objective=loss - self.penalty.weight * l_dist,
             loss=loss,

@@ -56,7 +56,7 @@ from kadv.device import resolve_device
 from kadv.io import atomic_write, remove_temporaries
 from kadv.models import count_passes
 from kadv.penalties import ENVELOPES, Envelope
-from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
+from kadv.render import DifferentiableRenderer, DiffRenderConfig
 from kadv.report.run import (
     SUMMARY,
     is_complete,
@@ -107,17 +107,12 @@ def attack_radii(cfg: DictConfig) -> tuple[tuple[float, float], ...] | None:
 
 
 def _init_views(
-    seed: int,
-    run_dir: Path,
-    renderer: ExactRenderer,
-    model,
-    penalty: PenaltyConfig,
-    init_config: InitViewConfig,
-    height: int,
-    width: int,
+    seed: int, run_dir: Path, objective: Objective, init_config: InitViewConfig, height: int, width: int
 ) -> tuple[list, int]:
     """The run's init views: those saved in the run directory (a resumed run), a given file, or chosen
-    now; and the model passes that chose them."""
+    now (scored as the objective scores views: its model, after its alignment); and the model
+    passes that chose them."""
+    renderer, model, penalty = objective.renderer, objective.model, objective.penalty
     saved = run_dir / INIT_PARAMS
     if saved.is_file():
         return load_init_params(saved), json.loads(saved.read_text()).get("model_passes", 0)
@@ -136,7 +131,7 @@ def _init_views(
                 )
             views += choose(
                 renderer, model, init_config.count - len(views), config=init_config, penalty=penalty,
-                height=height, width=width,
+                height=height, width=width, alignment=objective.alignment,
             )  # fmt: skip
     check_init_views(renderer, views, penalty, height, width)
     save_init_params(saved, views, count.passes)
@@ -145,8 +140,9 @@ def _init_views(
 
 def _table(summary: RunSummary) -> str:
     """The run's table and, under it, what each init view's search cost."""
+    fit = summary.alignment
     lines = [
-        "| init view | L_depth init | L_depth adv | delta1 init | delta1 adv | agreement |",
+        f"| init view | L_depth init | L_depth adv | delta1 init ({fit}) | delta1 adv ({fit}) | agreement |",
         "|---|---|---|---|---|---|",
     ]
     for view in summary.init_views:
@@ -271,17 +267,18 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     diff_config = DiffRenderConfig(
         supersample=supersample, **OmegaConf.to_container(cfg.render.differentiable, resolve=True)
     )
-    get_method(attack_config.method).check(attack_config.settings, attack_config.passes, supersample)
+    attack_config.check_run(get_method(attack_config.method).check, supersample)
     scene = scene_from_config(cfg.scene)
     if (note := frame_note(scene)) is not None:
         log.info(note)
     renderer = renderer_from_config(scene, cfg.render, device)
     model = model_from_config(cfg.model)
     loss = loss_from_config(cfg.loss)
-    objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space, device=device)
+    alignment = cfg.loss.get("alignment", "scale_shift")  # a run saved before it existed: the study's
+    objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space, device=device, alignment=alignment)
     config_text = OmegaConf.to_yaml(cfg, resolve=True)  # render.lighting resolved
     atomic_write(run_dir / "config.yaml", lambda tmp: tmp.write_text(config_text))
-    views, init_passes = _init_views(seed, run_dir, renderer, model, penalty, init_config, height, width)
+    views, init_passes = _init_views(seed, run_dir, objective, init_config, height, width)
     completed = load_partial_results(run_dir)
     progress.update(done=len(completed), total=len(views))
     if completed:
@@ -318,7 +315,8 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
             objective, differentiable, views, (height, width), attack_config, radii, seed, progress=cfg.progress,
             searched=searched,
         )  # fmt: skip
-        profile = Profile.of(model.name, scene.name, attack_config.envelope.name, radii, (seed,), [seeded])
+        names = (model.name, scene.name, attack_config.envelope.name)
+        profile = Profile.of(*names, radii, (seed,), [seeded], alignment=objective.alignment)
     info = RunInfo(
         scene.name, model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed), init_passes
     )

@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
-from kadv.losses.align import align_scale_shift, minmax_normalize, to_comparison_space
+from kadv.losses.align import (
+    ALIGNMENTS,
+    align_scale,
+    align_scale_shift,
+    check_alignment,
+    minmax_normalize,
+    to_comparison_space,
+)
 from kadv.losses.aligned import ALIGNED_LOSSES, DELTA1_TEMPERATURE, AlignedLoss, absrel_loss, soft_delta1_loss
 from kadv.losses.metrics import aligned_depth, depth_metrics
 from kadv.losses.perceptual import PerceptualLoss, depth_loss, ssim_loss
@@ -11,14 +18,17 @@ from kadv.losses.vgg import VGG16_TAPS, VGG16_URL, load_vgg16_state_dict, vgg16_
 
 __all__ = [
     "ALIGNED_LOSSES",
+    "ALIGNMENTS",
     "DELTA1_TEMPERATURE",
     "VGG16_TAPS",
     "VGG16_URL",
     "AlignedLoss",
     "PerceptualLoss",
     "absrel_loss",
+    "align_scale",
     "align_scale_shift",
     "aligned_depth",
+    "check_alignment",
     "depth_loss",
     "depth_metrics",
     "gradient_matching",

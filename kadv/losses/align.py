@@ -1,4 +1,5 @@
-"""Comparison spaces, min-max normalisation and least-squares scale-and-shift alignment.
+"""Comparison spaces, min-max normalisation and the least-squares alignments: scale and shift, or
+scale alone.
 
 All maps are (B, 1, H, W); ``mask`` (B, 1, H, W) bool marks valid pixels.
 """
@@ -7,9 +8,32 @@ from __future__ import annotations
 
 import torch
 
-__all__ = ["align_scale_shift", "minmax_normalize", "to_comparison_space"]
+__all__ = [
+    "ALIGNMENTS",
+    "align_scale",
+    "align_scale_shift",
+    "check_alignment",
+    "minmax_normalize",
+    "to_comparison_space",
+]
 
 _EPS = 1e-8
+
+# how a prediction is fitted to the ground truth before it is scored (``loss.alignment``): least
+# squares on scale and shift, or on scale alone, in the loss's space; or not at all (metric depth)
+ALIGNMENTS = ("scale_shift", "scale", "none")
+
+
+def check_alignment(alignment: str, prediction_kind: str, model: str = "the model") -> None:
+    """Refuse an unknown alignment, or ``none`` for a prediction that is not metric depth, naming
+    the model and what it outputs."""
+    if alignment not in ALIGNMENTS:
+        raise ValueError(f"loss.alignment must be one of {', '.join(ALIGNMENTS)}, got {alignment!r}")
+    if alignment == "none" and prediction_kind != "depth":
+        raise ValueError(
+            f"loss.alignment=none scores the prediction as metric depth, but {model} outputs relative "
+            f"{prediction_kind}: use scale_shift or scale"
+        )
 
 
 def to_comparison_space(values: torch.Tensor, kind: str, space: str, mask: torch.Tensor) -> torch.Tensor:
@@ -71,3 +95,21 @@ def align_scale_shift(prediction: torch.Tensor, target: torch.Tensor, mask: torc
     variance = (centred_p * centred_p).sum(dim=(1, 2, 3), keepdim=True)
     scale = covariance / variance.clamp_min(_EPS)
     return scale * (prediction - mean_p) + mean_t
+
+
+def align_scale(prediction: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
+    """s * prediction with s per map minimising the squared error to ``target`` on ``mask``;
+    differentiable in both maps.
+
+    Examples:
+        >>> target = 1.0 + torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4)
+        >>> mask = torch.ones_like(target, dtype=torch.bool)
+        >>> torch.allclose(align_scale(0.5 * target, target, mask), target)
+        True
+        >>> torch.allclose(align_scale(target - 3.0, target, mask), target)  # a shift stays
+        False
+    """
+    weight = mask.to(prediction.dtype)
+    covariance = (weight * prediction * target).sum(dim=(1, 2, 3), keepdim=True)
+    variance = (weight * prediction * prediction).sum(dim=(1, 2, 3), keepdim=True)
+    return covariance / variance.clamp_min(_EPS) * prediction

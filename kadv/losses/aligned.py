@@ -1,5 +1,5 @@
 """Attack losses on the failure users report: AbsRel and a smooth delta1 error share, both after
-the scale-and-shift alignment that scores the prediction (:func:`kadv.losses.aligned_depth`).
+the alignment that scores the prediction (:func:`kadv.losses.aligned_depth`).
 
 Unlike L_depth, which compares min-max normalised maps, these see the prediction as the metrics
 do, so a search that raises them lowers the reported delta1 (or raises AbsRel) directly.
@@ -33,9 +33,10 @@ def absrel_loss(
     prediction_kind: str = "disparity",
     space: str = "disparity",
     min_depth: float = 1e-3,
+    alignment: str = "scale_shift",
 ) -> torch.Tensor:
     """Mean |aligned - gt| / gt over valid pixels (B,); the ``abs_rel`` of
-    :func:`kadv.losses.depth_metrics` when ``space`` is disparity.
+    :func:`kadv.losses.depth_metrics` when ``space`` is disparity (or ``alignment`` is none).
 
     Examples:
         >>> depth = 1.0 + torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4) / 4
@@ -43,7 +44,9 @@ def absrel_loss(
         >>> absrel_loss(2.0 / depth + 1.0, depth, mask).abs().item() < 1e-9  # right up to scale and shift
         True
     """
-    mask, count, safe_gt, aligned = aligned_on_valid(prediction, gt_depth, mask, prediction_kind, space, min_depth)
+    mask, count, safe_gt, aligned = aligned_on_valid(
+        prediction, gt_depth, mask, prediction_kind, space, min_depth, alignment
+    )
     return mean_on_valid((aligned - safe_gt).abs() / safe_gt, mask, count)
 
 
@@ -55,6 +58,7 @@ def soft_delta1_loss(
     space: str = "disparity",
     temperature: float = DELTA1_TEMPERATURE,
     min_depth: float = 1e-3,
+    alignment: str = "scale_shift",
 ) -> torch.Tensor:
     """A smooth share of pixels that delta1 counts wrong (B,): per pixel
     sigmoid((|log(aligned / gt)| - log 1.25) / temperature), rescaled so that a perfect prediction
@@ -67,7 +71,9 @@ def soft_delta1_loss(
         True
     """
     _check_temperature(temperature)
-    mask, count, safe_gt, aligned = aligned_on_valid(prediction, gt_depth, mask, prediction_kind, space, min_depth)
+    mask, count, safe_gt, aligned = aligned_on_valid(
+        prediction, gt_depth, mask, prediction_kind, space, min_depth, alignment
+    )
     log_ratio = torch.log(aligned / safe_gt).abs()
     margin = math.log(1.25)
     floor = torch.sigmoid(torch.tensor(-margin / temperature, dtype=log_ratio.dtype))
@@ -94,9 +100,17 @@ class AlignedLoss:
         self.kind, self.temperature = kind, temperature
 
     def __call__(
-        self, prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor, prediction_kind: str, space: str
+        self,
+        prediction: torch.Tensor,
+        gt_depth: torch.Tensor,
+        mask: torch.Tensor,
+        prediction_kind: str,
+        space: str,
+        alignment: str = "scale_shift",
     ) -> torch.Tensor:
         """The loss (B,) of a raw prediction (B, 1, H, W) against z-depth (B, 1, H, W) on ``mask``."""
         if self.kind == "delta1":
-            return soft_delta1_loss(prediction, gt_depth, mask, prediction_kind, space, self.temperature)
-        return absrel_loss(prediction, gt_depth, mask, prediction_kind, space)
+            return soft_delta1_loss(
+                prediction, gt_depth, mask, prediction_kind, space, self.temperature, alignment=alignment
+            )
+        return absrel_loss(prediction, gt_depth, mask, prediction_kind, space, alignment=alignment)

@@ -1,10 +1,11 @@
-"""Standard depth metrics after scale-and-shift alignment in disparity space."""
+"""Standard depth metrics after an alignment (``loss.alignment``: scale and shift, by default, or
+scale alone, in disparity space by default; or none, for metric depth)."""
 
 from __future__ import annotations
 
 import torch
 
-from kadv.losses.align import align_scale_shift, to_comparison_space
+from kadv.losses.align import align_scale, align_scale_shift, check_alignment, to_comparison_space
 
 __all__ = ["aligned_depth", "aligned_on_valid", "depth_metrics", "mean_on_valid"]
 
@@ -15,9 +16,12 @@ def aligned_depth(
     mask: torch.Tensor,
     prediction_kind: str = "disparity",
     space: str = "disparity",
+    alignment: str = "scale_shift",
 ) -> torch.Tensor:
     """The prediction as metric depth (B, 1, H, W): converted to ``space``, aligned to the ground
-    truth there by least squares on ``mask``, and converted back. Differentiable in both maps.
+    truth there by least squares on ``mask`` (``alignment``: on scale and shift, or on scale
+    alone), and converted back; under ``none``, a metric depth prediction as it is (a value at or
+    below 0 as a depth of 1e-8 m: wrong). Differentiable in both maps.
 
     Aligned values are clamped at the end of the ground truth's range on the side where depth would
     turn negative (disparity at 1/max(gt), depth at min(gt)), so a prediction that needs a negative
@@ -30,8 +34,12 @@ def aligned_depth(
         >>> torch.allclose(aligned_depth(disparity, depth, mask, "disparity"), depth)
         True
     """
+    check_alignment(alignment, prediction_kind)
+    if alignment == "none":
+        return prediction.clamp_min(1e-8)
     target = to_comparison_space(gt_depth, "depth", space, mask)
-    aligned = align_scale_shift(to_comparison_space(prediction, prediction_kind, space, mask), target, mask)
+    fit = align_scale_shift if alignment == "scale_shift" else align_scale
+    aligned = fit(to_comparison_space(prediction, prediction_kind, space, mask), target, mask)
     if space == "depth":
         floor = torch.where(mask, gt_depth, torch.full_like(gt_depth, torch.inf)).amin(dim=(1, 2, 3), keepdim=True)
         return torch.maximum(aligned, floor)
@@ -46,6 +54,7 @@ def aligned_on_valid(
     prediction_kind: str = "disparity",
     space: str = "disparity",
     min_depth: float = 1e-3,
+    alignment: str = "scale_shift",
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """What the metrics and the aligned losses score on: the valid pixels (ground truth above
     ``min_depth``), their count per map (B,), the ground truth with 1 elsewhere (safe to divide by),
@@ -53,7 +62,7 @@ def aligned_on_valid(
     mask = mask & (gt_depth > min_depth)
     count = mask.to(gt_depth.dtype).sum(dim=(1, 2, 3)).clamp_min(1.0)
     safe_gt = torch.where(mask, gt_depth, torch.ones_like(gt_depth))
-    return mask, count, safe_gt, aligned_depth(prediction, gt_depth, mask, prediction_kind, space)
+    return mask, count, safe_gt, aligned_depth(prediction, gt_depth, mask, prediction_kind, space, alignment)
 
 
 def mean_on_valid(values: torch.Tensor, mask: torch.Tensor, count: torch.Tensor) -> torch.Tensor:
@@ -67,11 +76,12 @@ def depth_metrics(
     mask: torch.Tensor,
     prediction_kind: str = "disparity",
     min_depth: float = 1e-3,
+    alignment: str = "scale_shift",
 ) -> dict[str, torch.Tensor]:
     """delta1/2/3, abs_rel and rmse per map (B,) on valid pixels.
 
-    The prediction is aligned as :func:`aligned_depth` does, so a prediction that needs a negative
-    depth counts as wrong rather than being dropped.
+    The prediction is aligned as :func:`aligned_depth` does, in disparity space, so a prediction
+    that needs a negative depth counts as wrong rather than being dropped.
 
     Args:
         prediction: (B, 1, H, W) model output.
@@ -79,6 +89,7 @@ def depth_metrics(
         mask: (B, 1, H, W) valid ground-truth pixels.
         prediction_kind: "disparity" (relative, affine-invariant) or "depth".
         min_depth: ground truth below this is treated as invalid.
+        alignment: ``scale_shift``, ``scale`` or ``none`` (a metric depth prediction as it is).
 
     Examples:
         >>> depth = 1.0 + torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4) / 4
@@ -88,7 +99,7 @@ def depth_metrics(
         ([1.0], True)
     """
     mask, count, safe_gt, pred_depth = aligned_on_valid(
-        prediction, gt_depth, mask, prediction_kind, min_depth=min_depth
+        prediction, gt_depth, mask, prediction_kind, min_depth=min_depth, alignment=alignment
     )
     ratio = torch.maximum(pred_depth / safe_gt, safe_gt / pred_depth)
     result = {f"delta{k}": mean_on_valid((ratio < 1.25**k).to(gt_depth.dtype), mask, count) for k in (1, 2, 3)}

@@ -182,7 +182,8 @@ class ViewRenderer:
         with torch.no_grad():
             out = self.objective.renderer.render(poses, K, self.height, self.width, self.supersample).to("cpu")
             prediction = self.objective.model(out.rgb, K)
-            aligned = aligned_depth(prediction.double(), out.depth.double(), out.mask, self.objective.model.output_kind)
+            kind, alignment = self.objective.model.output_kind, self.objective.alignment
+            aligned = aligned_depth(prediction.double(), out.depth.double(), out.mask, kind, alignment=alignment)
         return {
             "rgb": out.rgb.permute(0, 2, 3, 1).numpy(),
             "depth": out.depth[:, 0].numpy(),
@@ -314,6 +315,7 @@ def write_run(
         versions=_versions(),
         init_views=per_view,
         profile=None if profile is None else profile.to_dict(),
+        alignment=objective.alignment,
     )
     if profile is not None:
         profile.save_png(run_dir / PROFILE_PNG)

@@ -150,6 +150,8 @@ class RunSummary(RunInfo):
 
     The means are over the init views that kept an adversarial view; ``budget`` is the run's total.
     ``profile``: a profile run's (``attack.radii``) :meth:`kadv.testing.Profile.to_dict`, else None.
+    ``alignment``: how every delta1 and AbsRel here met the ground truth (``loss.alignment``:
+    ``scale_shift``, ``scale`` or ``none``).
     """
 
     method: str
@@ -163,6 +165,7 @@ class RunSummary(RunInfo):
     complete: bool = True
     schema: int = SCHEMA_VERSION
     profile: dict | None = None
+    alignment: str = "scale_shift"
 
     def to_dict(self) -> dict:
         """Everything as plain JSON values, each budget with its passes."""

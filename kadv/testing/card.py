@@ -164,7 +164,8 @@ class Scorecard:
                 f"**{np.mean(typical):.3f}** |"
             )
         notes = [
-            "agreement: the searches' runs that reached their worst, of the runs made, over seeds and init views "
+            f"delta1 after {self.results[self.probes[0]][self.models[0]].alignment} alignment; agreement: the "
+            "searches' runs that reached their worst, of the runs made, over seeds and init views "
             "(alone: init views whose worst one run found and none confirmed; attack.restarts); search noise: the "
             "sd of the worst over the search seeds with the init views fixed (n/a: one search seed); ± after an "
             "area: its spread over the seeds, init views and searches together"

@@ -45,6 +45,8 @@ class CheckOptions:
         progress: show progress bars.
         restarts: independent runs of the search per init view at most, each a share of the
             budget (``attack.restarts``; their agreement is reported beside the worst).
+        alignment: how delta1 meets the ground truth (``loss.alignment``): ``scale_shift``,
+            ``scale`` or ``none`` (metric depth as predicted; a relative model is refused).
     """
 
     init_count: int = 2
@@ -59,6 +61,7 @@ class CheckOptions:
     artifacts: str | Path | None = None
     progress: bool = False
     restarts: int = 1
+    alignment: str = "scale_shift"
 
     @classmethod
     def of(cls, options: dict, taker: str) -> CheckOptions:
@@ -118,11 +121,12 @@ def setup(model, scene, options: CheckOptions) -> Setup:
     try:
         renderer = ExactRenderer(built, Shading(lighting=options.lighting), progress=options.progress)
         penalty = PenaltyConfig()
-        objective = Objective(depth_model, depth_loss(options.loss), renderer, penalty)
+        objective = Objective(depth_model, depth_loss(options.loss), renderer, penalty, alignment=options.alignment)
         views = file_init_views(renderer, penalty.margin)[:init_count]
         views += sample_init_views(
-            renderer, depth_model, init_count - len(views), options.seed, InitViewConfig(), penalty, height, width
-        )
+            renderer, depth_model, init_count - len(views), options.seed, InitViewConfig(), penalty, height, width,
+            alignment=options.alignment,
+        )  # fmt: skip
         check_init_views(renderer, views, penalty, height, width)
     except InitViewError as error:
         raise RobustnessInputError(f"scene {built.name!r}: {error}") from error

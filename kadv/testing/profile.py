@@ -85,6 +85,7 @@ class Profile:
         agreement_by_seed: (seeds, radii) the agreement of the searches at each radius, summed over
             the init views: [runs that reached their worst, runs made, init views whose worst one
             run alone found] (:class:`kadv.attack.Agreement`).
+        alignment: how every delta1 met the ground truth (``loss.alignment``).
     """
 
     model: str
@@ -102,6 +103,7 @@ class Profile:
     search_noise_by_seed: list[list[float]] = dataclasses.field(default_factory=list)
     cost_by_seed: list[dict[str, float]] = dataclasses.field(default_factory=list)
     agreement_by_seed: list[list[list[int]]] = dataclasses.field(default_factory=list)
+    alignment: str = "scale_shift"
 
     @property
     def worst(self) -> list[float]:
@@ -139,6 +141,7 @@ class Profile:
         seed_profiles: list[SeedProfile],
         fail_below: float = FAIL_BELOW,
         pictures: list[str] | None = None,
+        alignment: str = "scale_shift",
     ) -> Profile:
         """The profile of ``seed_profiles`` (one per seed, :func:`profile_views`)."""
         return cls(
@@ -157,6 +160,7 @@ class Profile:
             search_noise_by_seed=[p.search_noise for p in seed_profiles],
             cost_by_seed=[p.cost for p in seed_profiles],
             agreement_by_seed=[p.agreement for p in seed_profiles],
+            alignment=alignment,
         )
 
     @classmethod
@@ -271,8 +275,8 @@ class Profile:
     def markdown(self) -> str:
         """A table: per radius, the worst and typical delta1, the failure rate; then the score."""
         lines = [
-            f"{self.model} on {self.scene}, envelope {self.envelope}, seeds {list(self.seeds)}: "
-            f"delta1 {np.mean(self.delta1_init):.3f} at the init views",
+            f"{self.model} on {self.scene}, envelope {self.envelope}, seeds {list(self.seeds)}, delta1 after "
+            f"{self.alignment} alignment: {np.mean(self.delta1_init):.3f} at the init views",
             "",
             f"| radius | worst delta1 | agreement | typical delta1 (95%) | failure rate, delta1 < {self.fail_below:g} "
             "(95%) |",
@@ -685,7 +689,8 @@ class ProfileSettings:
         built = runs[0].built
         names = (built.model_name, built.scene_name, self.config.envelope.name)
         seeds = tuple(run.seed for run in runs)
-        return Profile.of(*names, self.radii, seeds, [run.seeded for run in runs], self.fail_below, pictures)
+        seeded = [run.seeded for run in runs]
+        return Profile.of(*names, self.radii, seeds, seeded, self.fail_below, pictures, self.checked.alignment)
 
 
 def profile_settings(

@@ -103,6 +103,7 @@ def test_run_directory_holds_every_artefact(demo_runs: Path) -> None:
     run = demo_runs / "first"
     summary = json.loads((run / "summary.json").read_text())
     assert summary["complete"] and summary["seed"] == 0 and summary["device"] == "cpu"
+    assert summary["alignment"] == "scale_shift"  # every delta1 and AbsRel in it after a scale-and-shift fit
     assert {"torch", "kornia", "kadv"} <= set(summary["versions"])
     assert len(summary["init_views"]) == 2
     init_params = json.loads((run / "init_params.json").read_text())["init_views"]
@@ -265,6 +266,12 @@ BAD_INPUTS = [
         "attack.turbo needs 0 < length_min < length_init <= length_max, got 2, 0.8, 1.6",
     ),
     ("kadv-attack", ["attack=turbo", "attack.turbo.batch=0"], "attack.turbo.batch must be an integer >= 1, got 0"),
+    (
+        "kadv-attack",
+        ["loss.alignment=none"],
+        "loss.alignment=none scores the prediction as metric depth, but model kadv_tiny outputs relative disparity",
+    ),
+    ("kadv-attack", ["loss.alignment=affine"], "loss.alignment must be one of scale_shift, scale, none, got 'affine'"),
     ("kadv-attack", ["attack.restarts=0"], "attack.restarts must be an integer >= 1, got 0"),
     ("kadv-attack", ["attack.agreement_delta1=-1"], "attack.agreement_delta1 must be in [0, 1], got -1"),
     ("kadv-attack", ["attack.budget_evaluations=48"], "attack.budget_evaluations was renamed attack.budget_passes"),
@@ -420,7 +427,9 @@ def test_a_run_with_restarts_says_beside_each_worst_how_many_runs_reached_it(tmp
     small = [o for o in SMALL if not o.startswith("attack")]
     result = _run_in_process("kadv-attack", tmp_path / "run", *small, "render.lighting=direct", *overrides)
     assert result.returncode == 0, result.stderr
-    assert "| delta1 adv | agreement |" in result.stdout
+    assert (
+        "| delta1 init (scale_shift) | delta1 adv (scale_shift) | agreement |" in result.stdout
+    )  # the alignment named
     assert result.stdout.count("| 2/2 (stopped early, of 3) |") == 2  # any two runs agree within 1
     summary = RunSummary.read(tmp_path / "run" / "summary.json")
     for view in summary.init_views:

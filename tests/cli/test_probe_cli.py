@@ -15,6 +15,7 @@ def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_pat
     printed = capsys.readouterr().out
     assert "| probe | model | worst delta1 5°/0.1 m | worst delta1 15°/0.3 m | worst delta1 45°/1 m |" in printed
     assert "| window | kadv_tiny | " in printed and "| stairs | kadv_tiny | " in printed
+    assert "\ndelta1 after scale_shift alignment; agreement: " in printed  # how every figure was scored
     assert "\nranking (worst-case area): kadv_tiny (" in printed and "\nranking (typical area): kadv_tiny (" in printed
     assert (tmp_path / "scorecard.md").read_text().strip() in printed
     assert (tmp_path / "scorecard.png").stat().st_size > 10_000
@@ -34,6 +35,8 @@ def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_pat
         ("seeds=0,-1", "seeds must be an integer >= 0, got -1"),
         ("envelope=drone", "envelope 'drone' is not a preset; choose one of free, upright, handheld, robot"),
         ("lighting=sun", "lighting must be 'baked' or 'direct', got 'sun'"),
+        ("restarts=0", "restarts must be an integer >= 1, got 0"),
+        ("alignment=none", "scores the prediction as metric depth, but model kadv_tiny outputs relative disparity"),
         ("colour=red", "'colour=red': expected key=value with a key of model, probes"),
     ],
 )
