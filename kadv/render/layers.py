@@ -1,8 +1,8 @@
 """Anchor RGB-D layers: exact renders at a pose, kept for differentiable reprojection.
 
-Layer 0 is the visible surface; layer k the (k+1)-th surface along each ray (depth peeling with
-Open3D's ``list_intersections``, sorted per ray), so pixels hidden at the anchor can still be
-found when the camera moves. An optional guard band widens the field of view (same centre,
+Layer 0 is the visible surface; layer k the k-th front-facing surface behind it along each ray
+(depth peeling with Open3D's ``list_intersections``, sorted per ray; an occluder's own back faces
+are skipped), so pixels hidden at the anchor can still be found when the camera moves. An optional guard band widens the field of view (same centre,
 same focal length) so that samples near the current view's border have real content.
 """
 
@@ -93,7 +93,9 @@ def camera_face_normals(surfaces: Surfaces, triangle_ids: torch.Tensor, world_T_
 
 
 def _peel(renderer: ExactRenderer, origins: torch.Tensor, directions: torch.Tensor, layers: int) -> list[RayHits]:
-    """The first ``layers`` opaque surfaces along each ray (N, 3), nearest first."""
+    """Along each ray (N, 3): the visible surface (its first opaque hit), then the next ``layers - 1``
+    front-facing surfaces behind it, nearest first. A closed occluder's own back faces are left
+    out: what a moved camera finds behind an object is what the object hides, not its far side."""
     n = len(origins)
     ray_ids, t, ids, bary = renderer.intersections(origins, directions)
     # Coplanar duplicates (z-fighting) would fill several layers with one surface.
@@ -102,7 +104,15 @@ def _peel(renderer: ExactRenderer, origins: torch.Tensor, directions: torch.Tens
     keep[1:] = ~((ray_ids[1:] == ray_ids[:-1]) & ((t64[1:] - t64[:-1]).abs() <= 1e-5 * t64[1:].clamp_min(1e-6)))
     ray_ids, t, ids, bary = ray_ids[keep], t[keep], ids[keep], bary[keep]
     first = torch.searchsorted(ray_ids, torch.arange(n, device=ray_ids.device))
-    rank = torch.arange(len(ray_ids), device=ray_ids.device) - first[ray_ids]
+    order = torch.arange(len(ray_ids), device=ray_ids.device)
+    visible = order == first[ray_ids]
+    rays = torch.as_tensor(directions, device=renderer.surfaces.device).double()[ray_ids.to(renderer.surfaces.device)]
+    front = (renderer.surfaces.facing(ids.long().to(rays.device), rays) < 0).to(ray_ids.device)
+    # the visible hit is layer 0; the front-facing hits behind it are layers 1, 2, ... in order
+    behind = ~visible & front
+    counted = torch.cumsum(behind.long(), dim=0)
+    before = torch.cat([counted.new_zeros(1), counted])[first]  # each ray's: those of the rays before it
+    rank = torch.where(visible, 0, torch.where(behind, counted - before[ray_ids], -1))
     out = []
     for layer in range(layers):
         selected = rank == layer

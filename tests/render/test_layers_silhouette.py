@@ -10,7 +10,7 @@ from kadv.render import ExactRenderer, find_edge_pairs, render_anchor, silhouett
 from kadv.render.layers import guard_band_intrinsics
 from kadv.render.silhouette import edge_crossings
 from kadv.scenes import Material, assemble_scene
-from kadv.scenes.parts import quad_part
+from kadv.scenes.parts import box_parts, quad_part
 
 
 def _panel_before_wall() -> ExactRenderer:
@@ -37,6 +37,22 @@ def test_depth_peeling_layers_are_sorted_and_complete() -> None:
     assert anchor.mask[0, :, 0, 8, 8].tolist() == [True, True, False]
     corner = anchor.points[0, :, 2, 0, 0].tolist()  # outside the panel: the wall only
     assert abs(corner[0] - 4.0) < 1e-6 and not anchor.mask[0, 1, 0, 0, 0]
+
+
+def test_the_second_layer_holds_the_wall_a_box_hides_not_the_box_s_far_side() -> None:
+    # a closed 1 m box from z = 2 to 3 in front of a wall at z = 4: a ray through the box meets its
+    # front (2 m), its back face from inside (3 m) and the wall (4 m)
+    materials = [Material("box", base_color=[1.0, 0.0, 0.0]), Material("wall", base_color=[0.0, 0.0, 1.0])]
+    parts = box_parts(np.array([-0.5, -0.5, 2.0]), np.array([0.5, 0.5, 3.0]), 0, "box", tile=1.0)
+    parts.append(quad_part(np.array([[-5, -5, 4], [5, -5, 4], [5, 5, 4], [-5, 5, 4]], float), 1, "wall"))
+    renderer = ExactRenderer(assemble_scene(parts, materials, name="box before wall"))
+    K = intrinsics_from_fov(60.0, 16, 16)
+    anchor = render_anchor(renderer, POSE, K, 16, 16, layers=3)
+    centre = anchor.points[0, :, 2, 8, 8].tolist()
+    assert centre[:2] == pytest.approx([2.0, 4.0], abs=1e-5) and centre[2] == 0.0  # box, wall, nothing
+    assert anchor.mask[0, :, 0, 8, 8].tolist() == [True, True, False]
+    rgb = anchor.rgb[0, :, :, 8, 8]
+    assert rgb[0, 0] > rgb[0, 2] and rgb[1, 2] > rgb[1, 0]  # red box in front, the blue wall behind it
 
 
 def test_guard_band_widens_the_view_around_the_same_centre() -> None:
