@@ -2,8 +2,9 @@
 
 Layer 0 is the visible surface; layer k the k-th front-facing surface behind it along each ray
 (depth peeling with Open3D's ``list_intersections``, sorted per ray; an occluder's own back faces
-are skipped), so pixels hidden at the anchor can still be found when the camera moves. An optional guard band widens the field of view (same centre,
-same focal length) so that samples near the current view's border have real content.
+are skipped), so pixels hidden at the anchor can still be found when the camera moves. An
+optional guard band widens the field of view (same centre, same focal length) so that samples near
+the current view's border have real content.
 """
 
 from __future__ import annotations
