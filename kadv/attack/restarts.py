@@ -52,8 +52,6 @@ def restarted_search(
         spent = spent + result.budget
         if run >= 1 and not agreement(results, config.restarts, config.agreement_delta1).alone:
             break
-    if len(results) == 1 and config.restarts == 1:
-        return dataclasses.replace(results[0], agreement=agreement(results, 1, config.agreement_delta1))
     records = [record for result in results for record in result.records]
     top = select_top_views(records, config.top_n, config.min_separation, config.min_separation_deg)
     holder = next((result for result in results if top and any(r is top[0] for r in result.records)), results[0])

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from scipy.stats import qmc
 
 from kadv.attack.init_views import InitView
 from kadv.attack.objective import Objective, ObjectiveTerms
@@ -204,6 +205,13 @@ class AttackConfig:
             s = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
             parts.append(np.stack([r * s * np.cos(phi), r * s * np.sin(phi), r * z], axis=1))
         return torch.from_numpy(np.concatenate(parts, axis=1))
+
+    def sobol_ball(self, count: int, rng: np.random.Generator) -> torch.Tensor:
+        """``count`` poses (count, 6) spread over the bounds' balls: the first points of a scrambled
+        Sobol sequence drawn from ``rng`` (a power of two of them keeps its balance), through
+        :meth:`sample_ball`."""
+        unit = qmc.Sobol(d=6, scramble=True, rng=rng).random_base2(math.ceil(math.log2(count)))[:count]
+        return self.sample_ball(unit)
 
 
 class Clock:

@@ -614,11 +614,8 @@ def profile_views(
 
 def _agreement_row(agreements: list) -> list[int]:
     """[runs that reached their worst, runs made, init views whose worst one run alone found]
-    over the init views' agreements (a result without one counts as one run alone)."""
-    known = [a for a in agreements if a is not None]
-    missing = len(agreements) - len(known)
-    return [sum(a.reached for a in known) + missing, sum(a.runs for a in known) + missing,
-            sum(a.alone for a in known) + missing]  # fmt: skip
+    over the init views' agreements (:func:`kadv.attack.attack` gives every result one)."""
+    return [sum(a.reached for a in agreements), sum(a.runs for a in agreements), sum(a.alone for a in agreements)]
 
 
 def _worst_of(results: list) -> list[float]:

@@ -18,7 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from scipy.stats import qmc
 from tqdm import tqdm
 
 from kadv.attack.methods.hybrid import HybridSettings, check_trust_region, trust_region_refine
@@ -231,8 +230,8 @@ def halving_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) 
     screen_views = round(settings.screen_fraction * clock.passes) if clock.passes is not None else settings.batch
     screened: list[ViewRecord] = []
     if screen_views:
-        unit = qmc.Sobol(d=6, scramble=True, rng=rng).random_base2(math.ceil(math.log2(screen_views)))[:screen_views]
-        screened = context.screen(2, config.sample_ball(unit), settings.screen_supersample, settings.batch, bar)
+        poses = config.sobol_ball(screen_views, rng)
+        screened = context.screen(2, poses, settings.screen_supersample, settings.batch, bar)
         records += screened
     if rescore:
         best = select_top_views(

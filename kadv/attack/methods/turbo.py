@@ -79,11 +79,7 @@ class TurboProposer(Proposer):
         self.design = list(context.starts) + self.design  # views found bad before (a smaller radius) join the first
 
     def _restart(self) -> None:
-        from scipy.stats import qmc
-
-        count = self.settings.init_views
-        unit = qmc.Sobol(d=_DIMS, scramble=True, rng=self.rng).random_base2(math.ceil(math.log2(count)))[:count]
-        self.design = list(self.config.sample_ball(unit))
+        self.design = list(self.config.sobol_ball(self.settings.init_views, self.rng))
         self.length = self.settings.length_init
         self.successes = self.failures = 0
         self.start = len(self.y)  # the restart's own views: its region centres on their best
