@@ -18,6 +18,7 @@ import torch
 import yaml
 
 from kadv.device import resolve_device
+from kadv.render import DiffRenderConfig
 from kadv.render.backends import resolve_backend
 from kadv.scenes import Scene, box_room, load_scene
 
@@ -109,3 +110,12 @@ def scene_file(name: str) -> Path:
 def load_bench_scene(name: str) -> Scene:
     """A real scene by name or path (:func:`scene_file`), or the procedural box room for "box_room"."""
     return box_room(seed=0) if name == "box_room" else load_scene(scene_file(name))
+
+
+def render_preset(name: str) -> DiffRenderConfig:
+    """The DiffRenderConfig a ``render=<name>`` preset in conf/render/ gives the attack."""
+    folder = Path(__file__).resolve().parents[1] / "conf" / "render"
+    preset = yaml.safe_load((folder / f"{name}.yaml").read_text())
+    base = yaml.safe_load((folder / "exact.yaml").read_text())
+    options = {**base["differentiable"], **preset.get("differentiable", {})}
+    return DiffRenderConfig(supersample=preset.get("supersample", base["supersample"]), **options)

@@ -2,6 +2,11 @@
 EVAL_BATCH nearby views at supersample 2 and one kadv-tiny forward pass) and a gradient step of
 kadv-tiny + SSIM (one restart), on grey_white_room at 240x320.
 
+Then the render presets' steps, in one process: PRESET_STEPS small moves rendered forward and
+backward through the differentiable renderer under ``render=exact`` (the default) and
+``render=warp`` (refreshes included), against one exact render at supersample 2 and the warp of a
+moved view with the cast it needs (forward).
+
 Each phase is a function of kadv wrapped for this run: the device is synchronised before and after
 it, so that its time is its own (what the phases leave out is the rest of the step: the optimiser,
 the records). Then torch's profiler lists the operators that took the most time in one more
@@ -19,7 +24,7 @@ from collections import defaultdict
 from collections.abc import Callable
 
 import torch
-from common import device_and_backend, load_bench_scene
+from common import device_and_backend, load_bench_scene, median_seconds, render_preset
 from torch.profiler import ProfilerActivity, profile
 
 import kadv.attack.objective
@@ -29,11 +34,14 @@ from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig
 from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam
 from kadv.losses import depth_loss
 from kadv.models import load_model
-from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
+from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer, render_anchor
+from kadv.render.dibr import warp_boxed
+from kadv.render.layers import camera_face_normals
 
 HEIGHT, WIDTH = 240, 320
 EVAL_BATCH = 8
 STEPS = 6
+PRESET_STEPS = 12
 # (module, attribute, phase): the functions timed, where the step calls them from
 PHASES = [
     (kadv.render.differentiable, "render_anchor", "anchor render"),
@@ -111,6 +119,54 @@ def tiny_attack(description: str) -> tuple[torch.device, str, argparse.Namespace
     return device, backend, args, renderer, view, objective
 
 
+def preset_steps(renderer: ExactRenderer, view, device: torch.device) -> dict[str, float]:
+    """Milliseconds of a step through each render preset (its refreshes spread over the steps), of
+    one exact render at supersample 2, and of a moved view's reprojection with its cast."""
+    K = intrinsics_from_fov(view.fov_x_deg, HEIGHT, WIDTH)
+    base = view.world_T_cam.double().reshape(1, 4, 4)
+    # small moves along a line, a few millimetres and tenths of a degree a step (an Adam run's scale)
+    moves = [
+        torch.tensor([[0.0, 0.004, 0.002, 0.01, 0.004, 0.006]], dtype=torch.float64) * i for i in range(PRESET_STEPS)
+    ]
+    weights = torch.linspace(-1.0, 1.0, 4 * HEIGHT * WIDTH, device=device).reshape(1, 4, HEIGHT, WIDTH)
+    out = {}
+    for name in ("exact", "warp"):
+        differentiable = DifferentiableRenderer(renderer, render_preset(name), device)
+
+        def steps() -> None:
+            differentiable.reset()
+            for move in moves:
+                params = move.to(device).requires_grad_(True)
+                rendered = differentiable(params, base, K, HEIGHT, WIDTH)
+                (torch.cat([rendered.rgb, rendered.depth], dim=1) * weights).sum().backward()
+
+        out[name] = median_seconds(steps, repeats=3) / PRESET_STEPS * 1e3
+    moved = perturb_world_T_cam(base, moves[3][:, :3], moves[3][:, 3:])
+    out["exact render"] = median_seconds(lambda: renderer.render(moved, K, HEIGHT, WIDTH, supersample=2)) * 1e3
+    preset = render_preset("warp")
+    anchor = render_anchor(renderer, base, K, HEIGHT, WIDTH, preset.layers, preset.guard_band, preset.supersample)
+    boxed = anchor.to(device).boxed
+    A_T_P = torch.linalg.inv(base) @ moved
+
+    def reprojection() -> None:
+        cast = renderer.render(moved, K, HEIGHT, WIDTH, colour=False)
+        normals = camera_face_normals(renderer.surfaces, cast.triangle_ids[:, 0], moved).permute(0, 3, 1, 2)
+        with torch.no_grad():
+            warp_boxed(boxed, cast.depth.to(device), normals.to(device), A_T_P.to(device), K, preset.depth_tolerance)
+
+    out["reprojection"] = median_seconds(reprojection) * 1e3
+    print(f"\nrender presets on {device}, grey_white_room {HEIGHT}x{WIDTH} (ms; steps: forward and backward)")
+    labels = {
+        "exact": "render=exact step",
+        "warp": "render=warp step",
+        "exact render": "exact render, s=2",
+        "reprojection": "reprojection of a moved view",
+    }
+    for key, label in labels.items():
+        print(f"  {label:<30} {out[key]:>8.1f}")
+    return out
+
+
 def main() -> None:
     device, backend, args, renderer, view, objective = tiny_attack(
         "Time an attack's phases and list its costliest operators."
@@ -159,10 +215,13 @@ def main() -> None:
     sort = "self_cuda_time_total" if device.type == "cuda" else "self_cpu_time_total"
     print(f"\noperators of one gradient run (2 passes), by {sort}")
     print(profiler.key_averages().table(sort_by=sort, row_limit=15, max_name_column_width=36))
+    presets = preset_steps(renderer, view, device)
     step = total / (STEPS + 1)
     render = evaluation.get("exact render", 0.0)
     print(
-        f"profile_step step_ms={step * 1e3:.0f} eval_render_ms={render * 1e3:.0f} "
+        f"profile_step default_ms={presets['exact']:.0f} warp_ms={presets['warp']:.0f} "
+        f"exact_ms={presets['exact render']:.0f} reproject_ms={presets['reprojection']:.1f} "
+        f"step_ms={step * 1e3:.0f} eval_render_ms={render * 1e3:.0f} "
         f"anchor_ms={seconds['anchor render'] / (STEPS + 1) * 1e3:.0f} "
         f"silhouette_ms={seconds['silhouette search'] / (STEPS + 1) * 1e3:.0f} device={device.type} backend={backend} "
         f"edge_search={args.edge_search}"

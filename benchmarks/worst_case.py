@@ -91,6 +91,7 @@ from kadv.attack.search import DEFAULT_METHOD, SearchContext
 from kadv.geometry import perturb_world_T_cam
 from kadv.io import atomic_write
 from kadv.models import load_model
+from kadv.render import DifferentiableRenderer
 from kadv.render.dibr import reproject
 from kadv.render.layers import AnchorLayers, camera_face_normals, render_anchor
 from kadv.scenes.probes import PROBES, probe_scene
@@ -112,7 +113,12 @@ CANDIDATES = {
     "cma": ("cma", None),
     "nevergrad": ("nevergrad", None),
     "turbo": ("turbo", None),
+    "hybrid_warp": ("hybrid", None),
+    "halving_gradient_warp": ("halving", HalvingSettings(screen_supersample=None, refine="gradient")),
 }
+# labels whose gradient lanes render through the warp (render=warp): the values of the steps between
+# refreshes come from the anchor's reprojection, and the exact render validates what a lane takes
+WARPED = {"hybrid_warp", "halving_gradient_warp"}
 # The default screens exactly under a pass budget (halving_exact's config, so its runs at equal
 # passes are the default's) and at one ray per pixel under a seconds budget when the render
 # outweighs the model (halving's): one method, never the other's W*.
@@ -198,18 +204,19 @@ class Cells:
         self.views = [fit_into_envelope(self.built.renderer, v, envelope, margin) for v in self.built.views]
 
     def run(self, view: int, config: AttackConfig, seed: int, seconds: list[float] | None = None,
-            radii=DEFAULT_RADII) -> dict:  # fmt: skip
+            radii=DEFAULT_RADII, warped: bool = False) -> dict:  # fmt: skip
         """The nested-radii search of one init view (``seconds``: per radius, replacing the pass
-        budget); per radius its curve of improvements, passes, seconds and agreement (the share of
-        its restarts that reached its worst)."""
+        budget; ``warped``: the gradient through ``render=warp``); per radius its curve of
+        improvements, passes, seconds and agreement (the share of its restarts that reached its worst)."""
         b = self.built
+        differentiable = self.warp_renderer() if warped else b.differentiable
         results: list = []
         for k, (degrees, metres) in enumerate(radii):
             within = dataclasses.replace(config, max_angle_deg=degrees, max_distance=metres)
             if seconds is not None:
                 within = dataclasses.replace(within, budget_passes=None, budget_seconds=seconds[k])
             starts = warm_starts(results, 1, WARM_STARTS, config) if results else None
-            results.append(attack(b.objective, b.differentiable, [self.views[view]], *b.size, within, seed,
+            results.append(attack(b.objective, differentiable, [self.views[view]], *b.size, within, seed,
                                   progress=False, starts=starts))  # fmt: skip
         rows = []
         for result in results:
@@ -223,6 +230,11 @@ class Cells:
             spent = {"passes": budget.passes, "screened": budget.screened, "seconds": budget.seconds}
             rows.append({"curve": curve, "agreement": agreed.reached / agreed.runs} | spent)
         return {"init": results[0].views[0].init_record.delta1, "radii": rows}
+
+    @functools.cache  # noqa: B019 (one per scene, kept for the benchmark's life)
+    def warp_renderer(self) -> DifferentiableRenderer:
+        """The differentiable renderer of ``render=warp`` (conf/render/warp.yaml) on this scene."""
+        return DifferentiableRenderer(self.built.renderer, common.render_preset("warp"))
 
 
 def worst_within(run: dict, radius: int) -> float:
@@ -241,13 +253,14 @@ class Store:
             radii=DEFAULT_RADII) -> dict:  # fmt: skip
         config = method_config(label, budget)
         key = [repr(config), seed, seconds, source_version(config.method), cells.name, view]
+        key += ["render=warp"] if label in WARPED else []
         key = json.dumps(key + ([] if radii == DEFAULT_RADII else [radii]))  # the profile's radii: keys as before
         digest = hashlib.sha256(key.encode()).hexdigest()[:16]
         path = self.folder / f"{cells.name}-v{view}-{label}-s{seed}-{'s' if seconds else 'p'}-{digest}.json"
         if path.is_file():
             return json.loads(path.read_text())
         started = time.perf_counter()
-        run = cells.run(view, config, seed, seconds, radii) | {"key": key}
+        run = cells.run(view, config, seed, seconds, radii, warped=label in WARPED) | {"key": key}
         text = json.dumps(run)
         atomic_write(path, lambda tmp: tmp.write_text(text))
         worst = " ".join(f"{worst_within(run, k):.3f}" for k in range(len(radii)))

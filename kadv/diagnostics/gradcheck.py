@@ -116,15 +116,19 @@ def check_pose(
     *,
     weight_seed: int = 0,
     reference_supersample: int = 4,
-    rotation_step: float = 2e-3,
-    translation_step: float = 4e-3,
+    steps: tuple[float, float] = (2e-3, 4e-3),
     edge_jump: float = 0.005,
+    anchor_offset: tuple[float, float] = (2.0, 0.05),
     device: str | torch.device = "cpu",
 ) -> dict[str, GradientCheck]:
     """Compare analytic and finite-difference gradients of the four functionals at one pose.
 
     The analytic gradients come from a DifferentiableRenderer on ``device``; the reference is exact
-    renders on the CPU.
+    renders on the CPU. A configuration that keeps its anchor between calls (``refresh`` every_k or
+    on_drift) is checked as it runs between refreshes: its anchor is rendered first at a pose
+    ``anchor_offset`` (degrees, metres, in directions seeded by ``weight_seed``) away, so that
+    the checked gradient comes through the warp of a moved view. ``steps``: the reference's
+    finite-difference steps in rotation (radians) and translation (metres).
 
     Returns one :class:`GradientCheck` per renderer configuration (the reference is shared); its
     ``step_agreement`` < 0.99 says the reference is not trustworthy there (resample the pose).
@@ -153,7 +157,7 @@ def check_pose(
         columns = []
         for i in range(6):
             step = torch.zeros(1, 6, dtype=torch.float64)
-            step[0, i] = (rotation_step if i < 3 else translation_step) * scale
+            step[0, i] = steps[i >= 3] * scale
             values = []
             for sign in (1.0, -1.0):
                 pose = perturb_world_T_cam(base, sign * step[:, :3], sign * step[:, 3:])
@@ -163,10 +167,16 @@ def check_pose(
 
     full, half = reference(1.0), reference(0.5)
     agreements = {name: min(_blocks(full[f], half[f])) for f, name in enumerate(FUNCTIONALS)}
+    generator = torch.Generator().manual_seed(weight_seed)
+    directions = F.normalize(torch.randn(2, 3, generator=generator, dtype=torch.float64), dim=1)
+    away = torch.cat([directions[0] * np.radians(anchor_offset[0]), directions[1] * anchor_offset[1]])[None]
     results = {}
     for name, config in configs.items():
+        differentiable = DifferentiableRenderer(renderer, config, device)
+        if config.refresh != "always":
+            differentiable(away, base, K, height, width)
         params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
-        output = DifferentiableRenderer(renderer, config, device)(params, base, K, height, width)
+        output = differentiable(params, base, K, height, width)
         values = functionals(output.rgb.double().cpu(), output.depth.double().cpu())
         analytic = np.stack([torch.autograd.grad(v, params, retain_graph=True)[0][0].numpy() for v in values])
         cosines = {f_name: _blocks(analytic[f], half[f]) for f, f_name in enumerate(FUNCTIONALS)}

@@ -1,14 +1,21 @@
 """Differentiable reprojection of anchor RGB-D layers into the current pose.
 
 For each current pixel p with exact (detached) depth: X_P = D(p) K^-1 p~ (kornia ``depth_to_3d_v2``),
-X_A = A_T_P X_P (``transform_points``), q = pi(K_A X_A) (``project_points``). The anchor is sampled at
-q with a box filter of one current pixel (s x s bilinear sub-samples of the s-times supersampled
-anchor), so the gradient is that of the box-filtered image the finite-difference reference sees.
+X_A = A_T_P X_P (``transform_points``), q = pi(K_A X_A) (``project_points``), and the anchor is read
+at q. Depth is the z of the anchor point read there, mapped back with P_T_A.
 
-Sampling is depth-aware: a bilinear tap counts only if the expected point X_A lies on the tap's
-own surface (within a tolerance of its triangle's plane). Taps across an occlusion edge would mix
-two surfaces and give the gradient of the wrong one; silhouettes get their own term
-(:mod:`kadv.render.silhouette`). Depth is the z of the sampled anchor point mapped back with P_T_A.
+- A moved view (:func:`warp_boxed`) reads the anchor box-filtered to its pixels (the mean of each
+  pixel's s x s sub-samples, as the exact render's colour is) with one ``grid_sample`` per layer,
+  and tests per pixel that the point read is the point expected (the same surface seen from both
+  poses). Layers behind the first are read only where those before failed.
+- At the anchor's own pose (:func:`reproject` with ``at_anchor``), the samples sit on the anchor's
+  pixel centres: each sub-sample's taps are tested against its own triangle's plane and the values
+  and slopes come in closed form (:func:`_anchor_layer_pixels`), exact to the last bit. This is
+  what the default step (``refresh=always``) runs.
+
+Either way the gradient is that of the box-filtered image the finite-difference reference sees;
+lookups across an occlusion edge would mix two surfaces and give the gradient of the wrong one, so
+silhouettes get their own term (:mod:`kadv.render.silhouette`).
 """
 
 from __future__ import annotations
@@ -21,14 +28,18 @@ import torch
 from kornia.geometry.camera.perspective import project_points
 from kornia.geometry.depth import depth_to_3d_v2
 from kornia.geometry.linalg import transform_points
+from kornia.geometry.line import ParametrizedLine
+from kornia.geometry.plane import Hyperplane
+from kornia.geometry.vector import Scalar, Vector3
+from torch.nn import functional as F
 
 from kadv.checks import check_shape
 from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.vector import dot
-from kadv.render.layers import AnchorLayers, guard_band_intrinsics
+from kadv.render.layers import AnchorLayers, BoxedLayers, guard_band_intrinsics
 from kadv.render.straight_through import straight_through
 
-__all__ = ["Reprojection", "reproject"]
+__all__ = ["Reprojection", "reproject", "warp_boxed"]
 
 # Per-sample arithmetic (a few hundred thousand sub-pixel samples) runs in float32, which halves its
 # memory traffic; the pose algebra stays in float64. benchmarks/gradcheck.py holds either way.
@@ -52,73 +63,6 @@ class Reprojection:
     depth: torch.Tensor
     valid: torch.Tensor
     layer: torch.Tensor
-
-
-def _gather(maps: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
-    """maps (B, C, N), index (B, M) -> (B, C, M)."""
-    return torch.gather(maps, 2, index[:, None, :].expand(-1, maps.shape[1], -1))
-
-
-def _hat(offset: torch.Tensor) -> torch.Tensor:
-    """Bilinear weight of a tap ``offset`` pixels away along one axis: max(0, 1 - |offset|)."""
-    return (1.0 - offset.abs()).clamp_min(0.0)
-
-
-def _sample_layer(anchor: AnchorLayers, layer: int, q: torch.Tensor, expected: torch.Tensor, plane_tolerance: float):
-    """Depth-aware samples of one layer at hi-res pixel coordinates q (B, M, 2).
-
-    Values come from one bilinear lookup (exact when q falls on anchor pixel centres, as with
-    A = P); gradients only from the mean of four lookups half a hi-res pixel away diagonally,
-    because a single lookup's derivative at a pixel centre is a one-sided difference and theirs
-    is central. All five lookups read the same 3 x 3 taps, so each tap is fetched and tested
-    against the expected surface once. A tap counts only if the expected point X_A lies on the
-    tap's own surface (within ``plane_tolerance`` of its triangle's plane, relative to depth).
-
-    Returns colour (B, 3, M) and point (B, 3, M), normalised, and the valid tap weight (B, M) of
-    the value lookup (0 where no tap is on the expected surface).
-    """
-    _, _, _, height, width = anchor.rgb.shape
-    # one gather per tap fetches colour, point, normal and mask together
-    maps = (
-        torch.cat(
-            [anchor.rgb[:, layer], anchor.points[:, layer], anchor.normals[:, layer], anchor.mask[:, layer]], dim=1
-        )
-        .to(_DTYPE)
-        .flatten(2)
-    )
-    x, y = q[..., 0] - 0.5, q[..., 1] - 0.5  # continuous pixel index (centres at +0.5)
-    x0, y0 = torch.floor(x.detach() - 0.5), torch.floor(y.detach() - 0.5)  # the taps: x0 + {0, 1, 2}
-    tolerance = plane_tolerance * expected[:, 2].abs()
-    # the four diagonal lookups' weights on tap column i add up to hat(x - 0.5 - x_i) + hat(x + 0.5 - x_i)
-    value_x = [_hat(x.detach() - (x0 + i)) for i in range(3)]
-    value_y = [_hat(y.detach() - (y0 + j)) for j in range(3)]
-    smooth_x = [_hat(x - 0.5 - (x0 + i)) + _hat(x + 0.5 - (x0 + i)) for i in range(3)]
-    smooth_y = [_hat(y - 0.5 - (y0 + j)) + _hat(y + 0.5 - (y0 + j)) for j in range(3)]
-    colour = point = total = smooth_colour = smooth_point = smooth_total = 0.0
-    for j in range(3):
-        for i in range(3):
-            xi, yi = x0 + i, y0 + j
-            inside = (xi >= 0) & (xi < width) & (yi >= 0) & (yi < height)
-            index = (yi.clamp(0, height - 1) * width + xi.clamp(0, width - 1)).long()
-            tap = _gather(maps, index)
-            tap_rgb, tap_points, tap_normals = tap[:, 0:3], tap[:, 3:6], tap[:, 6:9]
-            off_plane = ((expected - tap_points) * tap_normals).sum(1).abs()
-            same_surface = inside & (tap[:, 9] > 0) & (off_plane <= tolerance)
-            weight = value_x[i] * value_y[j] * same_surface
-            smooth = smooth_x[i] * smooth_y[j] * same_surface
-            with torch.no_grad():
-                colour = colour + weight[:, None] * tap_rgb
-                point = point + weight[:, None] * tap_points
-                total = total + weight
-            smooth_colour = smooth_colour + smooth[:, None] * tap_rgb
-            smooth_point = smooth_point + smooth[:, None] * tap_points
-            smooth_total = smooth_total + smooth
-    smooth_total = smooth_total.clamp_min(1e-12)[:, None]
-    smooth_colour, smooth_point = smooth_colour / smooth_total, smooth_point / smooth_total
-    value_weight = total.clamp_min(1e-12)[:, None]
-    colour = straight_through(smooth_colour, onto=colour / value_weight)
-    point = straight_through(smooth_point, onto=point / value_weight)
-    return colour, point, total
 
 
 # hi-res samples whose closed-form taps are computed at once, at most. On the CPU, per view: bands
@@ -320,53 +264,205 @@ def reproject(
 ) -> Reprojection:
     """Warp the anchor into current views.
 
+    At the anchor's own pose the warp is exact, sub-pixel by sub-pixel (:func:`_anchor_layer_pixels`);
+    elsewhere it reads one sample per pixel of the box-filtered anchor (:func:`warp_boxed`).
+
     Args:
         anchor: anchor layers.
         depth: (B, 1, H, W) exact z-depth of the current views (detached; 0 = invalid).
-        normals: (B, 3, H, W) current-camera-frame geometric normals of the surfaces seen; the
-            sub-pixel samples of a pixel lie on that triangle's plane.
+        normals: (B, 3, H, W) current-camera-frame geometric normals of the surfaces seen (the
+            sub-pixel samples at the anchor's pose, and the points a move slides along, lie on
+            that triangle's plane).
         A_T_P: (B, 4, 4) current-to-anchor camera transform, differentiable in the pose.
             The work runs on ``depth``'s device, where the anchor's maps must be.
         K: (3, 3) or (B, 3, 3) intrinsics of the current views.
-        depth_tolerance: relative disagreement between warped and exact depth above which a
+        depth_tolerance: relative disagreement between warped and exact points above which a
             pixel is invalid.
-        plane_tolerance: relative distance from a tap's surface plane above which the tap is
-            taken to belong to another surface.
+        plane_tolerance: at the anchor's pose, relative distance from a tap's surface plane above
+            which the tap is taken to belong to another surface.
         at_anchor: True when the caller rendered the anchor at these very poses and intrinsics (the
             comparison, which reads the poses back from the device, is then skipped); None: compare.
     """
     sizes = check_shape(depth, "B 1 H W", "depth")
-    check_shape(normals, "B 3 H W", "normals", sizes)
     check_shape(A_T_P, "B 4 4", "A_T_P", sizes)
     batch, _, height, width = depth.shape
+    K = batched_intrinsics(K, batch)
+    check_shape(normals, "B 3 H W", "normals", sizes)
+    if not _at_anchor(anchor, A_T_P, K, height, width, at_anchor):
+        return warp_boxed(anchor.boxed, depth, normals, A_T_P, K, depth_tolerance)
     device = depth.device
     depth = depth.detach().to(_DTYPE)
     valid_pixel = (depth[:, 0] > 0).reshape(batch, height * width)
     # Pixels without a surface get a stand-in depth so that no NaN enters the graph; they stay invalid.
     depth = torch.where(depth > 0, depth, torch.ones_like(depth))
-    K = batched_intrinsics(K, batch)
     sub_points_P = _sub_pixel_points(depth, normals, K.to(device, _DTYPE, non_blocking=True), anchor.supersample)
     P_T_A = torch.linalg.inv_ex(A_T_P.double())[0].to(device, _DTYPE)  # inv_ex: no wait for its check
-    if _at_anchor(anchor, A_T_P, K, height, width, at_anchor):
-        expected = sub_points_P.reshape(batch, -1, 3).transpose(1, 2)  # A = P, to within _SAME_POSE
-        # pixel centres, shaped as one sub-sample per pixel
-        centres = depth_to_3d_v2(
-            depth[:, 0], _shift_half_pixel(K.to(device, _DTYPE, non_blocking=True)), normalize_points=False
-        )
-        _, q = _project_to_anchor(anchor, centres[:, :, None, :, None, :], A_T_P)
-        shift = straight_through(q).transpose(1, 2).reshape(batch, 2, height, width)
+    expected = sub_points_P.reshape(batch, -1, 3).transpose(1, 2)  # A = P, to within _SAME_POSE
+    # pixel centres, shaped as one sub-sample per pixel
+    centres = depth_to_3d_v2(
+        depth[:, 0], _shift_half_pixel(K.to(device, _DTYPE, non_blocking=True)), normalize_points=False
+    )
+    _, q = _project_to_anchor(anchor, centres[:, :, None, :, None, :], A_T_P)
+    shift = straight_through(q).transpose(1, 2).reshape(batch, 2, height, width)
 
-        def layer_pixels(layer: int) -> tuple[torch.Tensor, ...]:
-            return _anchor_layer_pixels(anchor, layer, expected, shift, P_T_A, plane_tolerance)
-    else:
-        expected, q = _project_to_anchor(anchor, sub_points_P, A_T_P)
-
-        def layer_pixels(layer: int) -> tuple[torch.Tensor, ...]:
-            return _sampled_layer_pixels(anchor, layer, q, expected, P_T_A, plane_tolerance, (height, width))
+    def layer_pixels(layer: int) -> tuple[torch.Tensor, ...]:
+        return _anchor_layer_pixels(anchor, layer, expected, shift, P_T_A, plane_tolerance)
 
     return _composite_layers(
         layer_pixels, anchor.num_layers, depth.reshape(batch, -1), valid_pixel, (height, width), depth_tolerance
     )
+
+
+# The smooth lookups of warp_boxed: half a fine pixel away diagonally. A bilinear lookup's derivative
+# at a pixel centre is a one-sided difference; the mean of these four is central.
+_DIAGONALS = ((-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5))
+# a lookup whose taps all hit surfaces reads a hit fraction of 1 (bilinear weights sum to 1 up to rounding)
+_FULL = 1.0 - 1e-4
+
+
+def warp_boxed(
+    boxed: BoxedLayers,
+    depth: torch.Tensor,
+    normals: torch.Tensor,
+    A_T_P: torch.Tensor,
+    K: torch.Tensor,
+    tolerance: float = 0.01,
+) -> Reprojection:
+    """Warp box-filtered anchor layers into current views: one bilinear lookup per pixel.
+
+    Each current pixel's point X_P (its exact depth along the pixel-centre ray) goes to the anchor,
+    X_A = A_T_P X_P, and is looked up at its projection q with ``grid_sample``. As the pose moves,
+    X_A moves where the pixel's ray meets the plane of the surface it hit (fixed in the anchor's
+    frame): away from the anchor's own pose, the point sliding along the surface moves q too. A lookup holds if
+    all its taps hit a surface and the point it reads lies within ``tolerance`` (relative to depth)
+    of X_A: the same surface, seen from both poses (a depth test per pixel; the diagonal lookups
+    below read a point on X_A's plane). The first layer that
+    holds gives the pixel's colour and depth; the next layer is read only at the pixels where the
+    layers before it failed. Values come from the lookup at q; gradients, where it is differentiable
+    in the pose, from the mean of four lookups half a pixel away diagonally (:data:`_DIAGONALS`),
+    where all four hold (elsewhere the pixel's value carries no gradient: the silhouette term's).
+
+    Args:
+        boxed: the anchor's box-filtered layers (:attr:`AnchorLayers.boxed`), on ``depth``'s device.
+        depth: (B, 1, H, W) exact z-depth of the current views (detached; 0 = no surface).
+        normals: (B, 3, H, W) current-camera-frame normals of the surfaces the pixels hit.
+        A_T_P: (B, 4, 4) current-to-anchor camera transform, differentiable in the pose.
+        K: (3, 3) or (B, 3, 3) intrinsics of the current views.
+        tolerance: the depth test's relative tolerance.
+    """
+    sizes = check_shape(depth, "B 1 H W", "depth")
+    check_shape(A_T_P, "B 4 4", "A_T_P", check_shape(normals, "B 3 H W", "normals", sizes))
+    batch, _, height, width = depth.shape
+    device = depth.device
+    K = batched_intrinsics(K, batch).to(device, _DTYPE, non_blocking=True)
+    depth = depth.detach().to(_DTYPE)
+    hit = (depth[:, 0] > 0).reshape(batch, -1)
+    # pixels without a surface get a stand-in depth so that no NaN enters the graph; they stay invalid
+    depth = torch.where(depth > 0, depth, torch.ones_like(depth))
+    points_P = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False).reshape(batch, -1, 3)
+    points_A = _on_surface(points_P, normals.detach().to(device, _DTYPE).flatten(2).transpose(1, 2), A_T_P)
+    q = project_points(points_A, boxed.K[:, None].to(device, _DTYPE, non_blocking=True))
+    q = torch.where(torch.isfinite(q) & (points_A[..., 2:] > 0), q, torch.full_like(q, _OFF_IMAGE))
+    P_T_A = torch.linalg.inv_ex(A_T_P.double())[0].to(device, _DTYPE)  # inv_ex: no wait for its check
+    smooth = torch.is_grad_enabled() and A_T_P.requires_grad
+    pixels = hit.shape[1]
+    colour = torch.zeros(batch, 3, pixels, dtype=_DTYPE, device=device)
+    warped = torch.zeros(batch, pixels, dtype=_DTYPE, device=device)
+    layer_used = torch.full((batch, pixels), -1, dtype=torch.int64, device=device)
+    todo = hit
+    for layer in range(boxed.maps.shape[1]):
+        if layer == 0:  # every pixel: no compaction
+            index, live = None, hit
+            q_todo, expected = q, points_A
+        else:
+            count = todo.sum(1)
+            most = int(count.max())
+            if most == 0:
+                break
+            # the pixels still to do first, in order (a permutation's head: no index twice)
+            index = torch.argsort((~todo).to(torch.uint8), dim=1, stable=True)[:, :most]
+            live = torch.arange(most, device=device)[None] < count[:, None]
+            q_todo = q.gather(1, index[..., None].expand(-1, -1, 2))
+            expected = points_A.gather(1, index[..., None].expand(-1, -1, 3))
+        c, z, ok = _lookup(boxed.maps[:, layer], q_todo, expected, P_T_A, tolerance, smooth)
+        ok = ok & live
+        if index is None:
+            colour, warped = torch.where(ok[:, None], c, colour), torch.where(ok, z, warped)
+            layer_used = torch.where(ok, layer, layer_used)
+            todo = todo & ~ok
+            continue
+        spread = index[:, None].expand(-1, 3, -1)
+        colour = colour.scatter(2, spread, torch.where(ok[:, None], c, colour.gather(2, spread)))
+        warped = warped.scatter(1, index, torch.where(ok, z, warped.gather(1, index)))
+        layer_used = layer_used.scatter(1, index, torch.where(ok, layer, layer_used.gather(1, index)))
+        todo = todo.scatter(1, index, todo.gather(1, index) & ~ok)
+    valid = layer_used >= 0
+    shape = (batch, 1, height, width)
+    # the depth's value is the exact one the test passed against; the warp gives its gradient
+    warped = torch.where(valid, depth.reshape(batch, -1) + (warped - warped.detach()), 0.0)
+    return Reprojection(
+        rgb=colour.reshape(batch, 3, height, width).float(),
+        depth=warped.reshape(shape).float(),
+        valid=valid.reshape(shape),
+        layer=layer_used.reshape(shape),
+    )
+
+
+def _on_surface(points_P: torch.Tensor, normals_P: torch.Tensor, A_T_P: torch.Tensor) -> torch.Tensor:
+    """Anchor-frame points (B, N, 3) of current-frame points (B, N, 3) (detached), equal in value
+    to A_T_P X_P and differentiable as the point where each pixel's ray meets its surface's plane
+    (normals (B, N, 3), current frame), which stays put in the anchor's frame as the pose moves."""
+    A_T_P = A_T_P.to(points_P.device, _DTYPE)
+    rotation, origin = A_T_P[:, None, :3, :3], A_T_P[:, None, :3, 3].expand_as(points_P)
+    ray = (rotation @ points_P[..., None])[..., 0]  # the pixel's ray in the anchor frame, to the hit
+    normal = (rotation.detach() @ normals_P[..., None])[..., 0]
+    hit = (ray + origin).detach()
+    plane = Hyperplane(Vector3(normal), Scalar(-dot(normal, hit)))
+    # kornia's intersection needs |n . direction| above an absolute eps: the unit ray's
+    length = ray.detach().norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    grazing = dot(normal, ray.detach() / length).abs() < _GRAZING_COSINE
+    _, point = ParametrizedLine(origin, ray / length).intersect(plane, eps=_GRAZING_COSINE)
+    # a ray grazing its plane keeps the point it hit, moving with the camera
+    return torch.where(grazing[..., None], ray + origin, point)
+
+
+def _lookup(
+    maps: torch.Tensor, q: torch.Tensor, expected: torch.Tensor, P_T_A: torch.Tensor, tolerance: float, smooth: bool
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """One boxed layer (B, 10, h, w) read at boxed-pixel coordinates q (B, M, 2), whose points should
+    be ``expected`` (B, M, 3, anchor frame): colour (B, 3, M), current-frame z-depth (B, M) and
+    whether the lookup holds (B, M). With ``smooth``, the gradients of the diagonal lookups."""
+    height, width = maps.shape[-2:]
+    scale = q.new_tensor([2.0 / width, 2.0 / height])
+
+    def read_at(grid: torch.Tensor) -> torch.Tensor:  # (B, lookups, M, 2) -> (B, 10, lookups, M)
+        # grid_sample's coordinates with align_corners=False: pixel i's centre, i + 0.5, at (2i + 1) / n - 1
+        grid = (grid * scale - 1.0).to(maps.dtype)
+        return F.grid_sample(maps, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+
+    with torch.no_grad():
+        read = read_at(q.detach()[:, None])
+    if smooth:
+        read = torch.cat([read, read_at(q[:, None] + q.new_tensor(_DIAGONALS)[:, None])], dim=2)
+    tolerance = tolerance * expected[..., 2].detach()
+    expected = expected.detach().transpose(1, 2)[:, :, None]
+    off = read[:, 3:6] - expected
+    # the centre lookup must read the point expected; the diagonal ones, half a pixel away, a point
+    # on its plane (written out channel by channel: a reduction over a strided channel axis is slow)
+    near = off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1] + off[:, 2] * off[:, 2] <= (tolerance * tolerance)[:, None]
+    on_plane = (off[:, 0] * read[:, 7] + off[:, 1] * read[:, 8] + off[:, 2] * read[:, 9]).abs() <= tolerance[:, None]
+    lookups = torch.arange(read.shape[2], device=read.device)[None, :, None]
+    holds = (read[:, 6] >= _FULL) & torch.where(lookups == 0, near, on_plane)  # (B, lookups, M)
+    colour, point = read[:, 0:3, 0], read[:, 3:6, 0]
+    if smooth:
+        both = holds[:, 1:].all(1)[:, None]
+        mean = read[:, :6, 1:].mean(2)
+        colour = torch.where(both, straight_through(mean[:, 0:3], onto=colour), colour)
+        point = torch.where(both, straight_through(mean[:, 3:6], onto=point), point)
+    z = transform_points(P_T_A[:, None], point.transpose(1, 2))[..., 2]
+    if smooth:  # a point read without the smooth lookups moves with nothing: its depth is fixed too
+        z = torch.where(both[:, 0], z, z.detach())
+    return colour, z, holds[:, 0]
 
 
 def _at_anchor(
@@ -399,33 +495,6 @@ def _block_min(image: torch.Tensor, s: int) -> torch.Tensor:
     for k in range(1, s * s):
         least = torch.minimum(least, image[..., k // s :: s, k % s :: s])
     return least
-
-
-def _sampled_layer_pixels(
-    anchor: AnchorLayers,
-    layer: int,
-    q: torch.Tensor,
-    expected: torch.Tensor,
-    P_T_A: torch.Tensor,
-    plane_tolerance: float,
-    size: tuple[int, int],
-) -> tuple[torch.Tensor, ...]:
-    """One layer's warp per pixel from its sub-pixel samples read by :func:`_sample_layer`:
-    colour (B, 3, H * W), z-depth (B, H * W) and whether every sub-sample found its surface (B, H * W)."""
-    batch = q.shape[0]
-    height, width = size
-    s = anchor.supersample
-
-    def image(samples: torch.Tensor) -> torch.Tensor:  # (B, C, M) -> (B, C, sH, sW): the samples' order
-        return samples.reshape(batch, samples.shape[1], s * height, s * width)
-
-    c, p, total = _sample_layer(anchor, layer, q, expected, plane_tolerance)
-    ok = _block_min(image(total[:, None]), s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): the least weight
-    sub_z = image(transform_points(P_T_A[:, None], p.transpose(1, 2))[..., 2][:, None])
-    # 1/z is affine across a plane's image, so the harmonic mean is the pixel-centre depth
-    inverse = 1.0 / torch.where(ok.repeat_interleave(s, 2).repeat_interleave(s, 3), sub_z, 1.0).clamp_min(1e-9)
-    z = 1.0 / _block_mean(inverse, s)
-    return _block_mean(image(c), s).flatten(2), z.flatten(1), ok.flatten(1)
 
 
 def _composite_layers(

@@ -4,6 +4,11 @@ One call: pose parameters (omega, delta) -> world_T_cam -> exact ray cast (no gr
 kornia reprojection of the anchor layers (gradient) -> straight-through combination, plus the
 silhouette term at occlusion edges. The anchor is refreshed by policy; every call reports how
 well the warp agrees with the exact render.
+
+With ``values="exact"`` every call renders the current view exactly (shaded). With
+``values="warp"`` only a refresh does: between refreshes a call casts the view's pixel-centre rays
+without shading (the warp's depth test needs the exact depth), takes its colours and depths from
+the warp, and shades exactly only the pixels no anchor layer holds (holes, sky).
 """
 
 from __future__ import annotations
@@ -16,9 +21,9 @@ from kadv.checks import check_shape, check_values
 from kadv.device import resolve_device
 from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import perturb_world_T_cam
-from kadv.render.dibr import Reprojection, reproject
+from kadv.render.dibr import Reprojection, reproject, warp_boxed
 from kadv.render.layers import RING, AnchorLayers, camera_face_normals, render_anchor, ring_view
-from kadv.render.raycast import ExactRenderer, RenderOutput
+from kadv.render.raycast import ExactRenderer, RenderOutput, pixel_angle
 from kadv.render.silhouette import find_edge_pairs, silhouette_term
 from kadv.render.straight_through import straight_through
 
@@ -34,7 +39,8 @@ class DiffRenderConfig:
 
     Attributes:
         values: "exact" (values of the exact render, gradients of the warp) or "warp" (values
-            of the warp; the exact render only validates and refreshes).
+            of the warp between refreshes; the exact render only validates and refreshes, and a
+            refresh's values are exact).
         refresh: "always", "on_drift" (when coverage or errors pass the tolerances) or "every_k".
         every_k: steps between refreshes for "every_k".
         min_coverage: on_drift refreshes when the valid warped fraction of hit pixels drops below.
@@ -52,10 +58,12 @@ class DiffRenderConfig:
             marks the candidates (nothing waits, and every shape is fixed; the arithmetic grows
             with the pixels), "auto" every_pair where the step is captured, else compact.
         cuda_graphs: on CUDA, capture the gradient step in a CUDA graph and replay it
-            (:class:`~kadv.attack.capture.StepGraph`); off for debugging.
-        depth_tolerance: relative warped-vs-exact depth disagreement that invalidates a pixel.
-        plane_tolerance: relative distance from a tap's surface plane above which the warp takes
-            the tap to belong to another surface.
+            (:class:`~kadv.attack.capture.StepGraph`) where the anchor is rendered on every step
+            (``refresh="always"``); off for debugging.
+        depth_tolerance: relative disagreement between a warped point and the exact one that
+            invalidates a pixel.
+        plane_tolerance: at the anchor's own pose, relative distance from a tap's surface plane
+            above which the warp takes the tap to belong to another surface.
     """
 
     values: str = "exact"
@@ -100,12 +108,16 @@ class DiffRenderOutput:
     Attributes:
         rgb: (B, 3, H, W); depth: (B, 1, H, W) z-depth (0 invalid); mask: (B, 1, H, W) bool; on
             the renderer's device.
-        exact: the exact render at the current poses (no gradient), on the exact renderer's device.
+        exact: the exact render at the current poses (no gradient), on the exact renderer's device;
+            between refreshes under ``values="warp"``, a cast without shading (its ``rgb`` None).
         world_T_cam: (B, 4, 4) current poses (differentiable), on the pose parameters' device.
         coverage: (B,) fraction of hit pixels with a valid warp; it and the errors on the renderer's device.
-        rgb_error: (B,) mean |rgb_warp - rgb_exact| over valid pixels.
+        rgb_error: (B,) mean |rgb_warp - rgb_exact| over valid pixels (NaN where the values
+            came from the warp: no exact colour was rendered to compare).
         depth_error: (B,) mean |depth_warp - depth_exact| / depth_exact over valid pixels.
         refreshed: whether the anchor was re-rendered at the current poses in this call.
+        warped: whether the values came from the warp, between refreshes (a cheap fidelity that
+            no exact render has confirmed).
     """
 
     rgb: torch.Tensor
@@ -117,13 +129,15 @@ class DiffRenderOutput:
     rgb_error: torch.Tensor
     depth_error: torch.Tensor
     refreshed: bool
+    warped: bool = False
 
 
 @dataclass
 class _ExactFrame:
-    """One call's exact render: ``rendered`` (the frame and its ring, on the CPU), ``exact`` (the
-    frame), ``K`` of ``rendered``, the index of the frame ``inside`` it, and on the renderer's device
-    the ring's rgb (B, 3, ...) and depth, the frame's rgb, depth, mask and camera-frame normals."""
+    """One call's exact frame: ``rendered`` (the frame and its ring, on the caster's device),
+    ``exact`` (the frame), ``K`` of ``rendered``, the index of the frame ``inside`` it, and on the
+    renderer's device the ring's rgb (B, 3, ...) and depth, the frame's rgb, depth, mask and
+    camera-frame normals (None where the values come from the warp)."""
 
     rendered: RenderOutput
     exact: RenderOutput
@@ -134,7 +148,7 @@ class _ExactFrame:
     rgb: torch.Tensor
     depth: torch.Tensor
     mask: torch.Tensor
-    normals: torch.Tensor
+    normals: torch.Tensor | None
 
 
 class DifferentiableRenderer:
@@ -156,13 +170,14 @@ class DifferentiableRenderer:
         self.anchor: AnchorLayers | None = None
         self._anchor_key: _ViewKey | None = None
         self._steps_since_refresh = 0
+        self._exact_next = False
 
     @property
     def compact_edges(self) -> bool:
         """Whether the edge search compacts its candidates: ``auto`` does but where the gradient
         step is captured (CUDA with ``cuda_graphs``: a captured step waits for no count)."""
         if self.config.edge_search == "auto":
-            return not (self.config.cuda_graphs and self.device.type == "cuda")
+            return not (self.config.cuda_graphs and self.config.refresh == "always" and self.device.type == "cuda")
         return self.config.edge_search == "compact"
 
     @property
@@ -173,6 +188,11 @@ class DifferentiableRenderer:
         """Forget the anchor (the next call renders a new one)."""
         self.anchor = None
         self._anchor_key = None
+
+    def validate_next(self) -> None:
+        """Render the next call's views exactly (values from the exact render, as at a refresh),
+        keeping the anchor: how a search under ``values="warp"`` confirms the views it ends on."""
+        self._exact_next = True
 
     def _refresh(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> AnchorLayers:
         """Render a new anchor at ``world_T_cam``; returns it on the CPU and keeps it on the device."""
@@ -208,11 +228,20 @@ class DifferentiableRenderer:
         K = batched_intrinsics(K, base.shape[0])
         current = world_T_cam.detach()
         refreshed = self._due_for_refresh(K, height, width)
-        anchor = self._refresh(current, K, height, width) if refreshed else None
-        frame = self._exact_frame(current, K, height, width, anchor)
-        warp, agreement, refreshed = self._checked_warp(frame, world_T_cam, K, height, width, refreshed)
+        warped, exact_next, self._exact_next = False, self._exact_next, False
+        if self.config.values == "warp" and not (refreshed or exact_next):
+            frame, agreement = self._warped_frame(current, world_T_cam, K, height, width)
+            # an anchor that drifted too far is rendered again, and the view with it
+            refreshed = self.config.refresh == "on_drift" and agreement.drifted(self.config)
+            warped = not refreshed
+        if not warped:
+            anchor = self._refresh(current, K, height, width) if refreshed else None
+            frame = self._exact_frame(current, K, height, width, anchor)
+            warp, agreement, refreshed = self._checked_warp(frame, world_T_cam, K, height, width, refreshed)
+            rgb, depth = self._values(frame, warp)
+        else:
+            rgb, depth = frame.rgb, frame.depth
         self._steps_since_refresh += 1
-        rgb, depth = self._values(frame, warp)
         if self.config.silhouette:
             pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K, self.compact_edges)
             term = silhouette_term(
@@ -229,6 +258,7 @@ class DifferentiableRenderer:
             rgb_error=agreement.rgb_error,
             depth_error=agreement.depth_error,
             refreshed=refreshed,
+            warped=warped,
         )
 
     def _due_for_refresh(self, K: torch.Tensor, height: int, width: int) -> bool:
@@ -265,6 +295,61 @@ class DifferentiableRenderer:
             normals.to(self.device),
         )
 
+    def _warped_frame(
+        self, current: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int
+    ) -> tuple[_ExactFrame, WarpAgreement]:
+        """The frame's values from the warp: the view (with its ring) cast without shading for
+        the depth test, the anchor warped onto it, and the pixels no layer holds shaded exactly.
+        Its agreement: the warp's coverage and depth error against the cast (no exact colour)."""
+        border = RING if self.config.silhouette else 0
+        K_render, render_height, render_width = ring_view(K, height, width) if border else (K, height, width)
+        cast = self.renderer.render(current, K_render, render_height, render_width, colour=False)
+        cast_depth = cast.depth.to(self.device)
+        A_T_P = torch.linalg.inv_ex(self.anchor.world_T_cam)[0] @ world_T_cam  # inv_ex: no wait for its check
+        normals = camera_face_normals(self.renderer.surfaces, cast.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
+        warp = warp_boxed(
+            self.anchor.boxed, cast_depth, normals.to(self.device), A_T_P, K_render, self.config.depth_tolerance
+        )
+        holes = self._shade_holes(current, K_render, render_height, render_width, ~warp.valid)
+        rgb = torch.where(warp.valid, warp.rgb, holes)
+        depth = torch.where(warp.valid, warp.depth, cast_depth)
+        exact = cast.cropped(border) if border else cast
+        inside = (..., slice(border, render_height - border), slice(border, render_width - border))
+        frame = _ExactFrame(
+            cast, exact, K_render, inside, rgb.detach(), depth.detach(), rgb[inside], depth[inside],
+            exact.mask.to(self.device), None,
+        )  # fmt: skip
+        inner = Reprojection(warp.rgb[inside], warp.depth[inside], warp.valid[inside], warp.layer[inside])
+        agreement = WarpAgreement.of(inner, torch.full_like(frame.rgb, torch.nan), cast_depth[inside], frame.mask)
+        return frame, agreement
+
+    def _shade_holes(
+        self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, holes: torch.Tensor
+    ) -> torch.Tensor:
+        """(B, 3, H, W) exact colours of the pixels ``holes`` (B, 1, H, W) (0 elsewhere): each
+        one's s x s rays cast and shaded, without the mirrored light of coats and metals (which
+        the anchor's colours, and so the warp's, leave out too)."""
+        s = self.config.supersample
+        rgb = torch.zeros(holes.shape[0], 3, height, width, dtype=torch.float32, device=self.device)
+        view, row, column = torch.nonzero(holes[:, 0].to(self.renderer.device), as_tuple=True)
+        if not len(view):
+            return rgb
+        # the chosen pixels' sub-pixel centres, in pixels, each pixel's s x s together
+        offsets = (torch.arange(s, dtype=torch.float64, device=view.device) + 0.5) / s
+        u = (column[:, None, None] + offsets[None, None, :]).expand(-1, s, s)
+        v = (row[:, None, None] + offsets[None, :, None]).expand(-1, s, s)
+        pixels = torch.stack([u, v, torch.ones_like(u)], dim=-1).reshape(len(view), s * s, 3)
+        K_inv = torch.linalg.inv(batched_intrinsics(K, holes.shape[0])).to(view.device)[view]
+        pose = world_T_cam.detach().double().to(view.device)[view]
+        directions = pixels @ K_inv.transpose(1, 2) @ pose[:, :3, :3].transpose(1, 2)  # camera z = 1
+        origins = pose[:, None, :3, 3].expand_as(directions)
+        _, shaded = self.renderer.cast_and_shade(
+            origins.reshape(-1, 3), directions.reshape(-1, 3), pixel_angle(K) / s, True, False
+        )
+        colours = shaded["rgb"].reshape(-1, s * s, 3).mean(1).to(self.device, torch.float32)
+        index = tuple(i.to(self.device) for i in (view, row, column))
+        return rgb.permute(0, 2, 3, 1).index_put(index, colours).permute(0, 3, 1, 2)
+
     def _checked_warp(
         self, frame: _ExactFrame, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, refreshed: bool
     ) -> tuple[Reprojection, WarpAgreement, bool]:
@@ -281,13 +366,11 @@ class DifferentiableRenderer:
         return warp, agreement, refreshed
 
     def _values(self, frame: _ExactFrame, warp: Reprojection) -> tuple[torch.Tensor, torch.Tensor]:
-        """rgb and depth: the exact values with the warp's gradient, or the warp's values where valid."""
+        """rgb and depth of an exact frame: the exact values, with the warp's gradient where it holds."""
         valid = warp.valid
-        if self.config.values == "exact":
-            rgb = frame.rgb + torch.where(valid, straight_through(warp.rgb), torch.zeros_like(warp.rgb))
-            depth = frame.depth + torch.where(valid, straight_through(warp.depth), torch.zeros_like(warp.depth))
-            return rgb, depth
-        return torch.where(valid, warp.rgb, frame.rgb), torch.where(valid, warp.depth, frame.depth)
+        rgb = frame.rgb + torch.where(valid, straight_through(warp.rgb), torch.zeros_like(warp.rgb))
+        depth = frame.depth + torch.where(valid, straight_through(warp.depth), torch.zeros_like(warp.depth))
+        return rgb, depth
 
     def _exact_render(
         self,

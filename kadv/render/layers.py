@@ -1,8 +1,9 @@
 """Anchor RGB-D layers: exact renders at a pose, kept for differentiable reprojection.
 
-Layer 0 is the visible surface; layer k the k-th front-facing surface behind it along each ray
-(depth peeling with Open3D's ``list_intersections``, sorted per ray; an occluder's own back faces
-are skipped), so pixels hidden at the anchor can still be found when the camera moves. An
+Layer 0 is the visible surface, at s x s rays per pixel; layer k the k-th front-facing surface
+behind it along each pixel's centre ray (depth peeling by casting on from beyond each hit; an
+occluder's own back faces are stepped through), so pixels hidden at the anchor can still be found
+when the camera moves. An
 optional guard band widens the field of view (same centre, same focal length) so that samples near
 the current view's border have real content.
 """
@@ -10,15 +11,25 @@ the current view's border have real content.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import torch
+from torch.nn import functional as F
 
 from kadv.geometry.camera import batched_intrinsics, camera_rays, world_rays
 from kadv.geometry.pose import check_world_T_cam
 from kadv.render.raycast import ExactRenderer, RayHits, pixel_angle
 from kadv.render.surface import Surfaces
 
-__all__ = ["RING", "AnchorLayers", "camera_face_normals", "guard_band_intrinsics", "render_anchor", "ring_view"]
+__all__ = [
+    "RING",
+    "AnchorLayers",
+    "BoxedLayers",
+    "camera_face_normals",
+    "guard_band_intrinsics",
+    "render_anchor",
+    "ring_view",
+]
 
 
 @dataclass
@@ -55,11 +66,48 @@ class AnchorLayers:
     def num_layers(self) -> int:
         return self.rgb.shape[1]
 
+    @cached_property
+    def boxed(self) -> BoxedLayers:
+        """The layers box-filtered to the current views' pixels (computed once per anchor)."""
+        return BoxedLayers.of(self)
+
     def to(self, device: torch.device | str) -> AnchorLayers:
         """The same layers with every map on ``device``; the pose and intrinsics stay where they are."""
         maps = {name: getattr(self, name).to(device) for name in ("rgb", "points", "normals", "triangle_ids", "mask")}
         reflecting = None if self.reflecting is None else self.reflecting.to(device)
         return AnchorLayers(self.world_T_cam, self.K, self.supersample, self.guard_band, **maps, reflecting=reflecting)
+
+
+@dataclass
+class BoxedLayers:
+    """An anchor's layers box-filtered to the current views' pixel size: each pixel of the anchor's
+    fine image holds the mean over an s x s block of them around its corner, as an exact render's
+    pixel does over its own rays. At the anchor's pose a view's pixel centre falls on one of these;
+    elsewhere the filter can be read anywhere, half a fine pixel apart.
+
+    Attributes:
+        K: (B, 3, 3) intrinsics of the boxed images (the fine anchor's, shifted by the block's centre).
+        maps: (B, L, 10, Hs - s + 1, Ws - s + 1) float32: colour (3), anchor-frame point (3), 1 where
+            every sample of the block hit a surface (else 0), and anchor-frame face normal (3).
+    """
+
+    K: torch.Tensor
+    maps: torch.Tensor
+
+    @classmethod
+    def of(cls, anchor: AnchorLayers) -> BoxedLayers:
+        """Box-filter ``anchor``'s colour, points and normals (mean) and its mask (least) over s x s
+        blocks at every fine pixel (stride 1)."""
+        s = anchor.supersample
+        batch, layers, _, height, width = anchor.rgb.shape
+        mean = torch.cat([anchor.rgb, anchor.points, anchor.normals], dim=2).flatten(0, 1)
+        full = anchor.mask.flatten(0, 1).float()
+        if s > 1:
+            mean, full = F.avg_pool2d(mean, s, stride=1), -F.max_pool2d(-full, s, stride=1)
+        maps = torch.cat([mean[:, :6], full, mean[:, 6:]], dim=1)
+        K = anchor.K.clone()
+        K[..., :2, 2] -= (s - 1) / 2  # block (i, j) is centred on fine pixel (i, j)'s centre + (s - 1) / 2
+        return cls(K, maps.reshape(batch, layers, 10, height - s + 1, width - s + 1).contiguous())
 
 
 def guard_band_intrinsics(K: torch.Tensor, guard_band: int, supersample: int) -> torch.Tensor:
@@ -93,39 +141,38 @@ def camera_face_normals(surfaces: Surfaces, triangle_ids: torch.Tensor, world_T_
     return torch.where((triangle_ids >= 0)[..., None], normals, 0.0)
 
 
-def _peel(renderer: ExactRenderer, origins: torch.Tensor, directions: torch.Tensor, layers: int) -> list[RayHits]:
-    """Along each ray (N, 3): the visible surface (its first opaque hit), then the next ``layers - 1``
-    front-facing surfaces behind it, nearest first. A closed occluder's own back faces are left
-    out: what a moved camera finds behind an object is what the object hides, not its far side."""
-    n = len(origins)
-    ray_ids, t, ids, bary = renderer.intersections(origins, directions)
-    # Coplanar duplicates (z-fighting) would fill several layers with one surface.
-    t64 = t.double()
-    keep = torch.ones_like(ray_ids, dtype=torch.bool)
-    keep[1:] = ~((ray_ids[1:] == ray_ids[:-1]) & ((t64[1:] - t64[:-1]).abs() <= 1e-5 * t64[1:].clamp_min(1e-6)))
-    ray_ids, t, ids, bary = ray_ids[keep], t[keep], ids[keep], bary[keep]
-    first = torch.searchsorted(ray_ids, torch.arange(n, device=ray_ids.device))
-    order = torch.arange(len(ray_ids), device=ray_ids.device)
-    visible = order == first[ray_ids]
-    rays = torch.as_tensor(directions, device=renderer.surfaces.device).double()[ray_ids.to(renderer.surfaces.device)]
-    front = (renderer.surfaces.facing(ids.long().to(rays.device), rays) < 0).to(ray_ids.device)
-    # the visible hit is layer 0; the front-facing hits behind it are layers 1, 2, ... in order
-    behind = ~visible & front
-    counted = torch.cumsum(behind.long(), dim=0)
-    before = torch.cat([counted.new_zeros(1), counted])[first]  # each ray's: those of the rays before it
-    rank = torch.where(visible, 0, torch.where(behind, counted - before[ray_ids], -1))
-    out = []
-    for layer in range(layers):
-        selected = rank == layer
-        hits = RayHits(
-            torch.full((n,), torch.inf, device=t.device),
-            torch.full((n,), -1, dtype=torch.int64, device=t.device),
-            torch.zeros(n, 2, device=t.device),
-        )
-        hits.t[ray_ids[selected]] = t[selected]
-        hits.triangle_ids[ray_ids[selected]] = ids[selected]
-        hits.barycentrics[ray_ids[selected]] = bary[selected]
-        out.append(hits)
+# A layer's search casts again from just beyond the last hit: this far, relative to its distance
+# (and at least a micrometre), so that a coplanar duplicate (z-fighting) is stepped over too.
+_BEYOND = 1e-5
+# casts behind a layer, at most, to find the next front-facing surface: an occluder's back face,
+# then what it hides, with room for a few thin shells in between
+_PEEL_CASTS = 4
+
+
+def _peel(renderer: ExactRenderer, origins: torch.Tensor, directions: torch.Tensor, first: RayHits, layers: int):
+    """Along each ray (N, 3) with first hits ``first``: the next ``layers - 1`` front-facing
+    surfaces behind it, nearest first, each found by casting on from just beyond the hit before.
+    A closed occluder's own back faces are stepped through: what a moved camera finds behind an
+    object is what the object hides, not its far side."""
+    out, behind = [], first
+    for _ in range(1, layers):
+        found = RayHits(torch.full_like(first.t, torch.inf), torch.full_like(first.triangle_ids, -1),
+                        torch.zeros_like(first.barycentrics))  # fmt: skip
+        live, start = behind.hit, torch.where(behind.hit, behind.t, 0.0).double()
+        for _ in range(_PEEL_CASTS):
+            if not bool(live.any()):
+                break
+            start = start + torch.clamp(_BEYOND * start, min=1e-6)
+            hits = renderer.surfaces.cast(origins + start[:, None] * directions, directions, live)
+            t = start + torch.where(hits.hit, hits.t.double(), 0.0)
+            front = hits.hit & (renderer.surfaces.facing(hits.triangle_ids.clamp_min(0), directions) < 0)
+            take = live & front
+            found.t = torch.where(take, t.float(), found.t)
+            found.triangle_ids = torch.where(take, hits.triangle_ids, found.triangle_ids)
+            found.barycentrics = torch.where(take[:, None], hits.barycentrics, found.barycentrics)
+            live, start = live & hits.hit & ~front, t
+        out.append(found)
+        behind = found
     return out
 
 
@@ -157,27 +204,50 @@ def render_anchor(
     rays_cam = camera_rays(K_anchor, h, w, device=renderer.device)
     origins, directions = (rays.reshape(-1, 3) for rays in world_rays(pose, rays_cam))
     rays_cam = rays_cam.reshape(batch, -1, 3)
-    angle = pixel_angle(K_anchor)
-    if layers == 1:  # cast and shaded in parts of render.max_rays
-        layered = [renderer.cast_and_shade(origins, directions, angle, colour=True, geometry=False)]
-    else:
-        peeled = _peel(renderer, origins, directions, layers)
-        layered = [(hits, renderer.shader.shade(hits, origins, directions, angle, geometry=False)) for hits in peeled]
-    maps = {key: [] for key in ("rgb", "points", "normals", "ids", "mask")}
-    for hits, shaded in layered:
-        ids = hits.triangle_ids.reshape(batch, -1)
-        depth = torch.where(hits.hit, hits.t.double(), 0.0).reshape(batch, -1, 1)
-        maps["rgb"].append(shaded["rgb"].reshape(batch, -1, 3))
-        maps["points"].append((depth * rays_cam).float())  # 0 where invalid
-        maps["normals"].append(camera_face_normals(renderer.surfaces, ids, pose).float())
-        maps["ids"].append(ids[..., None])
-        maps["mask"].append(ids[..., None] >= 0)
+    # cast and shaded in parts of render.max_rays
+    first, shaded = renderer.cast_and_shade(origins, directions, pixel_angle(K_anchor), colour=True, geometry=False)
+    layered = [_layer_maps(renderer, first, shaded, rays_cam, pose)]
+    if layers > 1:
+        # the layers behind, one ray per pixel (its centre): they fill what a move uncovers, where
+        # a quarter of the rays serve as well as all of them
+        K_centres = guard_band_intrinsics(K, guard_band, 1)
+        centre_cam = camera_rays(K_centres, h // supersample, w // supersample, device=renderer.device)
+        o, d = (rays.reshape(-1, 3) for rays in world_rays(pose, centre_cam))
+        centre_angle = pixel_angle(K_centres)
+        for hits in _peel(renderer, o, d, renderer.cast(o, d), layers):
+            behind = renderer.shader.shade(hits, o, d, centre_angle, geometry=False)
+            maps = _layer_maps(renderer, hits, behind, centre_cam.reshape(batch, -1, 3), pose)
+            layered.append({key: _upsampled(value, h // supersample, supersample) for key, value in maps.items()})
 
     def stack(key: str) -> torch.Tensor:
-        tensor = torch.stack(maps[key], dim=1)  # (B, L, N, C)
+        tensor = torch.stack([maps[key] for maps in layered], dim=1)  # (B, L, N, C)
         return tensor.reshape(batch, len(layered), h, w, -1).permute(0, 1, 4, 2, 3).contiguous()
 
-    reflecting = layered[0][1].get("reflecting")
+    reflecting = shaded.get("reflecting")
     if reflecting is not None:
         reflecting = reflecting.reshape(batch, h, w, 6).permute(0, 3, 1, 2).contiguous()
-    return AnchorLayers(pose, K_anchor, supersample, guard_band, *(stack(key) for key in maps), reflecting)
+    keys = ("rgb", "points", "normals", "ids", "mask")
+    return AnchorLayers(pose, K_anchor, supersample, guard_band, *(stack(key) for key in keys), reflecting)
+
+
+def _layer_maps(
+    renderer: ExactRenderer, hits: RayHits, shaded: dict[str, torch.Tensor], rays_cam: torch.Tensor, pose: torch.Tensor
+) -> dict[str, torch.Tensor]:
+    """One layer's maps (B, N, C) from its hits and shading on camera-frame rays (B, N, 3)."""
+    batch = len(pose)
+    ids = hits.triangle_ids.reshape(batch, -1)
+    depth = torch.where(hits.hit, hits.t.double(), 0.0).reshape(batch, -1, 1)
+    return {
+        "rgb": shaded["rgb"].reshape(batch, -1, 3),
+        "points": (depth * rays_cam).float(),  # 0 where invalid
+        "normals": camera_face_normals(renderer.surfaces, ids, pose).float(),
+        "ids": ids[..., None],
+        "mask": ids[..., None] >= 0,
+    }
+
+
+def _upsampled(values: torch.Tensor, height: int, s: int) -> torch.Tensor:
+    """(B, height * width, C) per-pixel values repeated over each pixel's s x s block: (B, s^2 height width, C)."""
+    batch, _, channels = values.shape
+    image = values.reshape(batch, height, -1, channels)
+    return image.repeat_interleave(s, dim=1).repeat_interleave(s, dim=2).reshape(batch, -1, channels)

@@ -489,6 +489,33 @@ def test_cheap_gradient_lanes_take_a_step_only_once_the_exact_render_confirms_it
         assert float(terms.delta1[0]) == pytest.approx(record.delta1, abs=1e-6)
 
 
+def test_gradient_steps_through_the_warp_are_screened_and_the_run_ends_on_an_exact_view(
+    tiny_objective, file_view
+) -> None:
+    """render.differentiable.values=warp: the steps between refreshes are scored on the warp's
+    values (screened, never chosen); the refreshes' views and the view each run ends on are scored
+    on the exact render, within the same budget as through the exact render."""
+    config = DiffRenderConfig(values="warp", refresh="every_k", every_k=3, layers=2)
+    differentiable = DifferentiableRenderer(tiny_objective.renderer, config)
+    settings = GradientSettings(steps=7, restarts=2)
+    with count_passes(tiny_objective.model) as count:
+        result = _run(tiny_objective, differentiable, [file_view], (H, W), "gradient", settings)
+    view = result.views[0]
+    assert count.passes == view.budget.passes == settings.restarts * (2 * settings.steps + 1)
+    for lane in _lanes(view.records).values():
+        steps = sorted(lane, key=lambda r: r.step)
+        # refreshes at steps 0, 3 and 6; the last (7) validated exactly
+        assert [r.step for r in steps if not r.screened] == [0, 3, 6, 7]
+        assert all(r.screened == (not r.refreshed) for r in steps[:-1]) and not steps[-1].refreshed
+    assert view.top and all(not r.screened for r in view.top)  # the path is the best run's every step
+    K = intrinsics_from_fov(file_view.fov_x_deg, H, W)
+    last = max(view.records, key=lambda r: (r.restart == 0, r.step))
+    pose = last.world_T_cam(file_view.world_T_cam)[None]
+    out = tiny_objective.renderer.render(pose, K, H, W, supersample=config.supersample)
+    terms = tiny_objective(out.rgb, out.depth, out.mask, pose, K)
+    assert float(terms.delta1[0]) == pytest.approx(last.delta1, abs=1e-6)
+
+
 def test_screening_at_a_reduced_size_re_scores_its_best_views_at_full_size(
     tiny_objective, differentiable, file_view
 ) -> None:

@@ -75,35 +75,38 @@ def test_pixels_without_a_surface_stay_invalid() -> None:
     assert float(warp.depth[..., :4, :].abs().max()) == 0.0
 
 
-def test_at_the_anchor_pose_the_closed_form_taps_match_the_gathered_ones(monkeypatch) -> None:
-    """At A = P the taps are shifted slices of the anchor and the lookups come in closed form: the
-    values are the general sampler's (both in float64, where rounding puts no sample off its pixel
-    centre), on a view with occlusion edges, and so are the pose gradients to first order in the
-    sub-pixel offsets (each sub-sample's projection moves as its pixel centre's): within one part in
-    the focal length in pixels."""
+def test_at_the_anchor_pose_the_lean_warp_reads_the_closed_form_values_and_slopes() -> None:
+    """At A = P the closed form reads each sub-sample on its own pixel centre; the lean warp reads
+    the box-filtered anchor once per pixel. Where both hold, on a view with occlusion edges, the
+    colours are the same box means, the lean warp's depth is the exact one it was tested against,
+    and the pose gradients (central differences of the same box-filtered image) point the same way.
+    At 48 x 64: coarser, most pixels lie by a crease or an edge, where the two reads' taps differ."""
+    height, width = 48, 64
     renderer = ExactRenderer(box_room(seed=0))
-    pose, K = renderer.scene.cameras[0].world_T_cam.double()[None], intrinsics_from_fov(60.0, H, W)
-    anchor = render_anchor(renderer, pose, K, H, W, guard_band=1, supersample=2)
-    exact = renderer.render(pose, K, H, W)
+    pose, K = renderer.scene.cameras[0].world_T_cam.double()[None], intrinsics_from_fov(60.0, height, width)
+    anchor = render_anchor(renderer, pose, K, height, width, guard_band=1, supersample=2)
+    exact = renderer.render(pose, K, height, width)
     normals = camera_face_normals(renderer.surfaces, exact.triangle_ids[:, 0], pose).permute(0, 3, 1, 2)
-    monkeypatch.setattr(dibr, "_DTYPE", torch.float64)
+    weights = torch.linspace(-1.0, 1.0, 4 * height * width, dtype=torch.float64).reshape(1, 4, height, width)
     results = []
-    for closed_form in (True, False):
-        if not closed_form:
-            monkeypatch.setattr(dibr, "_at_anchor", lambda *args: False)
+    for warp_of in (
+        lambda A_T_P: reproject(anchor, exact.depth, normals, A_T_P, K),
+        lambda A_T_P: dibr.warp_boxed(anchor.boxed, exact.depth, normals, A_T_P, K),
+    ):
         params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
         current = perturb_world_T_cam(pose, params[:, :3], params[:, 3:])
-        warp = reproject(anchor, exact.depth, normals, torch.linalg.inv(anchor.world_T_cam) @ current, K)
-        weights = torch.linspace(-1.0, 1.0, 4 * H * W, dtype=torch.float64).reshape(1, 4, H, W)
-        (torch.cat([warp.rgb, warp.depth], 1).double() * weights).sum().backward()
+        warp = warp_of(torch.linalg.inv(anchor.world_T_cam) @ current)
+        both = results[0][0].valid & warp.valid if results else warp.valid
+        (torch.cat([warp.rgb, warp.depth], 1).double() * weights * both).sum().backward()
         results.append((warp, params.grad))
-    (fast, fast_grad), (general, general_grad) = results
-    assert 0.5 < float(fast.valid.float().mean()) < 1.0  # edges in view, some pixels left to the silhouettes
-    assert torch.equal(fast.valid, general.valid)
-    torch.testing.assert_close(fast.rgb, general.rgb, rtol=0, atol=1e-7)  # float32 outputs: one ulp
-    torch.testing.assert_close(fast.depth, general.depth, rtol=1e-9, atol=0)
-    assert float(general_grad.abs().min()) > 0
-    torch.testing.assert_close(fast_grad, general_grad, rtol=1.0 / float(K[0, 0]), atol=0)  # 0.02 measured
+    (closed, closed_grad), (lean, lean_grad) = results
+    both = closed.valid & lean.valid
+    assert 0.5 < float(both.float().mean()) < 1.0  # edges in view, some pixels left to the silhouettes
+    assert float(both.sum()) >= 0.95 * float(closed.valid.sum())
+    torch.testing.assert_close(lean.rgb * both, closed.rgb * both, rtol=0, atol=1e-5)
+    torch.testing.assert_close(lean.depth[lean.valid], exact.depth[lean.valid], rtol=1e-6, atol=0)  # the cast's
+    cosine = torch.nn.functional.cosine_similarity(lean_grad, closed_grad, dim=1)
+    assert float(cosine) > 0.99, float(cosine)
 
 
 def test_the_closed_form_taps_are_the_same_in_bands_as_at_once(monkeypatch) -> None:

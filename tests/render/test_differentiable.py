@@ -7,6 +7,7 @@ import torch
 from kadv.geometry import intrinsics_from_fov
 from kadv.penalties import random_valid_poses
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
+from kadv.render import differentiable as differentiable_module
 
 K_SMALL = intrinsics_from_fov(70.0, 48, 64)
 
@@ -62,6 +63,14 @@ def test_bad_pose_params(room_renderer: ExactRenderer) -> None:
         DiffRenderConfig(values="magic")
 
 
+def _trajectory(step: int, steps: int) -> torch.Tensor:
+    phase = step / (steps - 1)
+    return torch.tensor(
+        [[0.05 * np.sin(2 * phase), 0.15 * phase, 0.02 * phase, 0.2 * phase, 0.05 * np.sin(3 * phase), 0.15 * phase]],
+        dtype=torch.float64,
+    )
+
+
 @pytest.mark.real_scenes
 def test_warp_mode_tracks_exact_render_along_a_trajectory(grey_white_room) -> None:
     renderer = ExactRenderer(grey_white_room)
@@ -70,22 +79,72 @@ def test_warp_mode_tracks_exact_render_along_a_trajectory(grey_white_room) -> No
     differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(values="warp", refresh="every_k", every_k=5))
     refreshes = 0
     for step in range(20):
-        phase = step / 19.0
-        params = torch.tensor(
-            [
-                [
-                    0.05 * np.sin(2 * phase),
-                    0.15 * phase,
-                    0.02 * phase,
-                    0.2 * phase,
-                    0.05 * np.sin(3 * phase),
-                    0.15 * phase,
-                ]
-            ],
-            dtype=torch.float64,
-        )
-        out = differentiable(params, base, K, 60, 80)
+        out = differentiable(_trajectory(step, 20), base, K, 60, 80)
         refreshes += out.refreshed
-        assert float(out.rgb_error) <= 0.02, (step, float(out.rgb_error))
+        assert out.warped != out.refreshed
+        exact = renderer.render(out.world_T_cam.detach(), K, 60, 80, supersample=2)
+        assert float((out.rgb.detach() - exact.rgb).abs().mean()) <= 0.02, step
+        # the cast's depth (the ring's interior), the warp's gradient
+        torch.testing.assert_close(out.depth.detach(), exact.depth, rtol=1e-6, atol=0)
         assert float(out.coverage) >= 0.9, (step, float(out.coverage))
     assert refreshes == 4  # steps 0, 5, 10, 15
+
+
+def test_between_refreshes_the_warp_renders_no_shaded_image(room_renderer: ExactRenderer, monkeypatch) -> None:
+    """values=warp: a step between refreshes casts its view without shading and shades only the
+    pixels no anchor layer holds; the shaded renders are the refreshes' (one anchor and one frame
+    each) and the view a search validates."""
+    renderer = ExactRenderer(room_renderer.scene)
+    calls = {"shaded": 0, "bare": 0, "anchors": 0, "rays": 0}
+    render, shade = renderer.render, renderer.cast_and_shade
+
+    def counted_render(*args, colour: bool = True, **kwargs):
+        calls["shaded" if colour else "bare"] += 1
+        return render(*args, colour=colour, **kwargs)
+
+    def counted_shade(origins, directions, pixel_angle, colour, geometry):
+        calls["rays"] += len(origins) if colour else 0
+        return shade(origins, directions, pixel_angle, colour, geometry)
+
+    monkeypatch.setattr(renderer, "render", counted_render)
+    monkeypatch.setattr(renderer, "cast_and_shade", counted_shade)
+    monkeypatch.setattr(differentiable_module, "render_anchor", _counting(differentiable_module.render_anchor, calls))
+    camera = renderer.scene.cameras[0]
+    config = DiffRenderConfig(values="warp", refresh="every_k", every_k=4, layers=2)
+    differentiable = DifferentiableRenderer(renderer, config)
+    warped_rays = 0
+    for step in range(10):
+        if step == 9:
+            differentiable.validate_next()
+        params = (0.3 * _trajectory(step, 10)).requires_grad_(True)
+        before = calls["rays"]
+        out = differentiable(params, camera.world_T_cam[None], K_SMALL, 48, 64)
+        (out.rgb.sum() + out.depth.sum()).backward()
+        assert torch.isfinite(params.grad).all() and params.grad.abs().sum() > 0
+        if out.warped:
+            warped_rays += calls["rays"] - before
+    # refreshes at steps 0, 4 and 8 (an anchor and a frame each), and step 9 validated exactly
+    assert calls["anchors"] == 3 and calls["shaded"] == 4 and calls["bare"] == 6
+    # the warped steps (1-3 and 5-7) shaded only their holes: far fewer rays than their frames'
+    assert 0 < warped_rays < 0.15 * 6 * config.supersample**2 * (48 + 2) * (64 + 2)
+
+
+def _counting(fn, calls: dict):
+    def counted(*args, **kwargs):
+        calls["anchors"] += 1
+        return fn(*args, **kwargs)
+
+    return counted
+
+
+@pytest.mark.parametrize(("min_coverage", "warped"), [(0.5, True), (1.0, False)])
+def test_on_drift_the_warp_refreshes_when_its_coverage_falls(room_renderer, min_coverage, warped) -> None:
+    """values=warp, refresh=on_drift: a moved view whose warp covers less than ``min_coverage`` of
+    its pixels is rendered again exactly, with a new anchor; one that covers enough is warped."""
+    camera = room_renderer.scene.cameras[0]
+    config = DiffRenderConfig(values="warp", refresh="on_drift", min_coverage=min_coverage, layers=2)
+    differentiable = DifferentiableRenderer(room_renderer, config)
+    differentiable(torch.zeros(1, 6, dtype=torch.float64), camera.world_T_cam[None], K_SMALL, 48, 64)
+    out = differentiable(0.3 * _trajectory(3, 10), camera.world_T_cam[None], K_SMALL, 48, 64)
+    assert out.warped == warped and out.refreshed == (not warped)
+    assert 0.8 < float(out.coverage) < 1.0

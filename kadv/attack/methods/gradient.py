@@ -64,7 +64,9 @@ def gradient_ascent(
     """Batched Adam runs from ``start`` (R, 6) within the context's budget; the measures of each step.
 
     Each update is pulled back within the pose bounds, then passes the step guard (a move that
-    would cross or approach a surface is shortened; the fraction taken is recorded). A step runs
+    would cross or approach a surface is shortened; the fraction taken is recorded). Views whose
+    values came from the warp (``render.differentiable.values=warp``, between refreshes) are
+    screened records; the views the runs end on are rendered exactly. A step runs
     only while the budget allows its forward and backward passes for all R views; where it allows
     only the forward passes, the views are evaluated and the run ends. Restart r is lane r, step s
     is ``first_step + s``.
@@ -79,7 +81,9 @@ def gradient_ascent(
     reached, fraction = context.guard(torch.zeros_like(start[:, 3:]), start[:, 3:])
     omega = start[:, :3].clone().requires_grad_(True)
     delta = reached.clone().requires_grad_(True)
-    capture = StepGraph.available(context.device, context.differentiable.config.cuda_graphs)
+    render = context.differentiable.config
+    # a step that keeps its anchor decides on the host when to refresh it: a graph would replay one choice
+    capture = StepGraph.available(context.device, render.cuda_graphs and render.refresh == "always")
     # a captured step keeps Adam's step count on the device
     optimiser = torch.optim.Adam(
         [{"params": [omega], "lr": lr_rotation}, {"params": [delta], "lr": lr_translation}],
@@ -95,7 +99,15 @@ def gradient_ascent(
         terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
         stats = (out.coverage, out.rgb_error, out.depth_error)
         measured = context.measure(
-            first_step + step, params, out.world_T_cam, terms, fraction, stats, out.refreshed, render=out.exact
+            first_step + step,
+            params,
+            out.world_T_cam,
+            terms,
+            fraction,
+            stats,
+            out.refreshed,
+            render=out.exact,
+            screened=out.warped,
         )
         return measured, terms.objective
 
@@ -122,6 +134,7 @@ def gradient_ascent(
             break
         started = time.perf_counter()
         if step == steps or clock.allows(batch, cost=2) < batch:  # no room for the backward pass
+            context.differentiable.validate_next()  # the views a run ends on are scored exactly
             measures.append(evaluate()[0])
             clock.spent(batch, time.perf_counter() - started)
             break

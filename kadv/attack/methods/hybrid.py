@@ -101,14 +101,16 @@ def trust_region_refine(
     pixel side; None: the run's, exactly). A trial that raises its lane's objective at that fidelity
     is then rendered and scored exactly, and becomes the incumbent only if its exact objective beats
     the incumbent's: the exact render validates each accepted step, and every incumbent is an exact
-    view. The cheap trials are screened records (never chosen or followed).
+    view. The cheap trials are screened records (never chosen or followed). Trials whose values
+    came from the warp (``render.differentiable.values=warp``, between refreshes) are cheap too.
 
     A step costs a forward pass per lane and, when any lane's trial may be accepted, a backward
     pass through the whole batch (the model's backward runs over every image of it), and at a
     cheap fidelity a forward pass per trial validated; it starts only while the budget holds them all.
     """
     clock = context.clock
-    cheap = supersample is not None
+    # at a cheap fidelity, or with values from the warp, an accepted trial is validated exactly
+    cheap = supersample is not None or context.differentiable.config.values == "warp"
     cost = 3 if cheap else 2
     lanes = clock.allows(len(starts), cost=cost)
     if lanes == 0:
@@ -134,6 +136,7 @@ def trust_region_refine(
         trial = torch.cat([proposal[:, :3].to(context.device), reached], dim=1).requires_grad_(True)
         out = differentiable(trial, base, context.K, context.height, context.width)
         terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
+        screened = supersample is not None or out.warped
         rows = context.records(
             step,
             trial,
@@ -144,7 +147,7 @@ def trust_region_refine(
             out.refreshed,
             lanes=list(ids),
             render=out.exact,
-            screened=cheap,
+            screened=screened,
         )
         records += rows
         value = terms.objective.detach().cpu()
@@ -153,8 +156,8 @@ def trust_region_refine(
         backward = lanes if bool((fresh | risen).any()) else 0
         if backward:
             (terms.objective * (fresh | risen).to(terms.objective.device)).sum().backward()
-        clock.spent(lanes, time.perf_counter() - started, backward=backward, screened=cheap)
-        if cheap and bool(risen.any()):
+        clock.spent(lanes, time.perf_counter() - started, backward=backward, screened=screened)
+        if screened and bool(risen.any()):
             chosen = torch.nonzero(risen).flatten().tolist()
             scored = context.score(step, trial.detach()[chosen], fraction[chosen], lanes=[ids[i] for i in chosen])
             records += scored
