@@ -539,9 +539,11 @@ def _proxy_cell(cell: Cells, degrees: float, metres: float) -> dict:
             timing["exact"] += time.perf_counter() - started
             started = time.perf_counter()
             cheap = b.renderer.render(chunk, context.K, height, width, supersample=1)
-            cast = time.perf_counter() - started
             cheap_terms = b.objective(cheap.rgb, cheap.depth, cheap.mask, chunk, context.K)
             timing["ss1"] += time.perf_counter() - started
+            started = time.perf_counter()
+            b.renderer.render(chunk, context.K, height, width, colour=False)  # what the warp's depth test needs
+            cast = time.perf_counter() - started
             started = time.perf_counter()
             normals = camera_face_normals(b.renderer.surfaces, cheap.triangle_ids[:, 0], chunk).permute(0, 3, 1, 2)
             layers = _expanded(anchor, len(chunk))
@@ -550,7 +552,8 @@ def _proxy_cell(cell: Cells, degrees: float, metres: float) -> dict:
             rgb = torch.where(warp.valid, warp.rgb, cheap.rgb)  # the cast's own shading where the warp has none
             timing["warp"] += time.perf_counter() - started
             proxy_terms = b.objective(rgb, cheap.depth, cheap.mask, chunk, context.K)
-            # the view's depth is the one-ray cast's (shared with ss1 here, but a reprojected view needs it)
+            # a reprojected view's cost: the unshaded cast, the warp and the model (its holes' shading,
+            # taken here from the one-ray render, left out)
             timing["reprojection"] += cast + time.perf_counter() - started
             out["exact"] += terms.delta1.tolist()
             out["ss1"] += cheap_terms.delta1.tolist()

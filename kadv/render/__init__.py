@@ -11,10 +11,10 @@ per scene with the same surfaces.
 from __future__ import annotations
 
 from kadv.render.bake import BakeConfig, bake_lighting, load_or_bake
-from kadv.render.dibr import Reprojection, reproject
+from kadv.render.dibr import Reprojection, reproject, warp_boxed
 from kadv.render.differentiable import DifferentiableRenderer, DiffRenderConfig, DiffRenderOutput
 from kadv.render.irradiance import BakedLighting
-from kadv.render.layers import AnchorLayers, render_anchor
+from kadv.render.layers import AnchorLayers, BoxedLayers, render_anchor
 from kadv.render.lights import scene_lights
 from kadv.render.raycast import ExactRenderer, RayHits, RenderOutput
 from kadv.render.shading import Shading
@@ -26,6 +26,7 @@ __all__ = [
     "AnchorLayers",
     "BakeConfig",
     "BakedLighting",
+    "BoxedLayers",
     "DiffRenderConfig",
     "DiffRenderOutput",
     "DifferentiableRenderer",
@@ -44,4 +45,5 @@ __all__ = [
     "sample_texture",
     "scene_lights",
     "silhouette_term",
+    "warp_boxed",
 ]

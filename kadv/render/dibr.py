@@ -342,6 +342,11 @@ def warp_boxed(
     in the pose, from the mean of four lookups half a pixel away diagonally (:data:`_DIAGONALS`),
     where all four hold (elsewhere the pixel's value carries no gradient: the silhouette term's).
 
+    Written here rather than as kornia's ``warp_frame_depth``, which takes one camera matrix for
+    both frames (the anchor's guard band moves its principal point and grows its image) and keeps
+    the point fixed along the ray; what no call does is the same-surface test and reading a layer
+    at some pixels only.
+
     Args:
         boxed: the anchor's box-filtered layers (:attr:`AnchorLayers.boxed`), on ``depth``'s device.
         depth: (B, 1, H, W) exact z-depth of the current views (detached; 0 = no surface).

@@ -143,7 +143,7 @@ def save_curves(path: str | Path, results: list[InitViewResult], label: str = "L
         screened = [r for r in result.records if r.valid and r.screened]
         if screened:
             x, y = [order[id(r)] for r in screened], [r.loss for r in screened]
-            axis.scatter(x, y, s=3, alpha=0.3, color="grey", label="screened (one ray per pixel)")
+            axis.scatter(x, y, s=3, alpha=0.3, color="grey", label="screened (fewer rays, or the warp)")
         invalid = [r for r in result.records if not r.valid]
         if invalid:
             axis.scatter(
