@@ -92,8 +92,8 @@ from kadv.geometry import perturb_world_T_cam
 from kadv.io import atomic_write
 from kadv.models import load_model
 from kadv.render import DifferentiableRenderer
-from kadv.render.dibr import reproject
-from kadv.render.layers import AnchorLayers, camera_face_normals, render_anchor
+from kadv.render.dibr import Reprojection, warp_boxed
+from kadv.render.layers import camera_face_normals, render_anchor
 from kadv.scenes.probes import PROBES, probe_scene
 from kadv.testing.options import CheckOptions, setup
 from kadv.testing.profile import DEFAULT_RADII, WARM_STARTS, warm_starts
@@ -452,15 +452,6 @@ def regret_part(runs: Runs) -> dict[str, str]:
     return figures
 
 
-def _expanded(anchor: AnchorLayers, batch: int) -> AnchorLayers:
-    """One anchor's layers repeated for ``batch`` views (views, not copies)."""
-    maps = {n: getattr(anchor, n).expand(batch, *getattr(anchor, n).shape[1:]) for n in ("rgb", "points", "normals")}
-    maps |= {n: getattr(anchor, n).expand(batch, *getattr(anchor, n).shape[1:]) for n in ("triangle_ids", "mask")}
-    return dataclasses.replace(
-        anchor, world_T_cam=anchor.world_T_cam.expand(batch, 4, 4), K=anchor.K.expand(batch, 3, 3), **maps
-    )
-
-
 def proxy_part(cells: dict[str, Cells], out: Path) -> dict[str, str]:
     """Part 5: delta1 on the exact render, at one ray per pixel and by the reprojection of anchor
     layers rendered at the init view (pixels the warp cannot fill shaded by one exact ray), over
@@ -546,9 +537,13 @@ def _proxy_cell(cell: Cells, degrees: float, metres: float) -> dict:
             cast = time.perf_counter() - started
             started = time.perf_counter()
             normals = camera_face_normals(b.renderer.surfaces, cheap.triangle_ids[:, 0], chunk).permute(0, 3, 1, 2)
-            layers = _expanded(anchor, len(chunk))
-            A_T_P = torch.linalg.inv(layers.world_T_cam) @ chunk
-            warp = reproject(layers, cheap.depth, normals.float(), A_T_P, context.K)
+            A_T_P = torch.linalg.inv(anchor.world_T_cam) @ chunk
+            # view by view, as a search warps them: one anchor's maps, read in place
+            warps = [warp_boxed(anchor.boxed, cheap.depth[i : i + 1], normals[i : i + 1].float(), A_T_P[i : i + 1],
+                                context.K, diff.depth_tolerance) for i in range(len(chunk))]  # fmt: skip
+            warp = Reprojection(
+                *(torch.cat([getattr(w, f) for w in warps]) for f in ("rgb", "depth", "valid", "layer"))
+            )
             rgb = torch.where(warp.valid, warp.rgb, cheap.rgb)  # the cast's own shading where the warp has none
             timing["warp"] += time.perf_counter() - started
             proxy_terms = b.objective(rgb, cheap.depth, cheap.mask, chunk, context.K)
