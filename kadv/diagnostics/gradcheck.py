@@ -167,9 +167,7 @@ def check_pose(
 
     full, half = reference(1.0), reference(0.5)
     agreements = {name: min(_blocks(full[f], half[f])) for f, name in enumerate(FUNCTIONALS)}
-    generator = torch.Generator().manual_seed(weight_seed)
-    directions = F.normalize(torch.randn(2, 3, generator=generator, dtype=torch.float64), dim=1)
-    away = torch.cat([directions[0] * np.radians(anchor_offset[0]), directions[1] * anchor_offset[1]])[None]
+    away = _offset_params(weight_seed, *anchor_offset)
     results = {}
     for name, config in configs.items():
         differentiable = DifferentiableRenderer(renderer, config, device)
@@ -182,6 +180,13 @@ def check_pose(
         cosines = {f_name: _blocks(analytic[f], half[f]) for f, f_name in enumerate(FUNCTIONALS)}
         results[name] = GradientCheck(cosines, agreements)
     return results
+
+
+def _offset_params(seed: int, degrees: float, metres: float) -> torch.Tensor:
+    """Pose parameters (1, 6) of a move by ``degrees`` and ``metres`` in directions seeded by ``seed``."""
+    generator = torch.Generator().manual_seed(seed)
+    directions = F.normalize(torch.randn(2, 3, generator=generator, dtype=torch.float64), dim=1)
+    return torch.cat([directions[0] * np.radians(degrees), directions[1] * metres])[None]
 
 
 def gradient_check_poses(

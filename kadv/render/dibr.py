@@ -7,7 +7,9 @@ at q. Depth is the z of the anchor point read there, mapped back with P_T_A.
 - A moved view (:func:`warp_boxed`) reads the anchor box-filtered to its pixels (the mean of each
   pixel's s x s sub-samples, as the exact render's colour is) with one ``grid_sample`` per layer,
   and tests per pixel that the point read is the point expected (the same surface seen from both
-  poses). Layers behind the first are read only where those before failed.
+  poses). Layers behind the first are read only where those before failed. (Not kornia's
+  ``warp_frame_depth``: it takes one camera matrix for both frames, where the guard band moves the
+  anchor's principal point, and holds the point fixed along the ray.)
 - At the anchor's own pose (:func:`reproject` with ``at_anchor``), the samples sit on the anchor's
   pixel centres: each sub-sample's taps are tested against its own triangle's plane and the values
   and slopes come in closed form (:func:`_anchor_layer_pixels`), exact to the last bit. This is
@@ -333,19 +335,16 @@ def warp_boxed(
     Each current pixel's point X_P (its exact depth along the pixel-centre ray) goes to the anchor,
     X_A = A_T_P X_P, and is looked up at its projection q with ``grid_sample``. As the pose moves,
     X_A moves where the pixel's ray meets the plane of the surface it hit (fixed in the anchor's
-    frame): away from the anchor's own pose, the point sliding along the surface moves q too. A lookup holds if
-    all its taps hit a surface and the point it reads lies within ``tolerance`` (relative to depth)
-    of X_A: the same surface, seen from both poses (a depth test per pixel; the diagonal lookups
-    below read a point on X_A's plane). The first layer that
-    holds gives the pixel's colour and depth; the next layer is read only at the pixels where the
-    layers before it failed. Values come from the lookup at q; gradients, where it is differentiable
-    in the pose, from the mean of four lookups half a pixel away diagonally (:data:`_DIAGONALS`),
-    where all four hold (elsewhere the pixel's value carries no gradient: the silhouette term's).
+    frame): away from the anchor's own pose, the point sliding along the surface moves q too.
 
-    Written here rather than as kornia's ``warp_frame_depth``, which takes one camera matrix for
-    both frames (the anchor's guard band moves its principal point and grows its image) and keeps
-    the point fixed along the ray; what no call does is the same-surface test and reading a layer
-    at some pixels only.
+    A lookup holds if all its taps hit a surface and the point it reads lies within ``tolerance``
+    (relative to depth) of X_A: the same surface, seen from both poses (a depth test per pixel; the
+    diagonal lookups below read a point on X_A's plane). The first layer that holds gives the
+    pixel's colour and the depth's gradient (its value is the exact depth it was tested against);
+    the next layer is read only at the pixels where the layers before it failed. Values come from
+    the lookup at q; gradients, where it is differentiable in the pose, from the mean of four
+    lookups half a fine pixel away diagonally (:data:`_DIAGONALS`), where all four hold (elsewhere
+    the pixel's value carries no gradient: the silhouette term's).
 
     Args:
         boxed: the anchor's box-filtered layers (:attr:`AnchorLayers.boxed`), on ``depth``'s device.
@@ -370,37 +369,7 @@ def warp_boxed(
     q = torch.where(torch.isfinite(q) & (points_A[..., 2:] > 0), q, torch.full_like(q, _OFF_IMAGE))
     P_T_A = torch.linalg.inv_ex(A_T_P.double())[0].to(device, _DTYPE)  # inv_ex: no wait for its check
     smooth = torch.is_grad_enabled() and A_T_P.requires_grad
-    pixels = hit.shape[1]
-    colour = torch.zeros(batch, 3, pixels, dtype=_DTYPE, device=device)
-    warped = torch.zeros(batch, pixels, dtype=_DTYPE, device=device)
-    layer_used = torch.full((batch, pixels), -1, dtype=torch.int64, device=device)
-    todo = hit
-    for layer in range(boxed.maps.shape[1]):
-        if layer == 0:  # every pixel: no compaction
-            index, live = None, hit
-            q_todo, expected = q, points_A
-        else:
-            count = todo.sum(1)
-            most = int(count.max())
-            if most == 0:
-                break
-            # the pixels still to do first, in order (a permutation's head: no index twice)
-            index = torch.argsort((~todo).to(torch.uint8), dim=1, stable=True)[:, :most]
-            live = torch.arange(most, device=device)[None] < count[:, None]
-            q_todo = q.gather(1, index[..., None].expand(-1, -1, 2))
-            expected = points_A.gather(1, index[..., None].expand(-1, -1, 3))
-        c, z, ok = _lookup(boxed.maps[:, layer], q_todo, expected, P_T_A, tolerance, smooth)
-        ok = ok & live
-        if index is None:
-            colour, warped = torch.where(ok[:, None], c, colour), torch.where(ok, z, warped)
-            layer_used = torch.where(ok, layer, layer_used)
-            todo = todo & ~ok
-            continue
-        spread = index[:, None].expand(-1, 3, -1)
-        colour = colour.scatter(2, spread, torch.where(ok[:, None], c, colour.gather(2, spread)))
-        warped = warped.scatter(1, index, torch.where(ok, z, warped.gather(1, index)))
-        layer_used = layer_used.scatter(1, index, torch.where(ok, layer, layer_used.gather(1, index)))
-        todo = todo.scatter(1, index, todo.gather(1, index) & ~ok)
+    colour, warped, layer_used = _read_layers(boxed, q, points_A, hit, P_T_A, tolerance, smooth)
     valid = layer_used >= 0
     shape = (batch, 1, height, width)
     # the depth's value is the exact one the test passed against; the warp gives its gradient
@@ -411,6 +380,50 @@ def warp_boxed(
         valid=valid.reshape(shape),
         layer=layer_used.reshape(shape),
     )
+
+
+def _read_layers(
+    boxed: BoxedLayers,
+    q: torch.Tensor,
+    points_A: torch.Tensor,
+    hit: torch.Tensor,
+    P_T_A: torch.Tensor,
+    tolerance: float,
+    smooth: bool,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Each pixel's colour (B, 3, N), current-frame depth (B, N) and layer (B, N; -1: none) from the
+    first boxed layer that holds at it, the pixels (``hit`` (B, N)) at boxed coordinates q (B, N, 2)
+    expecting points ``points_A`` (B, N, 3); a layer is read only at the pixels still to do."""
+    batch, pixels = hit.shape
+    device = q.device
+    colour = torch.zeros(batch, 3, pixels, dtype=_DTYPE, device=device)
+    warped = torch.zeros(batch, pixels, dtype=_DTYPE, device=device)
+    layer_used = torch.full((batch, pixels), -1, dtype=torch.int64, device=device)
+    todo = hit
+    for layer in range(boxed.maps.shape[1]):
+        if layer == 0:  # every pixel: no compaction
+            c, z, ok = _lookup(boxed.maps[:, 0], q, points_A, P_T_A, tolerance, smooth)
+            ok = ok & hit
+            colour, warped = torch.where(ok[:, None], c, colour), torch.where(ok, z, warped)
+            layer_used, todo = torch.where(ok, 0, layer_used), todo & ~ok
+            continue
+        count = todo.sum(1)
+        most = int(count.max())
+        if most == 0:
+            break
+        # the pixels still to do first, in order (a permutation's head: no index twice)
+        index = torch.argsort((~todo).to(torch.uint8), dim=1, stable=True)[:, :most]
+        live = torch.arange(most, device=device)[None] < count[:, None]
+        q_todo = q.gather(1, index[..., None].expand(-1, -1, 2))
+        expected = points_A.gather(1, index[..., None].expand(-1, -1, 3))
+        c, z, ok = _lookup(boxed.maps[:, layer], q_todo, expected, P_T_A, tolerance, smooth)
+        ok = ok & live
+        spread = index[:, None].expand(-1, 3, -1)
+        colour = colour.scatter(2, spread, torch.where(ok[:, None], c, colour.gather(2, spread)))
+        warped = warped.scatter(1, index, torch.where(ok, z, warped.gather(1, index)))
+        layer_used = layer_used.scatter(1, index, torch.where(ok, layer, layer_used.gather(1, index)))
+        todo = todo.scatter(1, index, todo.gather(1, index) & ~ok)
+    return colour, warped, layer_used
 
 
 def _on_surface(points_P: torch.Tensor, normals_P: torch.Tensor, A_T_P: torch.Tensor) -> torch.Tensor:

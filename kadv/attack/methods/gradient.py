@@ -98,17 +98,8 @@ def gradient_ascent(
         out = context.differentiable(params, base, context.K, context.height, context.width)
         terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
         stats = (out.coverage, out.rgb_error, out.depth_error)
-        measured = context.measure(
-            first_step + step,
-            params,
-            out.world_T_cam,
-            terms,
-            fraction,
-            stats,
-            out.refreshed,
-            render=out.exact,
-            screened=out.warped,
-        )
+        measured = context.measure(first_step + step, params, out.world_T_cam, terms, fraction, stats, out.refreshed,
+                                   render=out.exact, screened=out.warped)  # fmt: skip
         return measured, terms.objective
 
     def ascend() -> Measures:
