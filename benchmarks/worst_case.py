@@ -202,6 +202,8 @@ class Cells:
         envelope = AttackConfig(envelope=ENVELOPE).envelope
         margin = self.built.penalty.margin
         self.views = [fit_into_envelope(self.built.renderer, v, envelope, margin) for v in self.built.views]
+        # the gradient lanes through the warp (conf/render/warp.yaml)
+        self.warp = DifferentiableRenderer(self.built.renderer, common.render_preset("warp"))
 
     def run(self, view: int, config: AttackConfig, seed: int, seconds: list[float] | None = None,
             radii=DEFAULT_RADII, warped: bool = False) -> dict:  # fmt: skip
@@ -209,7 +211,7 @@ class Cells:
         budget; ``warped``: the gradient through ``render=warp``); per radius its curve of
         improvements, passes, seconds and agreement (the share of its restarts that reached its worst)."""
         b = self.built
-        differentiable = self.warp_renderer() if warped else b.differentiable
+        differentiable = self.warp if warped else b.differentiable
         results: list = []
         for k, (degrees, metres) in enumerate(radii):
             within = dataclasses.replace(config, max_angle_deg=degrees, max_distance=metres)
@@ -230,11 +232,6 @@ class Cells:
             spent = {"passes": budget.passes, "screened": budget.screened, "seconds": budget.seconds}
             rows.append({"curve": curve, "agreement": agreed.reached / agreed.runs} | spent)
         return {"init": results[0].views[0].init_record.delta1, "radii": rows}
-
-    @functools.cache  # noqa: B019 (one per scene, kept for the benchmark's life)
-    def warp_renderer(self) -> DifferentiableRenderer:
-        """The differentiable renderer of ``render=warp`` (conf/render/warp.yaml) on this scene."""
-        return DifferentiableRenderer(self.built.renderer, common.render_preset("warp"))
 
 
 def worst_within(run: dict, radius: int) -> float:

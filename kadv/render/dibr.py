@@ -467,20 +467,21 @@ def _lookup(
     off = read[:, 3:6] - expected
     # the centre lookup must read the point expected; the diagonal ones, half a pixel away, a point
     # on its plane (written out channel by channel: a reduction over a strided channel axis is slow)
-    near = off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1] + off[:, 2] * off[:, 2] <= (tolerance * tolerance)[:, None]
-    on_plane = (off[:, 0] * read[:, 7] + off[:, 1] * read[:, 8] + off[:, 2] * read[:, 9]).abs() <= tolerance[:, None]
-    lookups = torch.arange(read.shape[2], device=read.device)[None, :, None]
-    holds = (read[:, 6] >= _FULL) & torch.where(lookups == 0, near, on_plane)  # (B, lookups, M)
+    centre = off[:, :, 0]
+    near = centre[:, 0] * centre[:, 0] + centre[:, 1] * centre[:, 1] + centre[:, 2] * centre[:, 2]
+    holds = (read[:, 6, 0] >= _FULL) & (near <= tolerance * tolerance)  # (B, M)
     colour, point = read[:, 0:3, 0], read[:, 3:6, 0]
     if smooth:
-        both = holds[:, 1:].all(1)[:, None]
+        diagonal, normal = off[:, :, 1:], read[:, 7:10, 1:]
+        on_plane = (diagonal[:, 0] * normal[:, 0] + diagonal[:, 1] * normal[:, 1] + diagonal[:, 2] * normal[:, 2]).abs()
+        both = ((read[:, 6, 1:] >= _FULL) & (on_plane <= tolerance[:, None])).all(1)[:, None]
         mean = read[:, :6, 1:].mean(2)
         colour = torch.where(both, straight_through(mean[:, 0:3], onto=colour), colour)
         point = torch.where(both, straight_through(mean[:, 3:6], onto=point), point)
     z = transform_points(P_T_A[:, None], point.transpose(1, 2))[..., 2]
     if smooth:  # a point read without the smooth lookups moves with nothing: its depth is fixed too
         z = torch.where(both[:, 0], z, z.detach())
-    return colour, z, holds[:, 0]
+    return colour, z, holds
 
 
 def _at_anchor(

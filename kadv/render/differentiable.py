@@ -274,13 +274,10 @@ class DifferentiableRenderer:
         self, current: torch.Tensor, K: torch.Tensor, height: int, width: int, anchor: AnchorLayers | None
     ) -> _ExactFrame:
         """The exact render at the current poses and what the device needs of it, moved once."""
-        # with silhouettes, the frame is rendered with a ring around it (the frame is its interior)
-        border = RING if self.config.silhouette else 0
-        K_render, render_height, render_width = ring_view(K, height, width) if border else (K, height, width)
+        border, K_render, render_height, render_width, inside = self._render_view(K, height, width)
         rendered = self._exact_render(current, K_render, render_height, render_width, border, anchor)
         exact = rendered.cropped(border) if border else rendered
         normals = camera_face_normals(self.renderer.surfaces, exact.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
-        inside = (..., slice(border, render_height - border), slice(border, render_width - border))
         rgb_rendered, depth_rendered = rendered.rgb.to(self.device), rendered.depth.to(self.device)
         return _ExactFrame(
             rendered,
@@ -301,8 +298,7 @@ class DifferentiableRenderer:
         """The frame's values from the warp: the view (with its ring) cast without shading for
         the depth test, the anchor warped onto it, and the pixels no layer holds shaded exactly.
         Its agreement: the warp's coverage and depth error against the cast (no exact colour)."""
-        border = RING if self.config.silhouette else 0
-        K_render, render_height, render_width = ring_view(K, height, width) if border else (K, height, width)
+        border, K_render, render_height, render_width, inside = self._render_view(K, height, width)
         cast = self.renderer.render(current, K_render, render_height, render_width, colour=False)
         cast_depth = cast.depth.to(self.device)
         A_T_P = torch.linalg.inv_ex(self.anchor.world_T_cam)[0] @ world_T_cam  # inv_ex: no wait for its check
@@ -314,14 +310,20 @@ class DifferentiableRenderer:
         rgb = torch.where(warp.valid, warp.rgb, holes)
         depth = torch.where(warp.valid, warp.depth, cast_depth)
         exact = cast.cropped(border) if border else cast
-        inside = (..., slice(border, render_height - border), slice(border, render_width - border))
         frame = _ExactFrame(
             cast, exact, K_render, inside, rgb.detach(), depth.detach(), rgb[inside], depth[inside],
             exact.mask.to(self.device), None,
         )  # fmt: skip
         inner = Reprojection(warp.rgb[inside], warp.depth[inside], warp.valid[inside], warp.layer[inside])
-        agreement = WarpAgreement.of(inner, torch.full_like(frame.rgb, torch.nan), cast_depth[inside], frame.mask)
-        return frame, agreement
+        return frame, WarpAgreement.of(inner, None, cast_depth[inside], frame.mask)
+
+    def _render_view(self, K: torch.Tensor, height: int, width: int) -> tuple:
+        """What a frame is rendered as: its border, intrinsics and size, and the index of the frame
+        inside it. With silhouettes the frame is rendered with a ring around it (its interior)."""
+        border = RING if self.config.silhouette else 0
+        K_render, render_height, render_width = ring_view(K, height, width) if border else (K, height, width)
+        inside = (..., slice(border, render_height - border), slice(border, render_width - border))
+        return border, K_render, render_height, render_width, inside
 
     def _shade_holes(
         self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, holes: torch.Tensor
@@ -450,13 +452,17 @@ class WarpAgreement:
     depth_error: torch.Tensor
 
     @classmethod
-    def of(cls, warp, rgb: torch.Tensor, depth: torch.Tensor, mask: torch.Tensor) -> WarpAgreement:
-        """Compare a :class:`~kadv.render.dibr.Reprojection` with the exact rgb, depth and mask."""
+    def of(cls, warp, rgb: torch.Tensor | None, depth: torch.Tensor, mask: torch.Tensor) -> WarpAgreement:
+        """Compare a :class:`~kadv.render.dibr.Reprojection` with the exact rgb (None: no exact
+        colour was rendered, the colour error is NaN), depth and mask."""
         valid = warp.valid.detach()
         hit = mask.sum(dim=(1, 2, 3)).clamp_min(1)
         count = valid.sum(dim=(1, 2, 3)).clamp_min(1)
         coverage = valid.sum(dim=(1, 2, 3)) / hit
-        rgb_error = ((warp.rgb.detach() - rgb).abs().mean(1, keepdim=True) * valid).sum(dim=(1, 2, 3)) / count
+        if rgb is None:
+            rgb_error = torch.full_like(coverage, torch.nan)
+        else:
+            rgb_error = ((warp.rgb.detach() - rgb).abs().mean(1, keepdim=True) * valid).sum(dim=(1, 2, 3)) / count
         relative = (warp.depth.detach() - depth).abs() / depth.clamp_min(_MIN_DEPTH)
         depth_error = (relative * valid).sum(dim=(1, 2, 3)) / count
         return cls(coverage.double(), rgb_error.double(), depth_error.double())
