@@ -7,7 +7,9 @@ warp preset is checked as it runs between refreshes: its anchor rendered 2 degre
 Per scene: 10 seeded poses (>= 0.3 m from any surface, >= 90% of pixels hit, reference confirmed
 by halving its step to cos >= 0.99), functionals sum(W * rgb) and sum(W * depth), interior and
 full, cosine of analytic vs reference 6-vectors (the smaller of the rotation and translation
-blocks). Prints a table of medians for the plain warp and the final method (warp + silhouettes).
+blocks), and of the focal length's derivatives over 8 weight maps per functional (a searched field
+of view, ``envelope.fov_deg``, moves through it), under the same thresholds. Prints a table of
+medians per configuration, pose and focal length.
 Run: .venv/bin/python benchmarks/gradcheck.py [--poses N] [--height H] [--width W] [--device D]
 [--backend open3d|warp|auto] (the exact renders' ray caster, on the device) [--lighting direct|baked]
 """
@@ -45,7 +47,8 @@ def main(
         "grey_white_room": load_scene(scenes_root() / "grey_white_room" / "scene.xml"),
     }
     medians: dict[tuple[str, str], dict[str, float]] = {}
-    print(f"{'scene':<16} {'method':<18} " + " ".join(f"{f:>15}" for f in FUNCTIONALS) + "   seconds")
+    focal: dict[tuple[str, str], dict[str, float]] = {}
+    print(f"{'scene':<16} {'method':<30} " + " ".join(f"{f:>15}" for f in FUNCTIONALS) + "   seconds")
     for scene_name, scene in scenes.items():
         start = time.perf_counter()
         results = gradient_check_poses(
@@ -57,21 +60,29 @@ def main(
             width=width,
             configs=CONFIGS,
             reference_supersample=8,
+            steps=(2e-3, 4e-3, 2e-3),  # the focal length's too
             device=device,
         )
         seconds = time.perf_counter() - start
         for method, checks in results.items():
             medians[scene_name, method] = {f: float(np.median([c.score(f) for c in checks])) for f in FUNCTIONALS}
-            row = " ".join(f"{medians[scene_name, method][f]:>15.3f}" for f in FUNCTIONALS)
-            print(f"{scene_name:<16} {method:<18} {row}   {seconds:7.0f}")
+            focal[scene_name, method] = {f: float(np.median([c.focal_score(f) for c in checks])) for f in FUNCTIONALS}
+            for label, table in (("pose", medians), ("focal length", focal)):
+                row = " ".join(f"{table[scene_name, method][f]:>15.3f}" for f in FUNCTIONALS)
+                print(f"{scene_name:<16} {method + ' ' + label:<30} {row}   {seconds:7.0f}")
     checked = [m for m in CONFIGS if m != "no silhouettes"]
-    interior = min(medians[s, m][f] for s in scenes for m in checked for f in ("rgb_interior", "depth_interior"))
-    full_box = min(medians["box_room", m][f] for m in checked for f in ("rgb_full", "depth_full"))
-    full_real = min(medians["grey_white_room", m][f] for m in checked for f in ("rgb_full", "depth_full"))
-    print(
-        f"gradcheck interior_median_cos={interior:.3f} full_box_median_cos={full_box:.3f} "
-        f"full_real_median_cos={full_real:.3f} backend={backend} lighting={lighting}"
-    )
+
+    def least(table: dict, scene_names, functionals) -> float:
+        return min(table[s, m][f] for s in scene_names for m in checked for f in functionals)
+
+    figures = []
+    for prefix, table in (("", medians), ("focal_", focal)):
+        figures += [
+            f"{prefix}interior_median_cos={least(table, scenes, ('rgb_interior', 'depth_interior')):.3f}",
+            f"{prefix}full_box_median_cos={least(table, ['box_room'], ('rgb_full', 'depth_full')):.3f}",
+            f"{prefix}full_real_median_cos={least(table, ['grey_white_room'], ('rgb_full', 'depth_full')):.3f}",
+        ]
+    print(f"gradcheck {' '.join(figures)} backend={backend} lighting={lighting}")
 
 
 if __name__ == "__main__":

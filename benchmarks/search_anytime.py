@@ -93,7 +93,7 @@ def screening_rate(objective: Objective, differentiable, view, height: int, widt
     context = SearchContext(
         objective, differentiable, view, height, width, AttackConfig(budget_passes=None, budget_seconds=60.0)
     )
-    params = context.config.sample_ball(np.random.default_rng(0).random((8, 6)))
+    params = context.space.sample(np.random.default_rng(0).random((8, 6)))
     context.evaluate(1, params, scale=scale)
     started = time.perf_counter()
     for _ in range(3):

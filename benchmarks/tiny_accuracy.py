@@ -1,5 +1,6 @@
 """delta1 (after scale-and-shift alignment) of the embedded models on held-out generated rooms and
-on real scenes, which no training run ever sees (the three shared scenes, or ``--scenes``).
+on real scenes, which no training run ever sees (the three shared scenes, or ``--scenes``); the
+metric kadv-tiny-metric also unaligned (``none``: its depth in metres as predicted).
 
 - Generated: 200 views of furnished rooms and 200 of box rooms from seed 7 (``HELD_OUT_SEED``, which
   ``kadv-train-tiny`` refuses to train or validate on), at 240 x 320; with ``--lighting baked`` every
@@ -11,7 +12,8 @@ on real scenes, which no training run ever sees (the three shared scenes, or ``-
   180 x 320, under ``--lighting`` (default: the renderer's); the mean is over all their views (63
   for the shared scenes).
 
-Run: .venv/bin/python benchmarks/tiny_accuracy.py [--kadv-tiny FILE] [--kadv-tiny-dpt DIR] [--lighting direct|baked]
+Run: .venv/bin/python benchmarks/tiny_accuracy.py [--models kadv_tiny kadv_tiny_dpt kadv_tiny_metric]
+[--kadv-tiny FILE] [--kadv-tiny-dpt DIR] [--kadv-tiny-metric FILE] [--lighting direct|baked]
 [--scenes NAME_OR_PATH,...] (other weights than the shipped ones, e.g. a training run's; other scenes, e.g.
 rooms of your own).
 """
@@ -30,7 +32,7 @@ from kadv.datasets import HELD_OUT_SEED, RoomMix, ViewBatch, render_procedural_v
 from kadv.geometry import intrinsics_from_fov
 from kadv.losses import depth_metrics
 from kadv.models import load_model
-from kadv.models.tiny import TINY_WEIGHTS
+from kadv.models.tiny import TINY_METRIC_WEIGHTS, TINY_WEIGHTS
 from kadv.models.tiny_dpt import TINY_DPT_DIR
 from kadv.penalties import PenaltyConfig
 from kadv.render import ExactRenderer, Shading
@@ -67,11 +69,17 @@ def _label(name: str, path: Path) -> str:
     return name if name in REAL_SCENES else (path.parent.name if path.stem == "scene" else path.stem)
 
 
-def per_view_delta1(model: torch.nn.Module, views: ViewBatch) -> torch.Tensor:
+def per_view_delta1(model: torch.nn.Module, views: ViewBatch, alignment: str = "scale_shift") -> torch.Tensor:
     with torch.no_grad():
         return torch.cat(
             [
-                depth_metrics(model(views.rgb[i : i + 16]), views.depth[i : i + 16], views.mask[i : i + 16])["delta1"]
+                depth_metrics(
+                    model(views.rgb[i : i + 16]),
+                    views.depth[i : i + 16],
+                    views.mask[i : i + 16],
+                    model.output_kind,
+                    alignment=alignment,
+                )["delta1"]
                 for i in range(0, len(views.rgb), 16)
             ]
         )
@@ -85,9 +93,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--kadv-tiny", default=None, help="kadv-tiny weights file (default: the shipped one)")
     parser.add_argument("--kadv-tiny-dpt", default=None, help="kadv-tiny-dpt directory (default: the shipped one)")
-    parser.add_argument(
-        "--models", nargs="+", default=["kadv_tiny", "kadv_tiny_dpt"], choices=["kadv_tiny", "kadv_tiny_dpt"]
-    )
+    parser.add_argument("--kadv-tiny-metric", default=None, help="kadv-tiny-metric weights file (default: shipped)")
+    embedded = ["kadv_tiny", "kadv_tiny_dpt", "kadv_tiny_metric"]
+    parser.add_argument("--models", nargs="+", default=embedded, choices=embedded)
     parser.add_argument("--lighting", default=default_lighting(), choices=["direct", "baked"])
     parser.add_argument(
         "--scenes", default=",".join(REAL_SCENES), help="comma-separated shared scenes' names or scene files' paths"
@@ -97,7 +105,11 @@ def main() -> None:
     for name, path in paths.items():
         if not path.is_file():
             parser.error(f"--scenes: {name!r} is neither a shared scene's name nor a scene file")
-    weights = {"kadv_tiny": args.kadv_tiny, "kadv_tiny_dpt": args.kadv_tiny_dpt}
+    weights = {
+        "kadv_tiny": args.kadv_tiny,
+        "kadv_tiny_dpt": args.kadv_tiny_dpt,
+        "kadv_tiny_metric": args.kadv_tiny_metric,
+    }
     models = {name: load_model(name, weights=weights[name]) for name in args.models}
     baked_share = 1.0 if args.lighting == "baked" else 0.0
     held_out = {
@@ -112,9 +124,14 @@ def main() -> None:
     print("| model | " + " | ".join(columns) + " |")
     print("|---" * (len(columns) + 1) + "|")
     results = {}
-    for label, model in models.items():
-        generated = {key: float(per_view_delta1(model, views).mean()) for key, views in held_out.items()}
-        scores = {name: per_view_delta1(model, views) for name, views in shared.items()}
+    rows = [(name, "scale_shift") for name in models] + [
+        (n, "none") for n, m in models.items() if m.output_kind == "depth"
+    ]
+    for name, alignment in rows:
+        model = models[name]
+        label = name if alignment == "scale_shift" else f"{name}_none"
+        generated = {key: float(per_view_delta1(model, views, alignment).mean()) for key, views in held_out.items()}
+        scores = {scene: per_view_delta1(model, views, alignment) for scene, views in shared.items()}
         real = float(torch.cat(list(scores.values())).mean())
         cells = [
             *generated.values(),
@@ -122,12 +139,16 @@ def main() -> None:
             *(float(s[1:].mean()) for s in scores.values()),
             real,
         ]
-        print(f"| {label} | " + " | ".join(f"{value:.3f}" for value in cells) + " |")
+        print(f"| {label} ({alignment}) | " + " | ".join(f"{value:.3f}" for value in cells) + " |")
         results[label] = (real, generated["furnished"])
     print()
     print("| model | weights | forward at 240x320 (median of 20, batch 1) |")
     print("|---|---|---|")
-    shipped = {"kadv_tiny": args.kadv_tiny or TINY_WEIGHTS, "kadv_tiny_dpt": args.kadv_tiny_dpt or TINY_DPT_DIR}
+    shipped = {
+        "kadv_tiny": args.kadv_tiny or TINY_WEIGHTS,
+        "kadv_tiny_dpt": args.kadv_tiny_dpt or TINY_DPT_DIR,
+        "kadv_tiny_metric": args.kadv_tiny_metric or TINY_METRIC_WEIGHTS,
+    }
     image = torch.rand(1, 3, 240, 320)
     for label, model in models.items():
         with torch.no_grad():

@@ -129,6 +129,5 @@ def gradient_measures(
     context = SearchContext(
         objective, DifferentiableRenderer(objective.renderer, render, objective.device), view, *size, config
     )
-    settings = config.settings
     with tqdm(disable=True) as bar, around or contextlib.nullcontext():
-        return gradient_ascent(context, start, steps, settings.lr_rotation, settings.lr_translation, bar)
+        return gradient_ascent(context, start, steps, config.settings, bar)

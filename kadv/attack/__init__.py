@@ -51,11 +51,13 @@ from kadv.attack.search import (
     Measures,
     SearchContext,
 )
+from kadv.attack.space import FOV, PoseSpace
 from kadv.penalties import PenaltyConfig
 
 __all__ = [
     "DEFAULT_METHOD",
     "DEFAULT_PASSES",
+    "FOV",
     "METHODS",
     "RENAMED_BUDGET",
     "Agreement",
@@ -77,6 +79,7 @@ __all__ = [
     "Objective",
     "ObjectiveTerms",
     "PenaltyConfig",
+    "PoseSpace",
     "Proposer",
     "RandomSettings",
     "SearchContext",

@@ -29,7 +29,7 @@ def fitness(records: list[ViewRecord]) -> np.ndarray:
 
 
 class Proposer:
-    """Proposes pose parameters (omega, delta) relative to the init view; the loop evaluates them.
+    """Proposes points of the pose space (:class:`~kadv.attack.space.PoseSpace`); the loop evaluates them.
 
     Args:
         context: the search context (``context.config`` holds the bounds, ``.settings`` the
@@ -41,7 +41,7 @@ class Proposer:
         self.context, self.config, self.settings, self.rng = context, context.config, context.config.settings, rng
 
     def ask(self, count: int) -> torch.Tensor:
-        """At most ``count`` poses (N, 6) float64 to evaluate next (N = 0 ends the search)."""
+        """At most ``count`` points (N, dims) float64 of the pose space to evaluate next (N = 0 ends the search)."""
         raise NotImplementedError
 
     def tell(self, records: list[ViewRecord]) -> None:
@@ -53,7 +53,7 @@ def proposer_search(
 ) -> InitViewResult:
     """Run a proposer from one init view within the context's budget."""
     proposer = proposer_class(context, rng)
-    records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64))
+    records = context.evaluate(0, context.space.zeros())
     step = 1
     while (left := context.clock.allows(context.clock.remaining())) > 0:
         params = proposer.ask(left)

@@ -39,8 +39,10 @@ class ViewRecord:
 
     Attributes:
         step, restart: where it sits on the trajectory (see the module docstring).
-        params: (omega (3), delta (3)): rotation vector in the camera frame and centre offset in
-            world metres, relative to the init view's pose.
+        params: the point of the pose space (:class:`~kadv.attack.space.PoseSpace`): omega (3),
+            delta (3), a rotation vector in the camera frame and a centre offset in world metres
+            relative to the init view's pose, and when the field of view is searched its offset
+            from the init view's in degrees.
         theta: absolute axis-angle of the camera's orientation (3).
         centre: optical centre in world metres (3).
         l_depth, l_dist, objective: the objective's terms (L_depth is recorded whatever the loss).
@@ -63,6 +65,8 @@ class ViewRecord:
             (:func:`kadv.geometry.yaw_pitch_roll`); made from ``theta`` when not given.
         run: the independent run of the init view's search it belongs to (``attack.restarts``;
             0: the first).
+        fov_x_deg: the view's horizontal field of view, degrees (NaN: its init view's, in a
+            record made without it).
     """
 
     step: int
@@ -90,6 +94,7 @@ class ViewRecord:
     pitch_deg: float = math.nan
     roll_deg: float = math.nan
     run: int = 0
+    fov_x_deg: float = math.nan
 
     def __post_init__(self) -> None:
         if math.isnan(self.loss):
@@ -110,7 +115,11 @@ class ViewRecord:
     def world_T_cam(self, init_world_T_cam: torch.Tensor) -> torch.Tensor:
         """The view's pose (4, 4), recomputed exactly from the init pose and the parameters."""
         params = torch.tensor(self.params, dtype=torch.float64)[None]
-        return perturb_world_T_cam(init_world_T_cam.double()[None], params[:, :3], params[:, 3:])[0]
+        return perturb_world_T_cam(init_world_T_cam.double()[None], params[:, :3], params[:, 3:6])[0]
+
+    def fov(self, init_fov_x_deg: float) -> float:
+        """The view's horizontal field of view, degrees: its own, or its init view's when not recorded."""
+        return init_fov_x_deg if math.isnan(self.fov_x_deg) else self.fov_x_deg
 
 
 @dataclass

@@ -9,24 +9,17 @@ import time
 from dataclasses import InitVar, dataclass
 from typing import Any
 
-import numpy as np
 import torch
-from scipy.stats import qmc
 
 from kadv.attack.init_views import InitView
 from kadv.attack.objective import Objective, ObjectiveTerms
 from kadv.attack.records import Budget, InitViewResult, ViewRecord, select_top_views
 from kadv.attack.registry import get_method
-from kadv.geometry import (
-    intrinsics_from_fov,
-    matrix_to_axis_angle,
-    perturb_world_T_cam,
-    scaled_size,
-    yaw_pitch_roll,
-)
+from kadv.attack.space import FOV, PoseSpace
+from kadv.geometry import matrix_to_axis_angle, perturb_world_T_cam, scaled_size, yaw_pitch_roll
 from kadv.penalties import ViewValidity, step_guard, view_validity
 from kadv.penalties.envelope import Envelope, get_envelope
-from kadv.render import DifferentiableRenderer, RenderOutput
+from kadv.render import DifferentiableRenderer, DiffRenderOutput, RenderOutput
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -175,43 +168,9 @@ class AttackConfig:
             return natural
         return self.budget_passes if natural is None else min(natural, self.budget_passes)
 
-    def search_box(self) -> torch.Tensor:
-        """Half-widths (6,) of the region black-box methods sample: the rotation and distance bounds."""
-        rotation = math.radians(self.max_angle_deg if self.max_angle_deg is not None else 180.0)
-        translation = self.max_distance if self.max_distance is not None else 2.0
-        return torch.tensor([rotation] * 3 + [translation] * 3, dtype=torch.float64)
-
-    def project(self, params: torch.Tensor) -> torch.Tensor:
-        """Pull pose parameters (B, 6) back within the rotation-angle and distance bounds."""
-        omega, delta = params[:, :3], params[:, 3:]
-        if self.max_angle_deg is not None:
-            omega = omega * (math.radians(self.max_angle_deg) / omega.norm(dim=1, keepdim=True).clamp_min(1e-12)).clamp(
-                max=1.0
-            )
-        if self.max_distance is not None:
-            delta = delta * (self.max_distance / delta.norm(dim=1, keepdim=True).clamp_min(1e-12)).clamp(max=1.0)
-        return torch.cat([omega, delta], dim=1)
-
-    def sample_ball(self, unit: np.ndarray) -> torch.Tensor:
-        """Map points (N, 6) of the unit cube [0, 1)^6 onto poses spread uniformly over the two balls
-        of the bounds (rotation vector, centre offset): a uniform or space-filling design stays one."""
-        half = self.search_box()
-        parts = []
-        for k, radius in ((0, half[0]), (3, half[3])):
-            # three independent coordinates: radius from one, direction from two (Archimedes' projection)
-            r = unit[:, k] ** (1.0 / 3.0) * float(radius)
-            z = 2.0 * unit[:, k + 1] - 1.0
-            phi = 2.0 * math.pi * unit[:, k + 2]
-            s = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
-            parts.append(np.stack([r * s * np.cos(phi), r * s * np.sin(phi), r * z], axis=1))
-        return torch.from_numpy(np.concatenate(parts, axis=1))
-
-    def sobol_ball(self, count: int, rng: np.random.Generator) -> torch.Tensor:
-        """``count`` poses (count, 6) spread over the bounds' balls: the first points of a scrambled
-        Sobol sequence drawn from ``rng`` (a power of two of them keeps its balance), through
-        :meth:`sample_ball`."""
-        unit = qmc.Sobol(d=6, scramble=True, rng=rng).random_base2(math.ceil(math.log2(count)))[:count]
-        return self.sample_ball(unit)
+    def space(self, init_fov_deg: float) -> PoseSpace:
+        """The space a search moves in around an init view with that horizontal field of view."""
+        return PoseSpace(self.max_angle_deg, self.max_distance, self.envelope, init_fov_deg)
 
 
 class Clock:
@@ -268,16 +227,18 @@ class Measures:
     Attributes:
         step: the step.
         lanes: each view's lane.
-        table: (B, 25 or 28) float64: params (6), the rotation matrix (9, row-major: its rotation
-            vector is computed on the host, where its hundred-odd small operations cost no launches),
-            centre (3), L_depth, loss, L_dist, objective, delta1, AbsRel, the guard's fraction, and
-            the warp's coverage, rgb and depth errors when the views were rendered through the warp.
+        table: (B, dims + 20 or dims + 23) float64: params (dims), the rotation matrix (9,
+            row-major: its rotation vector is computed on the host, where its hundred-odd small
+            operations cost no launches), centre (3), the horizontal field of view, L_depth, loss,
+            L_dist, objective, delta1, AbsRel, the guard's fraction, and the warp's coverage, rgb
+            and depth errors when the views were rendered through the warp.
         validity: the views' validity (its verdicts are made when read).
         refreshed: whether the anchor was rendered again at this step.
         seconds: the search's clock when the step was measured.
         scale: the render's size relative to the run's.
         passes: the model passes the search had spent once these views were scored.
         screened: scored at a search's cheap fidelity (never chosen or followed).
+        dims: the coordinates of a point of the pose space (:class:`~kadv.attack.space.PoseSpace`).
     """
 
     step: int
@@ -289,26 +250,29 @@ class Measures:
     scale: float
     passes: int = 0
     screened: bool = False
+    dims: int = 6
 
     def records(self) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view."""
         table = self.table.cpu()
-        rotation = table[:, 6:15].reshape(-1, 3, 3)
+        d = self.dims
+        rotation = table[:, d : d + 9].reshape(-1, 3, 3)
         theta = matrix_to_axis_angle(rotation)
-        rows = torch.cat([table[:, :6], theta, table[:, 15:]], dim=1).tolist()
+        rows = torch.cat([table[:, :d], theta, table[:, d + 9 :]], dim=1).tolist()
         angles = torch.rad2deg(yaw_pitch_roll(rotation)).tolist()
         verdicts = self.validity.verdicts
         records = []
         for b, (lane, row, (yaw, pitch, roll)) in enumerate(zip(self.lanes, rows, angles)):
-            l_depth, loss, l_dist, objective, delta1, abs_rel, fraction = row[12:19]
-            coverage, rgb_error, depth_error = row[19:22] if len(row) > 19 else (math.nan,) * 3
+            fov, l_depth, loss, l_dist, objective, delta1, abs_rel, fraction = row[d + 6 : d + 14]
+            coverage, rgb_error, depth_error = row[d + 14 : d + 17] if len(row) > d + 14 else (math.nan,) * 3
             records.append(
                 ViewRecord(
                     step=self.step,
                     restart=lane,
-                    params=row[0:6],
-                    theta=row[6:9],
-                    centre=row[9:12],
+                    params=row[0:d],
+                    theta=row[d : d + 3],
+                    centre=row[d + 3 : d + 6],
+                    fov_x_deg=fov,
                     l_depth=l_depth,
                     loss=loss,
                     l_dist=l_dist,
@@ -343,7 +307,7 @@ class SearchContext:
         height: image height.
         width: image width.
         config: the attack's settings (bounds, budgets).
-        starts: warm starts, pose parameters (N, 6) relative to the init view (views found bad
+        starts: warm starts, points (N, dims) of the pose space (views found bad
             before: at a smaller radius, by another search); methods that take them
             (``halving``) score them exactly first, the others leave them.
     """
@@ -367,11 +331,13 @@ class SearchContext:
         self._base = init.world_T_cam.double().to(self.device, non_blocking=True)
         self.config = config
         self.height, self.width = height, width
-        self.K = intrinsics_from_fov(init.fov_x_deg, height, width)
+        self.space = config.space(init.fov_x_deg)
+        self.K = self.space.intrinsics(None, height, width)  # the init view's
         self.margin = objective.penalty.margin
         self.validity_options = objective.penalty.validity_options()
         self.clock = Clock(config.passes, config.budget_seconds)
-        self.starts = torch.zeros(0, 6, dtype=torch.float64) if starts is None else starts.double().reshape(-1, 6)
+        dims = self.space.dims
+        self.starts = self.space.zeros(0) if starts is None else starts.double().reshape(-1, dims)
 
     def base(self, batch: int) -> torch.Tensor:
         """The init view's pose (batch, 4, 4) float64 on :attr:`device`."""
@@ -385,11 +351,20 @@ class SearchContext:
         config = dataclasses.replace(self.differentiable.config, supersample=supersample)
         return DifferentiableRenderer(self.renderer, config, self.device)
 
+    def differentiable_terms(
+        self, differentiable: DifferentiableRenderer, params: torch.Tensor
+    ) -> tuple[DiffRenderOutput, ObjectiveTerms]:
+        """The differentiable render of points ``params`` (B, dims) at the run's size and the
+        objective's terms there, differentiable in the points (the field of view's through the
+        intrinsics)."""
+        K = self.size(1.0, params)[0]
+        out = differentiable(params[:, :FOV], self.base(len(params)), K, self.height, self.width)
+        return out, self.objective(out.rgb, out.depth, out.mask, out.world_T_cam, K)
+
     def project(self, params: torch.Tensor) -> torch.Tensor:
-        """Pose parameters (B, 6) pulled back within the rotation and distance bounds, then moved
-        into the envelope (on the parameters' device); the step guard has yet to pass the move."""
-        params = self.config.project(params)
-        return self.config.envelope.project(self.renderer, self.base(len(params)), params)
+        """Points (B, dims) pulled back within the bounds, then moved into the envelope
+        (:meth:`PoseSpace.project`); the step guard has yet to pass the move."""
+        return self.space.project(self.renderer, self.base(len(params)), params)
 
     def guard(self, old: torch.Tensor, new: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Let the centre offsets (B, 3) move from ``old`` to ``new`` only as far as the step guard allows.
@@ -427,7 +402,7 @@ class SearchContext:
         the view's validity (from ``render``, the views' render, when given, at ``scale`` times the
         run's size; ``screened``: at a cheap fidelity) and the search's clock."""
         pose = world_T_cam.detach()
-        K, height, width = self.size(scale)
+        K, height, width = self.size(scale, params.detach())
         validity = view_validity(self.renderer, pose, K, height, width, render=render, **self.validity_options)
         if not self.config.envelope.free:
             validity.envelope = self.config.envelope.figures(self.renderer, pose)
@@ -435,6 +410,7 @@ class SearchContext:
             params.detach(),
             pose[:, :3, :3].flatten(1),
             pose[:, :3, 3],
+            self.space.fov_deg(params.detach())[:, None],
             *(value.detach()[:, None] for value in (terms.l_depth, terms.loss, terms.l_dist, terms.objective)),
             terms.delta1[:, None],
             terms.abs_rel[:, None],
@@ -445,18 +421,21 @@ class SearchContext:
         table = torch.cat([n.to(device, torch.float64, non_blocking=True) for n in numbers], dim=1)
         lanes = list(lanes) if lanes is not None else list(range(len(pose)))
         passes = self.clock.budget.passes + len(pose)  # this batch's forward passes are done
-        return Measures(step, lanes, table, validity, refreshed, self.clock.elapsed(), scale, passes, screened)
+        elapsed = self.clock.elapsed()
+        return Measures(step, lanes, table, validity, refreshed, elapsed, scale, passes, screened, self.space.dims)
 
     def records(self, *args, **kwargs) -> list[ViewRecord]:
         """One :class:`ViewRecord` per view: :meth:`measure`'s arguments, read to the host at once."""
         return self.measure(*args, **kwargs).records()
 
-    def size(self, scale: float = 1.0) -> tuple[torch.Tensor, int, int]:
-        """Intrinsics (3, 3), height and width of renders at ``scale`` times the run's size."""
-        if scale == 1.0:
+    def size(self, scale: float = 1.0, params: torch.Tensor | None = None) -> tuple[torch.Tensor, int, int]:
+        """Intrinsics, height and width of renders at ``scale`` times the run's size: of points
+        ``params`` (B, dims) (:meth:`PoseSpace.intrinsics`: the init view's (3, 3) when the
+        field of view is fixed or ``params`` is None)."""
+        if scale == 1.0 and (params is None or self.space.dims == 6):
             return self.K, self.height, self.width
         height, width = scaled_size(self.height, self.width, scale)
-        return intrinsics_from_fov(self.init.fov_x_deg, height, width), height, width
+        return self.space.intrinsics(params, height, width), height, width
 
     def evaluate(
         self,
@@ -468,12 +447,12 @@ class SearchContext:
         screened: bool = False,
         timed: bool = False,
     ) -> list[ViewRecord]:
-        """Move from the init view to each pose (B, 6) through the step guard, then :meth:`score`
+        """Move from the init view to each point (B, dims) through the step guard, then :meth:`score`
         the poses reached."""
         started = time.perf_counter()
         params = self.project(params.to(self.device))
-        reached, fraction = self.guard(torch.zeros_like(params[:, 3:]), params[:, 3:])
-        params = torch.cat([params[:, :3], reached], dim=1)
+        reached, fraction = self.guard(torch.zeros_like(params[:, 3:6]), params[:, 3:6])
+        params = torch.cat([params[:, :3], reached, params[:, 6:]], dim=1)
         return self.score(
             step,
             params,
@@ -498,7 +477,7 @@ class SearchContext:
         timed: bool = False,
         started: float | None = None,
     ) -> list[ViewRecord]:
-        """Render poses (B, 6) already through the step guard (``fraction``: the share of each move
+        """Render points (B, dims) already through the step guard (``fraction``: the share of each move
         taken) exactly at ``scale`` times the run's size (with ``supersample`` rays per pixel side;
         None: the run's), evaluate and record, one model pass a view (``screened``: at a cheap
         fidelity, never ranked: :meth:`screen`). ``timed``: the render's and the model's seconds per
@@ -506,10 +485,10 @@ class SearchContext:
         ``started``: when the batch's work began (its seconds go to the clock), if before this call."""
         started = time.perf_counter() if started is None else started
         params = params.to(self.device)
-        K, height, width = self.size(scale)
+        K, height, width = self.size(scale, params)
         supersample = supersample or self.differentiable.config.supersample
         with torch.no_grad():
-            pose = perturb_world_T_cam(self.base(len(params)), params[:, :3], params[:, 3:])
+            pose = perturb_world_T_cam(self.base(len(params)), params[:, :3], params[:, 3:6])
             rendering = self._now() if timed else 0.0
             out = self.renderer.render(pose, K, height, width, supersample=supersample)
             modelling = self._now() if timed else 0.0
@@ -532,7 +511,7 @@ class SearchContext:
     def screen(
         self, step: int, params: torch.Tensor, supersample: int | None, batch: int, bar: Any = None
     ) -> list[ViewRecord]:
-        """:meth:`evaluate` poses (N, 6), ``batch`` views a render, while the budget allows: at the
+        """:meth:`evaluate` points (N, dims), ``batch`` views a render, while the budget allows: at the
         cheap fidelity of ``supersample`` rays per pixel side (screened records, never ranked), or
         exactly when ``supersample`` is None. Each view is a model pass like any other
         (``budget.screened`` counts the cheap ones). A progress ``bar`` shows the count meanwhile."""

@@ -140,17 +140,22 @@ def _init_views(
 
 def _table(summary: RunSummary) -> str:
     """The run's table and, under it, what each init view's search cost."""
-    fit = summary.alignment
+    fit, searched = summary.alignment, summary.fov_deg is not None
+    fov = f" fov init | fov adv ({summary.fov_deg[0]:g}° to {summary.fov_deg[1]:g}°) |" if searched else ""
     lines = [
-        f"| init view | L_depth init | L_depth adv | delta1 init ({fit}) | delta1 adv ({fit}) | agreement |",
-        "|---|---|---|---|---|---|",
+        f"| init view | L_depth init | L_depth adv | delta1 init ({fit}) | delta1 adv ({fit}) | agreement |{fov}",
+        "|---|---|---|---|---|---|" + "---|---|" * searched,
     ]
     for view in summary.init_views:
         adv = view.adversarial_mean
-        lines.append(
+        line = (
             f"| {view.name} | {view.init.l_depth:.4f} | {adv['l_depth']:.4f} | "
             f"{view.init.delta1:.3f} | {adv['delta1']:.3f} | {agreement_text(view.agreement)} |"
         )
+        if searched:  # each kept view's, the worst first
+            kept = ", ".join(f"{a.fov_x_deg:.0f}°" for a in view.adversarial)
+            line += f" {view.fov_x_deg:.0f}° | {kept} |"
+        lines.append(line)
     lines += ["", "model passes and seconds per init view:"]
     lines += [f"  {view.name}: {view.budget.text()}" for view in summary.init_views]
     lines.append(f"  (choosing the init views: {summary.init_passes} passes)")
@@ -317,9 +322,11 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
         )  # fmt: skip
         names = (model.name, scene.name, attack_config.envelope.name)
         profile = Profile.of(*names, radii, (seed,), [seeded], alignment=objective.alignment)
+    fov = attack_config.envelope.fov_deg
     info = RunInfo(
-        scene.name, model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed), init_passes
-    )
+        scene.name, model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed), init_passes,
+        fov_deg=None if fov is None else list(fov),
+    )  # fmt: skip
     summary = write_run(run_dir, result, objective, info, supersample, video=cfg.video, profile=profile)
     print(f"run directory: {run_dir}\n{_table(summary)}")
     if profile is not None:

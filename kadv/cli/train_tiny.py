@@ -1,5 +1,6 @@
-"""``kadv-train-tiny``: train an embedded model (kadv-tiny, or kadv-tiny-dpt with ``train.architecture=dpt``) on
-generated rooms; writes its weights and a log to the run directory."""
+"""``kadv-train-tiny``: train an embedded model (kadv-tiny; kadv-tiny-dpt with ``train.architecture=dpt``;
+kadv-tiny-metric with ``train.target=metric``) on generated rooms; writes its weights and a log to
+the run directory."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from kadv.cli.common import checks_overrides, reports_user_errors
 from kadv.io import atomic_write
-from kadv.models.tiny import TINY_WEIGHTS, save_kadv_tiny
+from kadv.models.tiny import TINY_METRIC_WEIGHTS, TINY_WEIGHTS, save_kadv_tiny
 from kadv.models.tiny_dpt import TINY_DPT_DIR, save_kadv_tiny_dpt
 from kadv.models.train_tiny import TinyTrainConfig, train_tiny
 
@@ -29,20 +30,23 @@ def main(cfg: DictConfig) -> None:
     config = TinyTrainConfig(**OmegaConf.to_container(cfg.train, resolve=True))
     model, training_log = train_tiny(config)
     summary = {k: v for k, v in training_log.items() if k != "losses"}
-    save, name, shipped = (
-        (save_kadv_tiny_dpt, "kadv_tiny_dpt", TINY_DPT_DIR)
-        if config.architecture == "dpt"
-        else (save_kadv_tiny, "kadv_tiny.safetensors", TINY_WEIGHTS)
-    )
+    if config.architecture == "dpt":
+        save, name, shipped = save_kadv_tiny_dpt, "kadv_tiny_dpt", TINY_DPT_DIR
+    elif config.target == "metric":
+        save, name, shipped = save_kadv_tiny, "kadv_tiny_metric.safetensors", TINY_METRIC_WEIGHTS
+    else:
+        save, name, shipped = save_kadv_tiny, "kadv_tiny.safetensors", TINY_WEIGHTS
     weights = save(model.network, out_dir / name, metadata=summary)
     atomic_write(out_dir / "train_log.json", lambda tmp: tmp.write_text(json.dumps(training_log, indent=1)))
     if cfg.replace_shipped_weights:
         save(model.network, shipped, metadata=summary)
         log.info("replaced the shipped weights: %s", shipped)
+    metric = summary.get("val_delta1_metric")
     log.info(
-        "%s: val delta1 %.3f, render %.0f s, train %.0f s -> %s",
+        "%s: val delta1 %.3f (scale_shift)%s, render %.0f s, train %.0f s -> %s",
         model.name,
         summary["val_delta1"],
+        "" if metric is None else f", {metric:.3f} (none)",
         summary["render_seconds"],
         summary["train_seconds"],
         weights,

@@ -3,7 +3,9 @@
 Reference: central differences of supersampled exact renders (RGB and depth box-averaged over
 s x s samples per pixel), with the step confirmed by halving it. Functionals are
 f = sum(W * rgb) and f = sum(W * depth) with fixed smooth random weight maps, in an *interior*
-version (weights zeroed within 2 pixels of occlusion edges) and a *full* one.
+version (weights zeroed within 2 pixels of occlusion edges) and a *full* one. The pose's gradient
+is a 6-vector (compared per block, rotation and translation); the focal length's derivative, a
+scalar, is compared as the vector of its values over :data:`FOCAL_WEIGHTS` weight maps.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ __all__ = [
 ]
 
 FUNCTIONALS = ("rgb_interior", "depth_interior", "rgb_full", "depth_full")
+FOCAL_WEIGHTS = 8  # weight maps per functional whose focal-length derivatives are compared as one vector
 
 
 def smooth_weights(seed: int, channels: int, height: int, width: int) -> torch.Tensor:
@@ -81,9 +84,11 @@ def supersampled_maps(
 
 @dataclass
 class GradientCheck:
-    """Cosines between analytic and reference 6-vectors at one pose, per functional and block."""
+    """Cosines between analytic and reference derivatives at one pose, per functional: of the
+    pose's 6-vector per block and, when checked, of the focal length's (over :data:`FOCAL_WEIGHTS`
+    weight maps)."""
 
-    cosines: dict[str, tuple[float, float]]  # functional -> (rotation block, translation block)
+    cosines: dict[str, tuple[float, ...]]  # functional -> (rotation block, translation block[, focal length])
     agreements: dict[str, float]  # functional -> min block cosine of the reference at step h vs h / 2
 
     @property
@@ -95,7 +100,13 @@ class GradientCheck:
         return min(self.agreements[f] for f in functionals)
 
     def score(self, functional: str) -> float:
-        return min(self.cosines[functional])
+        """The pose's: the lower of its blocks' cosines."""
+        return min(self.cosines[functional][:2])
+
+    def focal_score(self, functional: str) -> float:
+        """The focal length's cosine (NaN: not checked)."""
+        cosines = self.cosines[functional]
+        return cosines[2] if len(cosines) > 2 else float("nan")
 
 
 def _cos(a: np.ndarray, b: np.ndarray) -> float:
@@ -116,7 +127,7 @@ def check_pose(
     *,
     weight_seed: int = 0,
     reference_supersample: int = 4,
-    steps: tuple[float, float] = (2e-3, 4e-3),
+    steps: tuple[float, ...] = (2e-3, 4e-3),
     edge_jump: float = 0.005,
     anchor_offset: tuple[float, float] = (2.0, 0.05),
     device: str | torch.device = "cpu",
@@ -128,7 +139,9 @@ def check_pose(
     on_drift) is checked as it runs between refreshes: its anchor is rendered first at a pose
     ``anchor_offset`` (degrees, metres, in directions seeded by ``weight_seed``) away, so that
     the checked gradient comes through the warp of a moved view. ``steps``: the reference's
-    finite-difference steps in rotation (radians) and translation (metres).
+    finite-difference steps in rotation (radians) and translation (metres) and, to check the
+    derivative in the focal length too (square pixels, the principal point kept), a third: its
+    step as a share of the focal length.
 
     Returns one :class:`GradientCheck` per renderer configuration (the reference is shared); its
     ``step_agreement`` < 0.99 says the reference is not trustworthy there (resample the pose).
@@ -137,49 +150,106 @@ def check_pose(
     """
     base = world_T_cam.double().reshape(1, 4, 4)
     K = torch.as_tensor(K, dtype=torch.float64)
-    w_rgb, w_depth = smooth_weights(weight_seed, 3, height, width), smooth_weights(weight_seed + 1, 1, height, width)
+    focal = len(steps) > 2
     # edges just outside the frame enter it when the camera moves: detect them on the ring too
     edges = occlusion_edge_mask(renderer.render(base, *ring_view(K, height, width)), jump=edge_jump)[
         ..., RING:-RING, RING:-RING
     ]
-    interior = (~edges).double()
-    weights = {
-        "rgb_interior": (w_rgb * interior, None),
-        "depth_interior": (None, w_depth * interior),
-        "rgb_full": (w_rgb, None),
-        "depth_full": (None, w_depth),
-    }
-
-    def functionals(rgb: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
-        return torch.stack([(w * rgb).sum() if w is not None else (v * depth).sum() for w, v in weights.values()])
-
-    def reference(scale: float) -> np.ndarray:
-        columns = []
-        for i in range(6):
-            step = torch.zeros(1, 6, dtype=torch.float64)
-            step[0, i] = steps[i >= 3] * scale
-            values = []
-            for sign in (1.0, -1.0):
-                pose = perturb_world_T_cam(base, sign * step[:, :3], sign * step[:, 3:])
-                values.append(functionals(*supersampled_maps(renderer, pose, K, height, width, reference_supersample)))
-            columns.append(((values[0] - values[1]) / (2 * step[0, i])).numpy())
-        return np.stack(columns, axis=1)  # (F, 6)
-
-    full, half = reference(1.0), reference(0.5)
+    functionals = _Functionals(weight_seed, FOCAL_WEIGHTS if focal else 1, (~edges).double())
+    maps = lambda pose, K_view: supersampled_maps(renderer, pose, K_view, height, width, reference_supersample)
+    full, half = (_pose_reference(maps, base, K, functionals, steps, scale) for scale in (1.0, 0.5))
     agreements = {name: min(_blocks(full[f], half[f])) for f, name in enumerate(FUNCTIONALS)}
+    if focal:
+        focal_full, focal_half = (
+            _focal_reference(maps, base, K, functionals, steps[2] * scale) for scale in (1.0, 0.5)
+        )
+        for f, name in enumerate(FUNCTIONALS):
+            agreements[name] = min(agreements[name], _cos(focal_full[f], focal_half[f]))
     away = _offset_params(weight_seed, *anchor_offset)
     results = {}
     for name, config in configs.items():
         differentiable = DifferentiableRenderer(renderer, config, device)
         if config.refresh != "always":
             differentiable(away, base, K, height, width)
-        params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
-        output = differentiable(params, base, K, height, width)
-        values = functionals(output.rgb.double().cpu(), output.depth.double().cpu())
-        analytic = np.stack([torch.autograd.grad(v, params, retain_graph=True)[0][0].numpy() for v in values])
-        cosines = {f_name: _blocks(analytic[f], half[f]) for f, f_name in enumerate(FUNCTIONALS)}
+        pose, focal_length = _analytic(differentiable, base, K, height, width, functionals)
+        cosines = {f_name: _blocks(pose[f], half[f]) for f, f_name in enumerate(FUNCTIONALS)}
+        if focal:
+            cosines = {
+                f_name: c + (_cos(focal_length[f], focal_half[f]),) for f, (f_name, c) in enumerate(cosines.items())
+            }
         results[name] = GradientCheck(cosines, agreements)
     return results
+
+
+class _Functionals:
+    """The check's functionals (:data:`FUNCTIONALS`), each on ``maps`` sets of smooth weight maps
+    seeded from ``seed`` (the pose's on the first; the focal length's on all), the interior ones
+    zero where ``interior`` (1, 1, H, W) is."""
+
+    def __init__(self, seed: int, maps: int, interior: torch.Tensor) -> None:
+        height, width = interior.shape[-2:]
+        self.sets = [
+            _weights(smooth_weights(seed + 2 * k, 3, height, width), smooth_weights(seed + 2 * k + 1, 1, height, width),
+                     interior)
+            for k in range(maps)
+        ]  # fmt: skip
+
+    def __call__(self, rgb: torch.Tensor, depth: torch.Tensor, every: bool = False) -> torch.Tensor:
+        """(F,) the functionals on the first set of maps; ``every``: (F, maps) on each."""
+        values = torch.stack([_apply(w, rgb, depth) for w in self.sets if every or w is self.sets[0]], dim=-1)
+        return values if every else values[:, 0]
+
+
+def _pose_reference(maps, base, K, functionals: _Functionals, steps, scale: float) -> np.ndarray:
+    """(F, 6) central differences of the functionals in the pose, steps ``steps`` x ``scale``."""
+    columns = []
+    for i in range(6):
+        step = torch.zeros(1, 6, dtype=torch.float64)
+        step[0, i] = steps[i >= 3] * scale
+        values = [functionals(*maps(perturb_world_T_cam(base, sign * step[:, :3], sign * step[:, 3:]), K))
+                  for sign in (1.0, -1.0)]  # fmt: skip
+        columns.append(((values[0] - values[1]) / (2 * step[0, i])).numpy())
+    return np.stack(columns, axis=1)
+
+
+def _focal_reference(maps, base, K, functionals: _Functionals, share: float) -> np.ndarray:
+    """(F, maps) central differences of the functionals in the focal length, step ``share`` of it."""
+    step = share * float(K[0, 0])
+    values = [functionals(*maps(base, _with_focal(K, sign * step)), every=True) for sign in (1.0, -1.0)]
+    return ((values[0] - values[1]) / (2 * step)).numpy()
+
+
+def _analytic(
+    differentiable: DifferentiableRenderer, base, K, height: int, width: int, functionals: _Functionals
+) -> tuple[np.ndarray, np.ndarray]:
+    """The functionals' analytic derivatives: in the pose (F, 6), and in the focal length (F, maps)
+    when their weight maps are more than one set."""
+    params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
+    change = torch.zeros((), dtype=torch.float64, requires_grad=True)  # of the focal length, pixels
+    focal = len(functionals.sets) > 1
+    output = differentiable(params, base, _with_focal(K, change) if focal else K, height, width)
+    values = functionals(output.rgb.double().cpu(), output.depth.double().cpu(), every=True)
+    pose = np.stack([torch.autograd.grad(v, params, retain_graph=True)[0][0].numpy() for v in values[:, 0]])
+    if not focal:
+        return pose, np.zeros((len(values), 0))
+    grads = [[float(torch.autograd.grad(v, change, retain_graph=True)[0]) for v in row] for row in values]
+    return pose, np.array(grads)
+
+
+def _weights(w_rgb: torch.Tensor, w_depth: torch.Tensor, interior: torch.Tensor) -> list[tuple]:
+    """The four functionals' (rgb weights, depth weights), one of them None, in :data:`FUNCTIONALS`' order."""
+    return [(w_rgb * interior, None), (None, w_depth * interior), (w_rgb, None), (None, w_depth)]
+
+
+def _apply(weights: list[tuple], rgb: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
+    """(F,) the functionals of ``weights`` (:func:`_weights`) on rgb (1, 3, H, W) and depth (1, 1, H, W)."""
+    return torch.stack([(w * rgb).sum() if w is not None else (v * depth).sum() for w, v in weights])
+
+
+def _with_focal(K: torch.Tensor, change: torch.Tensor | float) -> torch.Tensor:
+    """``K`` (3, 3) with ``change`` added to both focal lengths (differentiable in it)."""
+    diagonal = torch.diag(torch.tensor([1.0, 1.0, 0.0], dtype=torch.float64))
+    return K + torch.as_tensor(change, dtype=torch.float64) * diagonal
 
 
 def _offset_params(seed: int, degrees: float, metres: float) -> torch.Tensor:

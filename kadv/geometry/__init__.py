@@ -5,6 +5,7 @@ from __future__ import annotations
 from kadv.geometry.camera import (
     Camera,
     batched_intrinsics,
+    fov_intrinsics,
     intrinsics_from_fov,
     pixel_rays,
     scaled_size,
@@ -27,6 +28,7 @@ __all__ = [
     "axis_angle_to_matrix",
     "batched_intrinsics",
     "check_world_T_cam",
+    "fov_intrinsics",
     "intrinsics_from_fov",
     "look_at",
     "matrix_to_axis_angle",

@@ -14,6 +14,7 @@ __all__ = [
     "Camera",
     "batched_intrinsics",
     "camera_rays",
+    "fov_intrinsics",
     "intrinsics_from_fov",
     "pixel_rays",
     "scaled_size",
@@ -77,6 +78,20 @@ class Camera:
     def intrinsics(self, height: int, width: int) -> torch.Tensor:
         """K (3, 3) for an image of the given size with this camera's horizontal field of view."""
         return intrinsics_from_fov(self.fov_x_deg, height, width)
+
+
+def fov_intrinsics(fov_x_deg: torch.Tensor, height: int, width: int) -> torch.Tensor:
+    """Intrinsics (B, 3, 3) float64 of pinhole cameras with square pixels, the principal point at
+    the image centre and horizontal fields of view ``fov_x_deg`` (B,) in degrees, differentiable in them
+    (:func:`intrinsics_from_fov` for one)."""
+    focal = 0.5 * width / torch.tan(torch.deg2rad(fov_x_deg.double()) / 2.0)
+    zero, one = torch.zeros_like(focal), torch.ones_like(focal)
+    rows = [
+        torch.stack([focal, zero, zero + width / 2.0], dim=-1),
+        torch.stack([zero, focal, zero + height / 2.0], dim=-1),
+        torch.stack([zero, zero, one], dim=-1),
+    ]
+    return torch.stack(rows, dim=-2)
 
 
 def batched_intrinsics(K: torch.Tensor, batch: int) -> torch.Tensor:

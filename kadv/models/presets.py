@@ -70,6 +70,7 @@ PRESETS = {
 # (kadv.models.tiny: TINY_PREPROCESS; kadv.models.tiny_dpt: TINY_DPT_PROCESSOR)
 EMBEDDED = {
     "kadv_tiny": Preset("", "kadv_tiny", "disparity", "128x160"),
+    "kadv_tiny_metric": Preset("", "kadv_tiny", "depth", "128x160"),
     "kadv_tiny_dpt": Preset("", "dpt", "disparity", "160x160"),
 }
 

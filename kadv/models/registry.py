@@ -16,9 +16,9 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
 
     Args:
         name_or_path: a preset (``midas_dpt_large``, ``zoedepth_nk``, ``depth_anything_v2_small``, ...,
-            and the embedded ``kadv_tiny`` and ``kadv_tiny_dpt``), any Hugging Face depth-estimation id, or a
-            local ``save_pretrained`` directory.
-        weights: an explicit local directory (or, for ``kadv_tiny``, a weights file) that overrides
+            and the embedded ``kadv_tiny``, ``kadv_tiny_metric`` and ``kadv_tiny_dpt``), any Hugging
+            Face depth-estimation id, or a local ``save_pretrained`` directory.
+        weights: an explicit local directory (or, for ``kadv_tiny*``, a weights file) that overrides
             the cache, the hub, or the shipped copy of an embedded model.
 
     Raises:
@@ -29,8 +29,8 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
     name = str(name_or_path)
     if not name:
         raise ValueError("model name is empty")
-    if name == "kadv_tiny":
-        return load_kadv_tiny(weights)
+    if name in ("kadv_tiny", "kadv_tiny_metric"):
+        return load_kadv_tiny(weights, "disparity" if name == "kadv_tiny" else "depth")
     # transformers takes seconds to import; commands that load no Hugging Face model skip it
     from kadv.models.huggingface import load_huggingface
     from kadv.models.tiny_dpt import load_kadv_tiny_dpt
@@ -47,7 +47,8 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
         return load_huggingface(PRESETS[name].hub_id, name=name, hub_id=PRESETS[name].hub_id)
     if "/" not in name:
         raise ValueError(
-            f"unknown model {name!r}: not a preset ({', '.join(sorted(PRESETS))}, kadv_tiny, kadv_tiny_dpt), "
+            f"unknown model {name!r}: not a preset ({', '.join(sorted(PRESETS))}, kadv_tiny, kadv_tiny_metric, "
+            "kadv_tiny_dpt), "
             "not a local directory, and not a Hugging Face id (owner/name)"
         )
     return load_huggingface(name, name=name, hub_id=name)

@@ -1,6 +1,7 @@
-"""kadv-tiny: a compact U-Net predicting relative disparity, trained on procedural rooms only.
+"""kadv-tiny: a compact U-Net predicting relative disparity, trained on procedural rooms only, and
+kadv-tiny-metric, the same network trained to predict metric depth.
 
-Its weights ship in ``kadv/models/weights/kadv_tiny.safetensors`` so everything runs offline.
+Their weights ship in ``kadv/models/weights/`` so everything runs offline.
 """
 
 from __future__ import annotations
@@ -18,9 +19,12 @@ from torch.nn import functional as F
 from kadv.models.base import DepthModel
 from kadv.models.preprocess import Preprocess
 
-__all__ = ["TINY_WEIGHTS", "KadvTiny", "TinyDepthNet", "load_kadv_tiny", "save_kadv_tiny"]
+__all__ = ["TINY_METRIC_WEIGHTS", "TINY_WEIGHTS", "KadvTiny", "TinyDepthNet", "load_kadv_tiny", "save_kadv_tiny"]
 
 TINY_WEIGHTS = Path(__file__).parent / "weights" / "kadv_tiny.safetensors"
+TINY_METRIC_WEIGHTS = Path(__file__).parent / "weights" / "kadv_tiny_metric.safetensors"
+# what each output kind's network is called
+_NAMES = {"disparity": "kadv_tiny", "depth": "kadv_tiny_metric"}
 DEFAULT_CHANNELS = (16, 32, 64, 128, 256)
 # The training resolution, to which every image is resized whatever its aspect (as DPT-Large's
 # processor squeezes images into its square): the network has seen no other size, and on held-out
@@ -40,7 +44,8 @@ def _block(c_in: int, c_out: int, stride: int = 1) -> nn.Sequential:
 
 
 class TinyDepthNet(nn.Module):
-    """U-Net: (B, 3, h, w) normalised RGB, h and w multiples of 32 -> (B, 1, h, w) disparity."""
+    """U-Net: (B, 3, h, w) normalised RGB, h and w multiples of 32 -> (B, 1, h, w) positive
+    disparity or depth (in metres), as it was trained."""
 
     def __init__(self, channels: tuple[int, ...] = DEFAULT_CHANNELS) -> None:
         super().__init__()
@@ -69,10 +74,11 @@ class TinyDepthNet(nn.Module):
 
 
 class KadvTiny(DepthModel):
-    """kadv-tiny behind the :class:`DepthModel` interface (output: relative disparity)."""
+    """kadv-tiny behind the :class:`DepthModel` interface: output relative ``disparity``
+    (kadv_tiny) or metric ``depth`` (kadv_tiny_metric)."""
 
-    def __init__(self, network: TinyDepthNet) -> None:
-        super().__init__(TINY_PREPROCESS, "disparity", "kadv_tiny")
+    def __init__(self, network: TinyDepthNet, output_kind: str = "disparity") -> None:
+        super().__init__(TINY_PREPROCESS, output_kind, _NAMES[output_kind])
         self.network = network
         self.freeze()
 
@@ -81,26 +87,36 @@ class KadvTiny(DepthModel):
 
 
 def save_kadv_tiny(network: TinyDepthNet, path: str | Path, metadata: dict[str, object] | None = None) -> Path:
-    """Write weights (float16 to stay small) with the architecture and training facts as metadata."""
+    """Write weights (float16 to stay small) with the architecture, the output kind (``disparity``
+    unless ``metadata`` names another) and training facts as metadata."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    info = {"channels": json.dumps(list(network.channels)), **{k: json.dumps(v) for k, v in (metadata or {}).items()}}
+    info = {"channels": json.dumps(list(network.channels)), "output_kind": json.dumps("disparity")}
+    info |= {k: json.dumps(v) for k, v in (metadata or {}).items()}
     state = {k: v.detach().to(torch.float16).contiguous() for k, v in network.state_dict().items()}
     save_file(state, str(path), metadata=info)
     return path
 
 
-def load_kadv_tiny(weights: str | Path | None = None) -> KadvTiny:
-    """Load kadv-tiny from ``weights`` or the copy shipped in the package.
+def load_kadv_tiny(weights: str | Path | None = None, output_kind: str = "disparity") -> KadvTiny:
+    """Load kadv-tiny (``output_kind="depth"``: kadv-tiny-metric) from ``weights`` or the copy
+    shipped in the package.
 
     Raises:
         FileNotFoundError: the weights file does not exist (says how to train it).
+        ValueError: the weights predict the other kind.
     """
-    path = Path(weights) if weights is not None else TINY_WEIGHTS
+    name = _NAMES[output_kind]
+    shipped = TINY_WEIGHTS if output_kind == "disparity" else TINY_METRIC_WEIGHTS
+    path = Path(weights) if weights is not None else shipped
     if not path.is_file():
-        raise FileNotFoundError(f"kadv-tiny weights not found at {path}; train them with kadv-train-tiny")
+        target = "" if output_kind == "disparity" else " train.target=metric"
+        raise FileNotFoundError(f"{name} weights not found at {path}; train them with kadv-train-tiny{target}")
     with safe_open(str(path), framework="pt") as handle:
-        channels = tuple(json.loads(handle.metadata()["channels"]))
-    network = TinyDepthNet(channels)
+        metadata = handle.metadata()
+    kind = json.loads(metadata.get("output_kind", '"disparity"'))
+    if kind != output_kind:
+        raise ValueError(f"{path}: these weights predict {kind}, not the {output_kind} of {name}")
+    network = TinyDepthNet(tuple(json.loads(metadata["channels"])))
     network.load_state_dict({k: v.float() for k, v in load_file(str(path)).items()})
-    return KadvTiny(network)
+    return KadvTiny(network, output_kind)

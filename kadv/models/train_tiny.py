@@ -1,8 +1,9 @@
-"""Training the embedded models (kadv-tiny, kadv-tiny-dpt) on generated rooms with a scale-and-shift-invariant
-disparity loss."""
+"""Training the embedded models on generated rooms: kadv-tiny and kadv-tiny-dpt with a
+scale-and-shift-invariant disparity loss, kadv-tiny-metric with a loss on metric log depth."""
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
@@ -15,6 +16,7 @@ from tqdm import tqdm
 from kadv.datasets import HELD_OUT_SEED, TRAINING_BAKE, RoomMix, ViewBatch, render_procedural_views
 from kadv.device import resolve_device
 from kadv.losses import ssi_loss
+from kadv.losses.ssi import gradient_matching
 from kadv.models.base import DepthModel
 from kadv.models.evaluation import evaluate
 from kadv.models.tiny import (
@@ -31,9 +33,11 @@ from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE
 __all__ = [
     "ARCHITECTURES",
     "AUGMENTATIONS",
+    "TARGETS",
     "TinyTrainConfig",
     "fit",
     "load_soup",
+    "metric_log_loss",
     "render_training_views",
     "soup",
     "train_tiny",
@@ -41,6 +45,7 @@ __all__ = [
 
 ARCHITECTURES = ("unet", "dpt")
 AUGMENTATIONS = ("basic", "strong")
+TARGETS = ("disparity", "metric")
 
 
 @dataclass
@@ -48,8 +53,10 @@ class TinyTrainConfig:
     """Everything that determines a training run of an embedded model (same config, same weights).
 
     ``architecture`` is "unet" (kadv-tiny, ``channels`` wide) or "dpt" (kadv-tiny-dpt, a small
-    hybrid DPT). ``seed`` draws the training rooms (``render_procedural_views``), the batches and
-    the augmentation; ``val_seed`` the validation rooms. ``furnished_share`` of the rooms are
+    hybrid DPT); ``target`` is "disparity" (relative, the scale-and-shift-invariant loss) or
+    "metric" (the U-Net's kadv-tiny-metric: depth in metres, :func:`metric_log_loss`). ``seed``
+    draws the training rooms (``render_procedural_views``), the batches and the augmentation;
+    ``val_seed`` the validation rooms. ``furnished_share`` of the rooms are
     furnished rooms, the rest box rooms; ``corridor_share`` and ``hall_share`` of the furnished
     rooms are corridors and halls (both 0: the rooms of the generator before it drew them).
     ``attack_view_share`` of the views are drawn as the attack draws init views (eye height, level
@@ -97,6 +104,7 @@ class TinyTrainConfig:
     augment: str = "basic"
     device: str = "cpu"
     soup_with: list[str] = field(default_factory=list)
+    target: str = "disparity"
 
     def __post_init__(self) -> None:
         # checked here, before the minutes of rendering that come first in train_tiny
@@ -113,6 +121,12 @@ class TinyTrainConfig:
             raise ValueError(f"train.channels must be positive integers, got {list(self.channels)}")
         if self.architecture not in ARCHITECTURES:
             raise ValueError(f"train.architecture must be one of {', '.join(ARCHITECTURES)}, got {self.architecture!r}")
+        if self.target not in TARGETS:
+            raise ValueError(f"train.target must be one of {', '.join(TARGETS)}, got {self.target!r}")
+        if self.target == "metric" and self.architecture != "unet":
+            raise ValueError("train.target=metric trains the U-Net (kadv_tiny_metric): set train.architecture=unet")
+        if self.target == "metric" and self.augment == "strong":
+            raise ValueError("train.augment=strong zooms, which changes the depth a view's pixels imply: use basic")
         if self.augment not in AUGMENTATIONS:
             raise ValueError(f"train.augment must be one of {', '.join(AUGMENTATIONS)}, got {self.augment!r}")
         if HELD_OUT_SEED in (self.seed, self.val_seed) or self.seed == self.val_seed:
@@ -198,7 +212,7 @@ def fit(model: DepthModel, train: ViewBatch, config: TinyTrainConfig, progress: 
             train.rgb[index], train.depth[index], train.mask[index], generator, config.augment == "strong"
         )
         rgb, depth, mask = rgb.to(device), depth.to(device), mask.to(device)
-        loss = ssi_loss(_predict(model, rgb), depth, mask, config.gradient_weight)
+        loss = _LOSSES[config.target](_predict(model, rgb), depth, mask, config.gradient_weight)
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
@@ -208,6 +222,30 @@ def fit(model: DepthModel, train: ViewBatch, config: TinyTrainConfig, progress: 
     network.cpu()
     model.freeze()
     return losses
+
+
+def metric_log_loss(
+    prediction: torch.Tensor, gt_depth: torch.Tensor, mask: torch.Tensor, gradient_weight: float = 0.0, scales: int = 4
+) -> torch.Tensor:
+    """Mean |log(prediction) - log(depth)| over valid pixels, plus ``gradient_weight`` times the
+    multi-scale gradient matching of that residual: a metric depth prediction's loss, no alignment.
+
+    Examples:
+        >>> depth = 1.0 + torch.arange(64.0, dtype=torch.float64).reshape(1, 1, 8, 8) / 16
+        >>> mask = torch.ones_like(depth, dtype=torch.bool)
+        >>> metric_log_loss(depth, depth, mask, 0.5).item(), round(metric_log_loss(2 * depth, depth, mask).item(), 6)
+        (0.0, 0.693147)
+    """
+    weight = mask.to(prediction.dtype)
+    count = weight.sum(dim=(1, 2, 3)).clamp_min(1.0)
+    residual = weight * (prediction.clamp_min(1e-6).log() - gt_depth.clamp_min(1e-6).log())
+    loss = residual.abs().sum(dim=(1, 2, 3)) / count
+    if gradient_weight > 0:
+        loss = loss + gradient_weight * gradient_matching(residual, mask, scales)
+    return loss.mean()
+
+
+_LOSSES = {"disparity": ssi_loss, "metric": metric_log_loss}
 
 
 def _predict(model: DepthModel, rgb: torch.Tensor) -> torch.Tensor:
@@ -228,16 +266,27 @@ def render_training_views(config: TinyTrainConfig, progress: bool = True) -> tup
 def _load(path: str, architecture: str) -> DepthModel:
     if architecture == "dpt":
         return load_kadv_tiny_dpt(Path(path).expanduser())
-    return load_kadv_tiny(path)
+    return load_kadv_tiny(path, _kind(Path(path)))
+
+
+def _kind(path: Path) -> str:
+    """The output kind of kadv-tiny weights at ``path``."""
+    from safetensors import safe_open
+
+    with safe_open(str(path), framework="pt") as handle:
+        return json.loads(handle.metadata().get("output_kind", '"disparity"'))
 
 
 def _initial_model(config: TinyTrainConfig) -> DepthModel:
     torch.manual_seed(config.seed)  # here, so the initial weights depend on the seed alone
+    kind = "depth" if config.target == "metric" else "disparity"
     if config.init_weights is not None:
-        return _load(config.init_weights, config.architecture)
+        model = _load(config.init_weights, config.architecture)
+        # kadv-tiny's features start kadv-tiny-metric well: its head learns the other kind
+        return KadvTiny(model.network, kind) if isinstance(model, KadvTiny) else model
     if config.architecture == "dpt":
         return tiny_dpt_model(tiny_dpt_network())
-    return KadvTiny(TinyDepthNet(tuple(config.channels)))
+    return KadvTiny(TinyDepthNet(tuple(config.channels)), kind)
 
 
 def load_soup(model: DepthModel, paths: list[str], architecture: str) -> list[dict[str, torch.Tensor]]:
@@ -282,6 +331,9 @@ def train_tiny(
         "train_seconds": train_seconds,
         "final_loss": float(np.mean(losses[-100:])),
         "val_delta1": evaluate(model, val),
+        "output_kind": model.output_kind,
+        # a metric model's delta1 as it predicts, unaligned (None for a relative one)
+        "val_delta1_metric": evaluate(model, val, alignment="none") if model.output_kind == "depth" else None,
         "losses": losses,
     }
     return model, log

@@ -40,19 +40,25 @@ class Envelope:
         pitch_deg: (lowest, highest) pitch, degrees above the horizon.
         height: (lowest, highest) height of the optical centre above the first surface straight
             below it, metres.
+        fov_deg: (lowest, highest) horizontal field of view, degrees, that the search may set
+            (square pixels, centred principal point; :class:`kadv.attack.PoseSpace`); None: each
+            view keeps its init view's. The init view itself keeps its own.
     """
 
     name: str = "free"
     max_roll_deg: float | None = None
     pitch_deg: tuple[float, float] | None = None
     height: tuple[float, float] | None = None
+    fov_deg: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if self.max_roll_deg is not None and not (math.isfinite(self.max_roll_deg) and 0 <= self.max_roll_deg <= 180):
             raise ValueError(f"envelope.max_roll_deg must be in [0, 180] or null, got {self.max_roll_deg}")
-        for key, bounds, lowest, highest in (
-            ("pitch_deg", self.pitch_deg, -90.0, 90.0),
-            ("height", self.height, 0, None),
+        for key, bounds, span, within in (
+            ("pitch_deg", self.pitch_deg, "[-90, 90]", lambda low, high: -90 <= low and high <= 90),
+            ("height", self.height, ">= 0", lambda low, high: low >= 0),
+            # a pinhole's field of view lies strictly between 0 and 180 degrees; kadv keeps off both ends
+            ("fov_deg", self.fov_deg, "(1, 179)", lambda low, high: 1 < low and high < 179),
         ):
             if bounds is None:
                 continue
@@ -63,14 +69,13 @@ class Envelope:
             ):
                 raise ValueError(f"envelope.{key} must be [lowest, highest] or null, got {bounds!r}")
             low, high = bounds
-            if low > high or low < lowest or (highest is not None and high > highest):
-                span = f"[{lowest}, {highest}]" if highest is not None else f">= {lowest}"
+            if low > high or not within(low, high):
                 raise ValueError(f"envelope.{key} [{low}, {high}] is empty or leaves {span}")
             object.__setattr__(self, key, (float(low), float(high)))
 
     @property
     def free(self) -> bool:
-        """Whether the envelope bounds nothing (the study's protocol)."""
+        """Whether the envelope bounds no pose (roll, pitch, height); the field of view aside."""
         return self.max_roll_deg is None and self.pitch_deg is None and self.height is None
 
     def describe(self) -> str:
@@ -82,6 +87,8 @@ class Envelope:
             parts.append(f"pitch {self.pitch_deg[0]:g}° to {self.pitch_deg[1]:g}°")
         if self.height is not None:
             parts.append(f"height {self.height[0]:g} to {self.height[1]:g} m")
+        if self.fov_deg is not None:
+            parts.append(f"field of view {self.fov_deg[0]:g}° to {self.fov_deg[1]:g}°")
         return f"{self.name} ({', '.join(parts) or 'any pose'})"
 
     def figures(self, renderer: ExactRenderer, world_T_cam: torch.Tensor) -> EnvelopeFigures:

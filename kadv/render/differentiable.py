@@ -23,7 +23,7 @@ from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import perturb_world_T_cam
 from kadv.render.dibr import Reprojection, reproject, warp_boxed
 from kadv.render.layers import RING, AnchorLayers, camera_face_normals, render_anchor, ring_view
-from kadv.render.raycast import ExactRenderer, RenderOutput, pixel_angle
+from kadv.render.raycast import ExactRenderer, RenderOutput, pixel_angle, views_apart
 from kadv.render.silhouette import find_edge_pairs, silhouette_term
 from kadv.render.straight_through import straight_through
 
@@ -217,7 +217,8 @@ class DifferentiableRenderer:
             pose_params: (B, 6) = (omega, delta): rotation vector in the camera frame and centre
                 offset in world metres; usually ``requires_grad``.
             base_world_T_cam: (B, 4, 4) poses at pose_params = 0.
-            K: (3, 3) or (B, 3, 3) intrinsics.
+            K: (3, 3) or (B, 3, 3) intrinsics; the render is differentiable in them where they
+                require a gradient (a searched field of view).
             height: image height.
             width: image width.
         """
@@ -225,28 +226,29 @@ class DifferentiableRenderer:
         check_values(torch.isfinite(pose_params.detach()), "pose_params: contain NaN or inf")
         base = torch.as_tensor(base_world_T_cam, dtype=torch.float64).reshape(-1, 4, 4)
         world_T_cam = perturb_world_T_cam(base, pose_params[:, :3].double(), pose_params[:, 3:].double())
-        K = batched_intrinsics(K, base.shape[0])
+        K_view = batched_intrinsics(K, base.shape[0])  # the warps' and the edges' (differentiable)
+        K = K_view.detach()  # the casts'
         current = world_T_cam.detach()
         refreshed = self._due_for_refresh(K, height, width)
         warped, exact_next, self._exact_next = False, self._exact_next, False
         if self.config.values == "warp" and not (refreshed or exact_next):
-            frame, agreement = self._warped_frame(current, world_T_cam, K, height, width)
+            frame, agreement = self._warped_frame(current, world_T_cam, K_view, height, width)
             # an anchor that drifted too far is rendered again, and the view with it
             refreshed = self.config.refresh == "on_drift" and agreement.drifted(self.config)
             warped = not refreshed
         if not warped:
             anchor = self._refresh(current, K, height, width) if refreshed else None
             frame = self._exact_frame(current, K, height, width, anchor)
-            warp, agreement, refreshed = self._checked_warp(frame, world_T_cam, K, height, width, refreshed)
+            warp, agreement, refreshed = self._checked_warp(frame, world_T_cam, K_view, height, width, refreshed)
             rgb, depth = self._values(frame, warp)
         else:
             rgb, depth = frame.rgb, frame.depth
         self._steps_since_refresh += 1
         if self.config.silhouette:
             pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K, self.compact_edges)
-            term = silhouette_term(
-                self.renderer, pairs, world_T_cam, frame.K, torch.cat([frame.rgb_rendered, frame.depth_rendered], dim=1)
-            )[frame.inside]
+            K_edges = self._render_view(K_view, height, width)[1] if K_view.requires_grad else frame.K
+            values = torch.cat([frame.rgb_rendered, frame.depth_rendered], dim=1)
+            term = silhouette_term(self.renderer, pairs, world_T_cam, K_edges, values)[frame.inside]
             rgb, depth = rgb + term[:, :3], depth + term[:, 3:]
         return DiffRenderOutput(
             rgb=rgb,
@@ -296,15 +298,17 @@ class DifferentiableRenderer:
         self, current: torch.Tensor, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int
     ) -> tuple[_ExactFrame, WarpAgreement]:
         """The frame's values from the warp: the view (with its ring) cast without shading for
-        the depth test, the anchor warped onto it, and the pixels no layer holds shaded exactly.
-        Its agreement: the warp's coverage and depth error against the cast (no exact colour)."""
-        border, K_render, render_height, render_width, inside = self._render_view(K, height, width)
+        the depth test, the anchor warped onto it (differentiable in the intrinsics ``K`` too), and
+        the pixels no layer holds shaded exactly. Its agreement: the warp's coverage and depth
+        error against the cast (no exact colour)."""
+        border, K_warp, render_height, render_width, inside = self._render_view(K, height, width)
+        K_render = K_warp.detach()
         cast = self.renderer.render(current, K_render, render_height, render_width, colour=False)
         cast_depth = cast.depth.to(self.device)
         A_T_P = torch.linalg.inv_ex(self.anchor.world_T_cam)[0] @ world_T_cam  # inv_ex: no wait for its check
         normals = camera_face_normals(self.renderer.surfaces, cast.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
         warp = warp_boxed(
-            self.anchor.boxed, cast_depth, normals.to(self.device), A_T_P, K_render, self.config.depth_tolerance
+            self.anchor.boxed, cast_depth, normals.to(self.device), A_T_P, K_warp, self.config.depth_tolerance
         )
         holes = self._shade_holes(current, K_render, render_height, render_width, ~warp.valid)
         rgb = torch.where(warp.valid, warp.rgb, holes)
@@ -345,12 +349,25 @@ class DifferentiableRenderer:
         pose = world_T_cam.detach().double().to(view.device)[view]
         directions = pixels @ K_inv.transpose(1, 2) @ pose[:, :3, :3].transpose(1, 2)  # camera z = 1
         origins = pose[:, None, :3, 3].expand_as(directions)
-        _, shaded = self.renderer.cast_and_shade(
-            origins.reshape(-1, 3), directions.reshape(-1, 3), pixel_angle(K) / s, True, False
-        )
-        colours = shaded["rgb"].reshape(-1, s * s, 3).mean(1).to(self.device, torch.float32)
+        colours = self._colours(origins.reshape(-1, 3), directions.reshape(-1, 3), K, view.repeat_interleave(s * s))
+        colours = colours.reshape(-1, s * s, 3).mean(1).to(self.device, torch.float32)
         index = tuple(i.to(self.device) for i in (view, row, column))
         return rgb.permute(0, 2, 3, 1).index_put(index, colours).permute(0, 3, 1, 2)
+
+    def _colours(
+        self, origins: torch.Tensor, directions: torch.Tensor, K: torch.Tensor, ray_view: torch.Tensor
+    ) -> torch.Tensor:
+        """(N, 3) shaded colours of sub-pixel rays (N, 3) of the views ``ray_view`` (N,) with
+        intrinsics ``K``, each view's at its own footprint when their intrinsics differ."""
+        s = self.config.supersample
+        if not views_apart(K):
+            return self.renderer.cast_and_shade(origins, directions, pixel_angle(K) / s, True, False)[1]["rgb"]
+        colours = torch.zeros(len(origins), 3, dtype=torch.float32, device=origins.device)
+        for b in torch.unique(ray_view).tolist():
+            rays = ray_view == b
+            shaded = self.renderer.cast_and_shade(origins[rays], directions[rays], pixel_angle(K[b]) / s, True, False)
+            colours[rays] = shaded[1]["rgb"].to(colours)
+        return colours
 
     def _checked_warp(
         self, frame: _ExactFrame, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int, refreshed: bool
@@ -361,7 +378,7 @@ class DifferentiableRenderer:
         warp = self._warp(frame.depth, frame.normals, world_T_cam, K, True if refreshed else None)
         agreement = WarpAgreement.of(warp, frame.rgb, frame.depth, frame.mask)
         if self.config.refresh == "on_drift" and not refreshed and agreement.drifted(self.config):
-            self._refresh(world_T_cam.detach(), K, height, width)
+            self._refresh(world_T_cam.detach(), K.detach(), height, width)
             refreshed = True
             warp = self._warp(frame.depth, frame.normals, world_T_cam, K, True)
             agreement = WarpAgreement.of(warp, frame.rgb, frame.depth, frame.mask)

@@ -18,7 +18,7 @@ from torch.nn import functional as F
 
 from kadv.geometry.camera import batched_intrinsics, camera_rays, world_rays
 from kadv.geometry.pose import check_world_T_cam
-from kadv.render.raycast import ExactRenderer, RayHits, pixel_angle
+from kadv.render.raycast import ExactRenderer, RayHits, concatenated, pixel_angle, views_apart
 from kadv.render.surface import Surfaces
 
 __all__ = [
@@ -199,6 +199,11 @@ def render_anchor(
     pose = check_world_T_cam(world_T_cam).detach().double()
     batch = pose.shape[0]
     K = batched_intrinsics(K, batch)
+    if views_apart(K):  # each view's pixels filtered at its own footprint
+        return concatenated([
+            render_anchor(renderer, pose[b : b + 1], K[b], height, width, layers, guard_band, supersample)
+            for b in range(batch)
+        ])  # fmt: skip
     K_anchor = guard_band_intrinsics(K, guard_band, supersample)
     h, w = supersample * (height + 2 * guard_band), supersample * (width + 2 * guard_band)
     rays_cam = camera_rays(K_anchor, h, w, device=renderer.device)

@@ -23,7 +23,15 @@ from kadv.render.shading import Shader, Shading, compact_rows
 from kadv.render.surface import RayHits, Surfaces
 from kadv.scenes.scene import Scene
 
-__all__ = ["DEFAULT_MAX_RAYS", "ExactRenderer", "RayHits", "RenderOutput", "pixel_angle"]
+__all__ = [
+    "DEFAULT_MAX_RAYS",
+    "ExactRenderer",
+    "RayHits",
+    "RenderOutput",
+    "concatenated",
+    "pixel_angle",
+    "views_apart",
+]
 
 _MIN_HIT_DEPTH = 1e-6  # metres
 
@@ -78,6 +86,23 @@ def pixel_angle(K: torch.Tensor) -> float:
     """Angle in radians one pixel subtends at the image centre (the smallest of the batch)."""
     K = torch.as_tensor(K, dtype=torch.float64).reshape(-1, 3, 3)
     return float(1.0 / torch.maximum(K[:, 0, 0], K[:, 1, 1]).max())
+
+
+def views_apart(K: torch.Tensor) -> bool:
+    """Whether the intrinsics (B, 3, 3) differ over the batch (a searched field of view). Each view
+    is then rendered on its own, so that a pixel's footprint (:func:`pixel_angle`: texture
+    filtering, the smoothing of reflections) is its own view's and a view renders the same in any batch."""
+    K = torch.as_tensor(K)
+    return K.ndim == 3 and len(K) > 1 and not bool((K == K[:1]).all())
+
+
+def concatenated(parts: list):
+    """One dataclass of the batches ``parts`` (dataclasses of one type): tensors concatenated along
+    the batch, anything else (None, a count) the first's."""
+    first = parts[0]
+    values = {f.name: getattr(first, f.name) for f in fields(first)}
+    joined = {k: torch.cat([getattr(p, k) for p in parts]) for k, v in values.items() if isinstance(v, torch.Tensor)}
+    return type(first)(**(values | joined))
 
 
 DEFAULT_MAX_RAYS = 2**22  # rays cast and shaded at once: about 1 GiB of temporaries (220 bytes a ray, measured)
@@ -282,6 +307,14 @@ class ExactRenderer:
         Raises:
             ValueError: on a NaN or non-rigid pose, bad intrinsics or a bad size.
         """
+        if views_apart(K):
+            pose = world_T_cam.reshape(-1, 4, 4)
+            given = {"sub_rgb": sub_rgb, "sub_ids": sub_ids, "sub_terms": sub_terms}
+            return concatenated([
+                self.render(pose[b : b + 1], K[b], height, width, supersample, colour=colour,
+                            **{key: None if value is None else value[b : b + 1] for key, value in given.items()})
+                for b in range(len(pose))
+            ])  # fmt: skip
         origins, directions = pixel_rays(world_T_cam, K, height, width, device=self.device)
         batch, s = origins.shape[0], supersample
         angle = pixel_angle(K)

@@ -57,13 +57,20 @@ _TITLE_BAND, _BOTTOM = 0.6, 0.1
 
 
 def save_four_panel(
-    path: str | Path, rgb: np.ndarray, depth: np.ndarray, prediction: np.ndarray, mask: np.ndarray, title: str
+    path: str | Path,
+    rgb: np.ndarray,
+    depth: np.ndarray,
+    prediction: np.ndarray,
+    mask: np.ndarray,
+    title: str,
+    alignment: str = "scale_shift",
 ) -> Path:
     """Image | ground-truth depth | aligned prediction | relative error, as one PNG.
 
     Args:
         rgb: (H, W, 3) in [0, 1]; depth, prediction: (H, W) metres (the prediction aligned to the
-            ground truth), sharing one colour map; mask: (H, W) valid ground truth.
+            ground truth by ``alignment``, which its panel names), sharing one colour map; mask:
+            (H, W) valid ground truth.
         title: the figure's title (the view's metrics).
     """
     low, high = depth_range(depth, mask)
@@ -85,7 +92,8 @@ def save_four_panel(
     axes[0].imshow(np.clip(rgb, 0, 1))
     axes[0].set_title("rendered image")
     shown = [np.ma.masked_where(~mask, depth), np.ma.masked_where(~mask, prediction)]
-    for axis, values, name in zip(axes[1:3], shown, ("ground-truth depth", "prediction (aligned)")):
+    aligned = "prediction (as predicted)" if alignment == "none" else f"prediction (aligned: {alignment})"
+    for axis, values, name in zip(axes[1:3], shown, ("ground-truth depth", aligned)):
         image = axis.imshow(values, cmap=depth_colour_map(), vmin=low, vmax=high, interpolation="nearest")
         axis.set_title(name)
     figure.colorbar(image, cax=axes_at(depth_bar, _BAR_WIDTH), label="depth [m], grey: no surface")

@@ -23,7 +23,8 @@ import torch
 
 from kadv.attack import AttackResult, InitView, InitViewResult, Objective, ViewRecord, best_so_far, incumbent_path
 from kadv.attack.records import Budget
-from kadv.geometry import intrinsics_from_fov
+from kadv.attack.space import FOV
+from kadv.geometry import fov_intrinsics
 from kadv.io import atomic_write
 from kadv.losses import aligned_depth
 from kadv.penalties.validity import UNINFORMATIVE
@@ -125,7 +126,9 @@ def trajectory_rows(result: AttackResult) -> list[dict]:
             row.update({f"theta_{a}": v for a, v in zip("xyz", r.theta)})
             row.update({f"c_{a}": v for a, v in zip("xyz", r.centre)})
             row.update({f"omega_{a}": v for a, v in zip("xyz", r.params[:3])})
-            row.update({f"delta_{a}": v for a, v in zip("xyz", r.params[3:])})
+            row.update({f"delta_{a}": v for a, v in zip("xyz", r.params[3:6])})
+            if len(r.params) > FOV:  # the field of view was searched
+                row["fov_offset_deg"] = r.params[FOV]
             row.update(
                 {
                     f.name: getattr(r, f.name)
@@ -157,6 +160,8 @@ def read_trajectory(path: str | Path) -> dict[int, list[ViewRecord]]:
             "centre": _vector(row, "c"),
             "params": _vector(row, "omega") + _vector(row, "delta"),
         }
+        if row.get("fov_offset_deg"):
+            values["params"].append(float(row["fov_offset_deg"]))
         records.setdefault(int(row["init_view"]), []).append(ViewRecord(**values))
     return records
 
@@ -178,7 +183,8 @@ class ViewRenderer:
 
     def __call__(self, init: InitView, records: list[ViewRecord]) -> dict[str, np.ndarray]:
         poses = torch.stack([r.world_T_cam(init.world_T_cam) for r in records])
-        K = intrinsics_from_fov(init.fov_x_deg, self.height, self.width)
+        fov = torch.tensor([r.fov(init.fov_x_deg) for r in records], dtype=torch.float64)
+        K = fov_intrinsics(fov, self.height, self.width)
         with torch.no_grad():
             out = self.objective.renderer.render(poses, K, self.height, self.width, self.supersample).to("cpu")
             prediction = self.objective.model(out.rgb, K)
@@ -195,21 +201,22 @@ class ViewRenderer:
         }
 
 
-def _title(label: str, record: ViewRecord) -> str:
+def _title(label: str, record: ViewRecord, init: InitView) -> str:
     return (
-        f"{label}: L_depth {record.l_depth:.4f}, delta1 {record.delta1:.3f}, AbsRel {record.abs_rel:.3f} "
-        f"(step {record.step}, restart {record.restart})"
+        f"{label}: L_depth {record.l_depth:.4f}, delta1 {record.delta1:.3f}, AbsRel {record.abs_rel:.3f}, "
+        f"field of view {record.fov(init.fov_x_deg):.1f}° (step {record.step}, restart {record.restart})"
     )
 
 
-def _four_panel(path: Path, maps: dict[str, np.ndarray], b: int, title: str) -> Path:
+def _four_panel(path: Path, maps: dict[str, np.ndarray], b: int, title: str, alignment: str) -> Path:
     """View ``b`` of a :class:`ViewRenderer`'s maps as a four-panel PNG."""
-    return save_four_panel(path, maps["rgb"][b], maps["depth"][b], maps["aligned"][b], maps["mask"][b], title)
+    views = (maps["rgb"][b], maps["depth"][b], maps["aligned"][b], maps["mask"][b])
+    return save_four_panel(path, *views, title, alignment)
 
 
 def save_view_picture(path: str | Path, render: ViewRenderer, init: InitView, record: ViewRecord, label: str) -> Path:
     """The recorded view ``record`` from ``init`` as a four-panel PNG at ``path``, titled with its metrics."""
-    return _four_panel(Path(path), render(init, [record]), 0, _title(label, record))
+    return _four_panel(Path(path), render(init, [record]), 0, _title(label, record, init), render.objective.alignment)
 
 
 def _save_views(views_dir: Path, index: int, view: InitViewResult, render: ViewRenderer) -> list[str]:
@@ -218,8 +225,8 @@ def _save_views(views_dir: Path, index: int, view: InitViewResult, render: ViewR
     maps = render(view.init, records)
     for b, (name, record) in enumerate(zip(names, records)):
         label = "init view" if b == 0 else f"adversarial view {b}"
-        _four_panel(views_dir / f"{name}.png", maps, b, _title(label, record))
-        arrays = {k: v[b] for k, v in maps.items() if k != "K"} | {"K": maps["K"]}
+        _four_panel(views_dir / f"{name}.png", maps, b, _title(label, record, view.init), render.objective.alignment)
+        arrays = {k: v[b] for k, v in maps.items()}
         atomic_write(views_dir / f"{name}.npz", lambda tmp, a=arrays: np.savez_compressed(str(tmp), **a))
     return [f"views/{name}.png" for name in names]
 
@@ -249,6 +256,7 @@ def _video_frames(view: InitViewResult, render: ViewRenderer, plan: PlanRaster) 
             best = [r for r in incumbents if order[id(r)] <= order[id(record)]]
             text = (
                 f"{view.init.name}  step {record.step}  L_depth {record.l_depth:.4f}  delta1 {record.delta1:.3f}"
+                f"  fov {record.fov(view.init.fov_x_deg):.0f}°"
                 f"  (best so far: delta1 {best[-1].delta1:.3f})   image | depth | prediction | |pred-gt|/gt | plan"
             )
             trail = np.array([r.centre for r in best])

@@ -8,7 +8,8 @@ reuses a result of another shape.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass
+import math
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from kadv.attack import InitView, InitViewResult, ViewRecord
@@ -46,7 +47,8 @@ def _read_json(path: Path) -> dict:
 
 @dataclass
 class ViewMetrics:
-    """One evaluated view as a summary reports it: the objective's terms, accuracy and pose."""
+    """One evaluated view as a summary reports it: the objective's terms, accuracy and pose, and its
+    horizontal field of view in degrees (None: its init view's, in a summary written without it)."""
 
     l_depth: float
     l_dist: float
@@ -59,6 +61,7 @@ class ViewMetrics:
     step: int
     restart: int
     png: str
+    fov_x_deg: float | None = None
 
     @classmethod
     def of(cls, record: ViewRecord, png: str) -> ViewMetrics:
@@ -74,6 +77,7 @@ class ViewMetrics:
             record.step,
             record.restart,
             png,
+            None if math.isnan(record.fov_x_deg) else record.fov_x_deg,
         )
 
 
@@ -130,8 +134,10 @@ class InitViewSummary:
 
 @dataclass
 class RunInfo:
-    """What a run was: scene, model, loss, seed, device, image size, the init views it resumed, and
-    the model passes that chose its init views (counted apart from the searches' budgets)."""
+    """What a run was: scene, model, loss, seed, device, image size, the init views it resumed, the
+    model passes that chose its init views (counted apart from the searches' budgets) and the
+    range of horizontal fields of view the search could set (``envelope.fov_deg``; None: each view
+    kept its init view's)."""
 
     scene: str
     model: str
@@ -142,6 +148,7 @@ class RunInfo:
     width: int
     resumed_init_views: list[int]
     init_passes: int
+    fov_deg: list[float] | None = field(default=None, kw_only=True)
 
 
 @dataclass

@@ -79,7 +79,7 @@ def camera_views(run: RunRecord) -> list[CameraView]:
                     name,
                     init.index,
                     arrays["world_T_cam"],
-                    init.fov_x_deg,
+                    metrics.fov_x_deg if metrics.fov_x_deg is not None else init.fov_x_deg,
                     metrics.delta1,
                     metrics.l_depth,
                     run.path / metrics.png,
@@ -263,7 +263,7 @@ class RunViewer:
         self.panel.image = iio.imread(camera.panel)[..., :3]
         self.metrics.content = (
             f"**{name}**: delta1 {camera.delta1:.3f}, L_depth {camera.l_depth:.4f}, "
-            f"centre {np.round(camera.world_T_cam[:3, 3], 3).tolist()}"
+            f"field of view {camera.fov_x_deg:.1f}°, centre {np.round(camera.world_T_cam[:3, 3], 3).tolist()}"
         )
         self._steps = self.records[camera.init_index]
         self.step.max = max(len(self._steps) - 1, 1)
@@ -277,12 +277,12 @@ class RunViewer:
         record = self._steps[min(index, len(self._steps) - 1)]
         camera = self.views[self.view_choice.value]
         init = self.views[f"init{camera.init_index}"]
-        self._add_frustum(
-            "/step", camera, record.world_T_cam(torch.from_numpy(init.world_T_cam)).numpy(), _STEP_FRUSTUM
-        )
+        pose = record.world_T_cam(torch.from_numpy(init.world_T_cam)).numpy()
+        fov = record.fov(init.fov_x_deg)
+        self._add_frustum("/step", camera, pose, _STEP_FRUSTUM, fov_x_deg=fov)
         self.step_text.content = (
             f"step {record.step}, lane {record.restart}: L_depth {record.l_depth:.4f}, "
-            f"delta1 {record.delta1:.3f}, {record.verdict}"
+            f"delta1 {record.delta1:.3f}, field of view {fov:.1f}°, {record.verdict}"
         )
 
     def _add_frustum(
@@ -293,12 +293,15 @@ class RunViewer:
         scale: float,
         colour: tuple[int, int, int] = _STEP_COLOUR,
         image: np.ndarray | None = None,
+        fov_x_deg: float | None = None,
     ):
-        """A frustum of ``camera``'s field of view and aspect at ``world_T_cam`` (4, 4)."""
+        """A frustum of ``camera``'s aspect at ``world_T_cam`` (4, 4), of its field of view or
+        ``fov_x_deg``."""
         height, width = camera.image.shape[:2]
+        fov_x_deg = camera.fov_x_deg if fov_x_deg is None else fov_x_deg
         return self.server.scene.add_camera_frustum(
             name,
-            fov=float(2 * np.arctan(np.tan(np.radians(camera.fov_x_deg) / 2) * height / width)),
+            fov=float(2 * np.arctan(np.tan(np.radians(fov_x_deg) / 2) * height / width)),
             aspect=width / height,
             scale=scale,
             thickness=_FRUSTUM_LINE,

@@ -434,13 +434,14 @@ def _typical(
     from kadv.geometry import perturb_world_T_cam
 
     context = SearchContext(objective, differentiable, init, *size, config)
-    sobol = qmc.Sobol(6, scramble=True, seed=np.random.default_rng([seed, index, 7]))
+    space = context.space
+    sobol = qmc.Sobol(space.dims, scramble=True, seed=np.random.default_rng([seed, index, 7]))
     chosen = []
     # rejection keeps the draws uniform within the envelope; a tight envelope (robot's roll of 2
     # degrees in a 45-degree ball) keeps few of them, so the design is drawn on in rounds
     for _ in range(_DRAW_ROUNDS):
-        params = config.sample_ball(sobol.random(4 * count))
-        poses = perturb_world_T_cam(context.base(len(params)).cpu(), params[:, :3], params[:, 3:])
+        params = space.sample(sobol.random(4 * count))
+        poses = perturb_world_T_cam(context.base(len(params)).cpu(), params[:, :3], params[:, 3:6])
         inside = [reason is None for reason in config.envelope.figures(objective.renderer, poses).reasons()]
         chosen += list(params[torch.tensor(inside)])
         if len(chosen) >= count:
@@ -547,13 +548,14 @@ def search_radii(
 
 
 def warm_starts(results: list, views: int, count: int, config) -> dict[int, torch.Tensor]:
-    """Per init view, the pose parameters (N, 6) of the ``count`` worst separated views that the
-    attack ``results`` found from it."""
+    """Per init view, the points (N, dims) of the pose space of the ``count`` worst separated views
+    that the attack ``results`` found from it."""
     starts = {}
     for index in range(views):
         records = [r for result in results for r in result.views[index].records]
         chosen = worst_views(records, count, config.min_separation, config.min_separation_deg)
-        starts[index] = torch.tensor([r.params for r in chosen], dtype=torch.float64).reshape(-1, 6)
+        dims = len(records[0].params) if records else 6
+        starts[index] = torch.tensor([r.params for r in chosen], dtype=torch.float64).reshape(-1, dims)
     return starts
 
 

@@ -42,6 +42,8 @@ class InitViewOutcome:
         seconds: the search's seconds from this init view.
         picture: the worst view's four-panel PNG (image | depth | prediction | error).
         world_T_cam: the worst view's pose (4, 4).
+        fov_x_deg: the worst view's horizontal field of view, degrees (its init view's unless
+            the envelope's ``fov_deg`` freed it).
     """
 
     name: str
@@ -55,6 +57,7 @@ class InitViewOutcome:
     seconds: float = field(compare=False)  # the machine's, not the result's
     picture: Path
     world_T_cam: list[list[float]] = field(repr=False)
+    fov_x_deg: float = 70.0
 
     @property
     def delta1_drop(self) -> float:
@@ -184,6 +187,7 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
                 seconds=view.budget.seconds,
                 picture=picture,
                 world_T_cam=pose.tolist(),
+                fov_x_deg=worst.fov(view.init.fov_x_deg),
             )
         )
     return RobustnessResult(

@@ -169,7 +169,7 @@ def test_every_method_runs_the_model_no_more_than_its_budget_of_passes(
     assert spent == sorted(spent) and spent[-1] <= budget
     assert view.init_record.params == [0.0] * 6 and view.path[0].step == 0 and view.path[-1] in view.records
     assert all(r.valid for r in view.top)
-    half = AttackConfig().search_box()
+    half = AttackConfig().space(70.0).box()[1]
     for record in view.records:  # every pose stays in the bounds' box
         assert all(abs(p) <= h + 1e-9 for p, h in zip(record.params, half.tolist()))
 
@@ -556,6 +556,33 @@ def test_every_method_keeps_its_chosen_views_inside_the_envelope(method, tiny_ob
     assert view.top and all(r.valid for r in view.top)
 
 
+@pytest.mark.parametrize("method", BUILT_IN)
+def test_every_method_moves_the_field_of_view_within_its_range_when_the_envelope_frees_it(
+    method, tiny_objective, differentiable, file_view
+) -> None:
+    free_fov = Envelope("custom", fov_deg=(40.0, 100.0))
+    result = _run(tiny_objective, differentiable, [file_view], (24, 32), method, budget_passes=24, envelope=free_fov)
+    records = result.views[0].records
+    assert records[0].params == [0.0] * 7 and records[0].fov_x_deg == file_view.fov_x_deg  # the init view's own
+    assert all(len(r.params) == 7 and r.fov_x_deg == pytest.approx(file_view.fov_x_deg + r.params[6]) for r in records)
+    assert all(40.0 - 1e-9 <= r.fov_x_deg <= 100.0 + 1e-9 for r in records)
+    assert len({round(r.fov_x_deg, 6) for r in records}) > 2  # it moved
+    # a fixed field of view stays the init view's, in six coordinates
+    fixed = _run(tiny_objective, differentiable, [file_view], (24, 32), method, budget_passes=12).views[0].records
+    assert all(len(r.params) == 6 and r.fov_x_deg == file_view.fov_x_deg for r in fixed)
+
+
+def test_a_recorded_view_is_rendered_at_its_own_field_of_view(tiny_objective, differentiable, file_view) -> None:
+    free_fov = Envelope("custom", fov_deg=(40.0, 100.0))
+    result = _run(tiny_objective, differentiable, [file_view], (24, 32), "random", budget_passes=9, envelope=free_fov)
+    record = max(result.views[0].records, key=lambda r: abs(r.params[6]))
+    pose = record.world_T_cam(file_view.world_T_cam)[None]
+    for fov, same in ((record.fov_x_deg, True), (file_view.fov_x_deg, False)):
+        out = tiny_objective.renderer.render(pose, intrinsics_from_fov(fov, 24, 32), 24, 32, supersample=2)
+        delta1 = float(tiny_objective(out.rgb, out.depth, out.mask, pose).delta1)
+        assert (delta1 == pytest.approx(record.delta1, abs=1e-6)) == same
+
+
 def test_an_init_view_outside_the_envelope_is_moved_into_it_or_refused(tiny_objective, file_view) -> None:
     renderer, margin = tiny_objective.renderer, PenaltyConfig().margin
     tilted = perturb_world_T_cam(
@@ -654,7 +681,7 @@ def test_halving_starts_from_warm_starts_and_its_local_lanes_step_within_their_t
     first = [r for r in view.records if r.step == 1]
     np.testing.assert_allclose([r.params for r in first], starts.numpy())  # the warm starts, evaluated exactly
     assert all(not r.screened for r in first)
-    half = config.search_box().numpy()
+    half = config.space(file_view.fov_x_deg).box()[1].numpy()
     proposals = [r for r in view.records if r.step >= 4 and r.screened]
     exact = [r for r in view.records if r.step >= 4 and not r.screened]
     # four draws per lane and step, the last step fewer, each lane's best re-scored exactly
@@ -752,10 +779,11 @@ def test_turbo_closes_in_on_an_analytic_maximum_where_its_design_alone_does_not(
 
     config = AttackConfig("turbo", TurboSettings(init_views=8), budget_passes=None, budget_seconds=1.0)
     context = SearchContext(tiny_objective, differentiable, file_view, H, W, config)
-    target = torch.tensor([0.3, -0.2, 0.1, 0.4, 0.2, -0.3], dtype=torch.float64) * config.search_box()
+    half = context.space.box()[1]
+    target = torch.tensor([0.3, -0.2, 0.1, 0.4, 0.2, -0.3], dtype=torch.float64) * half
 
     def told(params: torch.Tensor) -> list[ViewRecord]:
-        misses = ((params - target) / config.search_box()).square().sum(dim=1)  # a smooth bowl in the unit box
+        misses = ((params - target) / half).square().sum(dim=1)  # a smooth bowl in the unit box
         return [
             dataclasses.replace(_record(0.0, [0.0] * 3), params=p.tolist(), objective=-m)
             for p, m in zip(params, misses.tolist())
@@ -765,7 +793,7 @@ def test_turbo_closes_in_on_an_analytic_maximum_where_its_design_alone_does_not(
     best = []
     for _ in range(14):
         params = proposer.ask(8)
-        assert len(params) <= 8 and (params.abs() <= config.search_box() + 1e-9).all()
+        assert len(params) <= 8 and (params.abs() <= half + 1e-9).all()
         proposer.tell(told(params))
         best.append(float(proposer.y.max()))
     assert best == sorted(best)  # the best seen never falls

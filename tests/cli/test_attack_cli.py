@@ -128,9 +128,11 @@ def test_run_directory_holds_every_artefact(demo_runs: Path) -> None:
     assert (run / "trajectory.mp4").stat().st_size > 1000
     assert not (demo_runs / "second" / "trajectory.mp4").exists()
     assert "attack" in (run / "config.yaml").read_text()
-    # each row ends with the view's yaw, pitch and roll, the same as its rotation gives them
+    # each row ends with the view's yaw, pitch and roll, the same as its rotation gives them, and
+    # its field of view: the init view's, as the search did not set it
     rows = list(csv.DictReader((run / "trajectory.csv").open()))
-    assert list(rows[0])[-3:] == ["yaw_deg", "pitch_deg", "roll_deg"]
+    assert list(rows[0])[-4:] == ["yaw_deg", "pitch_deg", "roll_deg", "fov_x_deg"]
+    assert {float(r["fov_x_deg"]) for r in rows} == {70.0} and "fov_offset_deg" not in rows[0]
     theta = torch.tensor([[float(r[f"theta_{a}"]) for a in "xyz"] for r in rows], dtype=torch.float64)
     angles = torch.rad2deg(yaw_pitch_roll(axis_angle_to_matrix(theta)))
     written = torch.tensor([[float(r[k]) for k in ("yaw_deg", "pitch_deg", "roll_deg")] for r in rows])
@@ -304,7 +306,9 @@ BAD_INPUTS = [
         ["render.differentiable.cuda_graphs=maybe"],
         "render.differentiable.cuda_graphs must be true or false, got 'maybe'",
     ),
-    ("kadv-attack", ["envelope.pitch_deg=[30,-30]"], "envelope.pitch_deg [30, -30] is empty or leaves [-90.0, 90.0]"),
+    ("kadv-attack", ["envelope.pitch_deg=[30,-30]"], "envelope.pitch_deg [30, -30] is empty or leaves [-90, 90]"),
+    ("kadv-attack", ["envelope.fov_deg=[100,40]"], "envelope.fov_deg [100, 40] is empty or leaves (1, 179)"),
+    ("kadv-attack", ["envelope.fov_deg=[40,180]"], "envelope.fov_deg [40, 180] is empty or leaves (1, 179)"),
     (
         "kadv-attack",
         ["envelope.height=[5,6]", "init.count=1"],
@@ -436,3 +440,39 @@ def test_a_run_with_restarts_says_beside_each_worst_how_many_runs_reached_it(tmp
         assert view.agreement.runs == 2 and view.agreement.planned == 3 and view.budget.passes == 20
     rows = list(csv.DictReader((tmp_path / "run" / "trajectory.csv").open()))
     assert {row["run"] for row in rows} == {"0", "1"}
+
+
+def test_a_run_with_a_free_field_of_view_names_each_view_s_in_its_table_files_and_pictures(tmp_path: Path) -> None:
+    small = [o for o in SMALL if not o.startswith("attack")]
+    overrides = ["render.lighting=direct", "attack.budget_passes=20", "envelope.fov_deg=[40,100]"]
+    result = _run_in_process("kadv-attack", tmp_path / "run", *small, *overrides)
+    assert result.returncode == 0, result.stderr
+    assert "| agreement | fov init | fov adv (40° to 100°) |" in result.stdout
+    summary = RunSummary.read(tmp_path / "run" / "summary.json")
+    assert summary.fov_deg == [40.0, 100.0]
+    for view in summary.init_views:
+        assert view.fov_x_deg == 70.0 and view.init.fov_x_deg == 70.0  # the init views keep their own
+        fovs = [a.fov_x_deg for a in view.adversarial]
+        assert all(40.0 <= f <= 100.0 for f in fovs)
+        assert f"| 70° | {', '.join(f'{f:.0f}°' for f in fovs)} |" in result.stdout
+        for metrics in [view.init, *view.adversarial]:  # each picture's camera is its view's
+            K = np.load(tmp_path / "run" / metrics.png.replace(".png", ".npz"))["K"]
+            assert np.allclose(K[0, 0], 32.0 / np.tan(np.radians(metrics.fov_x_deg) / 2))
+    records = [r for view in read_trajectory(tmp_path / "run" / "trajectory.csv").values() for r in view]
+    assert all(len(r.params) == 7 and r.fov_x_deg == pytest.approx(70.0 + r.params[6]) for r in records)
+    assert len({round(r.fov_x_deg, 3) for r in records}) > 10  # the search moved it
+
+
+def test_the_metric_model_s_command_names_its_alignment_and_each_view_s_field_of_view(tmp_path: Path) -> None:
+    """``kadv-attack model=kadv_tiny_metric loss.alignment=none envelope.fov_deg=[40,100]``, at a
+    small size: the embedded metric model scored in metres with the field of view searched."""
+    command = ["model=kadv_tiny_metric", "loss.alignment=none", "envelope.fov_deg=[40,100]"]
+    small = [o for o in SMALL if not o.startswith("attack")]
+    result = _run_in_process("kadv-attack", tmp_path / "run", *small, "attack.budget_passes=20", *command)
+    assert result.returncode == 0, result.stderr
+    header = "| delta1 init (none) | delta1 adv (none) | agreement | fov init | fov adv (40° to 100°) |"
+    assert header in result.stdout
+    summary = RunSummary.read(tmp_path / "run" / "summary.json")
+    assert summary.model == "kadv_tiny_metric" and summary.alignment == "none" and summary.fov_deg == [40.0, 100.0]
+    for view in summary.init_views:
+        assert all(40.0 <= a.fov_x_deg <= 100.0 for a in view.adversarial) and view.adversarial

@@ -39,3 +39,17 @@ def test_gradient_check_on_box_room_poses_meets_the_thresholds(backend: str) -> 
     scores = np.array([[c.score(f) for f in FUNCTIONALS] for c in checks["default"]])
     assert np.median(scores[:, 0]) >= 0.99 and np.median(scores[:, 1]) >= 0.99  # interior rgb, depth
     assert np.median(scores[:, 2]) >= 0.95 and np.median(scores[:, 3]) >= 0.95  # full rgb, depth
+
+
+def test_the_focal_length_s_derivative_meets_the_pose_s_thresholds() -> None:
+    """The derivative a searched field of view moves along, as benchmarks/gradcheck.py checks it,
+    on three box-room poses: its cosine over eight weight maps per functional."""
+    renderer = ExactRenderer(box_room(seed=0))
+    configs = {"default": DiffRenderConfig(), "no silhouettes": DiffRenderConfig(silhouette=False)}
+    checks = gradient_check_poses(renderer, 3, 0, 70.0, 48, 64, configs, steps=(2e-3, 4e-3, 2e-3))
+    scores = np.array([[c.focal_score(f) for f in FUNCTIONALS] for c in checks["default"]])
+    assert np.median(scores[:, 0]) >= 0.99 and np.median(scores[:, 1]) >= 0.99  # interior rgb, depth
+    assert np.median(scores[:, 2]) >= 0.95 and np.median(scores[:, 3]) >= 0.95  # full rgb, depth
+    # the silhouette term carries the edges' motion under a zoom: without it the full rgb falls short
+    bare = np.array([c.focal_score("rgb_full") for c in checks["no silhouettes"]])
+    assert bare.min() < scores[:, 2].min()

@@ -160,3 +160,39 @@ def test_train_tiny_soups_with_the_weights_it_names(tmp_path) -> None:
 def test_bad_settings_are_refused_before_any_rendering(field, value) -> None:
     with pytest.raises((ValueError, FileNotFoundError), match=rf"train\.{field}"):
         TinyTrainConfig(**{field: value})
+
+
+def test_metric_log_loss_is_zero_for_the_depth_and_counts_a_scale_error() -> None:
+    depth, mask = _views()
+    assert training.metric_log_loss(depth, depth, mask, gradient_weight=0.5).abs().item() < 1e-12
+    # off by a factor of 2 everywhere: |log 2| per pixel, and no gradient-matching term (the residual is flat)
+    assert training.metric_log_loss(2 * depth, depth, mask, gradient_weight=0.5).item() == pytest.approx(0.693147)
+    # unlike the scale-and-shift-invariant loss, which a scaled disparity leaves at 0
+    assert ssi_loss(2 / depth, depth, mask).abs().item() < 1e-9
+
+
+def test_a_metric_target_trains_kadv_tiny_metric_from_kadv_tiny_s_weights(tmp_path) -> None:
+    torch.manual_seed(1)
+    start = save_kadv_tiny(TinyDepthNet((8, 8, 8, 8, 16)), tmp_path / "start.safetensors")
+    small = {"train_views": 8, "val_views": 8, "steps": 3, "batch_size": 2}
+    config = TinyTrainConfig(**small, init_weights=str(start), target="metric")
+    model, log = train_tiny(config, progress=False)
+    assert model.name == "kadv_tiny_metric" and model.output_kind == "depth" and log["output_kind"] == "depth"
+    assert 0.0 <= log["val_delta1_metric"] <= 1.0 and 0.0 <= log["val_delta1"] <= 1.0
+    saved = save_kadv_tiny(model.network, tmp_path / "metric.safetensors", metadata={"output_kind": "depth"})
+    assert load_kadv_tiny(saved, "depth").output_kind == "depth"
+    with pytest.raises(ValueError, match="predict depth, not the disparity of kadv_tiny"):
+        load_kadv_tiny(saved)
+
+
+@pytest.mark.parametrize(
+    ("settings", "words"),
+    [
+        ({"target": "metres"}, "train.target must be one of disparity, metric"),
+        ({"target": "metric", "architecture": "dpt"}, "train.target=metric trains the U-Net"),
+        ({"target": "metric", "augment": "strong"}, "train.augment=strong zooms"),
+    ],
+)
+def test_a_metric_target_the_network_cannot_learn_is_refused_by_key(settings, words) -> None:
+    with pytest.raises(ValueError, match=words):
+        TinyTrainConfig(**settings)

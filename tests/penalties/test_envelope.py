@@ -82,7 +82,7 @@ def test_each_preset_file_holds_the_python_preset(name: str) -> None:
 @pytest.mark.parametrize(
     "settings, message",
     [
-        ({"pitch_deg": (30.0, -30.0)}, r"envelope.pitch_deg \[30.0, -30.0\] is empty or leaves \[-90.0, 90.0\]"),
+        ({"pitch_deg": (30.0, -30.0)}, r"envelope.pitch_deg \[30.0, -30.0\] is empty or leaves \[-90, 90\]"),
         ({"height": (-1.0, 2.0)}, r"envelope.height \[-1.0, 2.0\] is empty or leaves >= 0"),
         ({"max_roll_deg": -5.0}, r"envelope.max_roll_deg must be in \[0, 180\] or null, got -5.0"),
         ({"pitch_deg": 30.0}, r"envelope.pitch_deg must be \[lowest, highest\] or null, got 30.0"),

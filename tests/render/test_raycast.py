@@ -6,6 +6,7 @@ import torch
 
 from kadv.geometry import intrinsics_from_fov, look_at, pixel_rays
 from kadv.render import ExactRenderer, Shading
+from kadv.render.raycast import pixel_angle
 from kadv.scenes import Material, assemble_scene, box_room
 from kadv.scenes.parts import quad_part
 
@@ -202,3 +203,20 @@ def test_bad_pose_raises(room, bad: str) -> None:
         pose[:3, :3] *= 2
     with pytest.raises(ValueError, match=r"NaN|not a rotation"):
         ExactRenderer(room).render(pose, intrinsics_from_fov(60.0, 4, 4), 4, 4)
+
+
+def test_a_view_renders_the_same_alone_as_beside_a_view_of_another_field_of_view() -> None:
+    """A pixel's footprint filters its textures: views of different fields of view in one batch
+    are each filtered at their own, so a batch's make-up changes no view's pixels."""
+    renderer = ExactRenderer(box_room(seed=0))
+    pose = renderer.scene.cameras[0].world_T_cam
+    wide, narrow = intrinsics_from_fov(100.0, 24, 32), intrinsics_from_fov(40.0, 24, 32)
+    together = renderer.render(torch.stack([pose, pose]), torch.stack([wide, narrow]), 24, 32, supersample=2)
+    for b, K in enumerate((wide, narrow)):
+        alone = renderer.render(pose[None], K, 24, 32, supersample=2)
+        assert torch.equal(together.rgb[b], alone.rgb[0]) and torch.equal(together.depth[b], alone.depth[0])
+    # the footprint matters: the narrow view's rays shaded at the wide one's footprint are another image
+    origins, directions = pixel_rays(pose, narrow, 24, 32)
+    rays = (origins.reshape(-1, 3), directions.reshape(-1, 3))
+    own, other = (renderer.cast_and_shade(*rays, pixel_angle(K), True, False)[1]["rgb"] for K in (narrow, wide))
+    assert not torch.equal(own, other)

@@ -98,6 +98,25 @@ def test_a_run_shows_every_camera_and_selecting_one_shows_its_panel(sweep: Path)
         viewer.stop()
 
 
+def test_each_camera_and_step_shows_its_own_field_of_view(tmp_path: Path) -> None:
+    run = _attack(tmp_path / "wide", "envelope.fov_deg=[40,100]")
+    summary = json.loads((run / "summary.json").read_text())
+    viewer = view(run, port=_free_port())
+    try:
+        for init in summary["init_views"]:
+            for k, kept in enumerate(init["adversarial"]):
+                assert viewer.views[f"init{init['index']}_adv{k}"].fov_x_deg == kept["fov_x_deg"]
+        chosen = next(name for name in viewer.frusta if "_adv" in name)
+        viewer.select(chosen)
+        assert f"field of view {viewer.views[chosen].fov_x_deg:.1f}°" in viewer.metrics.content
+        records = viewer.records[viewer.views[chosen].init_index]
+        moved = next(i for i, r in enumerate(records) if abs(r.fov_x_deg - 70.0) > 1.0)
+        viewer.step.value = moved
+        assert f"field of view {records[moved].fov_x_deg:.1f}°" in viewer.step_text.content
+    finally:
+        viewer.stop()
+
+
 def test_a_sweep_opens_and_choosing_another_run_shows_its_cameras(sweep: Path) -> None:
     viewer = view(sweep, port=_free_port())
     try:

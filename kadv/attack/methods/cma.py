@@ -1,4 +1,4 @@
-"""CMA-ES (the ``cma`` package, ask/tell) on the pose parameters scaled to the unit search box."""
+"""CMA-ES (the ``cma`` package, ask/tell) on the pose space scaled to its box [-1, 1]^dims."""
 
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ class CMAProposer(Proposer):
 
     def __init__(self, context, rng: np.random.Generator) -> None:
         super().__init__(context, rng)
-        self.strategy = self._start(np.zeros(6), self.settings.population)
+        self.strategy = self._start(np.zeros(context.space.dims), self.settings.population)
         self.candidates: list[np.ndarray] = []
 
     def _start(self, mean: np.ndarray, population: int):
@@ -56,9 +56,9 @@ class CMAProposer(Proposer):
 
     def ask(self, count: int) -> torch.Tensor:
         if self.settings.ipop and self.strategy.stop():
-            self.strategy = self._start(self.rng.uniform(-1.0, 1.0, 6), 2 * self.strategy.popsize)
+            self.strategy = self._start(self.rng.uniform(-1.0, 1.0, self.context.space.dims), 2 * self.strategy.popsize)
         self.candidates = self.strategy.ask()
-        return torch.from_numpy(np.asarray(self.candidates)) * self.config.search_box()
+        return self.context.space.from_box(torch.from_numpy(np.asarray(self.candidates)))
 
     def tell(self, records: list[ViewRecord]) -> None:
         if len(records) == len(self.candidates):

@@ -1,4 +1,5 @@
-"""The study's attack: Adam on (omega, delta) through the differentiable renderer, guarded steps."""
+"""The study's attack: Adam on (omega, delta) (and the field of view, when it is searched) through
+the differentiable renderer, guarded steps."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from kadv.attack.capture import StepGraph
 from kadv.attack.records import InitViewResult, ViewRecord
 from kadv.attack.registry import register_method
 from kadv.attack.search import Measures, SearchContext
+from kadv.attack.space import FOV
 
 __all__ = ["GradientSettings", "gradient_ascent", "gradient_search", "restart_jitter"]
 
@@ -30,6 +32,8 @@ class GradientSettings:
             seeded pose jitter.
         lr_rotation: Adam learning rate of the rotation vector (radians).
         lr_translation: Adam learning rate of the centre offset (metres).
+        lr_fov_deg: Adam learning rate of the field of view (degrees), when ``envelope.fov_deg``
+            frees it.
         jitter_deg, jitter_distance: largest rotation and centre offset of a restart's start.
     """
 
@@ -37,12 +41,13 @@ class GradientSettings:
     restarts: int = 3
     lr_rotation: float = 0.02
     lr_translation: float = 0.03
+    lr_fov_deg: float = 1.0
     jitter_deg: float = 3.0
     jitter_distance: float = 0.05
 
 
 def restart_jitter(rng: np.random.Generator, restarts: int, settings: GradientSettings) -> torch.Tensor:
-    """Start parameters (restarts, 6): zero for restart 0, uniform in the jitter balls for the others."""
+    """Start poses (restarts, 6): zero for restart 0, uniform in the jitter balls for the others."""
     directions = rng.normal(size=(restarts, 2, 3))
     directions /= np.linalg.norm(directions, axis=2, keepdims=True)
     scale = np.array([math.radians(settings.jitter_deg), settings.jitter_distance])[None, :, None]
@@ -56,12 +61,12 @@ def gradient_ascent(
     context: SearchContext,
     start: torch.Tensor,
     steps: int,
-    lr_rotation: float,
-    lr_translation: float,
+    settings: GradientSettings,
     bar: tqdm,
     first_step: int = 0,
 ) -> list[Measures]:
-    """Batched Adam runs from ``start`` (R, 6) within the context's budget; the measures of each step.
+    """Batched Adam runs from ``start`` (R, dims) within the context's budget, at the settings'
+    learning rates; the measures of each step.
 
     Each update is pulled back within the pose bounds, then passes the step guard (a move that
     would cross or approach a surface is shortened; the fraction taken is recorded). Views whose
@@ -78,43 +83,44 @@ def gradient_ascent(
     if batch == 0:
         return []
     start = context.project(start[:batch].to(context.device, torch.float64, non_blocking=True))
-    reached, fraction = context.guard(torch.zeros_like(start[:, 3:]), start[:, 3:])
+    reached, fraction = context.guard(torch.zeros_like(start[:, 3:6]), start[:, 3:6])
     omega = start[:, :3].clone().requires_grad_(True)
     delta = reached.clone().requires_grad_(True)
+    fov = start[:, FOV:].clone().requires_grad_(True)  # (R, 0) when the field of view is fixed
     render = context.differentiable.config
-    # a step that keeps its anchor decides on the host when to refresh it: a graph would replay one choice
-    capture = StepGraph.available(context.device, render.cuda_graphs and render.refresh == "always")
+    # a step that keeps its anchor decides on the host when to refresh it, and a searched field of
+    # view checks its intrinsics on the host: a graph would replay one choice
+    fixed = render.refresh == "always" and context.space.dims == FOV
+    capture = StepGraph.available(context.device, render.cuda_graphs and fixed)
     # a captured step keeps Adam's step count on the device
-    optimiser = torch.optim.Adam(
-        [{"params": [omega], "lr": lr_rotation}, {"params": [delta], "lr": lr_translation}],
-        maximize=True,
-        capturable=capture,
-    )
-    base = context.base(batch)
+    groups = [{"params": [omega], "lr": settings.lr_rotation}, {"params": [delta], "lr": settings.lr_translation}]
+    if context.space.dims > FOV:
+        groups.append({"params": [fov], "lr": settings.lr_fov_deg})
+    optimiser = torch.optim.Adam(groups, maximize=True, capturable=capture)
     step = 0
 
     def evaluate() -> tuple[Measures, torch.Tensor]:
-        params = torch.cat([omega, delta], dim=1)
-        out = context.differentiable(params, base, context.K, context.height, context.width)
-        terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
+        params = torch.cat([omega, delta, fov], dim=1)
+        out, terms = context.differentiable_terms(context.differentiable, params)
         stats = (out.coverage, out.rgb_error, out.depth_error)
         measured = context.measure(first_step + step, params, out.world_T_cam, terms, fraction, stats, out.refreshed,
                                    render=out.exact, screened=out.warped)  # fmt: skip
         return measured, terms.objective
 
     def ascend() -> Measures:
-        """One Adam step from the current poses (it updates omega, delta and fraction in place) and
-        the measures of the views it started from."""
+        """One Adam step from the current poses (it updates omega, delta, fov and fraction in
+        place) and the measures of the views it started from."""
         measured, objective = evaluate()
         optimiser.zero_grad()
         objective.sum().backward()
         previous = delta.detach().clone()
         optimiser.step()
         with torch.no_grad():
-            bounded = context.project(torch.cat([omega, delta], dim=1))
-            reached, moved = context.guard(previous, bounded[:, 3:])
+            bounded = context.project(torch.cat([omega, delta, fov], dim=1))
+            reached, moved = context.guard(previous, bounded[:, 3:6])
             omega.copy_(bounded[:, :3])
             delta.copy_(reached)
+            fov.copy_(bounded[:, FOV:])
             fraction.copy_(moved)
         return measured
 
@@ -155,19 +161,20 @@ def gradient_search(
         context: the search context; its settings are :class:`GradientSettings`.
         rng: seeds the restarts' jitter.
         bar: progress, in evaluated views.
-        start: start poses (R, 6) relative to the init view instead of jitter around it; the init
-            view itself is restart 0 (prepended unless a row is zero, which then comes first).
+        start: start points (R, dims) of the pose space instead of jitter around the init view;
+            the init view itself is restart 0 (prepended unless a row is zero, which then comes first).
 
     Every visited view is recorded with its validity verdict; invalid views are never chosen. The
     path is the best restart's.
     """
-    settings = context.config.settings
+    settings, space = context.config.settings, context.space
     if start is None:
-        start = restart_jitter(rng, settings.restarts, settings)
+        jitter = restart_jitter(rng, settings.restarts, settings)  # each restart at the init view's field of view
+        start = torch.cat([jitter, space.zeros(settings.restarts)[:, FOV:]], dim=1)
     else:
         zero = (start == 0).all(dim=1)
-        start = torch.cat([torch.zeros(1, 6, dtype=torch.float64), start[~zero].double()])
-    measures = gradient_ascent(context, start, settings.steps, settings.lr_rotation, settings.lr_translation, bar)
+        start = torch.cat([space.zeros(), start[~zero].double()])
+    measures = gradient_ascent(context, start, settings.steps, settings, bar)
     records = [record for step in measures for record in step.records()]
     if records:
         bar.set_postfix(loss=f"{max(r.loss for r in records):.4f}", refresh=False)

@@ -168,7 +168,8 @@ def local_refine(
         return []
     lanes = max(1, clock.allows(len(starts), _lane_step(settings)))
     pool = list(pool)
-    half = context.config.search_box().numpy()
+    half = context.space.box()[1].numpy()
+    dims = context.space.dims
     current = np.array([r.params for r in starts[:lanes]])
     best = np.array([r.objective for r in starts[:lanes]])
     region = np.ones(lanes)
@@ -181,8 +182,8 @@ def local_refine(
             views, active = min(settings.local_views, clock.remaining() - settings.cheap), 1
             if views < 1 or clock.allows(1) == 0:
                 break
-        draws = rng.normal(size=(active, views, 6)) * (settings.step_fraction * region[:active])[:, None, None]
-        proposals = torch.from_numpy((current[:active, None, :] + draws * half).reshape(-1, 6))
+        draws = rng.normal(size=(active, views, dims)) * (settings.step_fraction * region[:active])[:, None, None]
+        proposals = torch.from_numpy((current[:active, None, :] + draws * half).reshape(-1, dims))
         screened = context.screen(step, proposals, settings.screen_supersample, settings.batch)
         records += screened
         if len(screened) < len(proposals):
@@ -219,7 +220,7 @@ def halving_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) 
     The path is the successive best rankable views (the incumbent never falls).
     """
     clock, config = context.clock, context.config
-    records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64), timed=True)
+    records = context.evaluate(0, context.space.zeros(), timed=True)
     run_supersample = context.differentiable.config.supersample
     fidelity = screen_fidelity(config.settings, run_supersample, clock.seconds, clock.render_s, clock.model_s)
     settings = dataclasses.replace(config.settings, screen_supersample=fidelity)
@@ -230,7 +231,7 @@ def halving_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) 
     screen_views = round(settings.screen_fraction * clock.passes) if clock.passes is not None else settings.batch
     screened: list[ViewRecord] = []
     if screen_views:
-        poses = config.sobol_ball(screen_views, rng)
+        poses = context.space.sobol(screen_views, rng)
         screened = context.screen(2, poses, settings.screen_supersample, settings.batch, bar)
         records += screened
     if rescore:

@@ -17,6 +17,7 @@ from tqdm import tqdm
 from kadv.attack.records import InitViewResult, ViewRecord, incumbent_path, select_top_views
 from kadv.attack.registry import register_method
 from kadv.attack.search import SearchContext
+from kadv.attack.space import FOV
 
 __all__ = ["HybridSettings", "check_trust_region", "hybrid_search", "trust_region_refine"]
 
@@ -34,8 +35,9 @@ class HybridSettings:
             below 1 its best separated views are re-scored at full size before refinement.
         population: screening views per evaluated batch (a power of two keeps Sobol points balanced).
         refine_views: trust-region lanes, batched, from the best separated valid screened views.
-        lr_rotation, lr_translation: a lane's first step lengths (radians, metres) along the
-            normalised gradient of the rotation vector and of the centre offset.
+        lr_rotation, lr_translation, lr_fov_deg: a lane's first step lengths (radians, metres,
+            degrees) along the normalised gradient of the rotation vector, of the centre offset
+            and of the field of view (when ``envelope.fov_deg`` frees it).
         grow, shrink: a step that raises the objective multiplies the lane's step length by
             ``grow``; one that does not is undone and multiplies it by ``shrink``.
         stall_scale: a lane whose step length has shrunk below this share of the first restarts
@@ -49,6 +51,7 @@ class HybridSettings:
     refine_views: int = 2
     lr_rotation: float = 0.02
     lr_translation: float = 0.03
+    lr_fov_deg: float = 1.0
     grow: float = 1.5
     shrink: float = 0.5
     stall_scale: float = 0.1
@@ -70,10 +73,13 @@ def check_trust_region(settings, node: str, shares: tuple[str, ...]) -> None:
 
 
 def _steps(gradient: torch.Tensor, radius: torch.Tensor, settings: HybridSettings) -> torch.Tensor:
-    """Moves (L, 6): each lane's gradient, normalised per block (rotation, translation), times its
-    step lengths."""
+    """Moves (L, dims): each lane's gradient, normalised per block (rotation, translation, field
+    of view), times its step lengths."""
     step = torch.zeros_like(gradient)
-    for block, length in ((slice(0, 3), settings.lr_rotation), (slice(3, 6), settings.lr_translation)):
+    blocks = [(slice(0, 3), settings.lr_rotation), (slice(3, 6), settings.lr_translation)]
+    if gradient.shape[1] > FOV:
+        blocks.append((slice(FOV, FOV + 1), settings.lr_fov_deg))
+    for block, length in blocks:
         part = gradient[:, block]
         step[:, block] = length * radius[:, None] * part / part.norm(dim=1, keepdim=True).clamp_min(1e-30)
     return step
@@ -122,20 +128,18 @@ def trust_region_refine(
     current = torch.tensor([r.params for r in starts[:lanes]], dtype=torch.float64)  # incumbents
     level = torch.full((lanes,), -math.inf, dtype=torch.float64)  # their objective at the lanes' fidelity
     exact = torch.tensor([r.objective for r in starts[:lanes]], dtype=torch.float64)  # and exactly (a cheap lane)
-    gradient = torch.zeros(lanes, 6, dtype=torch.float64)
+    gradient = torch.zeros(lanes, context.space.dims, dtype=torch.float64)
     radius = torch.ones(lanes, dtype=torch.float64)
     fresh = torch.ones(lanes, dtype=torch.bool)  # the trial is the incumbent itself: evaluate for its gradient
-    base = context.base(lanes)
     records: list[ViewRecord] = []
     step = first_step
     while clock.allows(lanes, cost=cost) == lanes:
         started = time.perf_counter()
         proposal = context.project(current + torch.where(fresh[:, None], 0.0, _steps(gradient, radius, settings)))
-        reached, fraction = context.guard(current[:, 3:], proposal[:, 3:])
+        reached, fraction = context.guard(current[:, 3:6], proposal[:, 3:6])
         # the lanes' bookkeeping stays on the host, where its decisions are made; the trial goes to the device
-        trial = torch.cat([proposal[:, :3].to(context.device), reached], dim=1).requires_grad_(True)
-        out = differentiable(trial, base, context.K, context.height, context.width)
-        terms = context.objective(out.rgb, out.depth, out.mask, out.world_T_cam, context.K)
+        trial = torch.cat([proposal[:, :3].to(context.device), reached, proposal[:, FOV:].to(context.device)], dim=1)
+        out, terms = context.differentiable_terms(differentiable, trial.requires_grad_(True))
         screened = supersample is not None or out.warped
         rows = context.records(
             step,
@@ -195,8 +199,8 @@ def hybrid_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) -
     settings, clock, config = context.config.settings, context.clock, context.config
     screen_views = math.ceil(settings.screen_fraction * clock.passes) if clock.passes is not None else None
     screen_seconds = settings.screen_fraction * clock.seconds if clock.seconds is not None else None
-    sobol = qmc.Sobol(d=6, scramble=True, rng=rng)
-    records = context.evaluate(0, torch.zeros(1, 6, dtype=torch.float64))
+    sobol = qmc.Sobol(d=context.space.dims, scramble=True, rng=rng)
+    records = context.evaluate(0, context.space.zeros())
     step = 1
     while screen_views is None or clock.budget.passes < screen_views:
         if screen_seconds is not None and clock.elapsed() >= screen_seconds:
@@ -210,7 +214,7 @@ def hybrid_search(context: SearchContext, rng: np.random.Generator, bar: tqdm) -
         if count == 0:
             break
         unit = sobol.random(settings.population)[:count]
-        records += context.evaluate(step, config.sample_ball(unit), scale=settings.screen_scale)
+        records += context.evaluate(step, context.space.sample(unit), scale=settings.screen_scale)
         step += 1
     candidates = select_top_views(
         [dataclasses.replace(r, scale=1.0) for r in records],  # rank the reduced-size views too

@@ -64,14 +64,14 @@ def _metamodel_type_errors_as_failures() -> None:
 
 @register_proposer("nevergrad", NevergradSettings)
 class NevergradProposer(Proposer):
-    """Minimises -objective over the unit search box [-1, 1]^6, seeded from the search's generator."""
+    """Minimises -objective over the pose space's box [-1, 1]^dims, seeded from the search's generator."""
 
     def __init__(self, context, rng: np.random.Generator) -> None:
         import nevergrad as ng
 
         _metamodel_type_errors_as_failures()
         super().__init__(context, rng)
-        parametrization = ng.p.Array(shape=(6,), lower=-1.0, upper=1.0)
+        parametrization = ng.p.Array(shape=(context.space.dims,), lower=-1.0, upper=1.0)
         parametrization.random_state = np.random.RandomState(int(rng.integers(1, 2**31 - 1)))
         # the pass budget when there is one; else a count that a seconds budget rarely exceeds
         budget = context.clock.remaining() if context.clock.passes is not None else 1000
@@ -83,7 +83,7 @@ class NevergradProposer(Proposer):
     def ask(self, count: int) -> torch.Tensor:
         self.candidates = [self.optimizer.ask() for _ in range(min(self.settings.population, count))]
         unit = np.stack([c.value for c in self.candidates])
-        return torch.from_numpy(unit) * self.config.search_box()
+        return self.context.space.from_box(torch.from_numpy(unit))
 
     def tell(self, records: list[ViewRecord]) -> None:
         for candidate, value in zip(self.candidates, fitness(records)):

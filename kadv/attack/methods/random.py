@@ -1,4 +1,4 @@
-"""Random search: poses drawn uniformly over the bounds' two balls, a batch at a time."""
+"""Random search: points drawn uniformly over the pose space (the bounds' two balls), a batch at a time."""
 
 from __future__ import annotations
 
@@ -25,4 +25,5 @@ class RandomSettings:
 @register_proposer("random", RandomSettings)
 class RandomProposer(Proposer):
     def ask(self, count: int) -> torch.Tensor:
-        return self.config.sample_ball(self.rng.uniform(size=(min(self.settings.population, count), 6)))
+        space = self.context.space
+        return space.sample(self.rng.uniform(size=(min(self.settings.population, count), space.dims)))

@@ -21,8 +21,6 @@ from kadv.attack.records import ViewRecord
 
 __all__ = ["TurboProposer", "TurboSettings"]
 
-_DIMS = 6
-
 
 @dataclass(frozen=True)
 class TurboSettings:
@@ -64,29 +62,33 @@ class TurboSettings:
 
 @register_proposer("turbo", TurboSettings)
 class TurboProposer(Proposer):
-    """Maximises the objective over the unit cube x, the pose ``(2x - 1) * search_box`` pulled
-    within the bounds' balls. The process is fitted on the poses reached (after the bounds, the
-    envelope and the step guard), an invalid view at the lowest objective seen. The context's warm
-    starts are scored first, with the first design."""
+    """Maximises the objective over the unit cube x, the point of the pose space's box at
+    ``2x - 1`` (:meth:`~kadv.attack.space.PoseSpace.from_box`) pulled within the bounds' balls.
+    The process is fitted on the poses reached (after the bounds, the envelope and the step
+    guard), an invalid view at the lowest objective seen. The context's warm starts are scored
+    first, with the first design."""
 
     def __init__(self, context, rng: np.random.Generator) -> None:
         super().__init__(context, rng)
-        self.half = self.config.search_box()
-        self.x = torch.zeros(0, _DIMS, dtype=torch.float64)
+        self.space = context.space
+        self.x = torch.zeros(0, self.space.dims, dtype=torch.float64)
         self.y = torch.zeros(0, dtype=torch.float64)
         self.design: list[torch.Tensor] = []  # poses of a space-filling design still to ask
         self._restart()
         self.design = list(context.starts) + self.design  # views found bad before (a smaller radius) join the first
 
     def _restart(self) -> None:
-        self.design = list(self.config.sobol_ball(self.settings.init_views, self.rng))
+        self.design = list(self.space.sobol(self.settings.init_views, self.rng))
         self.length = self.settings.length_init
         self.successes = self.failures = 0
         self.start = len(self.y)  # the restart's own views: its region centres on their best
         self.best = -math.inf
 
     def _to_unit(self, params: torch.Tensor) -> torch.Tensor:
-        return ((params / self.half + 1.0) / 2.0).clamp(0.0, 1.0)
+        return (self.space.to_box(params) + 1.0) / 2.0
+
+    def _from_unit(self, x: torch.Tensor) -> torch.Tensor:
+        return self.space.bound(self.space.from_box(2.0 * x - 1.0))
 
     def ask(self, count: int) -> torch.Tensor:
         if not self.design and self.length < self.settings.length_min:
@@ -94,8 +96,7 @@ class TurboProposer(Proposer):
         if self.design:
             asked, self.design = self.design[:count], self.design[count:]
             return torch.stack(asked)
-        x = self._thompson(min(self.settings.batch, count))
-        return self.config.project((2.0 * x - 1.0) * self.half)
+        return self._from_unit(self._thompson(min(self.settings.batch, count)))
 
     def tell(self, records: list[ViewRecord]) -> None:
         values = torch.from_numpy(fitness(records))
@@ -113,7 +114,7 @@ class TurboProposer(Proposer):
             self.length, self.failures = self.length / 2.0, 0
 
     def _thompson(self, count: int) -> torch.Tensor:
-        """``count`` distinct points (count, 6) of the trust region, each the maximum of one draw
+        """``count`` distinct points (count, dims) of the trust region, each the maximum of one draw
         of the process over the candidates."""
         with warnings.catch_warnings():  # here, not at the top: only this search needs them
             warnings.simplefilter("ignore", DeprecationWarning)  # gpytorch's torch.jit.script at import
@@ -137,13 +138,14 @@ class TurboProposer(Proposer):
             own = torch.arange(len(y)) >= self.start
             centre = self.x[own][y[own].argmax()]
             scales = gp.covar_module.lengthscale.detach().reshape(-1)
-            weights = scales / scales.prod().pow(1.0 / _DIMS)  # longer where the objective varies slowly
+            dims = self.space.dims
+            weights = scales / scales.prod().pow(1.0 / dims)  # longer where the objective varies slowly
             half_side = (self.length * weights / 2.0).to(self.x)
             low, high = (centre - half_side).clamp(0.0, 1.0), (centre + half_side).clamp(0.0, 1.0)
-            sobol = torch.quasirandom.SobolEngine(_DIMS, scramble=True, seed=int(self.rng.integers(2**31 - 1)))
+            sobol = torch.quasirandom.SobolEngine(dims, scramble=True, seed=int(self.rng.integers(2**31 - 1)))
             unit = sobol.draw(self.settings.candidates, dtype=torch.float64)
             # the candidates as the poses they will be, within the balls, so the draws score what is evaluated
-            candidates = self._to_unit(self.config.project((2.0 * (low + (high - low) * unit) - 1.0) * self.half))
+            candidates = self._to_unit(self._from_unit(low + (high - low) * unit))
             with torch.no_grad():
                 draws = gp.posterior(candidates).rsample(torch.Size([count])).reshape(count, -1)
         chosen: list[int] = []
