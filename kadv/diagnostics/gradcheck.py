@@ -134,19 +134,17 @@ def check_pose(
 ) -> dict[str, GradientCheck]:
     """Compare analytic and finite-difference gradients of the four functionals at one pose.
 
-    The analytic gradients come from a DifferentiableRenderer on ``device``; the reference is exact
-    renders on the CPU. A configuration that keeps its anchor between calls (``refresh`` every_k or
-    on_drift) is checked as it runs between refreshes: its anchor is rendered first at a pose
-    ``anchor_offset`` (degrees, metres, in directions seeded by ``weight_seed``) away, so that
-    the checked gradient comes through the warp of a moved view. ``steps``: the reference's
-    finite-difference steps in rotation (radians) and translation (metres) and, to check the
-    derivative in the focal length too (square pixels, the principal point kept), a third: its
-    step as a share of the focal length.
+    The analytic gradients come from a DifferentiableRenderer on ``device``, the reference from
+    exact renders on the CPU. A configuration that keeps its anchor between calls (``refresh``
+    every_k or on_drift) is checked between refreshes: its anchor is rendered first ``anchor_offset``
+    (degrees, metres, directions seeded by ``weight_seed``) away. ``steps``: the reference's steps
+    in rotation (radians) and translation (metres) and, to check the focal length's derivative too
+    (square pixels, the principal point kept), its step as a share of the focal length.
 
-    Returns one :class:`GradientCheck` per renderer configuration (the reference is shared); its
-    ``step_agreement`` < 0.99 says the reference is not trustworthy there (resample the pose).
-    The interior functionals leave out pixels near occlusion edges (:func:`occlusion_edge_mask`
-    with ``jump=edge_jump``; a scan's surface noise asks for a larger one).
+    Returns one :class:`GradientCheck` per configuration (the reference is shared); its
+    ``step_agreement`` < 0.99 says the reference is not trustworthy there (resample the pose). The
+    interior functionals leave out pixels near occlusion edges (:func:`occlusion_edge_mask`,
+    ``jump=edge_jump``; a scan's surface noise asks for a larger one).
     """
     base = world_T_cam.double().reshape(1, 4, 4)
     K = torch.as_tensor(K, dtype=torch.float64)
