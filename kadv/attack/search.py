@@ -432,7 +432,7 @@ class SearchContext:
         """Intrinsics, height and width of renders at ``scale`` times the run's size: of points
         ``params`` (B, dims) (:meth:`PoseSpace.intrinsics`: the init view's (3, 3) when the
         field of view is fixed or ``params`` is None)."""
-        if scale == 1.0 and (params is None or self.space.dims == 6):
+        if scale == 1.0 and (params is None or not self.space.fov_searched):
             return self.K, self.height, self.width
         height, width = scaled_size(self.height, self.width, scale)
         return self.space.intrinsics(params, height, width), height, width
@@ -452,7 +452,7 @@ class SearchContext:
         started = time.perf_counter()
         params = self.project(params.to(self.device))
         reached, fraction = self.guard(torch.zeros_like(params[:, 3:6]), params[:, 3:6])
-        params = torch.cat([params[:, :3], reached, params[:, 6:]], dim=1)
+        params = torch.cat([params[:, :3], reached, params[:, FOV:]], dim=1)
         return self.score(
             step,
             params,

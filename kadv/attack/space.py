@@ -43,9 +43,14 @@ class PoseSpace:
     init_fov_deg: float
 
     @property
+    def fov_searched(self) -> bool:
+        """Whether the search sets the field of view (``envelope.fov_deg``)."""
+        return self.envelope.fov_deg is not None
+
+    @property
     def dims(self) -> int:
         """Coordinates of a point: 6, or 7 with the field of view searched."""
-        return 6 if self.envelope.fov_deg is None else 7
+        return FOV + self.fov_searched
 
     def zeros(self, count: int = 1) -> torch.Tensor:
         """``count`` copies (count, dims) of the init view."""
@@ -63,7 +68,7 @@ class PoseSpace:
         translation = self.max_distance if self.max_distance is not None else 2.0
         half = [rotation] * 3 + [translation] * 3
         centre = [0.0] * 6
-        if self.dims == 7:
+        if self.fov_searched:
             low, high = (f - self.init_fov_deg for f in self.envelope.fov_deg)
             half.append((high - low) / 2.0)
             centre.append((high + low) / 2.0)
@@ -72,7 +77,7 @@ class PoseSpace:
     def from_box(self, unit: torch.Tensor) -> torch.Tensor:
         """Points (N, dims) of the box for coordinates ``unit`` (N, dims) in [-1, 1]."""
         centre, half = self.box()
-        return unit * half if self.dims == 6 else centre + unit * half
+        return centre + unit * half if self.fov_searched else unit * half
 
     def to_box(self, params: torch.Tensor) -> torch.Tensor:
         """The box coordinates (N, dims) in [-1, 1] of points (N, dims), clamped to the box."""
@@ -83,7 +88,7 @@ class PoseSpace:
         """Map points (N, dims) of the unit cube [0, 1)^dims onto points spread uniformly over the
         two balls of the bounds (rotation vector, centre offset) and the field of view's range:
         a uniform or space-filling design stays one."""
-        _, half = self.box()
+        centre, half = self.box()
         parts = []
         for k, radius in ((0, half[0]), (3, half[3])):
             # three independent coordinates: radius from one, direction from two (Archimedes' projection)
@@ -92,11 +97,9 @@ class PoseSpace:
             phi = 2.0 * math.pi * unit[:, k + 2]
             s = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
             parts.append(np.stack([r * s * np.cos(phi), r * s * np.sin(phi), r * z], axis=1))
-        params = torch.from_numpy(np.concatenate(parts, axis=1))
-        if self.dims == 6:
-            return params
-        fov = self.from_box(torch.from_numpy(2.0 * unit[:, FOV : FOV + 1] - 1.0).expand(-1, 7))[:, FOV:]
-        return torch.cat([params, fov], dim=1)
+        if self.fov_searched:  # uniform over the range
+            parts.append(float(centre[FOV]) + (2.0 * unit[:, FOV : FOV + 1] - 1.0) * float(half[FOV]))
+        return torch.from_numpy(np.concatenate(parts, axis=1))
 
     def sobol(self, count: int, rng: np.random.Generator) -> torch.Tensor:
         """``count`` points (count, dims) spread over the space: the first points of a scrambled
@@ -115,7 +118,7 @@ class PoseSpace:
             )
         if self.max_distance is not None:
             delta = delta * (self.max_distance / delta.norm(dim=1, keepdim=True).clamp_min(1e-12)).clamp(max=1.0)
-        if self.dims == 6:
+        if not self.fov_searched:
             return torch.cat([omega, delta], dim=1)
         return torch.cat([omega, delta, params[:, FOV:].clamp(*self._fov_offsets())], dim=1)
 
@@ -124,11 +127,11 @@ class PoseSpace:
         the step guard has yet to pass the move."""
         params = self.bound(params)
         pose = self.envelope.project(renderer, base, params[:, :6])
-        return pose if self.dims == 6 else torch.cat([pose, params[:, FOV:]], dim=1)
+        return torch.cat([pose, params[:, FOV:]], dim=1) if self.fov_searched else pose
 
     def fov_deg(self, params: torch.Tensor) -> torch.Tensor:
         """The horizontal field of view (B,) float64, degrees, of points (B, dims)."""
-        if self.dims == 6:
+        if not self.fov_searched:
             return torch.full((len(params),), self.init_fov_deg, dtype=torch.float64, device=params.device)
         return self.init_fov_deg + params[:, FOV].double()
 
@@ -136,6 +139,6 @@ class PoseSpace:
         """Intrinsics of images ``height`` x ``width`` of points (B, dims): the init view's (3, 3)
         when the field of view is not searched (or ``params`` is None), else (B, 3, 3),
         differentiable in the field of view's coordinate."""
-        if self.dims == 6 or params is None:
+        if not self.fov_searched or params is None:
             return intrinsics_from_fov(self.init_fov_deg, height, width)
         return fov_intrinsics(self.fov_deg(params), height, width)

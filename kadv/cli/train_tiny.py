@@ -31,12 +31,10 @@ def main(cfg: DictConfig) -> None:
     model, training_log = train_tiny(config)
     summary = {k: v for k, v in training_log.items() if k != "losses"}
     if config.architecture == "dpt":
-        save, name, shipped = save_kadv_tiny_dpt, "kadv_tiny_dpt", TINY_DPT_DIR
-    elif config.target == "metric":
-        save, name, shipped = save_kadv_tiny, "kadv_tiny_metric.safetensors", TINY_METRIC_WEIGHTS
+        save, shipped = save_kadv_tiny_dpt, TINY_DPT_DIR
     else:
-        save, name, shipped = save_kadv_tiny, "kadv_tiny.safetensors", TINY_WEIGHTS
-    weights = save(model.network, out_dir / name, metadata=summary)
+        save, shipped = save_kadv_tiny, TINY_METRIC_WEIGHTS if config.target == "metric" else TINY_WEIGHTS
+    weights = save(model.network, out_dir / shipped.name, metadata=summary)
     atomic_write(out_dir / "train_log.json", lambda tmp: tmp.write_text(json.dumps(training_log, indent=1)))
     if cfg.replace_shipped_weights:
         save(model.network, shipped, metadata=summary)

@@ -98,25 +98,27 @@ def save_kadv_tiny(network: TinyDepthNet, path: str | Path, metadata: dict[str, 
     return path
 
 
-def load_kadv_tiny(weights: str | Path | None = None, output_kind: str = "disparity") -> KadvTiny:
-    """Load kadv-tiny (``output_kind="depth"``: kadv-tiny-metric) from ``weights`` or the copy
-    shipped in the package.
+def load_kadv_tiny(weights: str | Path | None = None, output_kind: str | None = "disparity") -> KadvTiny:
+    """Load kadv-tiny (``output_kind="depth"``: kadv-tiny-metric; None: the kind the weights
+    name) from ``weights`` or the copy shipped in the package.
 
     Raises:
         FileNotFoundError: the weights file does not exist (says how to train it).
         ValueError: the weights predict the other kind.
     """
-    name = _NAMES[output_kind]
-    shipped = TINY_WEIGHTS if output_kind == "disparity" else TINY_METRIC_WEIGHTS
+    expected = output_kind or "disparity"
+    shipped = TINY_WEIGHTS if expected == "disparity" else TINY_METRIC_WEIGHTS
     path = Path(weights) if weights is not None else shipped
     if not path.is_file():
-        target = "" if output_kind == "disparity" else " train.target=metric"
-        raise FileNotFoundError(f"{name} weights not found at {path}; train them with kadv-train-tiny{target}")
+        target = "" if expected == "disparity" else " train.target=metric"
+        raise FileNotFoundError(
+            f"{_NAMES[expected]} weights not found at {path}; train them with kadv-train-tiny{target}"
+        )
     with safe_open(str(path), framework="pt") as handle:
         metadata = handle.metadata()
     kind = json.loads(metadata.get("output_kind", '"disparity"'))
-    if kind != output_kind:
-        raise ValueError(f"{path}: these weights predict {kind}, not the {output_kind} of {name}")
+    if output_kind is not None and kind != output_kind:
+        raise ValueError(f"{path}: these weights predict {kind}, not the {output_kind} of {_NAMES[output_kind]}")
     network = TinyDepthNet(tuple(json.loads(metadata["channels"])))
     network.load_state_dict({k: v.float() for k, v in load_file(str(path)).items()})
-    return KadvTiny(network, output_kind)
+    return KadvTiny(network, kind)

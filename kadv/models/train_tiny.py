@@ -3,7 +3,6 @@ scale-and-shift-invariant disparity loss, kadv-tiny-metric with a loss on metric
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
@@ -266,15 +265,7 @@ def render_training_views(config: TinyTrainConfig, progress: bool = True) -> tup
 def _load(path: str, architecture: str) -> DepthModel:
     if architecture == "dpt":
         return load_kadv_tiny_dpt(Path(path).expanduser())
-    return load_kadv_tiny(path, _kind(Path(path)))
-
-
-def _kind(path: Path) -> str:
-    """The output kind of kadv-tiny weights at ``path``."""
-    from safetensors import safe_open
-
-    with safe_open(str(path), framework="pt") as handle:
-        return json.loads(handle.metadata().get("output_kind", '"disparity"'))
+    return load_kadv_tiny(path, output_kind=None)  # either kind: a stage may start from the other
 
 
 def _initial_model(config: TinyTrainConfig) -> DepthModel:

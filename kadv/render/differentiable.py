@@ -246,7 +246,7 @@ class DifferentiableRenderer:
         self._steps_since_refresh += 1
         if self.config.silhouette:
             pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K, self.compact_edges)
-            K_edges = self._render_view(K_view, height, width)[1] if K_view.requires_grad else frame.K
+            K_edges = self._render_view(K_view, height, width)[1]  # frame.K, differentiable as K_view is
             values = torch.cat([frame.rgb_rendered, frame.depth_rendered], dim=1)
             term = silhouette_term(self.renderer, pairs, world_T_cam, K_edges, values)[frame.inside]
             rgb, depth = rgb + term[:, :3], depth + term[:, 3:]

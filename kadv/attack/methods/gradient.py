@@ -90,11 +90,11 @@ def gradient_ascent(
     render = context.differentiable.config
     # a step that keeps its anchor decides on the host when to refresh it, and a searched field of
     # view checks its intrinsics on the host: a graph would replay one choice
-    fixed = render.refresh == "always" and context.space.dims == FOV
+    fixed = render.refresh == "always" and not context.space.fov_searched
     capture = StepGraph.available(context.device, render.cuda_graphs and fixed)
     # a captured step keeps Adam's step count on the device
     groups = [{"params": [omega], "lr": settings.lr_rotation}, {"params": [delta], "lr": settings.lr_translation}]
-    if context.space.dims > FOV:
+    if context.space.fov_searched:
         groups.append({"params": [fov], "lr": settings.lr_fov_deg})
     optimiser = torch.optim.Adam(groups, maximize=True, capturable=capture)
     step = 0
