@@ -39,10 +39,10 @@ import torch
 from common import device_and_backend, fastest_seconds, load_bench_scene, timings
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
-from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
+from kadv.attack import AttackConfig, GradientSettings, Objective, Study, StudySettings, attack, file_init_views
 from kadv.attack.capture import StepGraph
 from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam, pixel_rays
-from kadv.losses import VGG16_TAPS, PerceptualLoss, depth_loss, vgg16_features
+from kadv.losses import LossConfig, vgg16_features
 from kadv.models import DepthModel, load_model
 from kadv.penalties import distance_to_surface, shortcut_penalty, step_guard, view_validity
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, DiffRenderOutput, ExactRenderer
@@ -83,9 +83,13 @@ def depth_anything_v2_small(folder: str) -> DepthModel:
     return load_model(folder)
 
 
-def random_perceptual_loss() -> PerceptualLoss:
+def random_vgg16_weights(folder: str) -> str:
+    """A torchvision-layout VGG-16 checkpoint of random weights (seed 0) in ``folder``: the
+    perceptual loss's cost without its ImageNet download."""
     torch.manual_seed(0)
-    return PerceptualLoss(vgg16_features(), VGG16_TAPS)
+    path = f"{folder}/vgg16-random.pth"
+    torch.save({f"features.{k}": v for k, v in vgg16_features().state_dict().items()}, path)
+    return path
 
 
 def synchronised(fn: Callable[[], object], device: torch.device) -> Callable[[], None]:
@@ -327,22 +331,22 @@ def main() -> None:
     parser.add_argument("--cuda-graphs", default="on", choices=("on", "off"), help="capture the step on CUDA")
     device, backend, args = device_and_backend(parser.description, parser)
     render_config = DiffRenderConfig(edge_search=args.edge_search, cuda_graphs=args.cuda_graphs == "on")
-    scene = load_bench_scene("grey_white_room")
-    renderer = ExactRenderer(scene, backend=backend, device=device)
-    penalty = PenaltyConfig()
-    view = file_init_views(renderer, penalty.margin)[0]
+    settings = StudySettings(size=(HEIGHT, WIDTH), backend=backend, render=render_config, device=device)
+    study = Study.build(load_bench_scene("grey_white_room"), load_model("kadv_tiny"), settings)
+    renderer = study.renderer
+    view = file_init_views(renderer, settings.penalty.margin)[0]
     results = {}
     with tempfile.TemporaryDirectory() as folder:
         configurations = {
             "Depth Anything V2 Small (random) + perceptual (random VGG-16)": (
                 depth_anything_v2_small(folder),
-                random_perceptual_loss(),
+                LossConfig(kind="perceptual", vgg_weights=random_vgg16_weights(folder)),
             ),
-            "kadv-tiny + SSIM": (load_model("kadv_tiny"), depth_loss("ssim")),
+            "kadv-tiny + SSIM": (study.model, LossConfig(kind="ssim")),
         }
         for label, (model, loss) in configurations.items():
-            objective = Objective(model, loss, renderer, penalty, device=device)
-            results[label] = measure(label, objective, DifferentiableRenderer(renderer, render_config, device), view)
+            variant = study.variant(model=model, loss=loss)
+            results[label] = measure(label, variant.objective, variant.differentiable, view)
     (parts, overhead, share), (_, overhead_tiny, share_tiny) = results.values()
     render, networks = parts["render fwd+bwd"], parts["networks"]
     evals_per_s, cast = evaluations_per_second(renderer, load_model("kadv_tiny").to(device), view, device)

@@ -29,12 +29,13 @@ from torch.profiler import ProfilerActivity, profile
 
 import kadv.attack.objective
 import kadv.attack.search
+import kadv.attack.space
 import kadv.render.differentiable
-from kadv.attack import AttackConfig, GradientSettings, Objective, PenaltyConfig, attack, file_init_views
+from kadv.attack import AttackConfig, GradientSettings, Objective, Study, StudySettings, attack, file_init_views
 from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam
-from kadv.losses import depth_loss
+from kadv.losses import LossConfig
 from kadv.models import load_model
-from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer, render_anchor
+from kadv.render import DiffRenderConfig, ExactRenderer, render_anchor
 from kadv.render.dibr import warp_boxed
 from kadv.render.layers import camera_face_normals
 
@@ -48,7 +49,7 @@ PHASES = [
     (kadv.render.differentiable, "reproject", "warp of the anchor"),
     (kadv.render.differentiable, "find_edge_pairs", "silhouette search"),
     (kadv.render.differentiable, "silhouette_term", "silhouette term"),
-    (kadv.attack.search, "step_guard", "step guard"),
+    (kadv.attack.space, "step_guard", "step guard"),
     (kadv.attack.search, "view_validity", "view validity"),
     (kadv.attack.objective, "distance_to_surface", "penalty distance"),
 ]
@@ -105,23 +106,29 @@ def report(evaluation: dict[str, float], seconds: dict[str, float], total: float
     print(f"  {'whole step':<28} {total / (STEPS + 1) * 1e3:>8.1f}")
 
 
-def tiny_attack(description: str) -> tuple[torch.device, str, argparse.Namespace, ExactRenderer, object, Objective]:
+def tiny_attack(description: str) -> tuple[torch.device, str, argparse.Namespace, Study, object]:
     """The options (``--device --backend --edge-search``) and what a kadv-tiny + SSIM attack on
-    grey_white_room's file view needs: the device, the backend, the options, the renderer, the
-    view, the objective; a bad option ends the script in one line with exit status 2."""
+    grey_white_room's file view needs: the device, the backend, the options, the study, the view; a
+    bad option ends the script in one line with exit status 2."""
     parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--edge-search", default="auto", choices=("auto", "compact", "every_pair"))
     device, backend, args = device_and_backend(description, parser)
-    renderer = ExactRenderer(load_bench_scene("grey_white_room"), backend=backend, device=device)
-    penalty = PenaltyConfig()
-    view = file_init_views(renderer, penalty.margin)[0]
-    objective = Objective(load_model("kadv_tiny").to(device), depth_loss("ssim"), renderer, penalty, device=device)
-    return device, backend, args, renderer, view, objective
+    settings = StudySettings(
+        size=(HEIGHT, WIDTH),
+        backend=backend,
+        render=DiffRenderConfig(edge_search=args.edge_search),
+        loss=LossConfig(kind="ssim"),
+        device=device,
+    )
+    study = Study.build(load_bench_scene("grey_white_room"), load_model("kadv_tiny"), settings)
+    view = file_init_views(study.renderer, settings.penalty.margin)[0]
+    return device, backend, args, study, view
 
 
-def preset_steps(renderer: ExactRenderer, view, device: torch.device) -> dict[str, float]:
+def preset_steps(study: Study, view, device: torch.device) -> dict[str, float]:
     """Milliseconds of a step through each render preset (its refreshes spread over the steps), of
     one exact render at supersample 2, and of a moved view's reprojection with its cast."""
+    renderer = study.renderer
     K = intrinsics_from_fov(view.fov_x_deg, HEIGHT, WIDTH)
     base = view.world_T_cam.double().reshape(1, 4, 4)
     # small moves along a line, a few millimetres and tenths of a degree a step (an Adam run's scale)
@@ -131,7 +138,7 @@ def preset_steps(renderer: ExactRenderer, view, device: torch.device) -> dict[st
     weights = torch.linspace(-1.0, 1.0, 4 * HEIGHT * WIDTH, device=device).reshape(1, 4, HEIGHT, WIDTH)
     out = {}
     for name in ("exact", "warp"):
-        differentiable = DifferentiableRenderer(renderer, render_preset(name), device)
+        differentiable = study.variant(render=render_preset(name)).differentiable
 
         def steps() -> None:
             differentiable.reset()
@@ -168,15 +175,12 @@ def preset_steps(renderer: ExactRenderer, view, device: torch.device) -> dict[st
 
 
 def main() -> None:
-    device, backend, args, renderer, view, objective = tiny_attack(
-        "Time an attack's phases and list its costliest operators."
-    )
-    model = objective.model
-    differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(edge_search=args.edge_search), device)
+    device, backend, args, study, view = tiny_attack("Time an attack's phases and list its costliest operators.")
+    renderer, model = study.renderer, study.model
 
     def gradient(steps: int) -> None:
         config = AttackConfig("gradient", GradientSettings(steps=steps, restarts=1), budget_passes=None)
-        attack(objective, differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
+        attack(study.objective, study.differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
 
     generator = torch.Generator().manual_seed(0)
     offsets = 0.05 * (2 * torch.rand(EVAL_BATCH, 6, generator=generator, dtype=torch.float64) - 1)
@@ -215,7 +219,7 @@ def main() -> None:
     sort = "self_cuda_time_total" if device.type == "cuda" else "self_cpu_time_total"
     print(f"\noperators of one gradient run (2 passes), by {sort}")
     print(profiler.key_averages().table(sort_by=sort, row_limit=15, max_name_column_width=36))
-    presets = preset_steps(renderer, view, device)
+    presets = preset_steps(study, view, device)
     step = total / (STEPS + 1)
     render = evaluation.get("exact render", 0.0)
     print(

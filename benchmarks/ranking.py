@@ -35,8 +35,8 @@ import numpy as np
 import torch
 
 from kadv.attack import DEFAULT_METHOD
+from kadv.catalogue.probes import PROBES, probe_scene
 from kadv.models import DepthModel, load_model
-from kadv.scenes.probes import PROBES, probe_scene
 from kadv.testing.profile import Profile, robustness_profile
 
 SIGMAS = (0.0, 0.05, 0.1, 0.2)

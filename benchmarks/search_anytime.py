@@ -42,6 +42,8 @@ from kadv.attack import (
     Objective,
     PenaltyConfig,
     SearchContext,
+    Study,
+    StudySettings,
     attack,
     best_so_far,
     file_init_views,
@@ -49,9 +51,9 @@ from kadv.attack import (
     sample_init_views,
 )
 from kadv.device import resolve_device
-from kadv.losses import depth_loss
+from kadv.losses import LossConfig
 from kadv.models import load_model
-from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer, Shading
+from kadv.render import Shading
 
 BASELINES = ("random", "cma", "nevergrad")
 FRACTIONS = (0.1, 0.25, 0.5, 1.0)
@@ -104,13 +106,14 @@ def screening_rate(objective: Objective, differentiable, view, height: int, widt
 def run(args: argparse.Namespace) -> dict:
     device = resolve_device(args.device)
     model, penalty = load_model(args.model), PenaltyConfig()
-    losses = {name: depth_loss(name) for name in args.losses.split(",")}
+    losses = args.losses.split(",")
     methods = args.methods.split(",")
     curves: dict = {"budget_seconds": args.seconds, "views": [], "screening": {}}
     for name in args.scenes.split(","):
-        renderer = ExactRenderer(load_bench_scene(name), Shading(lighting=args.lighting))
-        objectives = {loss: Objective(model, fn, renderer, penalty, device=device) for loss, fn in losses.items()}
-        differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(), device)
+        settings = StudySettings(shading=Shading(lighting=args.lighting), penalty=penalty, device=device)
+        study = Study.build(load_bench_scene(name), model, settings)
+        renderer, differentiable = study.renderer, study.differentiable
+        objectives = {loss: study.variant(loss=LossConfig(kind=loss)).objective for loss in losses}
         views = file_init_views(renderer, penalty.margin)[:1]
         views += sample_init_views(
             renderer, model, args.sampled, args.seed, InitViewConfig(), penalty, args.height, args.width
@@ -310,7 +313,7 @@ def main() -> None:
         for label in args.methods.split(","):
             method_settings(label)
         for loss in args.losses.split(","):
-            depth_loss(loss)
+            LossConfig(kind=loss).loss()
         if not set(BASELINES) & {m.partition("@")[0] for m in args.methods.split(",")}:
             raise ValueError(f"--methods must include one of {', '.join(BASELINES)} to compare against")
         if "ssim" not in args.losses.split(","):

@@ -31,7 +31,6 @@ from torch.utils._python_dispatch import TorchDispatchMode
 
 from kadv.attack import AttackConfig, GradientSettings, attack
 from kadv.attack.capture import StepGraph, map_tensors
-from kadv.render import DifferentiableRenderer, DiffRenderConfig
 
 STEPS = 4
 
@@ -90,10 +89,10 @@ class _Counter(TorchDispatchMode):
 
 
 def main() -> None:
-    device, backend, args, renderer, view, objective = tiny_attack(
+    device, backend, args, study, view = tiny_attack(
         "Count the tensor operations of a gradient attack step, phase by phase."
     )
-    differentiable = DifferentiableRenderer(renderer, DiffRenderConfig(edge_search=args.edge_search), device)
+    objective, differentiable = study.objective, study.differentiable
     config = AttackConfig("gradient", GradientSettings(steps=STEPS, restarts=1), budget_passes=None)
 
     def run() -> None:

@@ -5,13 +5,15 @@ fidelities' rank agreement and cost.
 Cells: each scene's init views (the seven probes, the box room and grey_white_room; kadv-tiny, seed
 0, fitted into the upright envelope: held fixed, common random numbers) times the nested radii of a
 profile (5°/0.1 m, 15°/0.3 m, 45°/1 m). A run is one init view searched at every radius, smallest
-first, as a profile searches (each radius warm-started from the worst views of the smaller ones);
-its worst at a radius is the lowest delta1 found within it or a smaller one.
+first, as a profile searches (each radius warm-started from the worst views of the smaller ones,
+the passes split over the radii as a profile splits them, ``kadv.attack.radii.ramp_shares``); its
+worst at a radius is the lowest delta1 found within it or a smaller one. ``--scenes`` also takes
+``modern_hall`` and ``japanese_classroom``, rooms no default was chosen on (never in ``all``).
 
 Two regimes, one currency each:
 
 - network-bound, **equal passes**: every method gets ``--budget`` model passes per init view and
-  radius, every image the model runs on and every backward pass counted (the regime of every real
+  radius on average, every image the model runs on and every backward pass counted (the regime of every real
   model, where passes are the seconds);
 - render-bound, **equal seconds**: every method, the default included, runs in the same process
   right after the default's pass-budget run, under ``budget_seconds`` equal to the seconds that run
@@ -43,7 +45,8 @@ halving's under a seconds budget: the three are one method for W*.
    cell (the first init view of each scene), and each one's milliseconds per view at 240x320 (the
    reprojection's: the one-ray cast it needs for the view's depth, the warp, and the model).
 6. (``--parts budgets``, not run by default) The default alone at ``--budgets`` passes per init
-   view and radius: its search noise per radius and its mean worst, which more passes lower.
+   view and radius on average, split by each of ``--shares`` (``default``, ``equal``, ``a:b:c``):
+   its search noise per radius and its mean worst, which more passes lower.
 7. (``--parts study``, not run by default) The study's own protocol, ``attack=gradient`` with 5
    restarts of 400 steps from the init view (the best restart kept; 4,005 passes), at the largest
    radius from the first init view of each probe and the box room, under ``--study-seeds``; the
@@ -61,7 +64,7 @@ the default's runs, at the largest radius, of the share of its restarts that rea
 
 Run: .venv/bin/python benchmarks/worst_case.py [--out outputs/worst_case] [--parts regret,proxy,budgets,study]
      [--scenes all|a,b] [--views scene:count,...] [--seeds 0,1,2,3,4] [--budget 48] [--methods ...]
-     [--budgets 48,96,192] [--study-seeds 0,1]
+     [--budgets 48,96,192] [--shares default,equal,1:1:2] [--study-seeds 0,1]
 """
 
 from __future__ import annotations
@@ -71,6 +74,7 @@ import ast
 import dataclasses
 import functools
 import hashlib
+import itertools
 import json
 import math
 import time
@@ -87,19 +91,21 @@ import matplotlib.pyplot as plt
 
 from kadv.attack import AttackConfig, CMASettings, GradientSettings, HalvingSettings, attack
 from kadv.attack.init_views import fit_into_envelope
+from kadv.attack.radii import radius_budgets
 from kadv.attack.search import DEFAULT_METHOD, SearchContext
+from kadv.catalogue.probes import PROBES, probe_scene
 from kadv.geometry import perturb_world_T_cam
 from kadv.io import atomic_write
 from kadv.models import load_model
-from kadv.render import DifferentiableRenderer
 from kadv.render.dibr import Reprojection, warp_boxed
 from kadv.render.layers import camera_face_normals, render_anchor
-from kadv.scenes.probes import PROBES, probe_scene
 from kadv.testing.options import CheckOptions, setup
 from kadv.testing.profile import DEFAULT_RADII, WARM_STARTS, warm_starts
 
 ENVELOPE = "upright"
 SCENES = (*PROBES, "box_room", "grey_white_room")
+# rooms no default of the search was chosen on: named with --scenes, never in "all"
+HELD_OUT = ("modern_hall", "japanese_classroom")
 PARTS = ("regret", "proxy", "budgets", "study")
 BASELINES = ("random", "cma", "nevergrad")
 # label -> (method, settings); "default" is kadv's default search with its defaults
@@ -203,18 +209,20 @@ class Cells:
         margin = self.built.penalty.margin
         self.views = [fit_into_envelope(self.built.renderer, v, envelope, margin) for v in self.built.views]
         # the gradient lanes through the warp (conf/render/warp.yaml)
-        self.warp = DifferentiableRenderer(self.built.renderer, common.render_preset("warp"))
+        self.warp = self.built.study.variant(render=common.render_preset("warp")).differentiable
 
     def run(self, view: int, config: AttackConfig, seed: int, seconds: list[float] | None = None,
-            radii=DEFAULT_RADII, warped: bool = False) -> dict:  # fmt: skip
+            radii=DEFAULT_RADII, warped: bool = False, shares=None) -> dict:  # fmt: skip
         """The nested-radii search of one init view (``seconds``: per radius, replacing the pass
-        budget; ``warped``: the gradient through ``render=warp``); per radius its curve of
+        budget; ``warped``: the gradient through ``render=warp``; ``shares``: the pass budget split
+        over the radii by them, :func:`~kadv.attack.radii.radius_budgets`); per radius its curve of
         improvements, passes, seconds and agreement (the share of its restarts that reached its worst)."""
         b = self.built
         differentiable = self.warp if warped else b.differentiable
         results: list = []
+        budgets = radius_budgets(config.budget_passes, len(radii), shares)
         for k, (degrees, metres) in enumerate(radii):
-            within = dataclasses.replace(config, max_angle_deg=degrees, max_distance=metres)
+            within = dataclasses.replace(config, max_angle_deg=degrees, max_distance=metres, budget_passes=budgets[k])
             if seconds is not None:
                 within = dataclasses.replace(within, budget_passes=None, budget_seconds=seconds[k])
             starts = warm_starts(results, 1, WARM_STARTS, config) if results else None
@@ -247,17 +255,18 @@ class Store:
         self.folder = out / "runs"
 
     def run(self, cells: Cells, view: int, label: str, seed: int, budget: int | None, seconds=None,
-            radii=DEFAULT_RADII) -> dict:  # fmt: skip
+            radii=DEFAULT_RADII, shares=None) -> dict:  # fmt: skip
         config = method_config(label, budget)
         key = [repr(config), seed, seconds, source_version(config.method), cells.name, view]
         key += ["render=warp"] if label in WARPED else []
+        key += [] if shares is None else [f"shares={list(shares)}"]
         key = json.dumps(key + ([] if radii == DEFAULT_RADII else [radii]))  # the profile's radii: keys as before
         digest = hashlib.sha256(key.encode()).hexdigest()[:16]
         path = self.folder / f"{cells.name}-v{view}-{label}-s{seed}-{'s' if seconds else 'p'}-{digest}.json"
         if path.is_file():
             return json.loads(path.read_text())
         started = time.perf_counter()
-        run = cells.run(view, config, seed, seconds, radii, warped=label in WARPED) | {"key": key}
+        run = cells.run(view, config, seed, seconds, radii, warped=label in WARPED, shares=shares) | {"key": key}
         text = json.dumps(run)
         atomic_write(path, lambda tmp: tmp.write_text(text))
         worst = " ".join(f"{worst_within(run, k):.3f}" for k in range(len(radii)))
@@ -557,33 +566,37 @@ def _proxy_cell(cell: Cells, degrees: float, metres: float) -> dict:
 
 
 def budgets_part(
-    store: Store, cells: dict[str, Cells], views: dict[str, int], seeds, budgets, labels=("default",)
-) -> dict[str, str]:
+    store: Store, cells: dict[str, Cells], views: dict[str, int], seeds, budgets, labels=("default",),
+    shares=(None,),
+) -> dict[str, str]:  # fmt: skip
     """Part 6: the default (and the other ``labels``: ``default_r3``, its three restarts) alone at
-    each of ``budgets`` passes per init view and radius (the init views fixed): its search noise per
-    radius (median and largest over the unsaturated cells), its mean worst, which more passes
-    lower, and the mean share of its restarts that reached each worst."""
+    each of ``budgets`` passes per init view and radius on average, split over the radii by each of
+    ``shares`` (None: kadv's default split; the init views fixed): its search noise per radius (median and
+    largest over the unsaturated cells), its mean worst, which more passes lower, and the mean
+    share of its restarts that reached each worst."""
     figures: dict[str, str] = {}
     print("\n6. at more passes: search noise median, max (unsaturated cells); mean worst; agreement, per radius")
     print(
-        "| method | passes a radius | " + " | ".join(f"{d:g}°/{m:g} m" for d, m in DEFAULT_RADII) + " | noise median |"
+        "| method | passes a radius | shares | "
+        + " | ".join(f"{d:g}°/{m:g} m" for d, m in DEFAULT_RADII)
+        + " | noise median |"
     )
-    print("|---|---|" + "---|" * (len(DEFAULT_RADII) + 1))
-    for label in labels:
-        for budget in budgets:
-            runs = [[store.run(cells[n], v, label, seed, budget) for seed in seeds]
-                    for n in cells for v in range(views[n])]  # fmt: skip
-            row, pooled = [], []
-            for k in range(len(DEFAULT_RADII)):
-                worsts = [[worst_within(run, k) for run in cell] for cell in runs]
-                noise = [sd for sd in map(seed_noise, worsts) if sd is not None]
-                pooled += noise
-                agreed = np.mean([run["radii"][k]["agreement"] for cell in runs for run in cell])
-                row.append(f"{np.median(noise):.3f}, {np.max(noise):.3f}; worst {np.mean(worsts):.3f}; "
-                           f"agreed {agreed:.2f}")  # fmt: skip
-            print(f"| {label} | {budget} | " + " | ".join(row) + f" | {np.median(pooled):.3f} |")
-            suffix = "" if label == "default" else f"_{label}"
-            figures[f"noise_median_{budget}{suffix}"] = f"{np.median(pooled):.3f}"
+    print("|---|---|---|" + "---|" * (len(DEFAULT_RADII) + 1))
+    for label, budget, split in itertools.product(labels, budgets, shares):
+        runs = [[store.run(cells[n], v, label, seed, budget, shares=split) for seed in seeds]
+                for n in cells for v in range(views[n])]  # fmt: skip
+        row, pooled = [], []
+        for k in range(len(DEFAULT_RADII)):
+            worsts = [[worst_within(run, k) for run in cell] for cell in runs]
+            noise = [sd for sd in map(seed_noise, worsts) if sd is not None]
+            pooled += noise
+            agreed = np.mean([run["radii"][k]["agreement"] for cell in runs for run in cell])
+            row.append(f"{np.median(noise):.3f}, {np.max(noise):.3f}; worst {np.mean(worsts):.3f}; "
+                       f"agreed {agreed:.2f}")  # fmt: skip
+        written = "default" if split is None else ":".join(f"{v:g}" for v in split)
+        print(f"| {label} | {budget} | {written} | " + " | ".join(row) + f" | {np.median(pooled):.3f} |")
+        suffix = ("" if label == "default" else f"_{label}") + ("" if split is None else f"_{written}")
+        figures[f"noise_median_{budget}{suffix}"] = f"{np.median(pooled):.3f}"
     return figures
 
 
@@ -614,6 +627,22 @@ def study_part(store: Store, cells: dict[str, Cells], seeds: list[int], budget: 
     return {"win_study_passes": f"{share:.2f}"}
 
 
+def parse_shares(parser: argparse.ArgumentParser, item: str) -> tuple[float, ...] | None:
+    """One ``--shares`` item: None for ``default`` (kadv's split, :func:`~kadv.attack.radii.ramp_shares`),
+    ones for ``equal``, else one positive number a radius; a bad one ends the script in one line
+    (exit status 2)."""
+    if item == "default":
+        return None
+    if item == "equal":
+        return (1.0,) * len(DEFAULT_RADII)
+    try:
+        values = tuple(float(v) for v in item.split(":"))
+        radius_budgets(MIN_BUDGET, len(DEFAULT_RADII), values)
+    except ValueError:
+        parser.error(f"--shares: {item!r} is not 'default', 'equal' or {len(DEFAULT_RADII)} positive numbers a:b:c")
+    return values
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="outputs/worst_case")
@@ -627,11 +656,13 @@ def main() -> None:
     parser.add_argument("--budgets", default="48,96,192", help="part budgets: the default's passes a radius")
     parser.add_argument("--study-seeds", default="0,1", help="part study: the seeds of both searches")
     parser.add_argument("--budget-methods", default="default", help=f"part budgets: default, {', '.join(RESTARTED)}")
+    parser.add_argument("--shares", default="default", help="part budgets: splits of the passes over the radii, "
+                        "comma-separated, each 'default' (kadv's), 'equal' or a:b:c")  # fmt: skip
     args = parser.parse_args()
     out, parts = Path(args.out), args.parts.split(",")
     names = list(SCENES) if args.scenes == "all" else args.scenes.split(",")
     labels = args.methods.split(",")
-    common.check_names(parser, {"--parts": (parts, PARTS), "--scenes": (names, SCENES),
+    common.check_names(parser, {"--parts": (parts, PARTS), "--scenes": (names, SCENES + HELD_OUT),
                                 "--methods": (labels, ("default", *CANDIDATES))})  # fmt: skip
     common.check_names(parser, {"--budget-methods": (args.budget_methods.split(","), ("default", *RESTARTED))})
     if "default" not in labels:
@@ -641,6 +672,7 @@ def main() -> None:
     budgets = [int(b) for b in args.budgets.split(",") if b.strip().isdigit()]
     if not budgets or len(budgets) != len(args.budgets.split(",")) or min(budgets) < MIN_BUDGET:
         parser.error(f"--budgets: integers of at least {MIN_BUDGET}, comma-separated, got {args.budgets!r}")
+    shares = [parse_shares(parser, item) for item in args.shares.split(",")]
     seeds = [int(s) for s in args.seeds.split(",")]
     if len(seeds) < 2:
         parser.error("--seeds: at least two, for the search noise")
@@ -661,7 +693,7 @@ def main() -> None:
     if "proxy" in parts:
         figures |= proxy_part(cells, out)
     if "budgets" in parts:
-        figures |= budgets_part(Store(out), cells, views, seeds, budgets, args.budget_methods.split(","))
+        figures |= budgets_part(Store(out), cells, views, seeds, budgets, args.budget_methods.split(","), shares)
     if "study" in parts:
         figures |= study_part(Store(out), cells, [int(s) for s in args.study_seeds.split(",")], args.budget)
     print("worst_case " + " ".join(f"{k}={v}" for k, v in figures.items()))

@@ -19,6 +19,8 @@ _EXPORTS = {
     "RenderOutput": "kadv.render",
     "Scene": "kadv.scenes",
     "Shading": "kadv.render",
+    "Study": "kadv.attack",
+    "StudySettings": "kadv.attack",
     "box_room": "kadv.scenes",
     "intrinsics_from_fov": "kadv.geometry",
     "load_model": "kadv.models",
@@ -28,6 +30,7 @@ _EXPORTS = {
 }
 
 if TYPE_CHECKING:  # the same names, for type checkers and the API reference
+    from kadv.attack import Study, StudySettings
     from kadv.geometry import Camera, intrinsics_from_fov, look_at
     from kadv.models import DepthModel, load_model
     from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer, RenderOutput, Shading
@@ -43,6 +46,8 @@ __all__ = [
     "RenderOutput",
     "Scene",
     "Shading",
+    "Study",
+    "StudySettings",
     "box_room",
     "intrinsics_from_fov",
     "load_model",

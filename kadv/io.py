@@ -11,7 +11,7 @@ from pathlib import Path
 from kadv.errors import WriteError
 from kadv.runs import deferred_interrupts
 
-__all__ = ["TEMPORARY_MARK", "atomic_write", "remove_temporaries", "write_json"]
+__all__ = ["TEMPORARY_MARK", "atomic_write", "remove_temporaries", "save_figure", "write_json"]
 
 # in the name of every file atomic_write has not finished: ".summary.kadv-tmp-x1y2z3.json"
 TEMPORARY_MARK = ".kadv-tmp-"
@@ -67,3 +67,15 @@ def remove_temporaries(folder: str | Path) -> list[Path]:
     for path in left:
         path.unlink(missing_ok=True)
     return left
+
+
+def save_figure(path: str | Path, figure, tight: bool = True) -> Path:
+    """Write a matplotlib ``figure`` as a PNG atomically and close it; ``tight`` crops it to what it
+    draws (a layout pass of its own: a figure laid out by hand needs none)."""
+    import matplotlib.pyplot as plt  # the pictures' modules load it; the rest of kadv need not
+
+    bbox = "tight" if tight else None
+    try:
+        return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100, bbox_inches=bbox))
+    finally:
+        plt.close(figure)

@@ -17,7 +17,7 @@ from kadv.device import resolve_device
 from kadv.geometry import intrinsics_from_fov
 from kadv.losses import depth_loss
 from kadv.models import KadvTiny, TinyDepthNet
-from kadv.models.train_tiny import TinyTrainConfig, fit
+from kadv.training.tiny import TinyTrainConfig, fit
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 H, W = 48, 64

@@ -26,6 +26,8 @@ from kadv.attack.methods.nevergrad import NevergradSettings
 from kadv.attack.methods.random import RandomSettings
 from kadv.attack.methods.turbo import TurboSettings
 from kadv.attack.objective import Objective, ObjectiveTerms
+from kadv.attack.profile import Profile
+from kadv.attack.radii import DEFAULT_RADII, SeedProfile, profile_views, search_radii, warm_starts
 from kadv.attack.records import (
     Agreement,
     AttackResult,
@@ -38,6 +40,7 @@ from kadv.attack.records import (
     incumbent_path,
     select_top_views,
     separated,
+    worst_record,
 )
 from kadv.attack.registry import METHODS, NoSettings, SearchMethod, get_method, register_method
 from kadv.attack.restarts import restarted_search
@@ -52,11 +55,13 @@ from kadv.attack.search import (
     SearchContext,
 )
 from kadv.attack.space import FOV, PoseSpace
+from kadv.attack.study import Study, StudySettings
 from kadv.penalties import PenaltyConfig
 
 __all__ = [
     "DEFAULT_METHOD",
     "DEFAULT_PASSES",
+    "DEFAULT_RADII",
     "FOV",
     "METHODS",
     "RENAMED_BUDGET",
@@ -80,10 +85,14 @@ __all__ = [
     "ObjectiveTerms",
     "PenaltyConfig",
     "PoseSpace",
+    "Profile",
     "Proposer",
     "RandomSettings",
     "SearchContext",
     "SearchMethod",
+    "SeedProfile",
+    "Study",
+    "StudySettings",
     "TurboSettings",
     "ViewRecord",
     "ViewScores",
@@ -101,6 +110,7 @@ __all__ = [
     "gradient_search",
     "incumbent_path",
     "load_init_params",
+    "profile_views",
     "proposer_search",
     "register_method",
     "register_proposer",
@@ -109,6 +119,9 @@ __all__ = [
     "sample_valid_views",
     "save_init_params",
     "score_views",
+    "search_radii",
     "select_top_views",
     "separated",
+    "warm_starts",
+    "worst_record",
 ]

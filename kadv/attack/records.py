@@ -30,6 +30,7 @@ __all__ = [
     "incumbent_path",
     "select_top_views",
     "separated",
+    "worst_record",
 ]
 
 
@@ -258,6 +259,12 @@ class AttackResult:
 
     method: str
     views: list[InitViewResult] = field(default_factory=list)
+
+
+def worst_record(records: list[ViewRecord]) -> ViewRecord:
+    """The valid full-size record of lowest delta1 (the highest loss among ties)."""
+    rankable = [r for r in records if r.rankable] or records[:1]
+    return min(rankable, key=lambda r: (r.delta1, -r.loss))
 
 
 def incumbent_path(records: list[ViewRecord]) -> list[ViewRecord]:

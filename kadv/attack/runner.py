@@ -42,8 +42,7 @@ def attack(
             without a gradient use its exact renderer and supersampling).
         init_views: starting views; one outside ``config.envelope`` is moved into it, or refused
             (:class:`InitViewError`) when it cannot be.
-        height: image height.
-        width: image width.
+        height, width: the image size.
         config: search settings.
         seed: the run's seed.
         completed: results already computed, by init-view index; they are not recomputed.
@@ -52,21 +51,15 @@ def attack(
         starts: warm starts by init-view index, pose parameters (N, 6) relative to that init view
             (:class:`~kadv.attack.search.SearchContext`'s ``starts``).
     """
-    method = get_method(config.method)
-    config.check_run(method.check, differentiable.config.supersample)
+    config.check_run(get_method(config.method).check, differentiable.config.supersample)
     # all of them before any search: a view that cannot be moved in is refused before work is spent
-    margin = objective.penalty.margin
-    init_views = [fit_into_envelope(differentiable.renderer, init, config.envelope, margin) for init in init_views]
-    completed = dict(completed or {})
-    result = AttackResult(config.method)
+    fit = lambda init: fit_into_envelope(differentiable.renderer, init, config.envelope, objective.penalty.margin)
+    init_views = [fit(init) for init in init_views]
+    completed, result = dict(completed or {}), AttackResult(config.method)
     per_view = config.passes
-    with tqdm(
-        total=len(init_views) * per_view if per_view else None,
-        desc=f"{config.method} attack",
-        disable=not progress,
-        unit="pass",
-        dynamic_ncols=True,
-    ) as bar:
+    total = len(init_views) * per_view if per_view else None
+    options = {"desc": f"{config.method} attack", "disable": not progress, "unit": "pass", "dynamic_ncols": True}
+    with tqdm(total=total, **options) as bar:
         for index, init in enumerate(init_views):
             if index in completed:
                 bar.update(per_view or 0)
@@ -75,12 +68,9 @@ def attack(
             bar.set_description(f"{config.method} attack, init view {index + 1}/{len(init_views)}")
             bar.set_postfix_str("", refresh=False)  # the previous init view's best is not this one's
             warm = (starts or {}).get(index)
-
-            def make_context(share: AttackConfig, first: bool, init=init, warm=warm) -> SearchContext:
-                differentiable.reset()  # each run from its own anchor: runs are independent
-                return SearchContext(objective, differentiable, init, height, width, share, warm if first else None)
-
-            view_result = restarted_search(method.search, make_context, config, [seed, index], bar)
+            view_result = _search_from(
+                objective, differentiable, init, (height, width), config, [seed, index], warm, bar
+            )
             result.views.append(view_result)
             if on_result is not None:
                 on_result(index, view_result)
@@ -88,3 +78,23 @@ def attack(
                 bar.n = (index + 1) * per_view
                 bar.refresh()
     return result
+
+
+def _search_from(
+    objective: Objective,
+    differentiable: DifferentiableRenderer,
+    init: InitView,
+    size: tuple[int, int],
+    config: AttackConfig,
+    seed: list[int],
+    warm: torch.Tensor | None,
+    bar: tqdm,
+) -> InitViewResult:
+    """One init view's search under ``config`` (its restarts, each seeded from ``seed``), each run
+    from an anchor of its own, the first warm-started from ``warm``."""
+
+    def make_context(share: AttackConfig, first: bool) -> SearchContext:
+        differentiable.reset()  # each run from its own anchor: runs are independent
+        return SearchContext(objective, differentiable, init, *size, share, warm if first else None)
+
+    return restarted_search(get_method(config.method).search, make_context, config, seed, bar)

@@ -3,9 +3,11 @@ move, view evaluation and recording."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import InitVar, dataclass
 from typing import Any
 
@@ -17,7 +19,7 @@ from kadv.attack.records import Budget, InitViewResult, ViewRecord, select_top_v
 from kadv.attack.registry import get_method
 from kadv.attack.space import FOV, PoseSpace
 from kadv.geometry import matrix_to_axis_angle, perturb_world_T_cam, scaled_size, yaw_pitch_roll
-from kadv.penalties import ViewValidity, step_guard, view_validity
+from kadv.penalties import ViewValidity, view_validity
 from kadv.penalties.envelope import Envelope, get_envelope
 from kadv.render import DifferentiableRenderer, DiffRenderOutput, RenderOutput
 
@@ -89,6 +91,10 @@ class AttackConfig:
             of the budgets (:func:`~kadv.attack.restarts.restarted_search`): the search stops once
             two runs' worsts agree, and reports how many runs reached its worst (its agreement).
         agreement_delta1: two runs agree when their worst views' delta1 differ by at most this.
+        radius_shares: how a search across nested radii (a profile, ``attack.radii``) splits its
+            passes over them, ``budget_passes`` a radius on average: one positive share a radius
+            (None: the k-th radius, smallest first, gets k shares, :func:`~kadv.attack.radii.ramp_shares`;
+            ``(1, 1, 1)``: equally).
     """
 
     method: str = DEFAULT_METHOD
@@ -103,6 +109,7 @@ class AttackConfig:
     envelope: Envelope | str = "free"
     restarts: int = 1
     agreement_delta1: float = 0.03
+    radius_shares: tuple[float, ...] | None = None
     budget_evaluations: InitVar[int | None] = None  # renamed: refused with the new name
 
     def __post_init__(self, budget_evaluations: int | None) -> None:
@@ -136,6 +143,15 @@ class AttackConfig:
             raise ValueError(f"attack.restarts must be an integer >= 1, got {self.restarts!r}")
         if not (math.isfinite(self.agreement_delta1) and 0.0 <= self.agreement_delta1 <= 1.0):
             raise ValueError(f"attack.agreement_delta1 must be in [0, 1], got {self.agreement_delta1}")
+        shares = self.radius_shares
+        if shares is not None and not (
+            isinstance(shares, tuple)
+            and shares
+            and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0 for v in shares
+            )
+        ):
+            raise ValueError(f"attack.radius_shares must be null or positive numbers, one a radius, got {shares!r}")
         self.check_run(method.check)
 
     def check_run(self, check: Any, supersample: int | None = None) -> None:
@@ -182,6 +198,9 @@ class Clock:
     what is left of ``budget_seconds`` (so a search ends within about one batch of it, and a small
     batch after a large one, a lane's step after a screening, still starts). A ``progress`` bar
     (tqdm), when set, advances by the passes spent.
+
+    Passes are counted in one place, :meth:`charge`: a search scores its views inside it, and the
+    block's views and backward passes are counted, and its seconds timed, as it ends.
     """
 
     def __init__(self, passes: int | None, seconds: float | None, progress: Any = None) -> None:
@@ -208,15 +227,30 @@ class Clock:
             count = min(count, max(0, math.floor(left / (self._pass_seconds * cost))))
         return max(count, 0)
 
-    def spent(self, views: int, seconds: float, backward: int = 0, screened: bool = False) -> None:
-        """Count a batch of ``views`` forward passes (screened ones: at a cheap fidelity) and
-        ``backward`` backward passes that took ``seconds``."""
-        self.budget.forward += views
-        self.budget.screened += views if screened else 0
-        self.budget.backward += backward
-        self._pass_seconds = seconds / max(views + backward, 1)
+    @contextlib.contextmanager
+    def charge(self, views: int, backward: int = 0, screened: bool = False) -> Iterator[Charge]:
+        """Count a batch of ``views`` forward passes (``screened``: at a cheap fidelity) and
+        ``backward`` backward passes, scored inside the block, when it ends; the block may set the
+        :class:`Charge`'s ``backward`` once it knows how many views it back-propagated."""
+        charge = Charge(views, backward, screened)
+        started = time.perf_counter()
+        yield charge
+        self.budget.forward += charge.views
+        self.budget.screened += charge.views if charge.screened else 0
+        self.budget.backward += charge.backward
+        self._pass_seconds = (time.perf_counter() - started) / max(charge.views + charge.backward, 1)
         if self.progress is not None:
-            self.progress.update(views + backward)
+            self.progress.update(charge.views + charge.backward)
+
+
+@dataclass
+class Charge:
+    """What a :meth:`Clock.charge` block spends: forward passes (``views``; ``screened``: at a cheap
+    fidelity) and backward passes."""
+
+    views: int
+    backward: int = 0
+    screened: bool = False
 
 
 @dataclass
@@ -367,22 +401,11 @@ class SearchContext:
         return self.space.project(self.renderer, self.base(len(params)), params)
 
     def guard(self, old: torch.Tensor, new: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Let the centre offsets (B, 3) move from ``old`` to ``new`` only as far as the step guard allows.
-
-        A refused move is shortened to the guard's clear fraction; if that is still refused, the
-        camera stays. Returns the offsets reached and the fraction of each move taken (B,), on
-        :attr:`device`.
-        """
+        """Let the centre offsets (B, 3) move from ``old`` to ``new`` only as far as the step guard
+        allows (:meth:`PoseSpace.guard`); the offsets reached and the fraction of each move taken
+        (B,), on :attr:`device`."""
         old, new = old.to(self.device), new.to(self.device)
-        c0 = self._base[:3, 3]
-        check = step_guard(self.renderer, c0 + old, c0 + new, self.margin)
-        fraction = torch.where(check.allowed, torch.ones_like(check.max_fraction), check.max_fraction)
-        shortened = old + fraction[:, None] * (new - old)
-        # every move is checked again, the allowed ones too: deciding which to check would read the
-        # verdicts back from the device
-        again = step_guard(self.renderer, c0 + old, c0 + shortened, self.margin)
-        fraction = torch.where(check.allowed | again.allowed, fraction, torch.zeros_like(fraction))
-        return old + fraction[:, None] * (new - old), fraction
+        return self.space.guard(self.renderer, self._base[:3, 3], old, new, self.margin)
 
     def measure(
         self,
@@ -449,21 +472,11 @@ class SearchContext:
     ) -> list[ViewRecord]:
         """Move from the init view to each point (B, dims) through the step guard, then :meth:`score`
         the poses reached."""
-        started = time.perf_counter()
-        params = self.project(params.to(self.device))
-        reached, fraction = self.guard(torch.zeros_like(params[:, 3:6]), params[:, 3:6])
-        params = torch.cat([params[:, :3], reached, params[:, FOV:]], dim=1)
-        return self.score(
-            step,
-            params,
-            fraction,
-            lanes,
-            scale=scale,
-            supersample=supersample,
-            screened=screened,
-            timed=timed,
-            started=started,
-        )
+        with self.clock.charge(len(params), screened=screened):
+            params = self.project(params.to(self.device))
+            reached, fraction = self.guard(torch.zeros_like(params[:, 3:6]), params[:, 3:6])
+            params = torch.cat([params[:, :3], reached, params[:, FOV:]], dim=1)
+            return self._scored(step, params, fraction, lanes, scale, supersample, screened, timed)
 
     def score(
         self,
@@ -475,15 +488,27 @@ class SearchContext:
         supersample: int | None = None,
         screened: bool = False,
         timed: bool = False,
-        started: float | None = None,
     ) -> list[ViewRecord]:
         """Render points (B, dims) already through the step guard (``fraction``: the share of each move
         taken) exactly at ``scale`` times the run's size (with ``supersample`` rays per pixel side;
         None: the run's), evaluate and record, one model pass a view (``screened``: at a cheap
         fidelity, never ranked: :meth:`screen`). ``timed``: the render's and the model's seconds per
-        view go to the clock (each waits for the device, so only where a search asks for them).
-        ``started``: when the batch's work began (its seconds go to the clock), if before this call."""
-        started = time.perf_counter() if started is None else started
+        view go to the clock (each waits for the device, so only where a search asks for them)."""
+        with self.clock.charge(len(params), screened=screened):
+            return self._scored(step, params, fraction, lanes, scale, supersample, screened, timed)
+
+    def _scored(
+        self,
+        step: int,
+        params: torch.Tensor,
+        fraction: torch.Tensor,
+        lanes: list[int] | range | None,
+        scale: float,
+        supersample: int | None,
+        screened: bool,
+        timed: bool,
+    ) -> list[ViewRecord]:
+        """:meth:`score`'s work, inside a charge of the clock's."""
         params = params.to(self.device)
         K, height, width = self.size(scale, params)
         supersample = supersample or self.differentiable.config.supersample
@@ -496,11 +521,9 @@ class SearchContext:
             if timed:
                 self.clock.render_s = (modelling - rendering) / len(pose)
                 self.clock.model_s = (self._now() - modelling) / len(pose)
-        rows = self.records(
+        return self.records(
             step, params, pose, terms, fraction, lanes=lanes, render=out, scale=scale, screened=screened
         )
-        self.clock.spent(len(params), time.perf_counter() - started, screened=screened)
-        return rows
 
     def _now(self) -> float:
         """The clock, once the device's queued work is done (a GPU's work runs after its call returns)."""

@@ -19,6 +19,7 @@ from scipy.stats import qmc
 
 from kadv.geometry import fov_intrinsics, intrinsics_from_fov
 from kadv.penalties.envelope import Envelope
+from kadv.penalties.guard import step_guard
 from kadv.render.raycast import ExactRenderer
 
 __all__ = ["FOV", "PoseSpace"]
@@ -128,6 +129,23 @@ class PoseSpace:
         params = self.bound(params)
         pose = self.envelope.project(renderer, base, params[:, :6])
         return torch.cat([pose, params[:, FOV:]], dim=1) if self.fov_searched else pose
+
+    def guard(
+        self, renderer: ExactRenderer, centre: torch.Tensor, old: torch.Tensor, new: torch.Tensor, margin: float
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Let centre offsets (B, 3) from the init view's ``centre`` (3,) move from ``old`` to
+        ``new`` only as far as the step guard allows (:func:`kadv.penalties.step_guard`, ``margin``
+        clear of every surface): a refused move is shortened to the guard's clear fraction and, if
+        that is still refused, the camera stays. Returns the offsets reached and the fraction of
+        each move taken (B,)."""
+        check = step_guard(renderer, centre + old, centre + new, margin)
+        fraction = torch.where(check.allowed, torch.ones_like(check.max_fraction), check.max_fraction)
+        shortened = old + fraction[:, None] * (new - old)
+        # every move is checked again, the allowed ones too: deciding which to check would read the
+        # verdicts back from the device
+        again = step_guard(renderer, centre + old, centre + shortened, margin)
+        fraction = torch.where(check.allowed | again.allowed, fraction, torch.zeros_like(fraction))
+        return old + fraction[:, None] * (new - old), fraction
 
     def fov_deg(self, params: torch.Tensor) -> torch.Tensor:
         """The horizontal field of view (B,) float64, degrees, of points (B, dims)."""

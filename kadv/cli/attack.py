@@ -30,8 +30,8 @@ from kadv.attack import (
     InitViewConfig,
     Objective,
     PenaltyConfig,
+    Study,
     agreement_text,
-    attack,
     captured_init_views,
     check_init_views,
     file_init_views,
@@ -40,23 +40,24 @@ from kadv.attack import (
     sample_init_views,
     save_init_params,
 )
+from kadv.attack.profile import Profile
+from kadv.attack.radii import WARM_STARTS, profile_views, radius_budgets, search_radii, warm_starts
 from kadv.cli.common import (
     check_render_config,
     checks_overrides,
     config_int,
     frame_note,
-    loss_from_config,
+    loss_settings,
     model_from_config,
-    renderer_from_config,
     reports_user_errors,
     scene_from_config,
     settings_from_node,
+    study_settings,
 )
 from kadv.device import resolve_device
 from kadv.io import atomic_write, remove_temporaries
 from kadv.models import count_passes
 from kadv.penalties import ENVELOPES, Envelope
-from kadv.render import DifferentiableRenderer, DiffRenderConfig
 from kadv.report.run import (
     SUMMARY,
     is_complete,
@@ -68,7 +69,6 @@ from kadv.report.run import (
 from kadv.report.summary import RunInfo, RunSummary
 from kadv.runs import Interrupted, interruptible, run_lock
 from kadv.testing.options import check_radii
-from kadv.testing.profile import WARM_STARTS, Profile, profile_views, search_radii, warm_starts
 
 log = logging.getLogger(__name__)
 
@@ -249,6 +249,31 @@ def _check_same_settings(run_dir: Path, cfg: DictConfig) -> None:
         )
 
 
+def _search_settings(cfg: DictConfig) -> tuple[AttackConfig, tuple | None, list | None]:
+    """The run's search (``attack``, ``envelope``), and for a profile run (``attack.radii``) its
+    radii and each radius's pass budget: the run itself then searches the largest radius, with its
+    share of the passes (``attack.radius_shares``)."""
+    attack_config = attack_settings(cfg.attack, cfg.get("envelope"))
+    radii = attack_radii(cfg.attack)
+    if radii is None:
+        if attack_config.radius_shares is not None:
+            raise ValueError("attack.radius_shares splits a profile's passes over its radii: it needs attack.radii")
+        return attack_config, None, None
+    budgets = radius_budgets(attack_config.budget_passes, len(radii), attack_config.radius_shares)
+    largest = {"max_angle_deg": radii[-1][0], "max_distance": radii[-1][1], "budget_passes": budgets[-1]}
+    return dataclasses.replace(attack_config, **largest), radii, budgets
+
+
+def _profile(study: Study, views: list, radii: tuple, seed: int, results: list) -> Profile:
+    """The profile of a profile run: its searches' ``results`` at every radius, and the typical views."""
+    config = study.settings.attack
+    seeded = profile_views(
+        study, views, config, radii, seed, progress=study.settings.progress, searched=dict(enumerate(results))
+    )
+    names = (study.model.name, study.scene.name, config.envelope.name)
+    return Profile.of(*names, radii, (seed,), [seeded], alignment=study.objective.alignment)
+
+
 def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     """The run itself; ``progress`` counts the init views done (for the line an interruption prints)."""
     # a run killed mid-write (SIGKILL, a lost node) leaves the file it was writing as a temporary
@@ -263,24 +288,19 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     device = resolve_device(cfg.device)
     seed = config_int(cfg.seed, "seed")
     height, width, supersample = check_render_config(cfg.render)
-    attack_config = attack_settings(cfg.attack, cfg.get("envelope"))
-    radii = attack_radii(cfg.attack)
-    if radii is not None:  # a profile run: the run itself searches the largest radius
-        attack_config = dataclasses.replace(attack_config, max_angle_deg=radii[-1][0], max_distance=radii[-1][1])
+    attack_config, radii, budgets = _search_settings(cfg)
     init_config = settings_from_node(InitViewConfig, OmegaConf.to_container(cfg.init, resolve=True), "init")
     penalty = settings_from_node(PenaltyConfig, OmegaConf.to_container(cfg.penalty, resolve=True), "penalty")
-    diff_config = DiffRenderConfig(
-        supersample=supersample, **OmegaConf.to_container(cfg.render.differentiable, resolve=True)
-    )
     attack_config.check_run(get_method(attack_config.method).check, supersample)
     scene = scene_from_config(cfg.scene)
     if (note := frame_note(scene)) is not None:
         log.info(note)
-    renderer = renderer_from_config(scene, cfg.render, device)
-    model = model_from_config(cfg.model)
-    loss = loss_from_config(cfg.loss)
-    alignment = cfg.loss.get("alignment", "scale_shift")  # a run saved before it existed: the study's
-    objective = Objective(model, loss, renderer, penalty, space=cfg.loss.space, device=device, alignment=alignment)
+    loss = loss_settings(cfg.loss)
+    settings = study_settings(
+        scene, cfg.render, device, loss=loss, penalty=penalty, attack=attack_config, progress=cfg.progress
+    )
+    study = Study.build(scene, model_from_config(cfg.model), settings)
+    objective = study.objective
     config_text = OmegaConf.to_yaml(cfg, resolve=True)  # render.lighting resolved
     atomic_write(run_dir / "config.yaml", lambda tmp: tmp.write_text(config_text))
     views, init_passes = _init_views(seed, run_dir, objective, init_config, height, width)
@@ -293,38 +313,16 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
         save_partial_result(run_dir, index, view)
         progress["done"] += 1
 
-    differentiable = DifferentiableRenderer(renderer, diff_config, device)
     smaller, starts = [], None
     if radii is not None:  # the smaller radii first: the largest's search starts from their worst views
-        smaller = search_radii(
-            objective, differentiable, views, (height, width), attack_config, radii[:-1], seed, cfg.progress
-        )
+        smaller = search_radii(study, views, attack_config, radii[:-1], seed, cfg.progress, budgets=budgets[:-1])
         starts = warm_starts(smaller, len(views), WARM_STARTS, attack_config)
-    result = attack(
-        objective,
-        differentiable,
-        views,
-        height,
-        width,
-        attack_config,
-        seed,
-        completed=completed,
-        on_result=on_result,
-        progress=cfg.progress,
-        starts=starts,
-    )
-    profile = None
-    if radii is not None:  # the profile of all the radii
-        searched = dict(enumerate(smaller)) | {len(radii) - 1: result}
-        seeded = profile_views(
-            objective, differentiable, views, (height, width), attack_config, radii, seed, progress=cfg.progress,
-            searched=searched,
-        )  # fmt: skip
-        names = (model.name, scene.name, attack_config.envelope.name)
-        profile = Profile.of(*names, radii, (seed,), [seeded], alignment=objective.alignment)
+    result = study.attack(views, seed, completed=completed, on_result=on_result, starts=starts)
+    # the profile of all the radii
+    profile = None if radii is None else _profile(study, views, radii, seed, [*smaller, result])
     fov = attack_config.envelope.fov_deg
     info = RunInfo(
-        scene.name, model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed), init_passes,
+        scene.name, study.model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed), init_passes,
         fov_deg=None if fov is None else list(fov),
     )  # fmt: skip
     summary = write_run(run_dir, result, objective, info, supersample, video=cfg.video, profile=profile)

@@ -30,15 +30,17 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
 
+from kadv.attack import StudySettings
+from kadv.catalogue import scene_from_node
 from kadv.errors import WeightsUnavailable, WriteError
 from kadv.geometry import look_at
 from kadv.io import write_json
-from kadv.losses import DELTA1_TEMPERATURE, AlignedLoss, depth_loss
+from kadv.losses import DELTA1_TEMPERATURE, LossConfig
 from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
-from kadv.render import BakeConfig, ExactRenderer, Shading
+from kadv.render import BakeConfig, DiffRenderConfig, Shading
 from kadv.render.raycast import DEFAULT_MAX_RAYS
 from kadv.runs import LOCK_FILES, RunDirectoryBusy
-from kadv.scenes import Scene, scene_from_node
+from kadv.scenes import Scene
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, ROOM_FEATURES, check_shares
 
 __all__ = [
@@ -49,12 +51,14 @@ __all__ = [
     "config_float",
     "config_int",
     "dirname",
+    "loss_settings",
     "model_from_config",
     "reports_user_errors",
     "resolve_lighting",
     "scene_from_config",
     "settings_from_node",
     "shading_from_config",
+    "study_settings",
 ]
 
 # A user's mistake (a bad value, a missing file, unavailable weights, a run directory another run
@@ -324,13 +328,16 @@ def config_float(value: Any, key: str) -> float:
     return float(value)
 
 
-def loss_from_config(cfg: DictConfig) -> Callable | AlignedLoss:
-    """The attack loss a ``loss/`` config node names (see :func:`kadv.losses.depth_loss`)."""
-    return depth_loss(
-        cfg.kind,
-        cfg.get("vgg_weights"),
-        config_int(cfg.get("window_size", 11), "loss.window_size", 1),
-        config_float(cfg.get("temperature", DELTA1_TEMPERATURE), "loss.temperature"),
+def loss_settings(cfg: DictConfig) -> LossConfig:
+    """The :class:`~kadv.losses.LossConfig` a ``loss/`` config node describes, its numbers checked
+    (a run saved before ``loss.alignment`` existed aligns as the study did: scale and shift)."""
+    return LossConfig(
+        kind=cfg.kind,
+        space=cfg.get("space", "disparity"),
+        alignment=cfg.get("alignment", "scale_shift"),
+        vgg_weights=cfg.get("vgg_weights"),
+        window_size=config_int(cfg.get("window_size", 11), "loss.window_size", 1),
+        temperature=config_float(cfg.get("temperature", DELTA1_TEMPERATURE), "loss.temperature"),
     )
 
 
@@ -379,15 +386,23 @@ def resolve_lighting(scene: Scene, cfg: DictConfig) -> str:
     return lighting
 
 
-def renderer_from_config(scene: Scene, cfg: DictConfig, device: torch.device | str = "cpu") -> ExactRenderer:
-    """The exact renderer of ``scene`` that a ``render/`` node describes: its shading
-    (``render.lighting=auto`` resolved in ``cfg``: :func:`resolve_lighting`) and its ray caster
-    (``render.backend``, on ``device``; a run saved before backends existed casts with auto) and
-    the most rays it casts at once (``render.max_rays``)."""
+def study_settings(scene: Scene, cfg: DictConfig, device: torch.device | str = "cpu", **fields: Any) -> StudySettings:
+    """The :class:`~kadv.attack.StudySettings` of ``scene`` that a ``render/`` node describes: the
+    size, the shading (``render.lighting=auto`` resolved in ``cfg``: :func:`resolve_lighting`), the
+    ray caster (``render.backend``, on ``device``; a run saved before backends existed casts with
+    auto), the most rays cast at once (``render.max_rays``) and the differentiable renderer's
+    options, with the other ``fields`` given (loss, penalty, attack, progress)."""
     resolve_lighting(scene, cfg)
-    max_rays = config_int(cfg.get("max_rays", DEFAULT_MAX_RAYS), "render.max_rays", 1)
-    return ExactRenderer(
-        scene, shading_from_config(cfg), backend=cfg.get("backend", "auto"), device=device, max_rays=max_rays
+    height, width, supersample = check_render_config(cfg)
+    differentiable = OmegaConf.to_container(cfg.get("differentiable") or {}, resolve=True)
+    return StudySettings(
+        size=(height, width),
+        shading=shading_from_config(cfg),
+        backend=cfg.get("backend", "auto"),
+        max_rays=config_int(cfg.get("max_rays", DEFAULT_MAX_RAYS), "render.max_rays", 1),
+        render=DiffRenderConfig(supersample=supersample, **differentiable),
+        device=device,
+        **fields,
     )
 
 

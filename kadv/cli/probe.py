@@ -5,6 +5,7 @@
     kadv-probe model=kadv_tiny search_seeds=3          (the search noise, apart from the init views)
     kadv-probe model=kadv_tiny restarts=3 budget=144   (three runs a search: the agreement of each worst)
     kadv-probe model=kadv_tiny probes=thin_structures,window budget=96 out=outputs/probe_tiny
+    kadv-probe model=kadv_tiny radius_shares=1,1,1     (the passes split equally over the radii)
 
 Each model is profiled on each probe scene (:mod:`kadv.probes`), the probe built anew for each
 seed: the worst delta1 within each nested radius of the camera's move and the camera envelope,
@@ -42,6 +43,7 @@ _KEYS = {
     "budget": None,
     "search_seeds": "1",
     "restarts": "1",
+    "radius_shares": None,
     "alignment": "scale_shift",
     "lighting": "baked",
     "out": "outputs/probe",
@@ -81,6 +83,18 @@ def _seeds(values: dict[str, str | None]) -> tuple[int, ...]:
     return seeds
 
 
+def _shares(text: str | None) -> tuple[float, ...] | None:
+    """``radius_shares=1,2,3``: one positive share a radius (None: the default split)."""
+    if text is None:
+        return None
+    try:
+        return tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(
+            f"radius_shares must be numbers, one a radius, e.g. radius_shares=1,2,3, got {text!r}"
+        ) from None
+
+
 def main(argv: list[str] | None = None) -> None:
     from kadv.penalties import get_envelope
     from kadv.testing import DEFAULT_BUDGET, RobustnessInputError, scorecard
@@ -104,6 +118,7 @@ def main(argv: list[str] | None = None) -> None:
             budget_passes=budget,
             search_seeds=_int(values["search_seeds"], "search_seeds", 1),
             restarts=_int(values["restarts"], "restarts", 1),
+            radius_shares=_shares(values["radius_shares"]),
             alignment=values["alignment"],
             artifacts=out / "views",
             lighting=values["lighting"],

@@ -30,9 +30,9 @@ from kadv.cli.common import (
     check_render_config,
     checks_overrides,
     frame_note,
-    renderer_from_config,
     reports_user_errors,
     scene_from_config,
+    study_settings,
 )
 from kadv.geometry import intrinsics_from_fov
 from kadv.io import atomic_write
@@ -54,7 +54,7 @@ def main(cfg: DictConfig) -> None:
     world_T_cam, fov = camera_from_config(cfg.camera, scene)
     height, width, supersample = check_render_config(cfg.render)
     penalty = PenaltyConfig(**OmegaConf.to_container(cfg.penalty, resolve=True))
-    renderer = renderer_from_config(scene, cfg.render)
+    renderer = study_settings(scene, cfg.render).exact_renderer(scene)
     note = "as given"
     if cfg.camera.world_T_cam is None and cfg.camera.eye is None:
         world_T_cam, moved = clear_file_camera(renderer, world_T_cam, penalty.margin)

@@ -13,9 +13,9 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from kadv.cli.common import USER_ERRORS, model_from_config, renderer_from_config, scene_from_config
+from kadv.attack import Study
+from kadv.cli.common import USER_ERRORS, loss_settings, model_from_config, scene_from_config, study_settings
 from kadv.models import DepthModel
-from kadv.render import ExactRenderer
 from kadv.report.build import write_report
 from kadv.report.sweep import RunRecord, collect_runs
 
@@ -49,17 +49,22 @@ def _parser() -> argparse.ArgumentParser:
 
 
 class _FromConfig:
-    """A run's renderer and model, built from its saved config, once per scene and per model."""
+    """A run's study and model, built from its saved config: one exact renderer per scene, one
+    model per model name."""
 
     def __init__(self) -> None:
-        self.renderers: dict[str, ExactRenderer] = {}
+        self.studies: dict[str, Study] = {}
         self.models: dict[str, DepthModel] = {}
 
-    def renderer_of(self, run: RunRecord) -> ExactRenderer:
-        if run.scene not in self.renderers:
-            config = OmegaConf.create(run.config)
-            self.renderers[run.scene] = renderer_from_config(scene_from_config(config.scene), config.render)
-        return self.renderers[run.scene]
+    def study_of(self, run: RunRecord) -> Study:
+        """The study of the run's scene and model, with its render and loss settings."""
+        config = OmegaConf.create(run.config)
+        loss = loss_settings(config.loss)
+        if run.scene not in self.studies:
+            scene = scene_from_config(config.scene)
+            settings = study_settings(scene, config.render, loss=loss)
+            self.studies[run.scene] = Study.build(scene, self.model_of(run), settings)
+        return self.studies[run.scene].variant(model=self.model_of(run), loss=loss)
 
     def model_of(self, run: RunRecord) -> DepthModel:
         if run.model not in self.models:
@@ -78,7 +83,7 @@ def main(argv: list[str] | None = None) -> None:
         written = write_report(
             args.paths,
             args.out,
-            sources and sources.renderer_of,
+            sources and sources.study_of,
             sources and sources.model_of,
             progress=not args.no_progress,
         )
@@ -111,7 +116,7 @@ def _reference_tables(args: argparse.Namespace, sources: _FromConfig) -> list[Pa
         if not path.is_file():
             raise FileNotFoundError(f"{run.path}: its scene file {path} is gone; the reference needs it")
         rows = survival(
-            path, run.summary.init_views, sources.renderer_of(run), sources.model_of(run),
+            path, run.summary.init_views, sources.study_of(run).renderer, sources.model_of(run),
             run.summary.height, run.summary.width, args.reference_spp, progress=not args.no_progress,
         )  # fmt: skip
         title = f"{run.model} on {run.scene} ({run.method}): delta1 on kadv's renders and on Mitsuba's"

@@ -16,7 +16,7 @@ from kadv.cli.common import checks_overrides, reports_user_errors
 from kadv.io import atomic_write
 from kadv.models.tiny import TINY_METRIC_WEIGHTS, TINY_WEIGHTS, save_kadv_tiny
 from kadv.models.tiny_dpt import TINY_DPT_DIR, save_kadv_tiny_dpt
-from kadv.models.train_tiny import TinyTrainConfig, train_tiny
+from kadv.training.tiny import TinyTrainConfig, train_tiny
 
 log = logging.getLogger(__name__)
 

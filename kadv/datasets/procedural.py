@@ -15,7 +15,7 @@ from kadv.attack.init_views import InitViewConfig, sample_valid_views
 from kadv.geometry import intrinsics_from_fov
 from kadv.penalties import PenaltyConfig, random_valid_poses
 from kadv.render import BakeConfig, ExactRenderer, Shading
-from kadv.scenes import box_room, procedural_room
+from kadv.scenes import Scene, box_room, procedural_room
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, ROOM_FEATURES, check_shares
 
 __all__ = [
@@ -126,6 +126,25 @@ def training_poses(
     return torch.cat([eye_level, random_valid_poses(renderer, rest, rng, fov_x_deg)]) if rest else eye_level
 
 
+def _room(room_seed: int, index: int, mix: RoomMix, rng: np.random.Generator, bake) -> tuple[Scene, Shading]:
+    """Room ``index`` of a batch and its random shading, as ``mix`` says (its draws from ``rng``)."""
+    # room i is furnished when the running share first reaches the next whole room
+    if math.floor((index + 1) * mix.furnished_share) > math.floor(index * mix.furnished_share):
+        scene = procedural_room(
+            seed=room_seed, corridor_share=mix.corridor_share, hall_share=mix.hall_share, **mix.room_features()
+        )
+        lights = None  # the room's own: its lamps and windows
+    else:
+        scene = box_room(seed=room_seed, num_boxes=int(rng.integers(2, 8)))
+        lo, hi = scene.bounds
+        lights = (tuple(rng.uniform(lo + 0.3, hi - 0.3)),)
+    shading = Shading(ambient=float(rng.uniform(0.3, 0.6)), diffuse=float(rng.uniform(0.3, 0.7)), lights=lights)
+    # spread evenly without drawing, so the other rooms' views are those drawn before the share existed
+    if math.floor((index + 1) * mix.baked_share) > math.floor(index * mix.baked_share):
+        shading = replace(shading, lighting="baked", bake=bake)
+    return scene, shading
+
+
 def render_procedural_views(
     count: int,
     seed: int,
@@ -155,22 +174,7 @@ def render_procedural_views(
         rgb, depth, mask, world_T_cam, intrinsics = [], [], [], [], []
         rooms = math.ceil(count / views_per_room)
         for index in tqdm(range(rooms), desc="rendering rooms", disable=not progress):
-            room_seed = seed * 100003 + index
-            # room i is furnished when the running share first reaches the next whole room
-            if math.floor((index + 1) * mix.furnished_share) > math.floor(index * mix.furnished_share):
-                scene = procedural_room(
-                    seed=room_seed, corridor_share=mix.corridor_share, hall_share=mix.hall_share, **mix.room_features()
-                )
-                lights = None  # the room's own: its lamps and windows
-            else:
-                scene = box_room(seed=room_seed, num_boxes=int(rng.integers(2, 8)))
-                lo, hi = scene.bounds
-                lights = (tuple(rng.uniform(lo + 0.3, hi - 0.3)),)
-            shading = Shading(ambient=float(rng.uniform(0.3, 0.6)), diffuse=float(rng.uniform(0.3, 0.7)), lights=lights)
-            # spread evenly without drawing, so the other rooms' views are those drawn before the share existed
-            if math.floor((index + 1) * mix.baked_share) > math.floor(index * mix.baked_share):
-                shading = replace(shading, lighting="baked", bake=bake)
-            renderer = ExactRenderer(scene, shading, progress=False)
+            renderer = ExactRenderer(*_room(seed * 100003 + index, index, mix, rng, bake), progress=False)
             fov = float(rng.uniform(55, 85))
             n = min(views_per_room, count - index * views_per_room)
             poses = training_poses(renderer, n, rng, fov, mix.attack_view_share, height, width)

@@ -160,16 +160,7 @@ def scan_like(room: Scene, seed: int = 0, settings: ScanLikeSettings | None = No
     for centre in centroids[rng.choice(walls, settings.holes, replace=False)] if len(walls) else []:
         radius = rng.uniform(*settings.hole_radius)
         keep &= np.linalg.norm(centroids - centre, axis=1) > radius
-    # the ceiling's missing patches, discs until the share is reached
-    patches = []
-    area = trimesh.triangles.area(vertices[faces])
-    ceiling_area = area[ceiling].sum()
-    removed = np.zeros(len(faces), bool)
-    while ceiling_area > 0 and area[removed].sum() < settings.ceiling_missing * ceiling_area:
-        centre = centroids[rng.choice(np.flatnonzero(ceiling))]
-        radius = rng.uniform(0.4, 1.0)
-        removed |= ceiling & (np.linalg.norm(centroids - centre, axis=1) < radius)
-        patches.append([*centre, radius])
+    removed, patches = _ceiling_patches(vertices, faces, centroids, ceiling, settings.ceiling_missing, rng)
     keep &= ~removed
     box = room.camera_region
     if settings.cut_height is not None:  # a sweep at chest height: nothing above it
@@ -187,18 +178,11 @@ def scan_like(room: Scene, seed: int = 0, settings: ScanLikeSettings | None = No
     if settings.cut_height is not None:
         box = box.copy()
         box[1, 1] = min(box[1, 1], box[0, 1] + settings.cut_height)
-    extra_vertices, extra_faces, extra_colours = [], [], []
-    for k in range(settings.floaters):
-        centre = rng.uniform(box[0] + 0.3, np.maximum(box[1] - 0.3, box[0] + 0.3))
-        corners = centre + rng.normal(0.0, 0.03, (4, 3))
-        start = len(vertices) + 4 * k
-        extra_vertices.append(corners)
-        extra_faces += [[start, start + 1, start + 2], [start, start + 2, start + 3]]
-        extra_colours.append(np.repeat(rng.integers(0, 256, (1, 3)), 4, axis=0))
-    if extra_vertices:
-        vertices = np.concatenate([vertices, *extra_vertices])
-        faces = np.concatenate([faces, np.array(extra_faces, np.int64)])
-        colours = np.concatenate([colours, *[c.astype(np.uint8) for c in extra_colours]])
+    if settings.floaters:
+        extra_vertices, extra_faces, extra_colours = _floaters(box, settings.floaters, len(vertices), rng)
+        vertices = np.concatenate([vertices, extra_vertices])
+        faces = np.concatenate([faces, extra_faces])
+        colours = np.concatenate([colours, extra_colours])
     flip = rng.uniform(size=len(faces)) < settings.flip_share
     faces = np.where(flip[:, None], faces[:, ::-1], faces)
     if settings.cut_height is not None or settings.missing_walls:  # what was cut away leaves no vertex behind
@@ -207,6 +191,39 @@ def scan_like(room: Scene, seed: int = 0, settings: ScanLikeSettings | None = No
     scan = ScanLike(vertices, faces.astype(np.int64), colours, room, np.array(patches).reshape(-1, 4))
     scan.trajectory = _capture_path(room.camera_region, settings)
     return scan
+
+
+def _ceiling_patches(
+    vertices: np.ndarray, faces: np.ndarray, centroids: np.ndarray, ceiling: np.ndarray, share: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, list[list[float]]]:  # fmt: skip
+    """The ceiling's missing patches: discs around ceiling triangles until ``share`` of the
+    ceiling's area is gone; the triangles removed (F,) and each disc's [x, y, z, radius]."""
+    patches = []
+    area = trimesh.triangles.area(vertices[faces])
+    ceiling_area = area[ceiling].sum()
+    removed = np.zeros(len(faces), bool)
+    while ceiling_area > 0 and area[removed].sum() < share * ceiling_area:
+        centre = centroids[rng.choice(np.flatnonzero(ceiling))]
+        radius = rng.uniform(0.4, 1.0)
+        removed |= ceiling & (np.linalg.norm(centroids - centre, axis=1) < radius)
+        patches.append([*centre, radius])
+    return removed, patches
+
+
+def _floaters(box: np.ndarray, count: int, first: int, rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    """``count`` floating fragments in ``box`` (2, 3), two small triangles each: their vertices,
+    faces (numbered from vertex ``first``) and uint8 colours."""
+    extra_vertices, extra_faces, extra_colours = [], [], []
+    for k in range(count):
+        centre = rng.uniform(box[0] + 0.3, np.maximum(box[1] - 0.3, box[0] + 0.3))
+        corners = centre + rng.normal(0.0, 0.03, (4, 3))
+        start = first + 4 * k
+        extra_vertices.append(corners)
+        extra_faces += [[start, start + 1, start + 2], [start, start + 2, start + 3]]
+        extra_colours.append(np.repeat(rng.integers(0, 256, (1, 3)), 4, axis=0))
+    colours = np.concatenate([c.astype(np.uint8) for c in extra_colours])
+    return np.concatenate(extra_vertices), np.array(extra_faces, np.int64), colours
 
 
 def _capture_path(box: np.ndarray, settings: ScanLikeSettings) -> np.ndarray:

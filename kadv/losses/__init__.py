@@ -11,6 +11,7 @@ from kadv.losses.align import (
     to_comparison_space,
 )
 from kadv.losses.aligned import ALIGNED_LOSSES, DELTA1_TEMPERATURE, AlignedLoss, absrel_loss, soft_delta1_loss
+from kadv.losses.config import LossConfig
 from kadv.losses.metrics import aligned_depth, depth_metrics
 from kadv.losses.perceptual import PerceptualLoss, depth_loss, ssim_loss
 from kadv.losses.ssi import gradient_matching, ssi_loss
@@ -23,6 +24,7 @@ __all__ = [
     "VGG16_TAPS",
     "VGG16_URL",
     "AlignedLoss",
+    "LossConfig",
     "PerceptualLoss",
     "absrel_loss",
     "align_scale",

@@ -33,7 +33,6 @@ outside the scene. A lone plane's
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 import weakref
@@ -86,7 +85,18 @@ _SCAN_CEILINGS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 @dataclass(frozen=True)
 class ValidityLimits:
-    """The limits a :class:`ViewValidity` judges its figures by (:func:`view_validity`'s arguments)."""
+    """The limits a :class:`ViewValidity` judges its figures by (:func:`view_validity`'s arguments).
+
+    Attributes:
+        near: pixels nearer than this z-depth make the view "too close".
+        min_distance: nor may the centre be nearer to a surface.
+        outside_threshold: the probe's escape fraction above which the centre is outside the scene.
+        inside_threshold: its hidden-side fraction above which the centre is inside an object.
+        max_plane_share: a view whose most common plane covers more of its hit pixels is
+            "uninformative" (None: never).
+        max_miss_share: so is a scan's view (``render.lighting=scanned``) where more of the
+            pixels see nothing below the scan's top (None, or any other scene: never).
+    """
 
     near: float = PenaltyConfig.near
     min_distance: float = PenaltyConfig.min_distance
@@ -472,19 +482,12 @@ def view_validity(
         renderer: the scene's exact renderer (its ray caster is reused).
         world_T_cam: (B, 4, 4) or (4, 4) poses.
         K: (3, 3) or (B, 3, 3) intrinsics.
-        height: the view's image height.
-        width: the view's image width.
+        height, width: the views' image size.
         probe_rays: directions of the spherical probe.
         render: the views' exact render at these poses, K and size, when the caller has one: its
             pixel-centre hits are used instead of casting them again.
-        limits: :class:`ValidityLimits`' fields, their defaults :class:`PenaltyConfig`'s: ``near``
-            (pixels nearer than this z-depth make the view "too close"), ``min_distance`` (nor may
-            the centre be nearer to a surface), ``outside_threshold`` (the probe's escape fraction
-            above which the centre is outside the scene), ``inside_threshold`` (its hidden-side
-            fraction above which it is inside an object), ``max_plane_share`` (a view whose most
-            common plane covers more of its hit pixels is "uninformative"; None: never),
-            ``max_miss_share`` (so is a scan's view, ``render.lighting=scanned``, where more of
-            the pixels see nothing below the scan's top; None, or any other scene: never).
+        limits: :class:`ValidityLimits`' fields (``near``, ``min_distance``, ...), their defaults
+            :class:`PenaltyConfig`'s.
 
     Examples:
         >>> import kadv
@@ -496,53 +499,25 @@ def view_validity(
         >>> verdicts.valid.tolist(), verdicts.verdicts
         ([True, False], ['valid', 'outside the scene'])
     """
-    pose = check_world_T_cam(world_T_cam)
+    pose, scanned = check_world_T_cam(world_T_cam), renderer.shading.lighting == "scanned"
     batch, device = len(pose), renderer.device
-    scanned = renderer.shading.lighting == "scanned"
-    limits = ValidityLimits(**limits)
-    if not scanned:
-        limits = dataclasses.replace(limits, max_miss_share=None)
+    limits = ValidityLimits(**(limits if scanned else {**limits, "max_miss_share": None}))
     centres = pose[:, :3, 3].detach().double().to(device, non_blocking=True)
     partial = scanned and not scan_has_ceiling(renderer)
-    if render is None or partial:
-        origins, directions = pixel_rays(pose, K, height, width, device=device)
-    if render is None:
-        hits = renderer.cast(origins, directions)
-        view_back = renderer.back_facing(hits, directions).reshape(batch, height * width)
-        triangle_ids = hits.triangle_ids.reshape(batch, height * width)
-        near_hit = (triangle_ids >= 0) & (hits.t.double().reshape(batch, height * width) < limits.near)
-        if scanned:
-            reach = torch.where(hits.hit, hits.t, 0.0).double()[:, None]
-            points = (origins.reshape(-1, 3) + directions.reshape(-1, 3) * reach).reshape(batch, height * width, 3)
-    else:
-        check_shape(render.depth, f"B 1 {height} {width}", "render.depth", {"B": batch})
-        triangle_ids = render.triangle_ids.reshape(batch, height * width).to(device)
-        view_back = render.back_face.reshape(batch, height * width).to(device)
-        near_hit = (triangle_ids >= 0) & (render.depth.reshape(batch, height * width).double().to(device) < limits.near)
-        if scanned:
-            points = render.points.to(device).flatten(2).transpose(1, 2)
+    rays = pixel_rays(pose, K, height, width, device=device) if render is None or partial else None
+    hits = _view_hits(renderer, rays, render, (batch, height, width), limits.near, scanned)
+    triangle_ids, view_back, near_hit, points = hits
     past_top, past_side, off_scan = None, None, None
     if scanned:  # a scan's noisy triangles share no plane exactly
         plane_share = dominant_plane_shares(points.double(), triangle_ids >= 0)
     if partial:  # no ceiling: past its walls' tops and its missing walls is no hole
-        top, side = scan_exits(renderer, origins.reshape(-1, 3), directions.reshape(-1, 3))
-        missed = triangle_ids < 0
-        past_top = (missed & top.reshape(batch, height * width)).double().mean(dim=1)
-        past_side = (missed & side.reshape(batch, height * width)).double().mean(dim=1)
-        lo, hi = (torch.as_tensor(b, dtype=torch.float64, device=device) for b in renderer.scene.bounds)
-        off_scan = (centres[:, 1] >= hi[1] - SCAN_TOP_TOLERANCE) | (centres < lo).any(dim=1) | (centres > hi).any(dim=1)
-        # an opening where a wall is missing fills the view as that wall would: one plane more
-        hits = 1.0 - missed.double().mean(dim=1)
-        plane_share = torch.maximum(plane_share * hits, past_side) / (hits + past_side).clamp_min(1e-12)
+        past_top, past_side, off_scan, plane_share = _open_scan(renderer, rays, triangle_ids, centres, plane_share)
     if not scanned:
         plane_share = plane_shares(renderer, triangle_ids)
     probe_miss, probe_back = probe_directions_hits(renderer, centres, _probe_directions(probe_rays, device))
+    shares = (triangle_ids < 0, view_back, near_hit, probe_miss, probe_back)
     return ViewValidity(
-        miss_fraction=(triangle_ids < 0).double().mean(dim=1),
-        back_face_fraction=view_back.double().mean(dim=1),
-        near_fraction=near_hit.double().mean(dim=1),
-        probe_miss_fraction=probe_miss.double().mean(dim=1),
-        probe_back_fraction=probe_back.double().mean(dim=1),
+        *(share.double().mean(dim=1) for share in shares),
         distance=distance_to_surface(renderer, centres).detach(),
         plane_share=plane_share,
         past_top_fraction=past_top,
@@ -550,6 +525,49 @@ def view_validity(
         off_scan=off_scan,
         limits=limits,
     )
+
+
+def _view_hits(renderer: ExactRenderer, rays, render: RenderOutput | None, size: tuple, near: float, scanned: bool):
+    """Each view's pixel-centre hits (B, H * W): triangles (-1: none), back faces, hits nearer than
+    ``near`` and, for a scan, the points hit (B, H * W, 3); cast along ``rays`` (origins,
+    directions) or read from the views' exact ``render``."""
+    batch, height, width = size
+    device = renderer.device
+    points = None
+    if render is None:
+        origins, directions = rays
+        hits = renderer.cast(origins, directions)
+        view_back = renderer.back_facing(hits, directions).reshape(batch, height * width)
+        triangle_ids = hits.triangle_ids.reshape(batch, height * width)
+        near_hit = (triangle_ids >= 0) & (hits.t.double().reshape(batch, height * width) < near)
+        if scanned:
+            reach = torch.where(hits.hit, hits.t, 0.0).double()[:, None]
+            points = (origins.reshape(-1, 3) + directions.reshape(-1, 3) * reach).reshape(batch, height * width, 3)
+        return triangle_ids, view_back, near_hit, points
+    check_shape(render.depth, f"B 1 {height} {width}", "render.depth", {"B": batch})
+    triangle_ids = render.triangle_ids.reshape(batch, height * width).to(device)
+    view_back = render.back_face.reshape(batch, height * width).to(device)
+    near_hit = (triangle_ids >= 0) & (render.depth.reshape(batch, height * width).double().to(device) < near)
+    if scanned:
+        points = render.points.to(device).flatten(2).transpose(1, 2)
+    return triangle_ids, view_back, near_hit, points
+
+
+def _open_scan(renderer: ExactRenderer, rays, triangle_ids: torch.Tensor, centres: torch.Tensor, plane_share):
+    """For a scan without a ceiling: each view's share of pixels that miss past its walls' tops and
+    past its missing walls (B,), whether its centre is off the scan (B,), and its plane share with
+    an opening where a wall is missing counted as that wall would be: one plane more."""
+    origins, directions = rays
+    batch, pixels = triangle_ids.shape
+    top, side = scan_exits(renderer, origins.reshape(-1, 3), directions.reshape(-1, 3))
+    missed = triangle_ids < 0
+    past_top = (missed & top.reshape(batch, pixels)).double().mean(dim=1)
+    past_side = (missed & side.reshape(batch, pixels)).double().mean(dim=1)
+    lo, hi = (torch.as_tensor(b, dtype=torch.float64, device=renderer.device) for b in renderer.scene.bounds)
+    off_scan = (centres[:, 1] >= hi[1] - SCAN_TOP_TOLERANCE) | (centres < lo).any(dim=1) | (centres > hi).any(dim=1)
+    hits = 1.0 - missed.double().mean(dim=1)
+    plane_share = torch.maximum(plane_share * hits, past_side) / (hits + past_side).clamp_min(1e-12)
+    return past_top, past_side, off_scan, plane_share
 
 
 @functools.lru_cache(maxsize=8)

@@ -167,18 +167,7 @@ def _build_lattice(scene: Scene, config: BakeConfig) -> _Lattice:
     starts = np.r_[0, np.cumsum(counts)[:-1]]
     per_side = int(counts.sum()) + len(representatives)
     starts[small] = int(counts.sum()) + cell
-    triangle_ids = np.empty(per_side, np.int64)
-    bary = np.empty((per_side, 2))
-    for r in np.unique(resolution[own]):
-        faces = np.flatnonzero(own & (resolution == r))
-        if r == 0:
-            steps = np.full((1, 2), 1.0 / 3.0)
-        else:
-            i, j = lattice_ij(int(r))
-            steps = np.stack([i, j], axis=1) / r
-        index = (starts[faces][:, None] + np.arange(len(steps))[None]).reshape(-1)
-        triangle_ids[index] = np.repeat(faces, len(steps))
-        bary[index] = np.tile(steps, (len(faces), 1))
+    triangle_ids, bary = _lattice_points(resolution, own, starts, per_side)
     triangle_ids[int(counts.sum()) :] = small[representatives]
     bary[int(counts.sum()) :] = 1.0 / 3.0
     tri = corners[triangle_ids]
@@ -190,15 +179,7 @@ def _build_lattice(scene: Scene, config: BakeConfig) -> _Lattice:
     inward = centroid - points
     distance = np.linalg.norm(inward, axis=1, keepdims=True)
     points = points + inward * np.minimum(1.0, SURFACE_OFFSET / np.maximum(distance, 1e-12))
-    face_normals = scene.face_normals[triangle_ids].astype(np.float64)
-    # a degenerate triangle has no normal: any unit vector serves, its area being nil
-    face_normals[np.linalg.norm(face_normals, axis=1) < 0.5] = (0.0, 1.0, 0.0)
-    normals = np.einsum("nk,nkd->nd", weights, scene.normals[triangle_ids].astype(np.float64))
-    length = np.linalg.norm(normals, axis=1, keepdims=True)
-    # corner normals that cancel out: the face normal
-    normals = np.where(length > 1e-6, normals / np.maximum(length, 1e-12), face_normals)
-    # shading normals on the face normal's side (files flip some)
-    normals *= np.where(np.einsum("nd,nd->n", normals, face_normals) < 0, -1.0, 1.0)[:, None]
+    face_normals, normals = _lattice_normals(scene, triangle_ids, weights)
     spacing = np.maximum(edges / np.maximum(resolution, 1), texel)[triangle_ids]
     return _Lattice(
         resolution=resolution,
@@ -211,6 +192,42 @@ def _build_lattice(scene: Scene, config: BakeConfig) -> _Lattice:
         texel=texel,
         spacing=np.concatenate([spacing, spacing]),
     )
+
+
+def _lattice_points(
+    resolution: np.ndarray, own: np.ndarray, starts: np.ndarray, per_side: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each lattice point's triangle (P,) and barycentric coordinates (P, 2), for the triangles
+    with points of their ``own`` (``resolution`` steps along an edge; 0: the centroid alone), from
+    each one's first point ``starts``; the shared cells' points are left to fill."""
+    triangle_ids = np.empty(per_side, np.int64)
+    bary = np.empty((per_side, 2))
+    for r in np.unique(resolution[own]):
+        faces = np.flatnonzero(own & (resolution == r))
+        if r == 0:
+            steps = np.full((1, 2), 1.0 / 3.0)
+        else:
+            i, j = lattice_ij(int(r))
+            steps = np.stack([i, j], axis=1) / r
+        index = (starts[faces][:, None] + np.arange(len(steps))[None]).reshape(-1)
+        triangle_ids[index] = np.repeat(faces, len(steps))
+        bary[index] = np.tile(steps, (len(faces), 1))
+    return triangle_ids, bary
+
+
+def _lattice_normals(scene: Scene, triangle_ids: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The lattice points' face normals and unit shading normals (P, 3), float64, the latter
+    interpolated with the barycentric ``weights`` (P, 3) and turned to the face normal's side."""
+    face_normals = scene.face_normals[triangle_ids].astype(np.float64)
+    # a degenerate triangle has no normal: any unit vector serves, its area being nil
+    face_normals[np.linalg.norm(face_normals, axis=1) < 0.5] = (0.0, 1.0, 0.0)
+    normals = np.einsum("nk,nkd->nd", weights, scene.normals[triangle_ids].astype(np.float64))
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    # corner normals that cancel out: the face normal
+    normals = np.where(length > 1e-6, normals / np.maximum(length, 1e-12), face_normals)
+    # shading normals on the face normal's side (files flip some)
+    normals *= np.where(np.einsum("nd,nd->n", normals, face_normals) < 0, -1.0, 1.0)[:, None]
+    return face_normals, normals
 
 
 def _shared_cells(
@@ -485,25 +502,36 @@ def bake_lighting(surfaces: Surfaces, config: BakeConfig | None = None, progress
     # the delta lights' own term is shaded per hit, with sharp shadows (a lattice point may stand
     # metres apart on a large floor); the light they bounce is baked
     delta = smooth(delta)
-    baked = smooth(direct + sky)
-    for _ in range(config.bounces):
-        leaving = np.concatenate([albedo * (baked + delta), np.zeros((1, 3))])  # pi x outgoing radiance
-        baked = smooth(direct + sky + _gather(leaving, hit_point))
-    irradiance = baked + delta
-    # exposure: the median radiance the scene's cameras see, mapped to the key grey
-    seen = seen[seen >= 0]
-    radiance = (albedo[seen] * irradiance[seen] / np.pi) @ LUMINANCE if len(seen) else np.zeros(1)
-    median = float(np.median(radiance))
-    exposure = exposed(config.key) / median if median > 0 else 1.0
+    baked = _bounced(smooth, direct + sky, delta, albedo, hit_point, config.bounces)
     return BakedLighting(
         resolution=lattice.resolution,
         offsets=lattice.offsets,
         irradiance=baked.astype(np.float32),
-        exposure=exposure,
+        exposure=_exposure(seen[seen >= 0], albedo, baked + delta, config.key),
         buried=buried,
         enclosed=~free,
         seconds=time.perf_counter() - start,
     )
+
+
+def _bounced(smooth, emitted: np.ndarray, delta: np.ndarray, albedo: np.ndarray, hit_point: np.ndarray,
+             bounces: int) -> np.ndarray:  # fmt: skip
+    """The baked irradiance (N, 3): the smoothed light arriving straight from the emitters and the
+    sky (``emitted``), then ``bounces`` diffuse inter-reflections, each gathering what the points
+    that each point's rays hit (``hit_point``) leave, the delta lights' own term (``delta``) included."""
+    baked = smooth(emitted)
+    for _ in range(bounces):
+        leaving = np.concatenate([albedo * (baked + delta), np.zeros((1, 3))])  # pi x outgoing radiance
+        baked = smooth(emitted + _gather(leaving, hit_point))
+    return baked
+
+
+def _exposure(seen: np.ndarray, albedo: np.ndarray, irradiance: np.ndarray, key: float) -> float:
+    """The exposure that maps the median radiance the scene's cameras see (at the lattice points
+    ``seen``) to the key grey."""
+    radiance = (albedo[seen] * irradiance[seen] / np.pi) @ LUMINANCE if len(seen) else np.zeros(1)
+    median = float(np.median(radiance))
+    return exposed(key) / median if median > 0 else 1.0
 
 
 def _scene_digest(scene: Scene, config: BakeConfig) -> str:

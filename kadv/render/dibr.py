@@ -171,21 +171,7 @@ def _anchor_layer_pixels(
         dim=1,
     )
     with torch.no_grad():
-        expected_image = expected.reshape(batch, 3, hs, ws)
-        value, slope_x, slope_y = (maps.new_empty(batch, channels, hs, ws) for channels in (7, 4, 4))
-        # in bands of rows of equal height
-        band = _band_rows(batch, hs, ws, maps.device)
-        for top in range(0, hs, band):
-            bottom = min(top + band, hs)
-            rows = slice(top, bottom)
-            _centred_taps(
-                maps[:, :, top : bottom + 2],
-                expected_image[:, :, rows],
-                plane_tolerance,
-                value[:, :, rows],
-                slope_x[:, :, rows],
-                slope_y[:, :, rows],
-            )
+        value, slope_x, slope_y = _taps_in_bands(maps, expected.reshape(batch, 3, hs, ws), plane_tolerance)
         on_surface = value[:, 4:5]
         ok = _block_min(on_surface, s) > _MIN_TAP_WEIGHT  # (B, 1, H, W): every sub-sample
         colour = _block_mean(value[:, 0:3], s)
@@ -203,6 +189,29 @@ def _anchor_layer_pixels(
     moved = transform_points(P_T_A[:, None], point.flatten(2).transpose(1, 2))[..., 2].reshape(batch, 1, height, width)
     z = z + shift[:, 0:1] * depth_x + shift[:, 1:2] * depth_y + straight_through(moved)
     return colour.flatten(2), z.flatten(1), ok.flatten(1)
+
+
+def _taps_in_bands(
+    maps: torch.Tensor, expected: torch.Tensor, plane_tolerance: float
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """:func:`_centred_taps` of the anchor ``maps`` (B, 10, hs + 2, ws + 2) at the sub-samples
+    ``expected`` (B, 3, hs, ws), in bands of rows of equal height: the values (B, 7, hs, ws) and
+    the slopes in x and y (B, 4, hs, ws)."""
+    batch, _, hs, ws = expected.shape
+    value, slope_x, slope_y = (maps.new_empty(batch, channels, hs, ws) for channels in (7, 4, 4))
+    band = _band_rows(batch, hs, ws, maps.device)
+    for top in range(0, hs, band):
+        bottom = min(top + band, hs)
+        rows = slice(top, bottom)
+        _centred_taps(
+            maps[:, :, top : bottom + 2],
+            expected[:, :, rows],
+            plane_tolerance,
+            value[:, :, rows],
+            slope_x[:, :, rows],
+            slope_y[:, :, rows],
+        )
+    return value, slope_x, slope_y
 
 
 # below this cosine between a sub-pixel ray and its pixel's plane, the ray grazes the plane and

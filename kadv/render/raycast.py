@@ -8,6 +8,7 @@ the casters' device. Values are exact and bit-identical across runs; nothing her
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -106,6 +107,11 @@ def concatenated(parts: list):
 
 
 DEFAULT_MAX_RAYS = 2**22  # rays cast and shaded at once: about 1 GiB of temporaries (220 bytes a ray, measured)
+
+
+def _image(values: torch.Tensor, channels: int, batch: int, height: int, width: int) -> torch.Tensor:
+    """Per-ray values (B * H * W, channels) as images (B, channels, H, W)."""
+    return values.reshape(batch, height, width, channels).permute(0, 3, 1, 2).contiguous()
 
 
 class ExactRenderer:
@@ -283,76 +289,42 @@ class ExactRenderer:
         sub_terms: torch.Tensor | None = None,
         colour: bool = True,
     ) -> RenderOutput:
-        """Render B cameras in one cast (in parts of :attr:`max_rays` rays when they are more).
+        """Render B cameras in one cast (in parts of :attr:`max_rays` rays when they are more): the
+        maps, on the renderer's device.
 
         Args:
             world_T_cam: (B, 4, 4) or (4, 4) poses (OpenCV camera, metres).
             K: (3, 3) or (B, 3, 3) intrinsics.
-            height: image height.
-            width: image width.
+            height, width: the image size.
             supersample: s; RGB averages s x s rays per pixel, depth and the other maps come from the
                 pixel-centre ray.
-            sub_rgb: (B, 3, s * height, s * width) colours of those s x s rays, when the caller has
-                already shaded them (an anchor render at this pose covers them): they are not cast again.
-            sub_ids: (B, 1, s * height, s * width) their triangles (-1: none), with ``sub_rgb``
-                when coats and metals reflect (:attr:`Shading.reflections`).
-            sub_terms: (B, 6, s * height, s * width) their reflection terms (:meth:`Shader.shade`'s
-                "reflecting"), with ``sub_rgb`` when coats and metals reflect.
+            sub_rgb, sub_ids, sub_terms: (B, 3 | 1 | 6, s * height, s * width) the colours of those
+                s x s rays, their triangles (-1: none) and reflection terms (:meth:`Shader.shade`'s
+                "reflecting"; both where coats and metals reflect), when the caller has already
+                shaded them (an anchor render at this pose covers them): they are not cast again.
             colour: shade the colour; False casts the pixel-centre rays alone and returns every
                 map but ``rgb`` (None): a tenth of a shaded render's time.
-
-        Returns:
-            The maps, on the renderer's device.
 
         Raises:
             ValueError: on a NaN or non-rigid pose, bad intrinsics or a bad size.
         """
         if views_apart(K):
-            pose = world_T_cam.reshape(-1, 4, 4)
-            given = {"sub_rgb": sub_rgb, "sub_ids": sub_ids, "sub_terms": sub_terms}
-            return concatenated([
-                self.render(pose[b : b + 1], K[b], height, width, supersample, colour=colour,
-                            **{key: None if value is None else value[b : b + 1] for key, value in given.items()})
-                for b in range(len(pose))
-            ])  # fmt: skip
+            return self._render_apart(world_T_cam, K, height, width, supersample, sub_rgb, sub_ids, sub_terms, colour)
         origins, directions = pixel_rays(world_T_cam, K, height, width, device=self.device)
         batch, s = origins.shape[0], supersample
-        angle = pixel_angle(K)
-        shade_centres = colour and s == 1
+        angle, shade_centres = pixel_angle(K), colour and s == 1
         hits, maps = self.cast_and_shade(origins.reshape(-1, 3), directions.reshape(-1, 3), angle, shade_centres, True)
-
-        def image(values: torch.Tensor, channels: int) -> torch.Tensor:
-            return values.reshape(batch, height, width, channels).permute(0, 3, 1, 2).contiguous()
-
-        if not colour:
-            rgb = None
-        elif sub_rgb is not None:
-            if s == 1:
-                raise ValueError("sub_rgb: given with supersample 1, where there are no sub-pixel rays")
-            check_shape(sub_rgb, f"B 3 {s * height} {s * width}", "sub_rgb", {"B": batch})
-            sub_rgb = sub_rgb.to(self.device)
-            if self.shader.reflecting:
-                for name, given, channels in (("sub_ids", sub_ids, 1), ("sub_terms", sub_terms, 6)):
-                    if given is None:
-                        raise ValueError(f"{name}: needed with the sub-pixel rays' colours when coats reflect")
-                    check_shape(given, f"B {channels} {s * height} {s * width}", name, {"B": batch})
-                sub_ids, sub_terms = sub_ids.to(self.device), sub_terms.to(self.device)
-        elif s > 1:
-            sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s, device=self.device)
-            sub_hits, sub = self.cast_and_shade(
-                sub_origins.reshape(-1, 3), sub_dirs.reshape(-1, 3), angle / s, True, False
-            )
-            sub_rgb = sub["rgb"].reshape(batch, s * height, s * width, 3).permute(0, 3, 1, 2)
-            sub_ids = sub_hits.triangle_ids.reshape(batch, 1, s * height, s * width)
-            if self.shader.reflecting:
-                sub_terms = sub["reflecting"].reshape(batch, s * height, s * width, 6).permute(0, 3, 1, 2)
-        else:
+        image = functools.partial(_image, batch=batch, height=height, width=width)
+        rgb = None
+        if colour and sub_rgb is not None:
+            sub_rgb, sub_ids, sub_terms = self._given_sub_colours(sub_rgb, sub_ids, sub_terms, batch, s, height, width)
+        elif colour and s > 1:
+            sub_rgb, sub_ids, sub_terms = self._sub_colours(world_T_cam, K, height, width, s, angle)
+        elif colour:
             sub_rgb, sub_ids = image(maps["rgb"], 3), image(hits.triangle_ids, 1)
-            if self.shader.reflecting:
-                sub_terms = image(maps["reflecting"], 6)
+            sub_terms = image(maps["reflecting"], 6) if self.shader.reflecting else sub_terms
         if colour:
             rgb = self._pixel_colours(sub_rgb, sub_ids, sub_terms, hits, maps["normals"], origins, directions, angle)
-
         # a ray that meets a surface within a micrometre of the eye starts on it (the eye lies on the
         # surface): it measures no depth, so it is no hit in the mask
         mask = hits.hit & (hits.t > _MIN_HIT_DEPTH)
@@ -365,3 +337,40 @@ class ExactRenderer:
             points=image(maps["points"], 3),
             back_face=image(maps["back_face"], 1),
         )
+
+    def _render_apart(self, world_T_cam, K, height, width, supersample, sub_rgb, sub_ids, sub_terms, colour):
+        """:meth:`render` of views whose intrinsics differ, one by one (a pixel's footprint is its view's)."""
+        pose = world_T_cam.reshape(-1, 4, 4)
+        given = {"sub_rgb": sub_rgb, "sub_ids": sub_ids, "sub_terms": sub_terms}
+        return concatenated([
+            self.render(pose[b : b + 1], K[b], height, width, supersample, colour=colour,
+                        **{key: None if value is None else value[b : b + 1] for key, value in given.items()})
+            for b in range(len(pose))
+        ])  # fmt: skip
+
+    def _given_sub_colours(self, sub_rgb, sub_ids, sub_terms, batch: int, s: int, height: int, width: int) -> tuple:
+        """The sub-pixel rays' colours (and, where coats reflect, triangles and reflection terms) a
+        caller has shaded, checked and on the renderer's device."""
+        if s == 1:
+            raise ValueError("sub_rgb: given with supersample 1, where there are no sub-pixel rays")
+        check_shape(sub_rgb, f"B 3 {s * height} {s * width}", "sub_rgb", {"B": batch})
+        sub_rgb = sub_rgb.to(self.device)
+        if self.shader.reflecting:
+            for name, given, channels in (("sub_ids", sub_ids, 1), ("sub_terms", sub_terms, 6)):
+                if given is None:
+                    raise ValueError(f"{name}: needed with the sub-pixel rays' colours when coats reflect")
+                check_shape(given, f"B {channels} {s * height} {s * width}", name, {"B": batch})
+            sub_ids, sub_terms = sub_ids.to(self.device), sub_terms.to(self.device)
+        return sub_rgb, sub_ids, sub_terms
+
+    def _sub_colours(self, world_T_cam, K, height: int, width: int, s: int, angle) -> tuple:
+        """The s x s sub-pixel rays of every pixel cast and shaded: their colours (B, 3, sH, sW),
+        triangles (B, 1, sH, sW) and, where coats reflect, reflection terms (B, 6, sH, sW)."""
+        sub_origins, sub_dirs = pixel_rays(world_T_cam, K, height, width, s, device=self.device)
+        sub_hits, sub = self.cast_and_shade(sub_origins.reshape(-1, 3), sub_dirs.reshape(-1, 3), angle / s, True, False)
+        batch = sub_origins.shape[0]
+        sub_rgb = sub["rgb"].reshape(batch, s * height, s * width, 3).permute(0, 3, 1, 2)
+        sub_ids = sub_hits.triangle_ids.reshape(batch, 1, s * height, s * width)
+        reflecting = self.shader.reflecting
+        terms = sub["reflecting"].reshape(batch, s * height, s * width, 6).permute(0, 3, 1, 2) if reflecting else None
+        return sub_rgb, sub_ids, terms

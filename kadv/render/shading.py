@@ -343,21 +343,16 @@ class Shader:
         # Every ray is shaded (a miss as a point on triangle 0 at the eye) and misses are masked at
         # the end: indoors nearly every ray hits, and compacting the hits would cost more (and, on a
         # GPU, a wait for their count).
-        hit = hits.hit
-        ids = hits.triangle_ids.clamp_min(0)
-        bary = hits.barycentrics
+        hit, ids, bary = hits.hit, hits.triangle_ids.clamp_min(0), hits.barycentrics
         t = torch.where(hit, hits.t.double(), 0.0)
         facing = self.surfaces.facing(ids, directions)
         back = hit & (facing > 0)
         # hit points and shading normals, where something reads them: the maps, Lambert's term or
         # the delta lights (baked light alone needs neither)
         lit_at_points = self.shading.lighting == "direct" or (self.baked is not None and not self._delta_lights.empty)
+        points = normals = terms = None
         if geometry or (colour and lit_at_points):
-            points = origins + directions * t[:, None]
-            normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
-            # a scan's winding is random, so its normals face the eye by their own side
-            away = back if self.shading.lighting != "scanned" else (normals * directions).sum(dim=1) > 0
-            normals = torch.where(away[:, None], -normals, normals)
+            points, normals = origins + directions * t[:, None], self._shading_normals(ids, bary, back, directions)
         rgb = self._background.expand(len(t), 3)
         if colour:
             footprint = _footprint(t, directions, facing, pixel_angle)
@@ -368,25 +363,11 @@ class Shader:
                 base = self.surfaces.albedo(ids, bary, footprint)
                 shaded = shade(self.shading, self._lights, points.float(), normals, base)
             else:
-                base = self.surfaces.albedo(ids, bary, footprint)
-                # the lattice weights in float64: a hit's place between lattice points is a small difference
-                irradiance = self.baked.irradiance_at(ids, bary.double(), back)
-                if not self._delta_lights.empty:
-                    irradiance = irradiance + self._delta_irradiance(points, directions, normals, hit)
-                radiance = self.surfaces.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi)
-                shaded = tone_map(radiance)
-                if self.reflecting:
-                    terms = self._reflecting_terms(hit, ids, base, radiance, irradiance)
-                # a ray that leaves the scene sees the sky the bake was lit by
-                sky = self._sky(F.normalize(directions, dim=1))
-                background = tone_map((sky * self.baked.exposure).float())
+                baked = self._baked_colours(hits, bary, footprint, back, points, directions, normals)
+                shaded, background, terms = baked
             rgb = torch.where(hit[:, None], shaded, background)
             if self._emitter_caster is not None:
-                table = self._emitter_table if self.reflecting else self._emitter_colour
-                seen, glow = self._emitter_glow(hits, origins, directions, table)
-                rgb = torch.where(seen[:, None], glow[:, :3], rgb)
-                if self.reflecting:  # a lamp in front of a coat shows its glow, nothing mirrored
-                    terms = torch.where(seen[:, None], F.pad(glow[:, 3:], (0, 3)), terms)
+                rgb, terms = self._lamps_seen(hits, origins, directions, rgb, terms)
         maps = {"rgb": rgb.contiguous()}
         if colour and self.reflecting:
             maps["reflecting"] = terms
@@ -397,6 +378,45 @@ class Shader:
                 back_face=back,
             )
         return maps
+
+    def _shading_normals(
+        self, ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor, directions: torch.Tensor
+    ) -> torch.Tensor:
+        """The hits' unit shading normals (N, 3), turned to the eye's side: by the side hit, or, for
+        a scan, whose winding is random, by their own side."""
+        normals = F.normalize(self.surfaces.interpolate(self.surfaces.normals, ids, bary), dim=1, eps=1e-12)
+        away = back if self.shading.lighting != "scanned" else (normals * directions).sum(dim=1) > 0
+        return torch.where(away[:, None], -normals, normals)
+
+    def _lamps_seen(
+        self, hits: RayHits, origins: torch.Tensor, directions: torch.Tensor, rgb: torch.Tensor, terms
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The colours (N, 3) and reflection terms with the glow of the emitters the rays see in
+        front of what they hit: a lamp in front of a coat shows its glow, nothing mirrored."""
+        table = self._emitter_table if self.reflecting else self._emitter_colour
+        seen, glow = self._emitter_glow(hits, origins, directions, table)
+        rgb = torch.where(seen[:, None], glow[:, :3], rgb)
+        if self.reflecting:
+            terms = torch.where(seen[:, None], F.pad(glow[:, 3:], (0, 3)), terms)
+        return rgb, terms
+
+    def _baked_colours(
+        self, hits: RayHits, bary: torch.Tensor, footprint: torch.Tensor, back: torch.Tensor,
+        points: torch.Tensor | None, directions: torch.Tensor, normals: torch.Tensor | None,
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:  # fmt: skip
+        """Under baked light: the hits' tone-mapped colours (N, 3), the sky each ray sees where it
+        leaves the scene (the light the bake was lit by), and, where coats and metals reflect, their
+        reflection terms (:meth:`shade`'s "reflecting"; else None)."""
+        hit, ids = hits.hit, hits.triangle_ids.clamp_min(0)
+        base = self.surfaces.albedo(ids, bary, footprint)
+        # the lattice weights in float64: a hit's place between lattice points is a small difference
+        irradiance = self.baked.irradiance_at(ids, bary.double(), back)
+        if not self._delta_lights.empty:
+            irradiance = irradiance + self._delta_irradiance(points, directions, normals, hit)
+        radiance = self.surfaces.reflectance(ids, base) * irradiance * (self.baked.exposure / math.pi)
+        terms = self._reflecting_terms(hit, ids, base, radiance, irradiance) if self.reflecting else None
+        sky = self._sky(F.normalize(directions, dim=1))
+        return tone_map(radiance), tone_map((sky * self.baked.exposure).float()), terms
 
     def _delta_irradiance(
         self, points: torch.Tensor, directions: torch.Tensor, normals: torch.Tensor, hit: torch.Tensor

@@ -274,29 +274,38 @@ def _bisect(
         hit, ids = hits.hit.reshape(n, -1), hits.triangle_ids.reshape(n, -1)
         mid_z = torch.where(hit, hits.t.reshape(n, -1).double(), torch.inf)
         same_as_a = (hit & (mid_z < limit)) == a_is_fg[:, None]
-        # the steps, on the grid: k_lo and k_hi bracket the crossing, the midpoint is their mean
-        k_lo, k_hi = torch.zeros_like(id_lo), torch.full_like(id_lo, points)
-        for _ in range(steps):
-            k = ((k_lo + k_hi) // 2)[:, None]
-            column = k - 1
-            mid, step_same, step_ids, step_z = (
-                values.gather(1, column)[:, 0] for values in (mids, same_as_a, ids, mid_z)
-            )
-            lo, id_lo, z_lo = (
-                torch.where(step_same, mid, lo),
-                torch.where(step_same, step_ids, id_lo),
-                torch.where(step_same, step_z, z_lo),
-            )
-            hi, id_hi, z_hi = (
-                torch.where(step_same, hi, mid),
-                torch.where(step_same, id_hi, step_ids),
-                torch.where(step_same, z_hi, step_z),
-            )
-            k_lo, k_hi = torch.where(step_same, k[:, 0], k_lo), torch.where(step_same, k_hi, k[:, 0])
+        bracket = (lo, hi, id_lo, id_hi, z_lo, z_hi)
+        lo, hi, id_lo, id_hi, z_lo, z_hi = _grid_steps(steps, mids, (same_as_a, ids, mid_z), bracket)
     occluder = torch.where(a_is_fg, id_lo, id_hi)
     near_z, far_z = torch.minimum(z_lo, z_hi), torch.maximum(z_lo, z_hi)
     occlusion = (occluder >= 0) & torch.isfinite(near_z) & ((far_z - near_z) > _CONTINUITY * near_z)
     return occluder, occlusion, 0.5 * (lo + hi)
+
+
+def _grid_steps(steps: int, mids: torch.Tensor, cast: tuple, bracket: tuple) -> tuple:
+    """``steps`` bisection steps on a bracket's grid of midpoints ``mids`` (N, 2**steps - 1): each
+    step takes the midpoint of the grid points k_lo and k_hi that bracket the crossing, and moves
+    one end of the ``bracket`` (lo, hi, id_lo, id_hi, z_lo, z_hi, each (N,)) there, by whether the
+    ray through it meets what the segment's start does (``cast``: that, the triangle and the depth
+    at every midpoint)."""
+    lo, hi, id_lo, id_hi, z_lo, z_hi = bracket
+    k_lo, k_hi = torch.zeros_like(id_lo), torch.full_like(id_lo, 2**steps)
+    for _ in range(steps):
+        k = ((k_lo + k_hi) // 2)[:, None]
+        column = k - 1
+        mid, step_same, step_ids, step_z = (values.gather(1, column)[:, 0] for values in (mids, *cast))
+        lo, id_lo, z_lo = (
+            torch.where(step_same, mid, lo),
+            torch.where(step_same, step_ids, id_lo),
+            torch.where(step_same, step_z, z_lo),
+        )
+        hi, id_hi, z_hi = (
+            torch.where(step_same, hi, mid),
+            torch.where(step_same, id_hi, step_ids),
+            torch.where(step_same, z_hi, step_z),
+        )
+        k_lo, k_hi = torch.where(step_same, k[:, 0], k_lo), torch.where(step_same, k_hi, k[:, 0])
+    return lo, hi, id_lo, id_hi, z_lo, z_hi
 
 
 def _occluder_edge(

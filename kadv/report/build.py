@@ -5,9 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from kadv.losses import DELTA1_TEMPERATURE, depth_loss
+from kadv.attack import Study
 from kadv.models import DepthModel
-from kadv.render import ExactRenderer
 from kadv.report.html import save_mean_curves, save_profile_curves, write_html
 from kadv.report.sweep import (
     RunRecord,
@@ -27,7 +26,7 @@ __all__ = ["write_report"]
 def write_report(
     paths: list[str | Path],
     out: str | Path | None = None,
-    renderer_of: Callable[[RunRecord], ExactRenderer] | None = None,
+    study_of: Callable[[RunRecord], Study] | None = None,
     model_of: Callable[[RunRecord], DepthModel] | None = None,
     progress: bool = True,
 ) -> list[Path]:
@@ -38,8 +37,9 @@ def write_report(
     Args:
         paths: sweep or run directories.
         out: output folder (default: ``<first path>/report``).
-        renderer_of: the renderer of a run's scene, to re-render its adversarial views for the
-            transfer matrix; without it (or ``model_of``), no transfer matrix.
+        study_of: a run's :class:`~kadv.attack.Study` (its scene, render and loss settings), to
+            re-render its adversarial views for the transfer matrix; without it (or ``model_of``),
+            no transfer matrix.
         model_of: a run's model, to score every run's adversarial views.
         progress: show a progress bar while re-rendering.
     """
@@ -56,15 +56,8 @@ def write_report(
     for k, table in enumerate(profile_tables(runs)):
         tables.append(table)
         stems.append(f"profiles{k if k else ''}")
-    if renderer_of is not None and model_of is not None:
-        loss_config = runs[0].config["loss"]
-        loss = depth_loss(
-            loss_config["kind"],
-            loss_config.get("vgg_weights"),
-            int(loss_config.get("window_size", 11)),
-            float(loss_config.get("temperature", DELTA1_TEMPERATURE)),
-        )
-        tables += transfer_tables(runs, renderer_of, model_of, loss, loss_config.get("space", "disparity"), progress)
+    if study_of is not None and model_of is not None:
+        tables += transfer_tables(runs, study_of, model_of, progress)
         stems += ["transfer_delta1", "transfer_l_depth"]
     written = [path for table, stem in zip(tables, stems) for path in table.write(out, stem)]
     curves = save_mean_curves(out / "curves.png", runs)

@@ -13,7 +13,7 @@ from matplotlib.collections import PolyCollection
 from PIL import Image, ImageDraw, ImageFont
 
 from kadv.attack.records import InitViewResult, incumbent_path
-from kadv.io import atomic_write
+from kadv.io import atomic_write, save_figure
 from kadv.report.images import depth_colour_map, depth_range
 from kadv.scenes import Scene
 
@@ -28,16 +28,6 @@ __all__ = [
     "save_video",
     "video_frame",
 ]
-
-
-def save_figure(path: Path, figure: plt.Figure, tight: bool = True) -> Path:
-    """Write ``figure`` as a PNG atomically and close it; ``tight`` crops it to what it draws (a
-    layout pass of its own: a figure laid out by hand needs none)."""
-    bbox = "tight" if tight else None
-    try:
-        return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100, bbox_inches=bbox))
-    finally:
-        plt.close(figure)
 
 
 def colourise(values: np.ndarray, mask: np.ndarray, low: float, high: float) -> np.ndarray:

@@ -11,12 +11,12 @@ import jinja2
 import matplotlib.pyplot as plt
 import numpy as np
 
+from kadv.attack.profile import Profile, save_profile_panels
 from kadv.attack.records import agreement_text
 from kadv.io import atomic_write
 from kadv.report.figures import loss_label
 from kadv.report.summary import InitViewSummary, ViewMetrics
 from kadv.report.sweep import RunRecord, Table
-from kadv.testing.profile import Profile, save_profile_panels
 
 __all__ = ["save_mean_curves", "save_profile_curves", "write_html"]
 
@@ -57,7 +57,7 @@ def save_mean_curves(path: Path, runs: list[RunRecord]) -> Path:
 
 def save_profile_curves(path: Path, profiles: dict[tuple[str, str, str], Profile]) -> Path:
     """One panel per scene: each model's (and method's) worst (solid) and typical (dashed) delta1
-    against the radius, with bands over its seeds (:func:`kadv.testing.profile.save_profile_panels`)."""
+    against the radius, with bands over its seeds (:func:`kadv.attack.profile.save_profile_panels`)."""
     panels: dict[str, dict[str, Profile]] = defaultdict(dict)
     for (model, scene, method), profile in sorted(profiles.items()):
         panels[scene][f"{model} ({method}) {profile.score:.2f}"] = profile

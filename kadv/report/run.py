@@ -292,7 +292,7 @@ def write_run(
         info: what the run was; its image size is the attack's.
         supersample: the attack's supersampling.
         video: also write ``trajectory.mp4`` of the run with the largest gain.
-        profile: a :class:`kadv.testing.Profile` of the run (``attack.radii``): kept in the summary
+        profile: a :class:`kadv.attack.Profile` of the run (``attack.radii``): kept in the summary
             and drawn in ``profile.png``.
     """
     run_dir = Path(run_dir)

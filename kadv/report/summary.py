@@ -156,7 +156,7 @@ class RunSummary(RunInfo):
     """``summary.json``: a finished run. Written last, so a run directory holding it is complete.
 
     The means are over the init views that kept an adversarial view; ``budget`` is the run's total.
-    ``profile``: a profile run's (``attack.radii``) :meth:`kadv.testing.Profile.to_dict`, else None.
+    ``profile``: a profile run's (``attack.radii``) :meth:`kadv.attack.Profile.to_dict`, else None.
     ``alignment``: how every delta1 and AbsRel here met the ground truth (``loss.alignment``:
     ``scale_shift``, ``scale`` or ``none``).
     """

@@ -17,10 +17,10 @@ from pathlib import Path
 
 import yaml
 
+from kadv.attack.profile import Profile
 from kadv.io import atomic_write
 from kadv.report.run import SUMMARY
 from kadv.report.summary import RunSummary
-from kadv.testing.profile import Profile
 
 __all__ = [
     "RunRecord",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import statistics
 from collections import defaultdict
 from collections.abc import Callable
@@ -10,11 +11,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from kadv.attack import Objective
+from kadv.attack import Study
 from kadv.losses import depth_metrics
 from kadv.models import DepthModel
-from kadv.penalties import PenaltyConfig
-from kadv.render import ExactRenderer
 from kadv.report.sweep import RunRecord, Table, main_method
 
 __all__ = ["transfer_tables"]
@@ -33,16 +32,15 @@ def _adversarial_poses(run: RunRecord) -> tuple[torch.Tensor, torch.Tensor]:
 
 def transfer_tables(
     runs: list[RunRecord],
-    renderer_of: Callable[[RunRecord], ExactRenderer],
+    study_of: Callable[[RunRecord], Study],
     model_of: Callable[[RunRecord], DepthModel],
-    loss: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
-    space: str = "disparity",
     progress: bool = True,
 ) -> tuple[Table, Table]:
     """delta1 and L_depth of every model (columns) on every model's adversarial views (rows).
 
-    Each run's adversarial poses are re-rendered exactly at the run's size and scored by each model
-    in the sweep; cells average over scenes and views. The diagonal reproduces the runs' own scores.
+    Each run's adversarial poses are re-rendered exactly at the run's size by its study
+    (``study_of``: its scene, render and loss settings) and scored by each model in the sweep
+    (``model_of``); cells average over scenes and views. The diagonal reproduces the runs' own scores.
     """
     method = main_method(runs)
     runs = [r for r in runs if r.method == method]
@@ -51,15 +49,18 @@ def transfer_tables(
     scores: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: {"delta1": [], "l_depth": []})
     with tqdm(total=len(runs) * len(names), desc="transfer: re-rendering views", disable=not progress) as bar:
         for run in runs:
-            renderer = renderer_of(run)
+            study = study_of(run)
+            renderer = study.renderer
+            # every model is scored after the same alignment, which models of both kinds share
+            loss = dataclasses.replace(study.settings.loss, alignment="scale_shift")
             poses, Ks = _adversarial_poses(run)
             height, width = run.summary.height, run.summary.width
             supersample = int(run.config.get("render", {}).get("supersample", 1))
             with torch.no_grad():
                 out = renderer.render(poses, Ks, height, width, supersample=supersample).to("cpu")
                 for name in names:
-                    model = model_of(models[name])
-                    objective = Objective(model, loss, renderer, PenaltyConfig(), space)
+                    objective = study.variant(model=model_of(models[name]), loss=loss).objective
+                    model = objective.model
                     prediction = model(out.rgb, Ks)
                     l_depth = objective.l_depth(out.depth.double(), prediction.double(), out.mask)
                     delta1 = depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)[

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from kadv.scenes.box_rooms import box_room
 from kadv.scenes.emitters import Emitters
-from kadv.scenes.from_node import scene_from_node
 from kadv.scenes.load import SUPPORTED_SUFFIXES, load_scene
 from kadv.scenes.ply import PlyError, PlyMesh, read_ply
 from kadv.scenes.procedural import procedural_room
@@ -27,5 +26,4 @@ __all__ = [
     "procedural_room",
     "read_ply",
     "recognise_scan",
-    "scene_from_node",
 ]

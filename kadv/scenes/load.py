@@ -26,6 +26,10 @@ SUPPORTED_SUFFIXES = (".xml", ".ply", *TRIMESH_SUFFIXES)
 UNLIT_GLTF = "glTF (KHR_materials_unlit)"
 # Scene.scan of a file said to be captured (load_scene's captured=True) in no layout kadv knows
 CAPTURED = "captured (scene.options.captured=true)"
+_UNCAPTURED_COLOUR = (
+    "%s: not a scan kadv recognises: its colour is lit as a modelled scene's (render.lighting=auto: baked); if "
+    "it is captured light (a photo-textured scan), scene.options.captured=true shows it as captured (scanned)"
+)
 
 
 def load_scene(
@@ -66,6 +70,55 @@ def load_scene(
         ValueError: unsupported extension, unreadable or empty file, NaN vertices, zero area.
     """
     path = Path(path)
+    suffix = _checked_file(path, captured, up_axis)
+    if name is None:
+        name = path.parent.name if path.stem == "scene" else path.stem
+    layout, scale, up_axis = _scan_layout(path, scale, up_axis)
+    scan = _captured_as(path, suffix, None if layout is None else layout.dataset, captured)
+    options = {"scale": 1.0 if scale is None else scale, "up_axis": up_axis or "y", "scan": scan}
+    options |= {"drop_transparent": drop_transparent, "drop_emitters": drop_emitters}
+    if suffix == ".xml":
+        parts, materials, cameras, lights, emitters = parse_mitsuba(path, missing=missing)
+        options["up_axis"] = _up(parts, options, path)
+        return assemble_scene(parts, materials, cameras, lights, name=name, emitters=emitters, **options)
+    aligned = layout is not None and layout.alignment is not None and suffix == ".ply"
+    parts, materials = _mesh_parts(path, suffix, name, layout.alignment if aligned else None)
+    options["up_axis"] = _up(parts, options, path)
+    if captured is None and scan is None and _coloured(parts, materials):
+        log.info(_UNCAPTURED_COLOUR, path)
+    scene = assemble_scene(parts, materials, name=name, **options)
+    if aligned:
+        scene.world_T_file = scene.world_T_file @ layout.alignment  # the file's own frame is before alignment
+    return _with_captured_path(scene, path, None if layout is None else layout.dataset)
+
+
+def _scan_layout(path: Path, scale: float | None, up_axis: str | None) -> tuple:
+    """The scan layout the file is in (None: none kadv recognises), and the scale and up axis it
+    loads with: those given, else the layout's (said in the log)."""
+    layout = recognise_scan(path)
+    if layout is None:
+        return None, scale, up_axis
+    chosen = dataclasses.replace(
+        layout,
+        up_axis=layout.up_axis if up_axis is None else up_axis,
+        scale=layout.scale if scale is None else scale,
+    )
+    log.info("%s: %s", path, chosen.describe())
+    return layout, chosen.scale, chosen.up_axis
+
+
+def _with_captured_path(scene: Scene, path: Path, dataset: str | None) -> Scene:
+    """The scene with the camera poses its capture left beside the file (a scan's trajectory), if any."""
+    captured_path = find_captured_path(path, dataset)
+    if captured_path is not None:
+        scene.trajectory = scene.to_world(captured_path.file_T_cam)
+        scene.trajectory_source = str(captured_path.source)
+        log.info("%s: %d captured camera poses from %s", path, len(scene.trajectory), captured_path.source)
+    return scene
+
+
+def _checked_file(path: Path, captured, up_axis) -> str:
+    """The scene file's lower-case suffix, once the file, its format and the options are checked."""
     if not path.exists():
         raise FileNotFoundError(f"scene file not found: {path}")
     if not path.is_file():
@@ -77,59 +130,30 @@ def load_scene(
         raise ValueError(f"scene.options.captured must be true, false or null, got {captured!r}")
     if up_axis not in (None, "y", "z", "auto"):
         raise ValueError(f"scene.options.up_axis must be y, z or auto, got {up_axis!r}")
-    if name is None:
-        name = path.parent.name if path.stem == "scene" else path.stem
-    layout = recognise_scan(path)
-    if layout is not None:
-        chosen = dataclasses.replace(
-            layout,
-            up_axis=layout.up_axis if up_axis is None else up_axis,
-            scale=layout.scale if scale is None else scale,
-        )
-        log.info("%s: %s", path, chosen.describe())
-        up_axis, scale = chosen.up_axis, chosen.scale
-    scan = None if layout is None else layout.dataset
+    return suffix
+
+
+def _captured_as(path: Path, suffix: str, dataset: str | None, captured: bool | None) -> str | None:
+    """:attr:`Scene.scan` of the file: the recognised scan's ``dataset``, as ``captured`` says, or
+    an unlit glTF's."""
     if captured is not None:
-        scan = (scan or CAPTURED) if captured else None
-    elif scan is None and suffix in (".glb", ".gltf") and gltf_unlit(path):
-        scan = UNLIT_GLTF
+        return (dataset or CAPTURED) if captured else None
+    if dataset is None and suffix in (".glb", ".gltf") and gltf_unlit(path):
         log.info("%s: KHR_materials_unlit: its colour is shown as captured", path)
-    options = {
-        "scale": 1.0 if scale is None else scale,
-        "up_axis": up_axis or "y",
-        "drop_transparent": drop_transparent,
-        "drop_emitters": drop_emitters,
-        "scan": scan,
-    }
-    if suffix == ".xml":
-        parts, materials, cameras, lights, emitters = parse_mitsuba(path, missing=missing)
-        options["up_axis"] = _up(parts, options, path)
-        return assemble_scene(parts, materials, cameras, lights, name=name, emitters=emitters, **options)
+        return UNLIT_GLTF
+    return dataset
+
+
+def _mesh_parts(path: Path, suffix: str, name: str, alignment: np.ndarray | None) -> tuple[list, list[Material]]:
+    """The parts and materials of a mesh file (not Mitsuba's): a PLY's one part (moved by a
+    dataset's ``alignment`` into its aligned frame, when it has one), or trimesh's."""
     if suffix == ".ply":
         mesh = read_ply(path)
-        if layout is not None and layout.alignment is not None:  # into the dataset's aligned frame
-            mesh.vertices = mesh.vertices @ layout.alignment[:3, :3].T + layout.alignment[:3, 3]
-        parts, materials = [ply_part(mesh, 0, str(path))], [Material(name)]
-    else:
-        materials = []
-        parts = load_mesh_file(path, materials)
-    options["up_axis"] = _up(parts, options, path)
-    if captured is None and scan is None and _coloured(parts, materials):
-        log.info(
-            "%s: not a scan kadv recognises: its colour is lit as a modelled scene's (render.lighting=auto: "
-            "baked); if it is captured light (a photo-textured scan), scene.options.captured=true shows it as "
-            "captured (scanned)",
-            path,
-        )
-    scene = assemble_scene(parts, materials, name=name, **options)
-    if suffix == ".ply" and layout is not None and layout.alignment is not None:
-        scene.world_T_file = scene.world_T_file @ layout.alignment  # the file's own frame is before alignment
-    captured_path = find_captured_path(path, None if layout is None else layout.dataset)
-    if captured_path is not None:
-        scene.trajectory = scene.to_world(captured_path.file_T_cam)
-        scene.trajectory_source = str(captured_path.source)
-        log.info("%s: %d captured camera poses from %s", path, len(scene.trajectory), captured_path.source)
-    return scene
+        if alignment is not None:
+            mesh.vertices = mesh.vertices @ alignment[:3, :3].T + alignment[:3, 3]
+        return [ply_part(mesh, 0, str(path))], [Material(name)]
+    materials: list[Material] = []
+    return load_mesh_file(path, materials), materials
 
 
 def _up(parts: list[MeshPart], options: dict, path: Path) -> str | np.ndarray:

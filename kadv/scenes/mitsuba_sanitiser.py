@@ -54,34 +54,7 @@ def sanitised_scene_root(
         for element in root.findall(tag):
             root.remove(element)
     for emitter in root.findall("emitter"):
-        kind = emitter.get("type")
-        names = {child.get("name"): child for child in emitter}
-        if kind == "envmap" and not (path.parent / names["filename"].get("value")).is_file():
-            root.remove(emitter)
-            root.append(
-                ET.fromstring(
-                    f'<emitter type="constant"><rgb name="radiance" value="{MISSING_ENVMAP_RADIANCE}"/></emitter>'
-                )
-            )
-        elif kind == "sunsky":
-            root.remove(emitter)
-            sky = float(names["skyScale"].get("value")) if "skyScale" in names else 1.0
-            root.append(
-                ET.fromstring(
-                    f'<emitter type="constant"><rgb name="radiance" value="{SUNSKY_SKY_PER_SCALE * sky}"/></emitter>'
-                )
-            )
-            sun = names.get("sunDirection")
-            if sun is not None:
-                direction = [-float(sun.get(axis)) for axis in "xyz"]
-                scale = float(names["sunScale"].get("value")) if "sunScale" in names else 1.0
-                root.append(
-                    ET.fromstring(
-                        f'<emitter type="directional"><vector name="direction" x="{direction[0]}" '
-                        f'y="{direction[1]}" z="{direction[2]}"/><rgb name="irradiance" '
-                        f'value="{scale}"/></emitter>'
-                    )
-                )
+        _replace_emitter(root, emitter, path.parent)
     for texture in root.iter("texture"):
         for child in texture:
             # Mitsuba 0.6's "trilinear" and "ewa" mip-map filters are gone; bilinear is the nearest left
@@ -96,3 +69,36 @@ def sanitised_scene_root(
     for index, (world_T_cam, fov) in enumerate(views):
         root.insert(1 + index, _sensor(world_T_cam, fov, height, width, spp))
     return root
+
+
+def _replace_emitter(root: ET.Element, emitter: ET.Element, folder: Path) -> None:
+    """Replace an emitter Mitsuba 3 cannot load: an environment map whose image is missing (by a
+    constant sky), and Mitsuba 0.6's sun and sky (by a constant sky and a directional sun)."""
+    kind = emitter.get("type")
+    names = {child.get("name"): child for child in emitter}
+    if kind == "envmap" and not (folder / names["filename"].get("value")).is_file():
+        root.remove(emitter)
+        root.append(
+            ET.fromstring(
+                f'<emitter type="constant"><rgb name="radiance" value="{MISSING_ENVMAP_RADIANCE}"/></emitter>'
+            )
+        )
+    elif kind == "sunsky":
+        root.remove(emitter)
+        sky = float(names["skyScale"].get("value")) if "skyScale" in names else 1.0
+        root.append(
+            ET.fromstring(
+                f'<emitter type="constant"><rgb name="radiance" value="{SUNSKY_SKY_PER_SCALE * sky}"/></emitter>'
+            )
+        )
+        sun = names.get("sunDirection")
+        if sun is not None:
+            direction = [-float(sun.get(axis)) for axis in "xyz"]
+            scale = float(names["sunScale"].get("value")) if "sunScale" in names else 1.0
+            root.append(
+                ET.fromstring(
+                    f'<emitter type="directional"><vector name="direction" x="{direction[0]}" '
+                    f'y="{direction[1]}" z="{direction[2]}"/><rgb name="irradiance" '
+                    f'value="{scale}"/></emitter>'
+                )
+            )

@@ -357,21 +357,30 @@ def _add_openings(
                 _corridor(b, wall, opening, thickness, extent, paint, floor, name)
                 clear.append(wall.rect(u0 - 0.1, u1 + 0.1, 0.0, 1.0))
             else:
-                pane = np.array(
-                    [
-                        wall.point(u0, v0, -thickness / 2),
-                        wall.point(u1, v0, -thickness / 2),
-                        wall.point(u1, v1, -thickness / 2),
-                        wall.point(u0, v1, -thickness / 2),
-                    ]
-                )
-                b.quad(pane, np.array([wall.inward[0], 0.0, wall.inward[1]]), glass, f"{name}.glass")
-                if glazed:
-                    _glazing_bars(b, wall, opening, thickness, name)
-                _outdoors(b, wall, thickness, extent, name)
-                b.lights.append(wall.point((u0 + u1) / 2, (v0 + v1) / 2, 0.4))
+                _window(b, wall, opening, thickness, extent, glass, glazed, name)
             break
     return clear
+
+
+def _window(
+    b: _Builder, wall: _Wall, opening: tuple, thickness: float, extent: tuple, glass: int, glazed: bool, name: str
+) -> None:
+    """A window in ``opening`` (u0, u1, v0, v1, kind): its pane, its glazing bars when ``glazed``,
+    the outdoors it looks on, and a light just inside it."""
+    u0, u1, v0, v1, _ = opening
+    pane = np.array(
+        [
+            wall.point(u0, v0, -thickness / 2),
+            wall.point(u1, v0, -thickness / 2),
+            wall.point(u1, v1, -thickness / 2),
+            wall.point(u0, v1, -thickness / 2),
+        ]
+    )
+    b.quad(pane, np.array([wall.inward[0], 0.0, wall.inward[1]]), glass, f"{name}.glass")
+    if glazed:
+        _glazing_bars(b, wall, opening, thickness, name)
+    _outdoors(b, wall, thickness, extent, name)
+    b.lights.append(wall.point((u0 + u1) / 2, (v0 + v1) / 2, 0.4))
 
 
 def _add_stairs(
@@ -389,19 +398,10 @@ def _add_stairs(
         b.material(("plain", "wood")[int(rng.integers(2))]),
     )
     slab = rng.uniform(0.04, 0.1)
-    for _ in range(20):
-        wall = walls[int(rng.integers(len(walls)))]
-        if wall.length < run + 0.4:
-            continue
-        start = rng.uniform(0.2, wall.length - run - 0.2)
-        if any(start < o1 + 0.1 and o0 < start + run + 0.1 for o0, o1, *_ in wall.openings):
-            continue
-        rect = wall.rect(start, start + run, 0.02, width + 0.05)
-        if not any(_inside(rect, r, 0.01) for r in rects) or any(_rects_overlap(rect, o, _GAP) for o in occupied):
-            continue
-        break
-    else:
+    placed = _flight_place(rng, walls, rects, occupied, run, width)
+    if placed is None:
         return None
+    wall, start = placed
     up = bool(rng.random() < 0.5)  # climbing along the wall's direction, or against it
     span = lambda i: (
         (start + i * going, start + (i + 1) * going) if up else (start + run - (i + 1) * going, start + run - i * going)
@@ -439,6 +439,27 @@ def _add_stairs(
     occupied.append(wall.rect(*sorted((foot - (1.0 if up else -1.0), head)), 0.0, width + 0.1))
     _stairwell(b, hole, height, rng.uniform(2.4, 3.0), b.material("wall"))
     return hole
+
+
+def _flight_place(
+    rng: np.random.Generator, walls: list[_Wall], rects: list[np.ndarray], occupied: list[np.ndarray], run: float,
+    width: float,
+) -> tuple[_Wall, float] | None:  # fmt: skip
+    """A wall and a start along it for a flight ``run`` long and ``width`` wide: clear of the
+    wall's openings, inside the room's floor ``rects`` and clear of what is ``occupied``; None
+    after 20 draws that fit nowhere."""
+    for _ in range(20):
+        wall = walls[int(rng.integers(len(walls)))]
+        if wall.length < run + 0.4:
+            continue
+        start = rng.uniform(0.2, wall.length - run - 0.2)
+        if any(start < o1 + 0.1 and o0 < start + run + 0.1 for o0, o1, *_ in wall.openings):
+            continue
+        rect = wall.rect(start, start + run, 0.02, width + 0.05)
+        if not any(_inside(rect, r, 0.01) for r in rects) or any(_rects_overlap(rect, o, _GAP) for o in occupied):
+            continue
+        return wall, start
+    return None
 
 
 def _stairwell(b: _Builder, hole: np.ndarray, height: float, rise: float, paint: int) -> None:
@@ -604,6 +625,13 @@ def _add_furniture(
 
 def _add_decor(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height: float, eye: np.ndarray) -> None:
     """Pictures on the walls, rugs on the floor, lamps hanging from the ceiling."""
+    _add_pictures(b, walls, height)
+    _add_rugs(b, rects)
+    _add_lamps(b, rects, height, eye)
+
+
+def _add_pictures(b: _Builder, walls: list[_Wall], height: float) -> None:
+    """One to four framed pictures on the walls, clear of their openings."""
     rng = b.rng
     for index in range(int(rng.integers(1, 5))):
         wall = walls[int(rng.integers(len(walls)))]
@@ -629,6 +657,11 @@ def _add_decor(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height:
             ]
         )
         b.framed_quad(canvas, inward, b.material("picture"), f"picture{index}.canvas")
+
+
+def _add_rugs(b: _Builder, rects: list[np.ndarray]) -> None:
+    """Up to two rugs on the floor's rectangles."""
+    rng = b.rng
     for index in range(int(rng.integers(0, 3))):
         rect = rects[int(rng.integers(len(rects)))]
         size = rng.uniform(1.0, 3.0, size=2)
@@ -638,6 +671,12 @@ def _add_decor(b: _Builder, walls: list[_Wall], rects: list[np.ndarray], height:
         b.box(
             np.array([x0, 0.0, z0]), np.array([x0 + size[0], 0.012, z0 + size[1]]), b.material("fabric"), f"rug{index}"
         )
+
+
+def _add_lamps(b: _Builder, rects: list[np.ndarray], height: float, eye: np.ndarray) -> None:
+    """One to three lamps hanging from the ceiling (cord, shade, an emissive bulb), none within
+    1.5 m of the ``eye``."""
+    rng = b.rng
     bulb = b.special(Material("bulb", base_color=np.ones(3), emissive=True))
     for index in range(int(rng.integers(1, 4))):
         rect = rects[int(rng.integers(len(rects)))]

@@ -267,8 +267,40 @@ def assemble_scene(
     rotation = rotation_to_y_up(up_axis)
     light_list = [np.asarray(lights, np.float64).reshape(-1, 3)] if lights is not None else []
     emitters = emitters or Emitters()
-    vertices, faces, uvs, normals, material_ids, colors = [], [], [], [], [], []
-    offset = 0
+    kept, emitters = _renderable_parts(name, parts, materials, light_list, emitters, drop_transparent, drop_emitters)
+    arrays = _concatenated(kept, coloured=not all(part.colors is None for part in parts))
+    vertices = arrays["vertices"] @ rotation.T * scale
+    return Scene(
+        vertices=vertices,
+        faces=arrays["faces"],
+        uvs=arrays["uvs"].astype(np.float32),
+        normals=_unit_normals(arrays["normals"] @ rotation.T, vertices, arrays["faces"]).astype(np.float32),
+        material_ids=arrays["material_ids"],
+        materials=materials,
+        cameras=[_turned_camera(camera, rotation, scale) for camera in cameras or []],
+        lights=(np.concatenate(light_list) if light_list else np.zeros((0, 3))) @ rotation.T * scale,
+        name=name,
+        interior=None if interior is None else _turned_box(interior, rotation, scale),
+        emitters=emitters.transformed(rotation, scale),
+        colors=arrays["colors"],
+        scan=scan,
+        world_T_file=world_from_file(rotation, scale),
+    )
+
+
+def _renderable_parts(
+    name: str,
+    parts: list[MeshPart],
+    materials: list[Material],
+    light_list: list[np.ndarray],
+    emitters: Emitters,
+    drop_transparent: bool,
+    drop_emitters: bool,
+) -> tuple[list[tuple[MeshPart, np.ndarray, np.ndarray]], Emitters]:
+    """The parts that are rendered, each with its vertices and faces as arrays, and the emitters
+    with the emissive parts' surfaces added (their centroids appended to ``light_list``); an error
+    naming the scene ``name`` when none is left."""
+    kept = []
     for part in parts:
         part_vertices = np.asarray(part.vertices, np.float64)
         if not np.isfinite(part_vertices).all():
@@ -284,6 +316,19 @@ def assemble_scene(
             continue
         if material.transparent and drop_transparent:
             continue
+        kept.append((part, part_vertices, part_faces))
+    if not kept:
+        raise ValueError(f"scene {name!r}: no renderable triangles (all parts empty, transparent or emissive)")
+    return kept, emitters
+
+
+def _concatenated(kept: list[tuple[MeshPart, np.ndarray, np.ndarray]], coloured: bool) -> dict[str, np.ndarray | None]:
+    """The parts' vertices, faces (indexing the concatenated vertices), per-corner uvs, normals
+    (a part without them: its face normals), material ids and, when ``coloured``, per-corner
+    colours (float32; NaN: a part without them; else None)."""
+    vertices, faces, uvs, normals, material_ids, colors = [], [], [], [], [], []
+    offset = 0
+    for part, part_vertices, part_faces in kept:
         n = len(part_faces)
         if part.normals is None:
             part_normals = np.repeat(_face_normals(part_vertices, part_faces)[0][:, None], 3, axis=1)
@@ -294,46 +339,38 @@ def assemble_scene(
         uvs.append(np.zeros((n, 3, 2)) if part.uvs is None else np.asarray(part.uvs).reshape(n, 3, 2))
         normals.append(part_normals)
         material_ids.append(np.full(n, part.material))
-        colors.append(np.full((n, 3, 3), np.nan, np.float32) if part.colors is None else part.colors)
+        if coloured:
+            colors.append(np.full((n, 3, 3), np.nan, np.float32) if part.colors is None else part.colors)
         offset += len(part_vertices)
-    if not faces:
-        raise ValueError(f"scene {name!r}: no renderable triangles (all parts empty, transparent or emissive)")
-    all_normals = np.concatenate(normals) @ rotation.T
-    norm = np.linalg.norm(all_normals, axis=-1, keepdims=True)
-    all_vertices = np.concatenate(vertices) @ rotation.T * scale
-    all_faces = np.concatenate(faces)
-    flat = np.repeat(_face_normals(all_vertices, all_faces)[0][:, None], 3, axis=1)
-    # Files carry zero or NaN normals on degenerate corners: fall back to the face normal there.
+    names = ("vertices", "faces", "uvs", "normals", "material_ids")
+    arrays = {key: np.concatenate(values) for key, values in zip(names, (vertices, faces, uvs, normals, material_ids))}
+    arrays["colors"] = np.concatenate(colors).astype(np.float32) if coloured else None
+    return arrays
+
+
+def _unit_normals(normals: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Per-corner normals (F, 3, 3) made unit length; files carry zero or NaN normals on degenerate
+    corners, which fall back to the face normal."""
+    norm = np.linalg.norm(normals, axis=-1, keepdims=True)
+    flat = np.repeat(_face_normals(vertices, faces)[0][:, None], 3, axis=1)
     bad = ~np.isfinite(norm) | (norm < 1e-8)
-    all_normals = np.where(bad, flat, all_normals / np.where(bad, 1.0, norm))
-    moved_cameras = []
-    for camera in cameras or []:
-        pose = camera.world_T_cam.numpy().copy()
-        pose[:3, :3] = rotation @ pose[:3, :3]
-        pose[:3, 3] = rotation @ pose[:3, 3] * scale
-        moved_cameras.append(Camera(pose, camera.fov_x_deg, camera.width, camera.height, camera.name))
-    all_lights = np.concatenate(light_list) if light_list else np.zeros((0, 3))
-    if interior is not None:  # the rotated box's bounds: all eight corners, for any rotation
-        box = np.asarray(interior, np.float64).reshape(2, 3)
-        corners = np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3)
-        turned = corners @ rotation.T * scale
-        interior = np.stack([turned.min(axis=0), turned.max(axis=0)])
-    return Scene(
-        vertices=all_vertices,
-        faces=all_faces,
-        uvs=np.concatenate(uvs).astype(np.float32),
-        normals=all_normals.astype(np.float32),
-        material_ids=np.concatenate(material_ids),
-        materials=materials,
-        cameras=moved_cameras,
-        lights=all_lights @ rotation.T * scale,
-        name=name,
-        interior=interior,
-        emitters=emitters.transformed(rotation, scale),
-        colors=None if all(part.colors is None for part in parts) else np.concatenate(colors).astype(np.float32),
-        scan=scan,
-        world_T_file=world_from_file(rotation, scale),
-    )
+    return np.where(bad, flat, normals / np.where(bad, 1.0, norm))
+
+
+def _turned_camera(camera: Camera, rotation: np.ndarray, scale: float) -> Camera:
+    """A file camera in kadv's world: turned by ``rotation`` (3, 3), its centre scaled to metres."""
+    pose = camera.world_T_cam.numpy().copy()
+    pose[:3, :3] = rotation @ pose[:3, :3]
+    pose[:3, 3] = rotation @ pose[:3, 3] * scale
+    return Camera(pose, camera.fov_x_deg, camera.width, camera.height, camera.name)
+
+
+def _turned_box(interior: np.ndarray, rotation: np.ndarray, scale: float) -> np.ndarray:
+    """(2, 3) the bounds of a box (2, 3) turned and scaled: all eight corners, for any rotation."""
+    box = np.asarray(interior, np.float64).reshape(2, 3)
+    corners = np.stack(np.meshgrid(*box.T, indexing="ij"), axis=-1).reshape(-1, 3)
+    turned = corners @ rotation.T * scale
+    return np.stack([turned.min(axis=0), turned.max(axis=0)])
 
 
 def world_from_file(rotation: np.ndarray, scale: float) -> np.ndarray:

@@ -193,6 +193,28 @@ class Scorecard:
         return save_profile_panels(path, panels)
 
 
+def _checked_inputs(models: list, probes: list[str] | None, seeds) -> tuple[list[str], tuple, list]:
+    """A scorecard's probes (None: all), seeds and loaded models, or :class:`RobustnessInputError`
+    naming what is wrong: an unknown probe, no model, no seed, two models of one name."""
+    from kadv.catalogue.probes import PROBES
+    from kadv.testing.inputs import resolve_model
+
+    probes = list(PROBES) if probes is None else list(probes)
+    unknown = [name for name in probes if name not in PROBES]
+    if unknown:
+        raise RobustnessInputError(f"no probe scene {unknown[0]!r}; the probes are: {', '.join(PROBES)}")
+    if not models:
+        raise RobustnessInputError("scorecard needs at least one model")
+    seeds = tuple(seeds)
+    if not seeds:
+        raise RobustnessInputError("seeds is empty: give at least one seed")
+    loaded = [resolve_model(model) for model in models]
+    names = [model.name for model in loaded]
+    if len(set(names)) != len(names):
+        raise RobustnessInputError(f"models: each must have its own name, got {names}")
+    return probes, seeds, loaded
+
+
 def scorecard(
     models: list,
     probes: list[str] | None = None,
@@ -226,23 +248,10 @@ def scorecard(
     Raises:
         RobustnessInputError: an unknown probe (listing the probes), no seeds, or a bad model.
     """
-    from kadv.models import DepthModel
-    from kadv.scenes.probes import PROBES, probe_scene
-    from kadv.testing.inputs import resolve_model
+    from kadv.catalogue.probes import probe_scene
 
-    probes = list(PROBES) if probes is None else list(probes)
-    unknown = [name for name in probes if name not in PROBES]
-    if unknown:
-        raise RobustnessInputError(f"no probe scene {unknown[0]!r}; the probes are: {', '.join(PROBES)}")
-    if not models:
-        raise RobustnessInputError("scorecard needs at least one model")
-    seeds = tuple(seeds)
-    if not seeds:
-        raise RobustnessInputError("seeds is empty: give at least one seed")
-    loaded: list[DepthModel] = [resolve_model(model) for model in models]
+    probes, seeds, loaded = _checked_inputs(models, probes, seeds)
     names = [model.name for model in loaded]
-    if len(set(names)) != len(names):
-        raise RobustnessInputError(f"models: each must have its own name, got {names}")
     settings = profile_settings(radii, envelope, typical_views, fail_below, options, "scorecard", search_seeds)
     results: dict[str, dict[str, Profile]] = {}
     for probe in probes:

@@ -20,7 +20,7 @@ def scene(name: str | Path, seed: int = 0):
     Raises:
         RobustnessInputError: an unknown name, listing what there is, or a file that cannot load.
     """
-    from kadv.scenes import scene_from_node
+    from kadv.catalogue import scene_from_node
 
     text = str(name)
     if text in ("box_room", "procedural"):

@@ -9,6 +9,7 @@ import tempfile
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+from kadv.attack.records import worst_record
 from kadv.attack.search import DEFAULT_METHOD, RENAMED_BUDGET
 from kadv.testing.inputs import RobustnessInputError, resolve_model, resolve_scene
 from kadv.testing.session import current
@@ -16,12 +17,6 @@ from kadv.testing.session import current
 __all__ = ["DEFAULT_BUDGET", "CheckOptions", "Setup", "check_radii", "setup", "slug", "worst_record"]
 
 DEFAULT_BUDGET = 48  # model passes per init view (and radius, in a profile), the init view's included
-
-
-def worst_record(records: list) -> object:
-    """The valid full-size record of lowest delta1 (the highest loss among ties)."""
-    rankable = [r for r in records if r.rankable] or records[:1]
-    return min(rankable, key=lambda r: (r.delta1, -r.loss))
 
 
 @dataclass(frozen=True)
@@ -47,6 +42,8 @@ class CheckOptions:
             budget (``attack.restarts``; their agreement is reported beside the worst).
         alignment: how delta1 meets the ground truth (``loss.alignment``): ``scale_shift``,
             ``scale`` or ``none`` (metric depth as predicted; a relative model is refused).
+        radius_shares: a profile's split of its passes over its radii, one positive share a
+            radius (``attack.radius_shares``; None: the k-th radius gets k shares).
     """
 
     init_count: int = 2
@@ -62,6 +59,7 @@ class CheckOptions:
     progress: bool = False
     restarts: int = 1
     alignment: str = "scale_shift"
+    radius_shares: tuple[float, ...] | None = None
 
     @classmethod
     def of(cls, options: dict, taker: str) -> CheckOptions:
@@ -76,15 +74,12 @@ class CheckOptions:
 
 @dataclass
 class Setup:
-    """What a robustness check searches with: the scene's renderers, the objective, the init views,
-    and where and how the worst views' pictures go."""
+    """What a robustness check searches with: its :class:`~kadv.attack.Study` (the scene's
+    renderers, the objective), the init views, and where and how the worst views' pictures go."""
 
     model_name: str
     scene_name: str
-    renderer: object
-    differentiable: object
-    objective: object
-    penalty: object
+    study: object
     views: list
     size: tuple[int, int]
     budget: int
@@ -92,20 +87,28 @@ class Setup:
     stem: str
     render: object
 
+    @property
+    def renderer(self):
+        return self.study.renderer
+
+    @property
+    def differentiable(self):
+        return self.study.differentiable
+
+    @property
+    def objective(self):
+        return self.study.objective
+
+    @property
+    def penalty(self):
+        return self.study.settings.penalty
+
 
 def setup(model, scene, options: CheckOptions) -> Setup:
     """The :class:`Setup` of a check, or :class:`RobustnessInputError` in one line."""
-    from kadv.attack import (
-        InitViewConfig,
-        InitViewError,
-        Objective,
-        PenaltyConfig,
-        check_init_views,
-        file_init_views,
-        sample_init_views,
-    )
-    from kadv.losses import depth_loss
-    from kadv.render import DifferentiableRenderer, ExactRenderer, Shading
+    from kadv.attack import InitViewError, Study, StudySettings
+    from kadv.losses import LossConfig
+    from kadv.render import Shading
     from kadv.report.run import ViewRenderer
 
     init_count, budget_passes = options.init_count, options.budget_passes
@@ -119,15 +122,17 @@ def setup(model, scene, options: CheckOptions) -> Setup:
     depth_model = resolve_model(model)
     built = resolve_scene(scene)
     try:
-        renderer = ExactRenderer(built, Shading(lighting=options.lighting), progress=options.progress)
-        penalty = PenaltyConfig()
-        objective = Objective(depth_model, depth_loss(options.loss), renderer, penalty, alignment=options.alignment)
-        views = file_init_views(renderer, penalty.margin)[:init_count]
-        views += sample_init_views(
-            renderer, depth_model, init_count - len(views), options.seed, InitViewConfig(), penalty, height, width,
-            alignment=options.alignment,
-        )  # fmt: skip
-        check_init_views(renderer, views, penalty, height, width)
+        study = Study.build(
+            built,
+            depth_model,
+            StudySettings(
+                size=(height, width),
+                shading=Shading(lighting=options.lighting),
+                loss=LossConfig(kind=options.loss, alignment=options.alignment),
+                progress=options.progress,
+            ),
+        )
+        views = _init_views(study, init_count, options.seed)
     except InitViewError as error:
         raise RobustnessInputError(f"scene {built.name!r}: {error}") from error
     except ValueError as error:
@@ -138,17 +143,29 @@ def setup(model, scene, options: CheckOptions) -> Setup:
     return Setup(
         depth_model.name,
         built.name,
-        renderer,
-        DifferentiableRenderer(renderer),
-        objective,
-        penalty,
+        study,
         views,
         (height, width),
         budget,
         folder,
         f"{slug(depth_model.name)}-{slug(built.name)}-seed{options.seed}",
-        ViewRenderer(objective, height, width, supersample=2),
+        ViewRenderer(study.objective, height, width, supersample=2),
     )
+
+
+def _init_views(study, count: int, seed: int) -> list:
+    """A check's ``count`` init views: the scene file's cameras first, then views sampled under
+    ``seed`` that the study's model gets right (after its alignment), all checked."""
+    from kadv.attack import InitViewConfig, check_init_views, file_init_views, sample_init_views
+
+    renderer, penalty, (height, width) = study.renderer, study.settings.penalty, study.settings.size
+    views = file_init_views(renderer, penalty.margin)[:count]
+    views += sample_init_views(
+        renderer, study.model, count - len(views), seed, InitViewConfig(), penalty, height, width,
+        alignment=study.settings.loss.alignment,
+    )  # fmt: skip
+    check_init_views(renderer, views, penalty, height, width)
+    return views
 
 
 def check_radii(radii) -> tuple[tuple[float, float], ...]:

@@ -135,8 +135,6 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
         RobustnessInputError: a bad model, scene or setting, in one line.
     """
     from kadv.attack import AttackConfig, InitViewError, attack
-    from kadv.geometry import yaw_pitch_roll
-    from kadv.report.run import save_view_picture
 
     checked = CheckOptions.of(options, "viewpoint_robustness")
     ((degrees, metres),) = check_radii([checked.radius])
@@ -163,33 +161,7 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
         raise RobustnessInputError(f"scene {built.scene_name!r}: {error}") from error
     except ValueError as error:
         raise RobustnessInputError(str(error)) from error
-    outcomes = []
-    for view in result.views:
-        init, worst = view.init_record, worst_record(view.records)
-        pose = worst.world_T_cam(view.init.world_T_cam)
-        picture = save_view_picture(
-            built.folder / f"{built.stem}-{view.init.name}-worst.png",
-            built.render,
-            view.init,
-            worst,
-            f"worst view from {view.init.name}",
-        )
-        outcomes.append(
-            InitViewOutcome(
-                name=view.init.name,
-                delta1_init=init.delta1,
-                abs_rel_init=init.abs_rel,
-                delta1_worst=worst.delta1,
-                abs_rel_worst=worst.abs_rel,
-                centre=tuple(pose[:3, 3].tolist()),
-                angles_deg=tuple(torch.rad2deg(yaw_pitch_roll(pose[:3, :3].double())).tolist()),
-                passes=view.budget.passes,
-                seconds=view.budget.seconds,
-                picture=picture,
-                world_T_cam=pose.tolist(),
-                fov_x_deg=worst.fov(view.init.fov_x_deg),
-            )
-        )
+    outcomes = [_outcome(built, view) for view in result.views]
     return RobustnessResult(
         built.model_name,
         built.scene_name,
@@ -198,6 +170,36 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
         outcomes,
         config.envelope.name,
         (degrees, metres),
+    )
+
+
+def _outcome(built, view) -> InitViewOutcome:
+    """An init view's outcome: its worst view found (pose, figures, cost) and its picture."""
+    from kadv.geometry import yaw_pitch_roll
+    from kadv.report.run import save_view_picture
+
+    init, worst = view.init_record, worst_record(view.records)
+    pose = worst.world_T_cam(view.init.world_T_cam)
+    picture = save_view_picture(
+        built.folder / f"{built.stem}-{view.init.name}-worst.png",
+        built.render,
+        view.init,
+        worst,
+        f"worst view from {view.init.name}",
+    )
+    return InitViewOutcome(
+        name=view.init.name,
+        delta1_init=init.delta1,
+        abs_rel_init=init.abs_rel,
+        delta1_worst=worst.delta1,
+        abs_rel_worst=worst.abs_rel,
+        centre=tuple(pose[:3, 3].tolist()),
+        angles_deg=tuple(torch.rad2deg(yaw_pitch_roll(pose[:3, :3].double())).tolist()),
+        passes=view.budget.passes,
+        seconds=view.budget.seconds,
+        picture=picture,
+        world_T_cam=pose.tolist(),
+        fov_x_deg=worst.fov(view.init.fov_x_deg),
     )
 
 

@@ -197,16 +197,22 @@ def test_48_more_budgeted_passes_buy_at_most_48_more_model_passes_at_every_profi
         assert passes[1] - passes[0] <= 48, (angle, passes)
 
 
-def test_the_clock_predicts_a_batch_by_its_passes() -> None:
+def test_the_clock_predicts_a_batch_by_its_passes(monkeypatch) -> None:
+    now = [100.0]
+    monkeypatch.setattr(time, "perf_counter", lambda: now[0])
     clock = Clock(None, 10.0)
-    clock.started -= 6.0  # six seconds gone, then a screening of 32 passes took five
-    clock.spent(32, 5.0, screened=True)
+    now[0] += 1.0
+    with clock.charge(32, screened=True):  # six seconds gone, of which a screening of 32 passes took five
+        now[0] += 5.0
+    assert (clock.budget.passes, clock.budget.screened, clock.elapsed()) == (32, 32, 6.0)
     # four seconds left at 5/32 s a pass: a two-lane step (forward and backward) fits, 32 more do not
     assert clock.allows(2, cost=2) == 2
-    most = math.floor((10.0 - clock.elapsed()) / (5.0 / 32))
-    allowed = clock.allows(32)
-    assert math.floor((10.0 - clock.elapsed()) / (5.0 / 32)) <= allowed <= most < 32
-    clock.started -= 4.0  # the budget is spent
+    assert clock.allows(32) == math.floor(4.0 / (5.0 / 32)) < 32
+    with clock.charge(2) as charge:  # a block that learns its backward passes as it runs
+        charge.backward = 2
+        now[0] += 0.5
+    assert (clock.budget.forward, clock.budget.backward, clock.budget.passes) == (34, 2, 36)
+    now[0] += 4.0  # the budget is spent
     assert clock.allows(1) == 0
     assert Clock(8, None).allows(5, cost=2) == 4 and Clock(8, None).allows(100) == 8
 

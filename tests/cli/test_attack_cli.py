@@ -309,6 +309,13 @@ BAD_INPUTS = [
     ("kadv-attack", ["envelope.pitch_deg=[30,-30]"], "envelope.pitch_deg [30, -30] is empty or leaves [-90, 90]"),
     ("kadv-attack", ["envelope.fov_deg=[100,40]"], "envelope.fov_deg [100, 40] is empty or leaves (1, 179)"),
     ("kadv-attack", ["envelope.fov_deg=[40,180]"], "envelope.fov_deg [40, 180] is empty or leaves (1, 179)"),
+    ("kadv-attack", ["attack.radius_shares=[1,2,3]"], "attack.radius_shares splits a profile's passes over its radii"),
+    (
+        "kadv-attack",
+        ["attack.radii=[[5,0.1],[45,1.0]]", "attack.radius_shares=[1,2,3]"],
+        "attack.radius_shares must be 2 positive numbers, one a radius, got [1, 2, 3]",
+    ),
+    ("kadv-attack", ["attack.radius_shares=[1,0]"], "attack.radius_shares must be null or positive numbers"),
     (
         "kadv-attack",
         ["envelope.height=[5,6]", "init.count=1"],
@@ -424,6 +431,24 @@ def test_a_profile_run_records_its_profile_in_the_summary(tmp_path: Path) -> Non
     assert max(np.linalg.norm(r.params[3:]) for r in records) <= 0.3 + 1e-6
     assert "score " in result.stdout and "| 15°, 0.3 m |" in result.stdout
     assert (tmp_path / "run" / "profile.png").stat().st_size > 5_000
+
+
+def test_a_profile_run_splits_its_passes_over_its_radii_by_their_shares(tmp_path: Path) -> None:
+    small = [o for o in SMALL if not o.startswith("attack")]
+    overrides = [
+        "attack=random",
+        "attack.budget_passes=12",
+        "attack.radii=[[5,0.1],[15,0.3]]",
+        "attack.radius_shares=[1,3]",
+    ]
+    result = _run_in_process(
+        "kadv-attack", tmp_path / "run", *small, "render.lighting=direct", "init.count=1", *overrides
+    )
+    assert result.returncode == 0, result.stderr
+    summary = RunSummary.read(tmp_path / "run" / "summary.json")
+    # 12 passes a radius on average, 24 in all: a quarter to 5°/0.1 m, three quarters to 15°/0.3 m
+    assert [view.budget.passes for view in summary.init_views] == [18]
+    assert summary.profile["cost_by_seed"][0]["search_passes"] == 24
 
 
 def test_a_run_with_restarts_says_beside_each_worst_how_many_runs_reached_it(tmp_path: Path) -> None:

@@ -8,14 +8,15 @@ from pathlib import Path
 from hydra import compose, initialize_config_module
 from omegaconf import OmegaConf
 
-from kadv.attack import DEFAULT_METHOD, AttackConfig, InitViewConfig, get_method
+from kadv.attack import DEFAULT_METHOD, AttackConfig, InitViewConfig, StudySettings, get_method
 from kadv.cli.attack import attack_settings
-from kadv.cli.common import _open_keys, loss_from_config, resolve_lighting, shading_from_config
+from kadv.cli.common import _open_keys, loss_settings, resolve_lighting, shading_from_config, study_settings
+from kadv.losses import LossConfig
 from kadv.models import EMBEDDED, PRESETS
-from kadv.models.train_tiny import TinyTrainConfig
 from kadv.penalties import PenaltyConfig
 from kadv.render import DiffRenderConfig, Shading
 from kadv.scenes import box_room
+from kadv.training.tiny import TinyTrainConfig
 
 CONF = Path(__file__).resolve().parents[2] / "conf"
 
@@ -52,7 +53,7 @@ def test_every_group_option_composes_into_valid_settings() -> None:
             _shading(cfg.render)
             assert cfg.loss.space in ("disparity", "depth")
             if cfg.loss.kind != "perceptual":  # its VGG-16 weights would be a download
-                loss_from_config(cfg.loss)
+                loss_settings(cfg.loss).loss()
             assert (
                 OmegaConf.is_missing(cfg.model, "name")
                 or cfg.model.name in {*PRESETS, *EMBEDDED}
@@ -90,6 +91,10 @@ def test_yaml_defaults_equal_the_library_defaults() -> None:
         Shading().diffuse,
         Shading().lights,
     )
+    assert loss_settings(cfg.loss) == LossConfig()  # loss=delta1 and its alignment
+    settings = study_settings(box_room(), cfg.render)
+    assert (settings.size, settings.render, settings.backend) == (StudySettings().size, DiffRenderConfig(), "auto")
+    assert settings.max_rays == StudySettings().max_rays
     train = OmegaConf.to_container(_compose("kadv_train_tiny").train)
     assert TinyTrainConfig(**{**train, "channels": tuple(train["channels"])}) == TinyTrainConfig()
 

@@ -3,10 +3,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kadv.catalogue import scene_from_node
 from kadv.penalties import random_valid_poses, view_validity
 from kadv.penalties.validity import fibonacci_sphere
 from kadv.render import ExactRenderer
-from kadv.scenes import procedural_room, scene_from_node
+from kadv.scenes import procedural_room
 
 SEEDS = range(12)  # rooms, an L, a hall (2) and corridors along x (3) and z (11)
 FEATURES = {"stairs_share": 1.0, "sun_share": 1.0, "glazing_share": 1.0, "trim_share": 1.0, "round_share": 1.0}

@@ -116,7 +116,7 @@ def test_each_radius_is_searched_from_the_worst_views_of_the_smaller_ones() -> N
     built = setup("kadv_tiny", "box_room", CheckOptions(init_count=1, size=(24, 32), lighting="direct"))
     config = AttackConfig(budget_passes=8, envelope="upright")
     radii = ((5.0, 0.1), (15.0, 0.3), (30.0, 0.6))
-    results = search_radii(built.objective, built.differentiable, built.views, built.size, config, radii, seed=0)
+    results = search_radii(built.study, built.views, config, radii, seed=0)
     for k in (1, 2):
         smaller = [r for result in results[:k] for r in result.views[0].records]
         expected = [r.params for r in worst_views(smaller, 2, config.min_separation, config.min_separation_deg)]

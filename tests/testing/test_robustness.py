@@ -135,7 +135,7 @@ def test_the_scorecard_profiles_each_model_on_each_probe_and_ranks_them(tmp_path
 
 
 def test_pooling_scores_each_model_at_the_other_searches_worst_views_and_never_raises_its_worst() -> None:
-    from kadv.scenes.probes import probe_scene
+    from kadv.catalogue import probe_scene
     from kadv.testing.profile import pool_worst_views, profile_settings, worst_views
 
     options = {"budget_passes": 6, "size": (24, 32), "lighting": "direct", "init_count": 2}

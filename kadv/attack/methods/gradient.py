@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -129,18 +128,18 @@ def gradient_ascent(
     for step in range(steps + 1):
         if step > 0 and clock.allows(batch) < batch:
             break
-        started = time.perf_counter()
         if step == steps or clock.allows(batch, cost=2) < batch:  # no room for the backward pass
             context.differentiable.validate_next()  # the views a run ends on are scored exactly
-            measures.append(evaluate()[0])
-            clock.spent(batch, time.perf_counter() - started)
+            with clock.charge(batch):
+                measures.append(evaluate()[0])
             break
-        measured = graph()
-        if graph.captured:  # a replay returns what the capture measured, but for the host's numbers
-            passes = clock.budget.passes + batch
-            measured = dataclasses.replace(measured, step=first_step + step, seconds=clock.elapsed(), passes=passes)
+        with clock.charge(batch, backward=batch):
+            measured = graph()
+            if graph.captured:  # a replay returns what the capture measured, but for the host's numbers
+                passes = clock.budget.passes + batch
+                replaced = {"step": first_step + step, "seconds": clock.elapsed(), "passes": passes}
+                measured = dataclasses.replace(measured, **replaced)
         measures.append(measured)
-        clock.spent(batch, time.perf_counter() - started, backward=batch)
     return measures
 
 

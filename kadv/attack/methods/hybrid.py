@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -134,33 +133,34 @@ def trust_region_refine(
     records: list[ViewRecord] = []
     step = first_step
     while clock.allows(lanes, cost=cost) == lanes:
-        started = time.perf_counter()
-        proposal = context.project(current + torch.where(fresh[:, None], 0.0, _steps(gradient, radius, settings)))
-        reached, fraction = context.guard(current[:, 3:6], proposal[:, 3:6])
-        # the lanes' bookkeeping stays on the host, where its decisions are made; the trial goes to the device
-        trial = torch.cat([proposal[:, :3].to(context.device), reached, proposal[:, FOV:].to(context.device)], dim=1)
-        out, terms = context.differentiable_terms(differentiable, trial.requires_grad_(True))
-        screened = supersample is not None or out.warped
-        rows = context.records(
-            step,
-            trial,
-            out.world_T_cam,
-            terms,
-            fraction,
-            (out.coverage, out.rgb_error, out.depth_error),
-            out.refreshed,
-            lanes=list(ids),
-            render=out.exact,
-            screened=screened,
-        )
-        records += rows
-        value = terms.objective.detach().cpu()
-        valid = torch.tensor([r.valid for r in rows])  # rankable at the lanes' fidelity (full size)
-        risen = ~fresh & valid & (value > level)
-        backward = lanes if bool((fresh | risen).any()) else 0
-        if backward:
-            (terms.objective * (fresh | risen).to(terms.objective.device)).sum().backward()
-        clock.spent(lanes, time.perf_counter() - started, backward=backward, screened=screened)
+        with clock.charge(lanes) as charge:  # its backward passes and fidelity are known once it has run
+            proposal = context.project(current + torch.where(fresh[:, None], 0.0, _steps(gradient, radius, settings)))
+            reached, fraction = context.guard(current[:, 3:6], proposal[:, 3:6])
+            # the lanes' bookkeeping stays on the host, where its decisions are made; the trial goes to the device
+            trial = torch.cat(
+                [proposal[:, :3].to(context.device), reached, proposal[:, FOV:].to(context.device)], dim=1
+            )
+            out, terms = context.differentiable_terms(differentiable, trial.requires_grad_(True))
+            screened = charge.screened = supersample is not None or out.warped
+            rows = context.records(
+                step,
+                trial,
+                out.world_T_cam,
+                terms,
+                fraction,
+                (out.coverage, out.rgb_error, out.depth_error),
+                out.refreshed,
+                lanes=list(ids),
+                render=out.exact,
+                screened=screened,
+            )
+            records += rows
+            value = terms.objective.detach().cpu()
+            valid = torch.tensor([r.valid for r in rows])  # rankable at the lanes' fidelity (full size)
+            risen = ~fresh & valid & (value > level)
+            backward = charge.backward = lanes if bool((fresh | risen).any()) else 0
+            if backward:
+                (terms.objective * (fresh | risen).to(terms.objective.device)).sum().backward()
         if screened and bool(risen.any()):
             chosen = torch.nonzero(risen).flatten().tolist()
             scored = context.score(step, trial.detach()[chosen], fraction[chosen], lanes=[ids[i] for i in chosen])

@@ -19,9 +19,11 @@ import torch
 
 from kadv.geometry.camera import Camera, intrinsics_from_fov
 from kadv.geometry.pose import look_at
+from kadv.render.raycast import ExactRenderer
 from kadv.scenes.emitters import Emitters
 from kadv.scenes.materials import textured_materials
 from kadv.scenes.parts import box_parts, facing, planar_quad, quad_part, room_shell_parts
+from kadv.scenes.procedural import procedural_room
 from kadv.scenes.scene import Material, MeshPart, Scene, assemble_scene
 
 __all__ = [
@@ -81,9 +83,6 @@ class _Room:
 @cache
 def _room_photograph(seed: int) -> np.ndarray:
     """(H, W, 3) an image of a furnished room: a generated room rendered from its own camera."""
-    from kadv.render.raycast import ExactRenderer  # the renderer imports the scenes package
-    from kadv.scenes.procedural import procedural_room
-
     room = procedural_room(seed=seed)
     camera = room.cameras[0]
 

@@ -17,7 +17,6 @@ from kadv.device import resolve_device
 from kadv.losses import ssi_loss
 from kadv.losses.ssi import gradient_matching
 from kadv.models.base import DepthModel
-from kadv.models.evaluation import evaluate
 from kadv.models.tiny import (
     DEFAULT_CHANNELS,
     TINY_PREPROCESS,
@@ -28,6 +27,7 @@ from kadv.models.tiny import (
 from kadv.models.tiny_dpt import load_kadv_tiny_dpt, tiny_dpt_model, tiny_dpt_network
 from kadv.render import BakeConfig
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE
+from kadv.training.evaluation import evaluate
 
 __all__ = [
     "ARCHITECTURES",

@@ -7,6 +7,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from kadv.catalogue.probes import probe_scene
 from kadv.scenes.box_rooms import box_room
 from kadv.scenes.load import load_scene
 from kadv.scenes.procedural import ROOM_FEATURES, procedural_room
@@ -33,8 +34,6 @@ def scene_from_node(node: Mapping[str, Any], path: str | Path | None = None) -> 
     if kind == "procedural":
         return procedural_room(seed=node.get("seed", 0), **{name: node[name] for name in ROOM_FEATURES if name in node})
     if kind == "probe":
-        from kadv.scenes.probes import probe_scene
-
         return probe_scene(node.get("name", ""), seed=node.get("seed", 0))
     if kind == "file":
         return load_scene(Path(path if path is not None else node["path"]).expanduser(), **(node.get("options") or {}))

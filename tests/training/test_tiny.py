@@ -8,8 +8,8 @@ import torch
 from kadv.datasets import render_procedural_views
 from kadv.losses import gradient_matching, ssi_loss
 from kadv.models import KadvTiny, TinyDepthNet, load_kadv_tiny, load_kadv_tiny_dpt, save_kadv_tiny, save_kadv_tiny_dpt
-from kadv.models import train_tiny as training
-from kadv.models.train_tiny import TinyTrainConfig, fit, load_soup, soup, train_tiny
+from kadv.training import tiny as training
+from kadv.training.tiny import TinyTrainConfig, fit, load_soup, soup, train_tiny
 
 
 def _views():
