@@ -3,8 +3,30 @@ and scoring a model on a batch of rendered views (:func:`evaluate`)."""
 
 from __future__ import annotations
 
-from kadv.training import tiny as _tiny
-from kadv.training.evaluation import evaluate as evaluate
-from kadv.training.tiny import *  # noqa: F403
+from kadv.training.evaluation import evaluate
+from kadv.training.tiny import (
+    ARCHITECTURES,
+    AUGMENTATIONS,
+    TARGETS,
+    TinyTrainConfig,
+    fit,
+    load_soup,
+    metric_log_loss,
+    render_training_views,
+    soup,
+    train_tiny,
+)
 
-__all__ = sorted(["evaluate", *_tiny.__all__])
+__all__ = [
+    "ARCHITECTURES",
+    "AUGMENTATIONS",
+    "TARGETS",
+    "TinyTrainConfig",
+    "evaluate",
+    "fit",
+    "load_soup",
+    "metric_log_loss",
+    "render_training_views",
+    "soup",
+    "train_tiny",
+]
