@@ -13,8 +13,7 @@ import numpy as np
 import torch
 
 from kadv.attack.records import select_top_views, worst_record
-from kadv.attack.runner import attack
-from kadv.attack.search import SearchContext
+from kadv.attack.search import SearchContext, positive_shares
 from kadv.attack.study import Study
 from kadv.geometry import perturb_world_T_cam
 
@@ -152,7 +151,7 @@ def radius_budgets(passes: int | None, count: int, shares: tuple[float, ...] | N
     if passes is None:
         return [None] * count
     shares = ramp_shares(count) if shares is None else shares
-    if len(shares) != count or not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in shares):
+    if len(shares) != count or not positive_shares(shares):
         raise ValueError(f"attack.radius_shares must be {count} positive numbers, one a radius, got {list(shares)}")
     total = passes * count
     bounds = [round(total * c) for c in np.cumsum(shares) / sum(shares)]
@@ -191,8 +190,7 @@ def search_radii(
         result = (searched or {}).get(k)
         if result is None:
             starts = warm_starts(results, len(views), warm, config) if results else None
-            result = attack(study.objective, study.differentiable, views, *study.settings.size, within, seed,
-                            progress=progress, starts=starts)  # fmt: skip
+            result = study.attack(views, seed, within, starts=starts, progress=progress)
         results.append(result)
     return results
 

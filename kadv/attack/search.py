@@ -32,6 +32,7 @@ __all__ = [
     "Measures",
     "SearchContext",
     "check_settings",
+    "positive_shares",
 ]
 
 # The search with the lowest held-out regret at equal model passes and at equal seconds
@@ -64,6 +65,11 @@ RENAMED_BUDGET = (
     "attack.budget_evaluations was renamed attack.budget_passes: model passes per init view, every "
     "image the model runs on (screened or exact) and every backward pass counted"
 )
+
+
+def positive_shares(shares) -> bool:
+    """Whether every one of ``shares`` is a positive finite number (a bool is not one)."""
+    return all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0 for v in shares)
 
 
 @dataclass(frozen=True)
@@ -144,13 +150,7 @@ class AttackConfig:
         if not (math.isfinite(self.agreement_delta1) and 0.0 <= self.agreement_delta1 <= 1.0):
             raise ValueError(f"attack.agreement_delta1 must be in [0, 1], got {self.agreement_delta1}")
         shares = self.radius_shares
-        if shares is not None and not (
-            isinstance(shares, tuple)
-            and shares
-            and all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0 for v in shares
-            )
-        ):
+        if shares is not None and not (isinstance(shares, tuple) and shares and positive_shares(shares)):
             raise ValueError(f"attack.radius_shares must be null or positive numbers, one a radius, got {shares!r}")
         self.check_run(method.check)
 

@@ -95,11 +95,11 @@ class Study:
         return cls._on(settings.exact_renderer(scene), model, settings)
 
     @classmethod
-    def _on(cls, renderer: ExactRenderer, model: DepthModel, settings: StudySettings) -> Study:
+    def _on(cls, renderer: ExactRenderer, model: DepthModel, settings: StudySettings, function=None) -> Study:
+        """The study on an exact renderer; ``function``: the loss function when one is at hand."""
         loss = settings.loss
-        objective = Objective(
-            model, loss.loss(), renderer, settings.penalty, loss.space, settings.device, loss.alignment
-        )
+        function = loss.loss() if function is None else function
+        objective = Objective(model, function, renderer, settings.penalty, loss.space, settings.device, loss.alignment)
         differentiable = DifferentiableRenderer(renderer, settings.render, settings.device)
         return cls(renderer.scene, objective.model, settings, renderer, objective, differentiable)
 
@@ -110,10 +110,13 @@ class Study:
         render: DiffRenderConfig | None = None,
     ) -> Study:
         """The study with another model, loss or differentiable renderer, on the same exact renderer
-        (no second bake, no second ray-casting structure)."""
+        (no second bake, no second ray-casting structure) and, while the loss function stays the
+        same, the same loss function (a perceptual loss's VGG-16 is loaded once)."""
         changes = {k: v for k, v in (("loss", loss), ("render", render)) if v is not None}
         settings = dataclasses.replace(self.settings, **changes)
-        return self._on(self.renderer, model if model is not None else self.model, settings)
+        same = settings.loss.function_key == self.settings.loss.function_key
+        function = self.objective.loss if same else None
+        return self._on(self.renderer, model if model is not None else self.model, settings, function)
 
     def attack(
         self,
@@ -123,9 +126,11 @@ class Study:
         completed: dict[int, InitViewResult] | None = None,
         on_result: Callable[[int, InitViewResult], None] | None = None,
         starts: dict[int, torch.Tensor] | None = None,
+        progress: bool | None = None,
     ) -> AttackResult:
         """Search from every init view (:func:`kadv.attack.attack`) at the study's size, with
-        ``config`` (None: the settings' search)."""
+        ``config`` (None: the settings' search), a progress bar as ``progress`` says (None: as the
+        settings do)."""
         height, width = self.settings.size
         return attack(
             self.objective,
@@ -137,6 +142,6 @@ class Study:
             seed,
             completed=completed,
             on_result=on_result,
-            progress=self.settings.progress,
+            progress=self.settings.progress if progress is None else progress,
             starts=starts,
         )

@@ -35,6 +35,12 @@ class LossConfig:
     window_size: int = 11
     temperature: float = DELTA1_TEMPERATURE
 
+    @property
+    def function_key(self) -> tuple:
+        """What :meth:`loss` is made from: two configs with one key share one loss function (the
+        space and the alignment are the objective's, not the function's)."""
+        return (self.kind, self.vgg_weights, self.window_size, self.temperature)
+
     def loss(self) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor] | AlignedLoss:
         """The loss function (a ``ValueError`` naming the key for a bad kind or window)."""
-        return depth_loss(self.kind, self.vgg_weights, self.window_size, self.temperature)
+        return depth_loss(*self.function_key)

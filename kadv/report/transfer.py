@@ -49,17 +49,17 @@ def transfer_tables(
     scores: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: {"delta1": [], "l_depth": []})
     with tqdm(total=len(runs) * len(names), desc="transfer: re-rendering views", disable=not progress) as bar:
         for run in runs:
-            study = study_of(run)
-            renderer = study.renderer
             # every model is scored after the same alignment, which models of both kinds share
-            loss = dataclasses.replace(study.settings.loss, alignment="scale_shift")
+            study = study_of(run)
+            study = study.variant(loss=dataclasses.replace(study.settings.loss, alignment="scale_shift"))
+            renderer = study.renderer
             poses, Ks = _adversarial_poses(run)
             height, width = run.summary.height, run.summary.width
             supersample = int(run.config.get("render", {}).get("supersample", 1))
             with torch.no_grad():
                 out = renderer.render(poses, Ks, height, width, supersample=supersample).to("cpu")
                 for name in names:
-                    objective = study.variant(model=model_of(models[name]), loss=loss).objective
+                    objective = study.variant(model=model_of(models[name])).objective
                     model = objective.model
                     prediction = model(out.rgb, Ks)
                     l_depth = objective.l_depth(out.depth.double(), prediction.double(), out.mask)

@@ -81,11 +81,14 @@ class Setup:
     scene_name: str
     study: object
     views: list
-    size: tuple[int, int]
     budget: int
     folder: Path
     stem: str
     render: object
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.study.settings.size
 
     @property
     def renderer(self):
@@ -145,7 +148,6 @@ def setup(model, scene, options: CheckOptions) -> Setup:
         built.name,
         study,
         views,
-        (height, width),
         budget,
         folder,
         f"{slug(depth_model.name)}-{slug(built.name)}-seed{options.seed}",

@@ -56,6 +56,8 @@ def test_a_variant_shares_the_exact_renderer_and_swaps_the_model_or_the_loss(stu
     assert other.model.name == "kadv_tiny_dpt" and study.model.name == "kadv_tiny"
     assert isinstance(other.objective.loss, AlignedLoss) and other.objective.alignment == "scale"
     assert other.settings.render == study.settings.render and other.differentiable is not study.differentiable
+    same_loss = study.variant(model=load_model("kadv_tiny_dpt"))
+    assert same_loss.objective.loss is study.objective.loss  # one loss function while its settings stay
 
 
 def test_a_bad_loss_setting_is_refused_naming_its_key(study) -> None:
