@@ -37,7 +37,7 @@ def main() -> None:
         K = camera.intrinsics(height, width)
         seconds = median_seconds(lambda: view_validity(renderer, camera.world_T_cam, K, height, width), 11)
         summary[f"validity_{height}x{width}_ms"] = seconds * 1e3
-        print(f"view_validity one camera  {height}x{width:<4}    median {seconds * 1e3:8.3f} ms (512 probe rays)")
+        print(f"view_validity one camera  {height}x{width:<4}    median {seconds * 1e3:8.3f} ms (512 enclosure rays)")
     print("penalty " + " ".join(f"{key}={value:.3f}" for key, value in summary.items()))
 
 

@@ -44,9 +44,10 @@ halving's under a seconds budget: the three are one method for W*.
    the reprojection of anchor layers against the exact render, over ``PROXY_VIEWS`` poses per
    cell (the first init view of each scene), and each one's milliseconds per view at 240x320 (the
    reprojection's: the one-ray cast it needs for the view's depth, the warp, and the model).
-6. (``--parts budgets``, not run by default) The default alone at ``--budgets`` passes per init
-   view and radius on average, split by each of ``--shares`` (``default``, ``equal``, ``a:b:c``):
-   its search noise per radius and its mean worst, which more passes lower.
+6. (``--parts budgets``, not run by default) The default (or each of ``--budget-methods``) alone
+   at ``--budgets`` passes per init view and radius on average, split by each of ``--shares``
+   (``default``, ``equal``, ``a:b:c``): its search noise per radius and its mean worst, which more
+   passes lower.
 7. (``--parts study``, not run by default) The study's own protocol, ``attack=gradient`` with 5
    restarts of 400 steps from the init view (the best restart kept; 4,005 passes), at the largest
    radius from the first init view of each probe and the box room, under ``--study-seeds``; the
@@ -569,7 +570,7 @@ def budgets_part(
     store: Store, cells: dict[str, Cells], views: dict[str, int], seeds, budgets, labels=("default",),
     shares=(None,),
 ) -> dict[str, str]:  # fmt: skip
-    """Part 6: the default (and the other ``labels``: ``default_r3``, its three restarts) alone at
+    """Part 6: the default (and the other ``labels``: ``default_r3``, its three restarts, or a candidate) alone at
     each of ``budgets`` passes per init view and radius on average, split over the radii by each of
     ``shares`` (None: kadv's default split; the init views fixed): its search noise per radius (median and
     largest over the unsaturated cells), its mean worst, which more passes lower, and the mean
@@ -655,7 +656,8 @@ def main() -> None:
     parser.add_argument("--reference-seeds", default="100,101,102,103", help="the reference attack's seeds (none: '')")
     parser.add_argument("--budgets", default="48,96,192", help="part budgets: the default's passes a radius")
     parser.add_argument("--study-seeds", default="0,1", help="part study: the seeds of both searches")
-    parser.add_argument("--budget-methods", default="default", help=f"part budgets: default, {', '.join(RESTARTED)}")
+    parser.add_argument("--budget-methods", default="default",
+                        help=f"part budgets: default, {', '.join(RESTARTED)} or a --methods choice")  # fmt: skip
     parser.add_argument("--shares", default="default", help="part budgets: splits of the passes over the radii, "
                         "comma-separated, each 'default' (kadv's), 'equal' or a:b:c")  # fmt: skip
     args = parser.parse_args()
@@ -664,7 +666,9 @@ def main() -> None:
     labels = args.methods.split(",")
     common.check_names(parser, {"--parts": (parts, PARTS), "--scenes": (names, SCENES + HELD_OUT),
                                 "--methods": (labels, ("default", *CANDIDATES))})  # fmt: skip
-    common.check_names(parser, {"--budget-methods": (args.budget_methods.split(","), ("default", *RESTARTED))})
+    common.check_names(
+        parser, {"--budget-methods": (args.budget_methods.split(","), ("default", *RESTARTED, *CANDIDATES))}
+    )
     if "default" not in labels:
         parser.error("--methods: the default is what the benchmark scores; name it")
     if args.budget < MIN_BUDGET:

@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from kadv.errors import WriteError
-from kadv.runs import deferred_interrupts
+from kadv.interrupts import deferred_interrupts
 
 __all__ = ["TEMPORARY_MARK", "atomic_write", "remove_temporaries", "save_figure", "write_json"]
 
@@ -38,7 +38,7 @@ def atomic_write(path: str | Path, write: Callable[[Path], None]) -> Path:
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)
-    # an interruption waits for the file (kadv.runs.interruptible): it is written whole or not at all
+    # an interruption waits for the file (kadv.interrupts.interruptible): it is written whole or not at all
     with deferred_interrupts():
         try:
             write(Path(tmp))

@@ -13,11 +13,12 @@ PACKAGE = Path(__file__).resolve().parents[1] / "kadv"
 ORDER = (
     "errors",
     "checks",
-    "runs",
+    "interrupts",
     "io",
     "runtime",
     "device",
     "_lazy",
+    "_renamed",
     "geometry",
     "scenes",
     "render",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from kadv.attack.driver import attack
 from kadv.attack.init_views import (
     InitView,
     InitViewConfig,
@@ -44,7 +45,6 @@ from kadv.attack.records import (
 )
 from kadv.attack.registry import METHODS, NoSettings, SearchMethod, get_method, register_method
 from kadv.attack.restarts import restarted_search
-from kadv.attack.runner import attack
 from kadv.attack.search import (
     DEFAULT_METHOD,
     DEFAULT_PASSES,

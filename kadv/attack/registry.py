@@ -1,4 +1,4 @@
-"""The one registry of search methods: config validation, the runner, progress and reports read it.
+"""The one registry of search methods: config validation, the driver, progress and reports read it.
 
 A method is a function ``search(context, rng, bar) -> InitViewResult`` with a settings dataclass
 (its ``attack.<name>`` config node). Black-box methods are written as ask/tell proposers
@@ -6,7 +6,7 @@ A method is a function ``search(context, rng, bar) -> InitViewResult`` with a se
 the shared loop owns the budgets, the init view at step 0, the step guard, validity and records.
 The built-in methods register themselves when :mod:`kadv.attack` imports :mod:`kadv.attack.methods`.
 
-Dependencies point one way: registry <- search <- loop <- methods <- runner.
+Dependencies point one way: registry <- search <- loop <- methods <- driver.
 """
 
 from __future__ import annotations

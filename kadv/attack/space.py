@@ -20,7 +20,7 @@ from scipy.stats import qmc
 from kadv.geometry import fov_intrinsics, intrinsics_from_fov
 from kadv.penalties.envelope import Envelope
 from kadv.penalties.guard import step_guard
-from kadv.render.raycast import ExactRenderer
+from kadv.render.exact import ExactRenderer
 
 __all__ = ["FOV", "PoseSpace"]
 

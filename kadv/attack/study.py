@@ -13,15 +13,15 @@ from dataclasses import dataclass, field
 
 import torch
 
+from kadv.attack.driver import attack
 from kadv.attack.objective import Objective
 from kadv.attack.records import AttackResult, InitViewResult
-from kadv.attack.runner import attack
 from kadv.attack.search import AttackConfig
 from kadv.losses import LossConfig
 from kadv.models import DepthModel
 from kadv.penalties import PenaltyConfig
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer, Shading
-from kadv.render.raycast import DEFAULT_MAX_RAYS
+from kadv.render.exact import DEFAULT_MAX_RAYS
 from kadv.scenes import Scene
 
 __all__ = ["Study", "StudySettings"]

@@ -19,7 +19,7 @@ import torch
 
 from kadv.geometry.camera import Camera, intrinsics_from_fov
 from kadv.geometry.pose import look_at
-from kadv.render.raycast import ExactRenderer
+from kadv.render.exact import ExactRenderer
 from kadv.scenes.emitters import Emitters
 from kadv.scenes.materials import textured_materials
 from kadv.scenes.parts import box_parts, facing, planar_quad, quad_part, room_shell_parts

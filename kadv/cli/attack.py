@@ -25,7 +25,6 @@ from omegaconf import DictConfig, OmegaConf
 from kadv.attack import (
     DEFAULT_METHOD,
     METHODS,
-    RENAMED_BUDGET,
     AttackConfig,
     InitViewConfig,
     Objective,
@@ -55,19 +54,21 @@ from kadv.cli.common import (
     study_settings,
 )
 from kadv.device import resolve_device
+from kadv.interrupts import Interrupted, interruptible
 from kadv.io import atomic_write, remove_temporaries
 from kadv.models import count_passes
 from kadv.penalties import ENVELOPES, Envelope
-from kadv.report.run import (
+from kadv.report.outputs import write_run
+from kadv.report.store import (
     SUMMARY,
+    check_same_settings,
     is_complete,
     load_partial_results,
     remove_partial_results,
+    run_lock,
     save_partial_result,
-    write_run,
 )
 from kadv.report.summary import RunInfo, RunSummary
-from kadv.runs import Interrupted, interruptible, run_lock
 from kadv.testing.options import check_radii
 
 log = logging.getLogger(__name__)
@@ -86,8 +87,6 @@ def attack_settings(cfg: DictConfig, envelope: DictConfig | None = None) -> Atta
             bounds = dataclasses.replace(bounds, name="custom")
         node["envelope"] = bounds
     node.pop("radii", None)  # a profile run's radii: attack_radii
-    if "budget_evaluations" in node:  # a preset written before the rename
-        raise ValueError(RENAMED_BUDGET)
     method = get_method(node.pop("method", DEFAULT_METHOD))
     settings = settings_from_node(method.settings, node.pop(method.name, None), f"attack.{method.name}")
     for name in METHODS:  # the nodes of other methods (a preset may carry several) are not this run's
@@ -216,37 +215,14 @@ _PRESENTATION = frozenset({"progress"})
 _RESOLVED = frozenset({"render.lighting"})
 
 
-def _leaves(node: Any, prefix: str = "") -> dict[str, Any]:
-    """A config's leaves by dotted key (lists are leaves)."""
-    if not isinstance(node, dict) or not node:
-        return {prefix: node}
-    return {
-        k: v for key, value in node.items() for k, v in _leaves(value, f"{prefix}.{key}" if prefix else key).items()
-    }
-
-
 def _check_same_settings(run_dir: Path, cfg: DictConfig) -> None:
     """Refuse to skip or resume a run directory whose run (its ``config.yaml``) was made with other
     settings than ``cfg``, naming them: its results would pass for this config's."""
     path = run_dir / "config.yaml"
-    if not path.is_file():
-        return
-    old = _leaves(OmegaConf.to_container(OmegaConf.load(path)))
-    new = _leaves(OmegaConf.to_container(cfg, resolve=True))
-    changed = [
-        key
-        for key in sorted(old.keys() | new.keys())
-        if old.get(key) != new.get(key)
-        and key not in _PRESENTATION
-        and not (key in _RESOLVED and new.get(key) == "auto")
-    ]
-    if changed:
-        listed = ", ".join(f"{k}: {old.get(k, '(unset)')} -> {new.get(k, '(unset)')}" for k in changed[:3])
-        more = f" and {len(changed) - 3} more" if len(changed) > 3 else ""
-        raise ValueError(
-            f"{run_dir} holds a run made with other settings ({listed}{more}): remove it to run again, "
-            "or set hydra.run.dir to another folder"
-        )
+    if path.is_file():
+        saved = OmegaConf.to_container(OmegaConf.load(path))
+        now = OmegaConf.to_container(cfg, resolve=True)
+        check_same_settings(run_dir, saved, now, _PRESENTATION, _RESOLVED, "set hydra.run.dir to another folder")
 
 
 def _search_settings(cfg: DictConfig) -> tuple[AttackConfig, tuple | None, list | None]:

@@ -30,7 +30,7 @@ from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBaseException
 
-from kadv.attack import StudySettings
+from kadv.attack import RENAMED_BUDGET, StudySettings
 from kadv.catalogue import scene_from_node
 from kadv.errors import WeightsUnavailable, WriteError
 from kadv.geometry import look_at
@@ -38,8 +38,8 @@ from kadv.io import write_json
 from kadv.losses import DELTA1_TEMPERATURE, LossConfig
 from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
 from kadv.render import BakeConfig, DiffRenderConfig, Shading
-from kadv.render.raycast import DEFAULT_MAX_RAYS
-from kadv.runs import LOCK_FILES, RunDirectoryBusy
+from kadv.render.exact import DEFAULT_MAX_RAYS
+from kadv.report.store import LOCK_FILES, RunDirectoryBusy
 from kadv.scenes import Scene
 from kadv.scenes.procedural import CORRIDOR_SHARE, HALL_SHARE, ROOM_FEATURES, check_shares
 
@@ -231,13 +231,18 @@ def _open_keys(arguments: list[str]) -> list[str]:
     return [f"++{a}" if any(a.startswith(f"{node}.") for node in OPEN_NODES) else a for a in arguments]
 
 
+# config keys renamed: old dotted key -> the line that refuses it, naming the new one
+RENAMED_KEYS = {
+    "attack.budget_evaluations": RENAMED_BUDGET,
+    "penalty.probe_rays": "penalty.probe_rays was renamed penalty.enclosure_rays: the rays around a camera's "
+    "centre that tell whether it stands inside an object or outside the scene",
+}
+
+
 def _renamed_key(arguments: list[str]) -> str | None:
     """The line refusing a key that was renamed, naming the new one; None when no argument sets one."""
-    if any(a.lstrip("+~").partition("=")[0] == "attack.budget_evaluations" for a in arguments):
-        from kadv.attack.search import RENAMED_BUDGET
-
-        return RENAMED_BUDGET
-    return None
+    keys = [a.lstrip("+~").partition("=")[0] for a in arguments]
+    return next((RENAMED_KEYS[k] for k in keys if k in RENAMED_KEYS), None)
 
 
 def checks_overrides(command: str) -> Callable[[Callable[[], Any]], Callable[[], Any]]:
@@ -379,9 +384,9 @@ def resolve_lighting(scene: Scene, cfg: DictConfig) -> str:
     a run's ``config.yaml`` names it) and said in the log."""
     lighting = cfg.get("lighting", "direct")
     if lighting == "auto":
-        lighting = "scanned" if scene.scan is not None else "baked"
+        lighting = "scanned" if scene.captured_by is not None else "baked"
         cfg.lighting = lighting
-        reason = f"a {scene.scan} scan" if scene.scan is not None else "not a scan"
+        reason = f"a {scene.captured_by} scan" if scene.captured_by is not None else "not a scan"
         log.info("render.lighting=auto: %s (%s)", lighting, reason)
     return lighting
 
@@ -475,6 +480,9 @@ def settings_from_node(cls: type, node: dict | None, prefix: str) -> Any:
     node = dict(node or {})
     known = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(node) - known)
+    renamed = [RENAMED_KEYS[f"{prefix}.{k}"] for k in unknown if f"{prefix}.{k}" in RENAMED_KEYS]
+    if renamed:  # a preset written before the rename
+        raise ValueError(renamed[0])
     if unknown:
         raise ValueError(
             f"unknown key(s) {', '.join(f'{prefix}.{k}' for k in unknown)}; "

@@ -3,7 +3,7 @@ from them in the scan datasets' layouts."""
 
 from __future__ import annotations
 
-from kadv.datasets.procedural import (
+from kadv.datasets.room_views import (
     HELD_OUT_SEED,
     MAX_SQUEEZED_ASPECT,
     TRAINING_BAKE,

@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 from kadv.geometry import look_at
 from kadv.io import atomic_write
 from kadv.render import BakeConfig, ExactRenderer, Shading
-from kadv.render.raycast import pixel_angle
+from kadv.render.exact import pixel_angle
 from kadv.scenes.scene import Scene, rotation_to_y_up
 
 __all__ = [

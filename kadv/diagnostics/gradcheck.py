@@ -21,8 +21,8 @@ from kadv.geometry.camera import intrinsics_from_fov, pixel_rays
 from kadv.geometry.pose import perturb_world_T_cam
 from kadv.penalties import random_valid_poses
 from kadv.render.differentiable import DifferentiableRenderer, DiffRenderConfig
+from kadv.render.exact import ExactRenderer, RenderOutput, pixel_angle
 from kadv.render.layers import RING, ring_view
-from kadv.render.raycast import ExactRenderer, RenderOutput, pixel_angle
 
 __all__ = [
     "FUNCTIONALS",

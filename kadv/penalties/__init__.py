@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from kadv._renamed import renamed_exports
 from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface, shortcut_penalty
 from kadv.penalties.envelope import ENVELOPES, Envelope, EnvelopeFigures, get_envelope
@@ -9,11 +10,11 @@ from kadv.penalties.guard import StepCheck, step_guard
 from kadv.penalties.sampling import random_valid_poses
 from kadv.penalties.validity import (
     ViewValidity,
+    enclosure_hits,
     fibonacci_sphere,
     plane_counts,
     plane_labels,
     plane_shares,
-    probe_directions_hits,
     view_validity,
 )
 
@@ -25,14 +26,16 @@ __all__ = [
     "StepCheck",
     "ViewValidity",
     "distance_to_surface",
+    "enclosure_hits",
     "fibonacci_sphere",
     "get_envelope",
     "plane_counts",
     "plane_labels",
     "plane_shares",
-    "probe_directions_hits",
     "random_valid_poses",
     "shortcut_penalty",
     "step_guard",
     "view_validity",
 ]
+
+__getattr__ = renamed_exports(__name__, {"probe_directions_hits": "enclosure_hits"})

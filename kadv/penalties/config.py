@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from kadv._renamed import renamed_attribute
+
 __all__ = ["PenaltyConfig"]
 
 
@@ -17,9 +19,9 @@ class PenaltyConfig:
         margin: step guard: a step may not end (or pass) closer than this to a surface.
         near: near plane of the view-validity check.
         min_distance: an optical centre nearer than this to a surface makes a view "too close".
-        probe_rays: directions of the spherical inside/outside probe.
-        outside_threshold: probe escape fraction above which a centre is outside the scene.
-        inside_threshold: probe back-face fraction above which a centre is inside an object.
+        enclosure_rays: directions of the sphere of rays of the inside/outside test.
+        outside_threshold: enclosure rays' escape fraction above which a centre is outside the scene.
+        inside_threshold: enclosure rays' back-face fraction above which a centre is inside an object.
         uninformative: judge views that show too little depth structure "uninformative" (recorded,
             never chosen as adversarial or init views).
         max_plane_share: a view is uninformative when one plane covers more than this share of the
@@ -35,12 +37,13 @@ class PenaltyConfig:
     margin: float = 0.1
     near: float = 0.05
     min_distance: float = 0.05
-    probe_rays: int = 512
+    enclosure_rays: int = 512
     outside_threshold: float = 0.3
     inside_threshold: float = 0.5
     uninformative: bool = True
     max_plane_share: float = 0.9
     max_miss_share: float = 0.25
+    probe_rays = renamed_attribute("enclosure_rays")
 
     def __post_init__(self) -> None:
         for name in ("d_th", "margin", "near", "min_distance"):
@@ -48,8 +51,8 @@ class PenaltyConfig:
                 raise ValueError(f"penalty.{name} must be positive, got {getattr(self, name)}")
         if self.weight < 0:
             raise ValueError(f"penalty.weight must be >= 0, got {self.weight}")
-        if self.probe_rays < 16:
-            raise ValueError(f"penalty.probe_rays must be >= 16, got {self.probe_rays}")
+        if self.enclosure_rays < 16:
+            raise ValueError(f"penalty.enclosure_rays must be >= 16, got {self.enclosure_rays}")
         for name in ("outside_threshold", "inside_threshold", "max_plane_share", "max_miss_share"):
             if not 0 < getattr(self, name) < 1:
                 raise ValueError(f"penalty.{name} must be in (0, 1), got {getattr(self, name)}")
@@ -59,7 +62,7 @@ class PenaltyConfig:
         return {
             "near": self.near,
             "min_distance": self.min_distance,
-            "probe_rays": self.probe_rays,
+            "enclosure_rays": self.enclosure_rays,
             "outside_threshold": self.outside_threshold,
             "inside_threshold": self.inside_threshold,
             "max_plane_share": self.max_plane_share if self.uninformative else None,

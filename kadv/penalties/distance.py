@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 
 from kadv.checks import check_shape, check_values
-from kadv.render.raycast import ExactRenderer
+from kadv.render.exact import ExactRenderer
 
 __all__ = ["distance_to_surface", "shortcut_penalty"]
 

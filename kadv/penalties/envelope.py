@@ -22,7 +22,7 @@ from kadv.geometry import (
     rotation_from_yaw_pitch_roll,
     yaw_pitch_roll,
 )
-from kadv.render.raycast import ExactRenderer
+from kadv.render.exact import ExactRenderer
 
 __all__ = ["ENVELOPES", "OUTSIDE_ENVELOPE", "Envelope", "EnvelopeFigures", "get_envelope"]
 

@@ -9,7 +9,7 @@ import torch
 from kadv.checks import check_shape, check_values
 from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface
-from kadv.render.raycast import ExactRenderer
+from kadv.render.exact import ExactRenderer
 
 __all__ = ["StepCheck", "step_guard"]
 

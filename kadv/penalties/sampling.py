@@ -9,7 +9,7 @@ import torch
 
 from kadv.geometry import axis_angle_to_matrix, intrinsics_from_fov, look_at
 from kadv.penalties.validity import view_validity
-from kadv.render.raycast import ExactRenderer
+from kadv.render.exact import ExactRenderer
 
 __all__ = ["random_valid_poses"]
 

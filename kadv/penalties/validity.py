@@ -1,13 +1,13 @@
 """Is a camera view legitimate? Inside an object, outside the scene, too close, or valid.
 
 Open3D's signed distance decides its sign by ray parity, which is meaningless for open rooms
-(windows, missing ceilings); the verdict here comes from a spherical probe of rays around the
+(windows, missing ceilings); the verdict here comes from a sphere of enclosure rays around the
 optical centre instead:
 
-- *outside the scene*: more than ``outside_threshold`` (0.3) of the probe directions escape. A
+- *outside the scene*: more than ``outside_threshold`` (0.3) of the enclosure rays escape. A
   room's windows and doors rarely let a fifth of all directions out, while anywhere under open
   sky, even over an endless ground plane, about half of them escape;
-- *inside an object*: most probe directions first hit a hidden side of a surface
+- *inside an object*: most enclosure rays first hit a hidden side of a surface
   (:meth:`~kadv.render.ExactRenderer.hidden_side`). With baked lighting that is a side the bake's
   flood fill from the scene's cameras did not reach, which holds whatever the file's windings (a
   room wound outwards, as some exporters leave two-sided walls). With direct lighting it is the
@@ -24,7 +24,7 @@ optical centre instead:
 A scan (``render.lighting=scanned``) may stop below eye height, with no ceiling, and miss whole
 walls: operators sweep at chest height. In such a scan (:func:`scan_has_ceiling` is False) a ray
 that leaves its bounds over its top or through a side is what the scan looks like, not a hole: the
-probe counts only rays that escape through its floor, and the hole test only pixels whose rays do
+enclosure test counts only rays that escape through its floor, and the hole test only pixels whose rays do
 (the others stay out of the mask all the same). A centre above its top or beyond its bounds is
 outside the scene. A lone plane's
   ground truth, min-max normalised, is a ramp that a model's nearly flat guess misses by a wide
@@ -41,13 +41,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from kadv._renamed import renamed_attribute
 from kadv.checks import check_shape
 from kadv.geometry.camera import pixel_rays
 from kadv.geometry.pose import check_world_T_cam
 from kadv.penalties.config import PenaltyConfig
 from kadv.penalties.distance import distance_to_surface
 from kadv.penalties.envelope import OUTSIDE_ENVELOPE, EnvelopeFigures
-from kadv.render.raycast import ExactRenderer, RenderOutput
+from kadv.render.exact import ExactRenderer, RenderOutput
 
 __all__ = [
     "SCAN_PLANE_TOLERANCE",
@@ -56,11 +57,11 @@ __all__ = [
     "ValidityLimits",
     "ViewValidity",
     "dominant_plane_shares",
+    "enclosure_hits",
     "fibonacci_sphere",
     "plane_counts",
     "plane_labels",
     "plane_shares",
-    "probe_directions_hits",
     "scan_exits",
     "scan_has_ceiling",
     "view_validity",
@@ -68,7 +69,7 @@ __all__ = [
 
 VALID, INSIDE, OUTSIDE, TOO_CLOSE = "valid", "inside an object", "outside the scene", "too close"
 UNINFORMATIVE = "uninformative"
-# A scan's probe looks no higher than this above the horizon, degrees: its ceiling may be missing
+# A scan's enclosure rays look no higher than this above the horizon, degrees: its ceiling may be missing
 SCAN_PROBE_ELEVATION = 15.0
 # metres from a scan's dominant plane within which a hit counts as on it (a scan's noise is millimetres)
 SCAN_PLANE_TOLERANCE = 0.03
@@ -90,7 +91,7 @@ class ValidityLimits:
     Attributes:
         near: pixels nearer than this z-depth make the view "too close".
         min_distance: nor may the centre be nearer to a surface.
-        outside_threshold: the probe's escape fraction above which the centre is outside the scene.
+        outside_threshold: the enclosure rays' escape fraction above which the centre is outside the scene.
         inside_threshold: its hidden-side fraction above which the centre is inside an object.
         max_plane_share: a view whose most common plane covers more of its hit pixels is
             "uninformative" (None: never).
@@ -117,8 +118,8 @@ class ViewValidity:
         miss_fraction: fraction of the view's pixels whose ray hits nothing.
         back_face_fraction: fraction of the view's pixels that see the back of a triangle.
         near_fraction: fraction of the view's pixels closer than the near plane.
-        probe_miss_fraction: fraction of spherical probe directions that escape.
-        probe_back_fraction: fraction of probe directions whose first hit is a hidden side
+        enclosure_miss_fraction: fraction of spherical enclosure rays that escape.
+        enclosure_back_fraction: fraction of enclosure rays whose first hit is a hidden side
             (:meth:`~kadv.render.ExactRenderer.hidden_side`: with direct lighting a back face).
         distance: distance from the optical centre to the nearest surface, metres.
         plane_share: share of the pixels that hit a surface which lie on the most common plane.
@@ -135,8 +136,8 @@ class ViewValidity:
     miss_fraction: torch.Tensor
     back_face_fraction: torch.Tensor
     near_fraction: torch.Tensor
-    probe_miss_fraction: torch.Tensor
-    probe_back_fraction: torch.Tensor
+    enclosure_miss_fraction: torch.Tensor
+    enclosure_back_fraction: torch.Tensor
     distance: torch.Tensor
     plane_share: torch.Tensor
     past_top_fraction: torch.Tensor | None = None
@@ -144,6 +145,8 @@ class ViewValidity:
     off_scan: torch.Tensor | None = None
     limits: ValidityLimits = field(default_factory=ValidityLimits)
     envelope: EnvelopeFigures | None = None
+    probe_miss_fraction = renamed_attribute("enclosure_miss_fraction")
+    probe_back_fraction = renamed_attribute("enclosure_back_fraction")
 
     @property
     def verdicts(self) -> list[str]:
@@ -180,29 +183,29 @@ class ViewValidity:
     def _judged(self) -> tuple[list[str], list[str]]:
         above = self.off_scan if self.off_scan is not None else torch.zeros_like(self.distance, dtype=torch.bool)
         figures = [
-            self.probe_miss_fraction,
-            self.probe_back_fraction,
+            self.enclosure_miss_fraction,
+            self.enclosure_back_fraction,
             self.distance,
             self.near_fraction,
             self.plane_share,
             self.hole_fraction,
             above.to(self.distance.device, self.distance.dtype),
         ]
-        probe_miss, probe_back, distance, near_fraction, share, missed, above = torch.stack(figures).cpu()  # one copy
+        escaped, hidden, distance, near_fraction, share, missed, above = torch.stack(figures).cpu()  # one copy
         limits, verdicts, reasons = self.limits, [], []
         outside_envelope = self.envelope.reasons() if self.envelope is not None else [None] * len(distance)
         for b in range(len(distance)):
-            miss_frac, back_frac = float(probe_miss[b]), float(probe_back[b])
+            miss_frac, back_frac = float(escaped[b]), float(hidden[b])
             if above[b]:
                 verdicts.append(OUTSIDE)
                 reasons.append("the centre stands above the scan's top or beyond its bounds")
             elif miss_frac > limits.outside_threshold:
                 verdicts.append(OUTSIDE)
-                reasons.append(f"{miss_frac:.0%} of probe rays escape the scene (> {limits.outside_threshold:.0%})")
+                reasons.append(f"{miss_frac:.0%} of enclosure rays escape the scene (> {limits.outside_threshold:.0%})")
             elif back_frac > limits.inside_threshold:
                 verdicts.append(INSIDE)
                 reasons.append(
-                    f"{back_frac:.0%} of probe rays first hit a hidden side (> {limits.inside_threshold:.0%})"
+                    f"{back_frac:.0%} of enclosure rays first hit a hidden side (> {limits.inside_threshold:.0%})"
                 )
             elif distance[b] < limits.min_distance or near_fraction[b] > 0:
                 verdicts.append(TOO_CLOSE)
@@ -365,7 +368,7 @@ def _device_plane_labels(renderer: ExactRenderer, device: torch.device) -> tuple
     return tables[device]
 
 
-def probe_directions_hits(
+def enclosure_hits(
     renderer: ExactRenderer, centres: torch.Tensor, directions: torch.Tensor
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """(miss, hidden) booleans (B, N) on the renderer's device for rays from each centre (B, 3) along
@@ -376,14 +379,14 @@ def probe_directions_hits(
         >>> import kadv
         >>> room = kadv.ExactRenderer(kadv.box_room(size=(4.0, 3.0, 5.0), num_boxes=0))
         >>> centres = torch.tensor([[2.0, 1.5, 2.5], [2.0, 1.5, -1.0]])  # inside; outside, behind the wall z = 0
-        >>> miss, back = probe_directions_hits(room, centres, fibonacci_sphere(64))
+        >>> miss, back = enclosure_hits(room, centres, fibonacci_sphere(64))
         >>> miss.any(dim=1).tolist(), back.any(dim=1).tolist()  # from outside: escaping rays, hidden sides
         ([False, True], [False, True])
     """
     centres = torch.as_tensor(centres).to(renderer.device, torch.float64, non_blocking=True)
     directions = torch.as_tensor(directions).to(renderer.device, torch.float64, non_blocking=True)
     if renderer.shading.lighting == "scanned":
-        return _scan_probe(renderer, centres, directions)
+        return _scan_enclosure(renderer, centres, directions)
     origins = centres[:, None, :].expand(len(centres), len(directions), 3)
     rays = directions[None].expand(origins.shape)
     hits = renderer.cast(origins, rays)
@@ -435,8 +438,8 @@ def scan_exits(
     return top, ~top & (height > lo[1] + SCAN_TOP_TOLERANCE)
 
 
-def _scan_probe(renderer: ExactRenderer, centres: torch.Tensor, directions: torch.Tensor) -> tuple:
-    """The probe of a scan, whose winding and closedness nothing keeps: only the directions at most
+def _scan_enclosure(renderer: ExactRenderer, centres: torch.Tensor, directions: torch.Tensor) -> tuple:
+    """The enclosure test of a scan, whose winding and closedness nothing keeps: only the directions at most
     :data:`SCAN_PROBE_ELEVATION` above the horizon (a scan's ceiling may be missing), and instead of
     the side a ray meets, the parity of the surfaces it crosses: from the free space of a room a ray
     crosses its shell once (or once more through each closed object on its way), from inside an
@@ -472,7 +475,7 @@ def view_validity(
     height: int,
     width: int,
     *,
-    probe_rays: int = PenaltyConfig.probe_rays,
+    enclosure_rays: int = PenaltyConfig.enclosure_rays,
     render: RenderOutput | None = None,
     **limits: float | None,
 ) -> ViewValidity:
@@ -483,7 +486,7 @@ def view_validity(
         world_T_cam: (B, 4, 4) or (4, 4) poses.
         K: (3, 3) or (B, 3, 3) intrinsics.
         height, width: the views' image size.
-        probe_rays: directions of the spherical probe.
+        enclosure_rays: directions of the sphere of enclosure rays.
         render: the views' exact render at these poses, K and size, when the caller has one: its
             pixel-centre hits are used instead of casting them again.
         limits: :class:`ValidityLimits`' fields (``near``, ``min_distance``, ...), their defaults
@@ -514,8 +517,8 @@ def view_validity(
         past_top, past_side, off_scan, plane_share = _open_scan(renderer, rays, triangle_ids, centres, plane_share)
     if not scanned:
         plane_share = plane_shares(renderer, triangle_ids)
-    probe_miss, probe_back = probe_directions_hits(renderer, centres, _probe_directions(probe_rays, device))
-    shares = (triangle_ids < 0, view_back, near_hit, probe_miss, probe_back)
+    escaped, hidden = enclosure_hits(renderer, centres, _enclosure_directions(enclosure_rays, device))
+    shares = (triangle_ids < 0, view_back, near_hit, escaped, hidden)
     return ViewValidity(
         *(share.double().mean(dim=1) for share in shares),
         distance=distance_to_surface(renderer, centres).detach(),
@@ -571,6 +574,6 @@ def _open_scan(renderer: ExactRenderer, rays, triangle_ids: torch.Tensor, centre
 
 
 @functools.lru_cache(maxsize=8)
-def _probe_directions(count: int, device: torch.device) -> torch.Tensor:
+def _enclosure_directions(count: int, device: torch.device) -> torch.Tensor:
     """:func:`fibonacci_sphere` as a float64 tensor on ``device``, made once."""
     return torch.from_numpy(fibonacci_sphere(count)).to(device)

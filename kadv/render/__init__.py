@@ -4,7 +4,7 @@ The exact renderer's stages, each in its own module: cast (:mod:`~kadv.render.ca
 :mod:`~kadv.render.backends`) -> surface (:mod:`~kadv.render.surface`: what was hit, with
 :mod:`~kadv.render.textures`) -> shade (:mod:`~kadv.render.shading`, reading
 :mod:`~kadv.render.irradiance` and :mod:`~kadv.render.lights`) -> output
-(:mod:`~kadv.render.raycast`). The bake (:mod:`~kadv.render.bake`) estimates the irradiance once
+(:mod:`~kadv.render.exact`). The bake (:mod:`~kadv.render.bake`) estimates the irradiance once
 per scene with the same surfaces.
 """
 
@@ -13,10 +13,10 @@ from __future__ import annotations
 from kadv.render.bake import BakeConfig, bake_lighting, load_or_bake
 from kadv.render.dibr import Reprojection, reproject, warp_boxed
 from kadv.render.differentiable import DifferentiableRenderer, DiffRenderConfig, DiffRenderOutput
+from kadv.render.exact import ExactRenderer, RayHits, RenderOutput
 from kadv.render.irradiance import BakedLighting
 from kadv.render.layers import AnchorLayers, BoxedLayers, render_anchor
 from kadv.render.lights import scene_lights
-from kadv.render.raycast import ExactRenderer, RayHits, RenderOutput
 from kadv.render.shading import Shading
 from kadv.render.silhouette import EdgePairs, find_edge_pairs, silhouette_term
 from kadv.render.surface import Surfaces

@@ -22,8 +22,8 @@ from kadv.device import resolve_device
 from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import perturb_world_T_cam
 from kadv.render.dibr import Reprojection, reproject, warp_boxed
+from kadv.render.exact import ExactRenderer, RenderOutput, pixel_angle, views_apart
 from kadv.render.layers import RING, AnchorLayers, camera_face_normals, render_anchor, ring_view
-from kadv.render.raycast import ExactRenderer, RenderOutput, pixel_angle, views_apart
 from kadv.render.silhouette import find_edge_pairs, silhouette_term
 from kadv.render.straight_through import straight_through
 

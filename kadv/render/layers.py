@@ -18,7 +18,7 @@ from torch.nn import functional as F
 
 from kadv.geometry.camera import batched_intrinsics, camera_rays, world_rays
 from kadv.geometry.pose import check_world_T_cam
-from kadv.render.raycast import ExactRenderer, RayHits, concatenated, pixel_angle, views_apart
+from kadv.render.exact import ExactRenderer, RayHits, concatenated, pixel_angle, views_apart
 from kadv.render.surface import Surfaces
 
 __all__ = [

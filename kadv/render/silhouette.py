@@ -22,7 +22,7 @@ from kadv.checks import check_shape
 from kadv.geometry.camera import batched_intrinsics
 from kadv.geometry.pose import check_world_T_cam
 from kadv.geometry.vector import dot, mat_vec
-from kadv.render.raycast import ExactRenderer, RenderOutput
+from kadv.render.exact import ExactRenderer, RenderOutput
 from kadv.render.straight_through import straight_through
 from kadv.render.surface import Surfaces
 

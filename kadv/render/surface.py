@@ -1,7 +1,7 @@
 """What a ray hit: the scene's triangles behind ray casters of one backend, alpha-masked texels
 that let rays through, and per hit its texture coordinates, shading normal, side and albedo.
 
-The renderer (:mod:`kadv.render.raycast`), the bake, the layers, the silhouette term and the
+The renderer (:mod:`kadv.render.exact`), the bake, the layers, the silhouette term and the
 validity checks all cast through one :class:`Surfaces`.
 """
 

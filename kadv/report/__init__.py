@@ -17,14 +17,14 @@ _EXPORTS = {
     "save_depth_png": "kadv.report.images",
     "save_rgb_png": "kadv.report.images",
     "write_report": "kadv.report.build",
-    "write_run": "kadv.report.run",
+    "write_run": "kadv.report.outputs",
     "view": "kadv.report.viewer",
 }
 
 if TYPE_CHECKING:  # the same names, for type checkers and the API reference
     from kadv.report.build import write_report
     from kadv.report.images import save_depth_png, save_rgb_png
-    from kadv.report.run import write_run
+    from kadv.report.outputs import write_run
     from kadv.report.summary import SCHEMA_VERSION, RunInfo, RunSummary
     from kadv.report.viewer import view
 

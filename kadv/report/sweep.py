@@ -19,7 +19,7 @@ import yaml
 
 from kadv.attack.profile import Profile
 from kadv.io import atomic_write
-from kadv.report.run import SUMMARY
+from kadv.report.store import SUMMARY
 from kadv.report.summary import RunSummary
 
 __all__ = [

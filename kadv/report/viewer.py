@@ -23,7 +23,7 @@ import trimesh
 from kadv.attack.records import ViewRecord, incumbent_path
 from kadv.catalogue import scene_from_node
 from kadv.render.textures import MaterialTextures
-from kadv.report.run import TRAJECTORY, read_trajectory
+from kadv.report.outputs import TRAJECTORY, read_trajectory
 from kadv.report.sweep import RunRecord, collect_runs
 from kadv.scenes import Scene
 

@@ -22,9 +22,9 @@ __all__ = ["CAPTURED", "SUPPORTED_SUFFIXES", "UNLIT_GLTF", "load_scene", "ply_pa
 log = logging.getLogger(__name__)
 
 SUPPORTED_SUFFIXES = (".xml", ".ply", *TRIMESH_SUFFIXES)
-# Scene.scan of a glTF whose materials are KHR_materials_unlit: captured colour, in glTF's own frame
+# Scene.captured_by of a glTF whose materials are KHR_materials_unlit: captured colour, in glTF's own frame
 UNLIT_GLTF = "glTF (KHR_materials_unlit)"
-# Scene.scan of a file said to be captured (load_scene's captured=True) in no layout kadv knows
+# Scene.captured_by of a file said to be captured (load_scene's captured=True) in no layout kadv knows
 CAPTURED = "captured (scene.options.captured=true)"
 _UNCAPTURED_COLOUR = (
     "%s: not a scan kadv recognises: its colour is lit as a modelled scene's (render.lighting=auto: baked); if "
@@ -74,8 +74,8 @@ def load_scene(
     if name is None:
         name = path.parent.name if path.stem == "scene" else path.stem
     layout, scale, up_axis = _scan_layout(path, scale, up_axis)
-    scan = _captured_as(path, suffix, None if layout is None else layout.dataset, captured)
-    options = {"scale": 1.0 if scale is None else scale, "up_axis": up_axis or "y", "scan": scan}
+    captured_by = _captured_as(path, suffix, None if layout is None else layout.dataset, captured)
+    options = {"scale": 1.0 if scale is None else scale, "up_axis": up_axis or "y", "captured_by": captured_by}
     options |= {"drop_transparent": drop_transparent, "drop_emitters": drop_emitters}
     if suffix == ".xml":
         parts, materials, cameras, lights, emitters = parse_mitsuba(path, missing=missing)
@@ -84,7 +84,7 @@ def load_scene(
     aligned = layout is not None and layout.alignment is not None and suffix == ".ply"
     parts, materials = _mesh_parts(path, suffix, name, layout.alignment if aligned else None)
     options["up_axis"] = _up(parts, options, path)
-    if captured is None and scan is None and _coloured(parts, materials):
+    if captured is None and captured_by is None and _coloured(parts, materials):
         log.info(_UNCAPTURED_COLOUR, path)
     scene = assemble_scene(parts, materials, name=name, **options)
     if aligned:
@@ -134,7 +134,7 @@ def _checked_file(path: Path, captured, up_axis) -> str:
 
 
 def _captured_as(path: Path, suffix: str, dataset: str | None, captured: bool | None) -> str | None:
-    """:attr:`Scene.scan` of the file: the recognised scan's ``dataset``, as ``captured`` says, or
+    """:attr:`Scene.captured_by` of the file: the recognised scan's ``dataset``, as ``captured`` says, or
     an unlit glTF's."""
     if captured is not None:
         return (dataset or CAPTURED) if captured else None

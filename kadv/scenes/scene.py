@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kadv._renamed import renamed_attribute
 from kadv.geometry.camera import Camera
 from kadv.scenes.emitters import DEFAULT_LAMP_RADIANCE, Emitters
 
@@ -133,9 +134,11 @@ class Scene:
             captured (vertex colours), shown as it is by ``render.lighting=scanned``; NaN on the
             triangles that have none (their material's colour or texel is shown). None: no triangle
             has one.
-        scan: the dataset whose scan layout the file had (:mod:`kadv.scenes.scans`), or
-            :data:`kadv.scenes.load.UNLIT_GLTF` for a glTF whose materials are unlit, or None: its
-            colour is the light a sensor captured, so ``render.lighting=auto`` shows it as scanned.
+        captured_by: what says the scene's colour is light a sensor captured, so that
+            ``render.lighting=auto`` shows it as scanned: the dataset whose scan layout the file had
+            (:mod:`kadv.scenes.scans`), :data:`kadv.scenes.load.UNLIT_GLTF` for a glTF whose
+            materials are unlit, or :data:`kadv.scenes.load.CAPTURED` for a file said to be
+            captured; None: its colour is a material's, which kadv lights.
         world_T_file: (4, 4) the map from the file's coordinates (file units, its own axes, before a
             dataset's alignment) to kadv's world (metres, y up): the scale, the turn to y-up and any
             alignment (:func:`world_from_file`). Identity for a generated room.
@@ -156,10 +159,11 @@ class Scene:
     interior: np.ndarray | None = None
     emitters: Emitters = field(default_factory=Emitters)
     colors: np.ndarray | None = None
-    scan: str | None = None
+    captured_by: str | None = None
     world_T_file: np.ndarray = field(default_factory=lambda: np.eye(4))
     trajectory: np.ndarray | None = None
     trajectory_source: str | None = None
+    scan = renamed_attribute("captured_by")
 
     def to_world(self, file_T_cam: np.ndarray) -> np.ndarray:
         """Camera poses (N, 4, 4) in the file's own frame as world_T_cam in kadv's world: the
@@ -241,7 +245,7 @@ def assemble_scene(
     drop_emitters: bool = True,
     interior: np.ndarray | None = None,
     emitters: Emitters | None = None,
-    scan: str | None = None,
+    captured_by: str | None = None,
 ) -> Scene:
     """Concatenate mesh parts into a :class:`Scene`, applying the load options.
 
@@ -257,7 +261,7 @@ def assemble_scene(
             triangles area emitters).
         interior: (2, 3) box where cameras belong, in file coordinates (see :class:`Scene`).
         emitters: the file's other light sources (point, spot, sky, sun), in file coordinates.
-        scan: the dataset whose scan layout the file had (:attr:`Scene.scan`).
+        captured_by: what says its colour is captured light (:attr:`Scene.captured_by`).
 
     Raises:
         ValueError: on NaN/inf coordinates, a non-positive scale, or nothing left to render.
@@ -283,7 +287,7 @@ def assemble_scene(
         interior=None if interior is None else _turned_box(interior, rotation, scale),
         emitters=emitters.transformed(rotation, scale),
         colors=arrays["colors"],
-        scan=scan,
+        captured_by=captured_by,
         world_T_file=world_from_file(rotation, scale),
     )
 

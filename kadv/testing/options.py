@@ -112,7 +112,7 @@ def setup(model, scene, options: CheckOptions) -> Setup:
     from kadv.attack import InitViewError, Study, StudySettings
     from kadv.losses import LossConfig
     from kadv.render import Shading
-    from kadv.report.run import ViewRenderer
+    from kadv.report.outputs import ViewRenderer
 
     init_count, budget_passes = options.init_count, options.budget_passes
     if isinstance(init_count, bool) or not isinstance(init_count, int) or init_count < 1:

@@ -193,7 +193,7 @@ def seed_run(model, scene, settings: ProfileSettings, seed: int) -> SeedRun:
 
 def save_worst_pictures(run: SeedRun, radii) -> list[str]:
     """The four-panel picture of the worst view found within each radius, in the run's folder."""
-    from kadv.report.run import save_view_picture
+    from kadv.report.outputs import save_view_picture
 
     pictures = []
     for k, ((degrees, metres), (init, record)) in enumerate(zip(radii, run.seeded.worst_views)):

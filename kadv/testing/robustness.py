@@ -176,7 +176,7 @@ def viewpoint_robustness(model, scene, **options) -> RobustnessResult:
 def _outcome(built, view) -> InitViewOutcome:
     """An init view's outcome: its worst view found (pose, figures, cost) and its picture."""
     from kadv.geometry import yaw_pitch_roll
-    from kadv.report.run import save_view_picture
+    from kadv.report.outputs import save_view_picture
 
     init, worst = view.init_record, worst_record(view.records)
     pose = worst.world_T_cam(view.init.world_T_cam)

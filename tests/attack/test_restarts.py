@@ -18,7 +18,7 @@ from kadv.attack import (
 )
 from kadv.attack.records import Budget, InitViewResult
 from kadv.models import count_passes
-from kadv.report.run import trajectory_rows
+from kadv.report.outputs import trajectory_rows
 from kadv.report.summary import read_partial, write_partial
 
 H, W = 24, 32

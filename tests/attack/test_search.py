@@ -26,10 +26,10 @@ from kadv.attack import (
     TurboSettings,
     ViewRecord,
     attack,
+    driver,
     get_method,
     gradient_search,
     register_proposer,
-    runner,
     select_top_views,
     separated,
 )
@@ -40,7 +40,7 @@ from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam, sca
 from kadv.models import count_passes
 from kadv.penalties import ENVELOPES, Envelope
 from kadv.render import DiffRenderConfig
-from kadv.report.run import _write_csv, read_trajectory, trajectory_rows
+from kadv.report.outputs import _write_csv, read_trajectory, trajectory_rows
 from kadv.testing import DEFAULT_RADII
 
 H, W = 48, 64
@@ -367,7 +367,7 @@ def _shown(monkeypatch) -> list[tuple[str, str]]:
             shown.append(("postfix", ",".join(f"{k}={v}" for k, v in kwargs.items())))
             super().set_postfix(ordered_dict, refresh, **kwargs)
 
-    monkeypatch.setattr(runner, "tqdm", Bar)
+    monkeypatch.setattr(driver, "tqdm", Bar)
     return shown
 
 
@@ -395,8 +395,8 @@ def test_the_progress_bar_calls_screened_only_the_cheap_views(
 
 
 def test_the_search_modules_import_each_other_in_one_direction() -> None:
-    layers = ["registry", "search", "loop", "methods", "runner"]
-    folder = Path(runner.__file__).parent
+    layers = ["registry", "search", "loop", "methods", "driver"]
+    folder = Path(driver.__file__).parent
     for index, name in enumerate(layers[:3]):
         tree = ast.parse((folder / f"{name}.py").read_text())  # function-level imports included
         imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}

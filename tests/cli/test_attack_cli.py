@@ -21,7 +21,7 @@ from kadv.cli.attack import main as attack_main
 from kadv.cli.render import main as render_main
 from kadv.cli.train_tiny import main as train_tiny_main
 from kadv.geometry import axis_angle_to_matrix, yaw_pitch_roll
-from kadv.report.run import read_trajectory
+from kadv.report.outputs import read_trajectory
 from kadv.report.summary import SCHEMA_VERSION, RunSummary
 from tests.cli.in_process import call_main
 
@@ -277,6 +277,7 @@ BAD_INPUTS = [
     ("kadv-attack", ["attack.restarts=0"], "attack.restarts must be an integer >= 1, got 0"),
     ("kadv-attack", ["attack.agreement_delta1=-1"], "attack.agreement_delta1 must be in [0, 1], got -1"),
     ("kadv-attack", ["attack.budget_evaluations=48"], "attack.budget_evaluations was renamed attack.budget_passes"),
+    ("kadv-attack", ["penalty.probe_rays=256"], "penalty.probe_rays was renamed penalty.enclosure_rays"),
     ("kadv-attack", ["attack.halving.refine=adam"], "attack.halving.refine must be 'gradient' or 'local', got 'adam'"),
     ("kadv-attack", ["attack.budget_passes=1"], "attack.budget_passes must be at least 2 for attack.halving"),
     ("kadv-attack", ["attack.halving.screen_supersample=2"], "attack.halving.screen_supersample must be below render"),

@@ -3,14 +3,23 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
+import pytest
 from hydra import compose, initialize_config_module
 from omegaconf import OmegaConf
 
 from kadv.attack import DEFAULT_METHOD, AttackConfig, InitViewConfig, StudySettings, get_method
 from kadv.cli.attack import attack_settings
-from kadv.cli.common import _open_keys, loss_settings, resolve_lighting, shading_from_config, study_settings
+from kadv.cli.common import (
+    _open_keys,
+    loss_settings,
+    resolve_lighting,
+    settings_from_node,
+    shading_from_config,
+    study_settings,
+)
 from kadv.losses import LossConfig
 from kadv.models import EMBEDDED, PRESETS
 from kadv.penalties import PenaltyConfig
@@ -139,3 +148,16 @@ def test_a_custom_models_keyword_arguments_need_no_plus() -> None:
     assert overrides == ["model=custom", "++model.args.width=4", "++model.args.depth=2,3", "render.height=48"]
     cfg = _compose("kadv_attack", *overrides[:2], "++model.args.depth=2", overrides[3])
     assert OmegaConf.to_container(cfg.model.args) == {"width": 4, "depth": 2}
+
+
+@pytest.mark.parametrize(
+    "cls, node, prefix, named",
+    [
+        (PenaltyConfig, {"probe_rays": 256}, "penalty", "penalty.probe_rays was renamed penalty.enclosure_rays"),
+        (PenaltyConfig, {"sphere_rays": 256}, "penalty", "unknown key(s) penalty.sphere_rays; penalty takes"),
+    ],
+)
+def test_a_preset_s_renamed_key_is_refused_naming_the_new_one(cls, node, prefix, named) -> None:
+    with pytest.raises(ValueError, match=re.escape(named)):
+        settings_from_node(cls, node, prefix)
+    assert settings_from_node(cls, {"enclosure_rays": 256}, prefix).enclosure_rays == 256

@@ -44,7 +44,7 @@ def test_a_scan_like_is_irregular_holed_open_above_and_wound_at_random(scan: Sca
 @pytest.mark.parametrize("layout", list(SCAN_LAYOUTS))
 def test_every_layout_loads_back_z_up_in_metres_as_the_room_was(layout: str, scan, written) -> None:
     loaded = kadv.load_scene(written[layout])
-    assert loaded.scan is not None and loaded.num_triangles == len(scan.faces)
+    assert loaded.captured_by is not None and loaded.num_triangles == len(scan.faces)
     # the scans are Z-up in metres: loaded into kadv's y-up world, the room is where it was
     np.testing.assert_allclose(loaded.bounds, scan.source.bounds, atol=0.05)
     if layout != "matterport":  # each corner has its vertex's colour, decoded once to linear light

@@ -78,7 +78,7 @@ def test_statistics_shapes_and_back_faces_seen_from_inside_a_box(room_renderer: 
     assert result.back_face_fraction.tolist() == [1.0, 0.0]
     assert result.miss_fraction.tolist() == [0.0, 0.0]
     # the box bottom is coplanar with the floor, so downward probes may see the floor instead
-    assert result.probe_back_fraction[0] > 0.8 and result.distance[1] > 0.5
+    assert result.enclosure_back_fraction[0] > 0.8 and result.distance[1] > 0.5
     assert result.valid.tolist() == [False, True]
 
 
@@ -104,11 +104,11 @@ def test_with_baked_lighting_a_camera_is_inside_where_the_flood_fill_says_not_wh
     assert _verdict(baked, (lo1 + hi1) / 2) == "inside an object"  # wound outwards
     assert _verdict(baked, scene.bounds[1] + [1.0, 0.5, 1.0]) == "outside the scene"
     pose = look_at(torch.tensor(camera), torch.tensor(camera + [1.0, -0.1, 0.7]))
-    assert view_validity(baked, pose, K, 12, 16).probe_back_fraction.item() < 0.05
+    assert view_validity(baked, pose, K, 12, 16).enclosure_back_fraction.item() < 0.05
     # the attack takes the file camera as an init view under baked lighting, and says why not under direct
     penalty = PenaltyConfig()
     check_init_views(baked, file_init_views(baked, penalty.margin), penalty, 12, 16)
-    with pytest.raises(InitViewError, match=r"inside an object: .* probe rays first hit a hidden side"):
+    with pytest.raises(InitViewError, match=r"inside an object: .* enclosure rays first hit a hidden side"):
         check_init_views(direct, file_init_views(direct, penalty.margin), penalty, 12, 16)
 
 
@@ -181,7 +181,7 @@ def test_a_wall_filling_the_frame_is_uninformative_and_a_corner_view_is_not(room
 
 def test_a_scan_without_trustworthy_winding_or_ceiling_is_judged_as_its_source_room_is(tmp_path) -> None:
     """A scan-like box room (random winding, holes, a third of its ceiling missing) under
-    ``scanned`` lighting: the probe below the horizon counts crossings instead of sides, and its
+    ``scanned`` lighting: the enclosure rays below the horizon counts crossings instead of sides, and its
     verdicts agree with the source room's (direct lighting, faithful winding) on random views."""
     import collections
 
@@ -216,8 +216,25 @@ def test_a_scan_without_trustworthy_winding_or_ceiling_is_judged_as_its_source_r
     assert up.verdicts == ["uninformative"] and float(up.miss_fraction[0]) > 0.25
     # the rule itself: a view whose pixels see a hole past the limit, though no plane fills it
     figures = {name: torch.zeros(1, dtype=torch.float64) for name in ("back_face_fraction", "near_fraction")}
-    figures |= {"probe_miss_fraction": torch.tensor([0.05]), "probe_back_fraction": torch.tensor([0.1])}
+    figures |= {"enclosure_miss_fraction": torch.tensor([0.05]), "enclosure_back_fraction": torch.tensor([0.1])}
     figures |= {"distance": torch.tensor([1.0]), "plane_share": torch.tensor([0.5])}
     holed = ViewValidity(miss_fraction=torch.tensor([0.4]), limits=ValidityLimits(max_miss_share=0.25), **figures)
     assert holed.verdicts == ["uninformative"] and holed.reasons == ["40% of the pixels see a hole in the scan (> 25%)"]
     assert ViewValidity(miss_fraction=torch.tensor([0.2]), **figures).verdicts == ["valid"]
+
+
+def test_the_enclosure_test_s_old_names_answer_for_a_release_with_a_warning_naming_the_new(
+    room_renderer: ExactRenderer,
+) -> None:
+    import kadv.penalties
+
+    with pytest.warns(FutureWarning, match="probe_directions_hits was renamed kadv.penalties.enclosure_hits"):
+        assert kadv.penalties.probe_directions_hits is kadv.penalties.enclosure_hits
+    with pytest.warns(FutureWarning, match="PenaltyConfig.probe_rays was renamed PenaltyConfig.enclosure_rays"):
+        assert PenaltyConfig(enclosure_rays=64).probe_rays == 64
+    centre = torch.tensor([1.0, 1.5, 1.0], dtype=torch.float64)
+    result = view_validity(room_renderer, look_at(centre, centre + torch.tensor([1.0, -0.1, 0.7])), K, 12, 16)
+    with pytest.warns(FutureWarning, match="ViewValidity.probe_miss_fraction was renamed"):
+        assert torch.equal(result.probe_miss_fraction, result.enclosure_miss_fraction)
+    with pytest.raises(AttributeError, match="no attribute 'no_such_name'"):
+        kadv.penalties.no_such_name  # noqa: B018

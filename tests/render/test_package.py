@@ -50,13 +50,13 @@ def test_the_stages_import_downstream_only() -> None:
     reaches = {name: _reaches(graph, name) for name in graph}
     render = "kadv.render."
     later = {
-        "casting": ["surface", "shading", "raycast", "bake", "warp_caster"],
-        "surface": ["shading", "raycast", "bake", "irradiance", "lights"],
-        "irradiance": ["bake", "shading", "raycast"],  # the lookup does not need the estimator
-        "bake": ["shading", "raycast"],  # the estimator casts through the surfaces, not the renderer
-        "shading": ["raycast"],
+        "casting": ["surface", "shading", "exact", "bake", "warp_caster"],
+        "surface": ["shading", "exact", "bake", "irradiance", "lights"],
+        "irradiance": ["bake", "shading", "exact"],  # the lookup does not need the estimator
+        "bake": ["shading", "exact"],  # the estimator casts through the surfaces, not the renderer
+        "shading": ["exact"],
     }
     for stage, downstream in later.items():
         for module in downstream:
             assert render + module not in reaches[render + stage], f"{stage} imports {module}"
-    assert render + "shading" in reaches[render + "raycast"] and render + "surface" in reaches[render + "shading"]
+    assert render + "shading" in reaches[render + "exact"] and render + "surface" in reaches[render + "shading"]

@@ -3,6 +3,7 @@ shown as it is (render.lighting=auto becomes scanned), every choice overridable.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from kadv.scenes import load_scene
+from kadv.scenes import box_room, load_scene
 from kadv.scenes.load import UNLIT_GLTF
 from kadv.scenes.scans import recognise_scan
 from tests.cli.in_process import call_main
@@ -53,7 +54,7 @@ def test_a_scannet_scan_is_z_up_in_metres_and_moved_by_its_axis_alignment(tmp_pa
     path = tmp_path / "scene0000_00_vh_clean_2.ply"
     _room_ply(path)
     unaligned = load_scene(path)  # no scene0000_00.txt: identity
-    assert unaligned.scan == "ScanNet" and unaligned.colors is not None
+    assert unaligned.captured_by == "ScanNet" and unaligned.colors is not None
     # Z-up metres to kadv's y-up: the room's height (2.5 m) is its y extent
     np.testing.assert_allclose(unaligned.bounds[1] - unaligned.bounds[0], [4.0, 2.5, 5.0], atol=1e-6)
     (tmp_path / "scene0000_00.txt").write_text(
@@ -149,7 +150,7 @@ def test_an_unlit_gltf_shows_its_colour_as_captured(tmp_path: Path) -> None:
                 primitive.setdefault("material", 0)
 
     scene = load_scene(_patched_glb(tmp_path / "lit.glb", tmp_path / "room.glb", unlit))
-    assert scene.scan == UNLIT_GLTF  # its COLOR_0 is kept beside its material, linear
+    assert scene.captured_by == UNLIT_GLTF  # its COLOR_0 is kept beside its material, linear
     np.testing.assert_allclose(scene.colors[0, 0], np.array([10, 200, 30]) / 255.0, atol=1e-6)
     np.testing.assert_allclose(scene.bounds, load_scene(tmp_path / "lit.glb").bounds)  # no axes changed
     render = OmegaConf.create({"lighting": "auto"})
@@ -189,12 +190,12 @@ def test_a_photo_textured_mesh_in_no_known_layout_says_its_lighting_and_can_be_s
     renamed.with_suffix(".mtl").write_text(obj.with_suffix(".mtl").read_text())
     with caplog.at_level(logging.INFO, logger="kadv.scenes.load"):
         plain = load_scene(renamed)
-    assert plain.scan is None and "scene.options.captured=true shows it as captured" in caplog.text
+    assert plain.captured_by is None and "scene.options.captured=true shows it as captured" in caplog.text
     assert resolve_lighting(plain, OmegaConf.create({"lighting": "auto"})) == "baked"
     captured = load_scene(renamed, captured=True)
-    assert captured.scan == CAPTURED
+    assert captured.captured_by == CAPTURED
     assert resolve_lighting(captured, OmegaConf.create({"lighting": "auto"})) == "scanned"
-    assert load_scene(obj, captured=False).scan is None  # a recognised scan, lit again on request
+    assert load_scene(obj, captured=False).captured_by is None  # a recognised scan, lit again on request
     with pytest.raises(ValueError, match=r"scene.options.captured must be true, false or null, got 'maybe'"):
         load_scene(obj, captured="maybe")
     caplog.clear()
@@ -242,3 +243,9 @@ def test_a_camera_in_the_files_own_coordinates_renders_what_the_same_camera_in_k
         )
     bad = call_main(render_main, [*base, "hydra.run.dir=b", "camera.frame=viewer"], cwd=tmp_path)
     assert bad.returncode == 2 and "camera.frame must be world or file, got 'viewer'" in bad.stderr
+
+
+def test_scene_scan_answers_for_a_release_with_a_warning_naming_captured_by() -> None:
+    scene = dataclasses.replace(box_room(seed=0), captured_by="ScanNet")
+    with pytest.warns(FutureWarning, match="Scene.scan was renamed Scene.captured_by"):
+        assert scene.scan == "ScanNet"

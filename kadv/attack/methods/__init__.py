@@ -1,6 +1,7 @@
-"""The built-in search methods, one module each; every module here registers itself when this
-package is imported (:mod:`kadv.attack` imports it), so adding a method is adding a module here
-(and its YAML under ``conf/attack/``)."""
+"""The built-in search methods, one module each (and ``lanes``, the trust-region lanes two of
+them share); every method's module registers itself when this package is imported
+(:mod:`kadv.attack` imports it), so adding a method is adding a module here (and its YAML under
+``conf/attack/``)."""
 
 import importlib
 import pkgutil

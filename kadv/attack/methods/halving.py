@@ -20,7 +20,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from kadv.attack.methods.hybrid import HybridSettings, check_trust_region, trust_region_refine
+from kadv.attack.methods.lanes import LaneSettings, check_trust_region, trust_region_refine
 from kadv.attack.records import InitViewResult, ViewRecord, incumbent_path, select_top_views
 from kadv.attack.registry import register_method
 from kadv.attack.search import SearchContext
@@ -44,7 +44,7 @@ class HalvingSettings:
         rescore_fraction: share of the budget that re-scores the best separated screened views
             exactly (a cheap fidelity only).
         refine: how the lanes step: ``gradient`` (along the normalised gradient through the
-            differentiable renderer, :func:`~kadv.attack.methods.hybrid.trust_region_refine`; a
+            differentiable renderer, :func:`~kadv.attack.methods.lanes.trust_region_refine`; a
             forward and a backward pass per lane, at the screening's fidelity, a trial it would
             take re-scored exactly first when that is cheap) or ``local`` (``local_views`` poses
             drawn around the lane's incumbent within its trust region and screened, the best
@@ -87,9 +87,9 @@ class HalvingSettings:
         ``auto`` counts as exact, what it is under a pass budget alone."""
         return isinstance(self.screen_supersample, int)
 
-    def gradient_lanes(self) -> HybridSettings:
-        """The gradient lanes' settings (their first step lengths are hybrid's)."""
-        return HybridSettings(refine_views=self.lanes, grow=self.grow, shrink=self.shrink, stall_scale=self.stall_scale)
+    def gradient_lanes(self) -> LaneSettings:
+        """The gradient lanes' settings (their first step lengths are the lanes' defaults)."""
+        return LaneSettings(grow=self.grow, shrink=self.shrink, stall_scale=self.stall_scale)
 
 
 def _rescore_count(settings: HalvingSettings, passes: int | None) -> int:

@@ -1,4 +1,4 @@
-"""kadv.datasets: procedural training views."""
+"""kadv.datasets.room_views: RGB-D views of generated rooms."""
 
 from __future__ import annotations
 

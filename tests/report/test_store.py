@@ -1,10 +1,9 @@
-"""kadv.runs: one live run per run directory, and interruptions that wait for the file being written."""
+"""kadv.report.store: one live run per run directory."""
 
 from __future__ import annotations
 
 import logging
 import os
-import signal
 import socket
 import subprocess
 import sys
@@ -12,11 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from kadv.io import atomic_write
-from kadv.runs import Interrupted, RunDirectoryBusy, interruptible, run_lock
+from kadv.report.store import RunDirectoryBusy, check_same_settings, run_lock
 
 HOLD = """import sys
-from kadv.runs import run_lock
+from kadv.report.store import run_lock
 with run_lock(sys.argv[1]):
     print("held", flush=True)
     sys.stdin.read()
@@ -41,7 +39,7 @@ def test_a_live_holder_is_named_and_a_dead_one_is_taken_over(tmp_path: Path, cap
     finally:
         process.kill()  # SIGKILL: the kernel frees its lock; its record stays behind
         process.wait()
-    with caplog.at_level(logging.WARNING, logger="kadv.runs"), run_lock(tmp_path / "run"):
+    with caplog.at_level(logging.WARNING, logger="kadv.report.store"), run_lock(tmp_path / "run"):
         assert (tmp_path / "run" / ".kadv.lock.json").read_text().count(f'"pid": {os.getpid()}') == 1
     assert [r.getMessage() for r in caplog.records] == [
         f"run directory {tmp_path / 'run'}: taking over from a run that is gone (PID {process.pid} on "
@@ -50,23 +48,16 @@ def test_a_live_holder_is_named_and_a_dead_one_is_taken_over(tmp_path: Path, cap
     assert not (tmp_path / "run" / ".kadv.lock.json").exists(), "a run that ends leaves no record"
 
 
-def test_an_interruption_waits_for_the_file_being_written(tmp_path: Path) -> None:
-    def write(tmp: Path) -> None:
-        tmp.write_text("first half ")
-        os.kill(os.getpid(), signal.SIGTERM)  # arrives mid-write
-        with tmp.open("a") as handle:
-            handle.write("second half")
-
-    with pytest.raises(Interrupted) as interruption, interruptible():
-        atomic_write(tmp_path / "file.txt", write)
-    assert interruption.value.exit_status == 143
-    assert (tmp_path / "file.txt").read_text() == "first half second half"
-    assert [p.name for p in tmp_path.iterdir()] == ["file.txt"], "no temporary file is left"
-    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL, "the handlers in force before come back"
-
-
-def test_sigint_between_files_raises_at_once(tmp_path: Path) -> None:
-    with pytest.raises(Interrupted) as interruption, interruptible():
-        os.kill(os.getpid(), signal.SIGINT)
-        atomic_write(tmp_path / "never.txt", lambda tmp: tmp.write_text("x"))
-    assert interruption.value.exit_status == 130 and not (tmp_path / "never.txt").exists()
+def test_a_run_made_with_other_settings_is_refused_naming_the_keys_and_the_ignored_ones_are_not(
+    tmp_path: Path,
+) -> None:
+    saved = {"attack": {"top_n": 5, "radii": [[5, 0.1]]}, "progress": True, "render": {"lighting": "baked"}}
+    same = {"attack": {"top_n": 5, "radii": [[5, 0.1]]}, "progress": False, "render": {"lighting": "auto"}}
+    check_same_settings(tmp_path, saved, same, frozenset({"progress"}), frozenset({"render.lighting"}))
+    other = {"attack": {"top_n": 2, "radii": [[5, 0.1]], "seed": 1}, "progress": True, "render": {"lighting": "auto"}}
+    with pytest.raises(ValueError) as refused:
+        check_same_settings(tmp_path, saved, other, resolved=frozenset({"render.lighting"}))
+    assert str(refused.value) == (
+        f"{tmp_path} holds a run made with other settings (attack.seed: (unset) -> 1, attack.top_n: 5 -> 2): "
+        "remove it to run again, or write to another folder"
+    )

@@ -1,14 +1,11 @@
-"""The run directory of an attack: partial results, trajectory, views, figures, video, summary.
+"""The files of an attack's run directory: trajectory, views, figures, video, summary.
 
 Every file is written atomically; ``summary.json`` is written last, so a run directory holding it
-is complete. Each init view's result is saved under ``partial/`` as soon as it is done, so an
-interrupted run resumes without recomputing (or rewriting) it; once the summary is written, the
-run needs none of it, and ``partial/`` goes (but for files set aside as unreadable).
+is complete (what a run keeps to resume from, and its lock: :mod:`kadv.report.store`).
 """
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import logging
@@ -39,81 +36,32 @@ from kadv.report.figures import (
     video_frame,
 )
 from kadv.report.images import depth_range
+from kadv.report.store import SUMMARY, remove_partial_results
 from kadv.report.summary import (
     AnytimePoint,
     InitViewSummary,
     RunInfo,
     RunSummary,
     ViewMetrics,
-    read_partial,
-    write_partial,
 )
 
 __all__ = [
     "PROFILE_PNG",
-    "SUMMARY",
     "TRAJECTORY",
     "ViewRenderer",
-    "is_complete",
-    "load_partial_results",
     "read_trajectory",
-    "remove_partial_results",
-    "save_partial_result",
     "save_view_picture",
     "trajectory_rows",
     "write_run",
 ]
 
-SUMMARY = "summary.json"
 TRAJECTORY = "trajectory.csv"
 PROFILE_PNG = "profile.png"
-_PARTIAL = "partial"
 log = logging.getLogger(__name__)
 _PACKAGES = ("kadv", "torch", "kornia", "open3d-cpu", "trimesh", "transformers", "numpy", "cma", "nevergrad")
 _MAX_VIDEO_FRAMES = 200
 # the video's panels are this many pixels high (upscaled from small attack renders)
 _VIDEO_HEIGHT = 240
-
-
-def is_complete(run_dir: str | Path) -> bool:
-    """Whether the run directory holds a finished run (its ``summary.json``)."""
-    return (Path(run_dir) / SUMMARY).is_file()
-
-
-def save_partial_result(run_dir: str | Path, index: int, result: InitViewResult) -> Path:
-    """Save one init view's search result (``partial/init<index>.json``)."""
-    return write_partial(Path(run_dir) / _PARTIAL / f"init{index}.json", result)
-
-
-def load_partial_results(run_dir: str | Path) -> dict[int, InitViewResult]:
-    """The init views' results an earlier (possibly interrupted) run saved, by index.
-
-    A file that cannot be read (cut short, edited, or of another schema version) is named in one
-    warning, moved aside as ``init<i>.json.unreadable``, and its init view is left to be computed again.
-    """
-    results = {}
-    for path in sorted((Path(run_dir) / _PARTIAL).glob("init*.json")):
-        try:
-            results[int(path.stem.removeprefix("init"))] = read_partial(path)
-        except ValueError as error:
-            aside = path.with_name(path.name + ".unreadable")
-            path.replace(aside)
-            log.warning(
-                "%s cannot be read (%s): moved aside to %s; its init view is computed again",
-                path,
-                str(error).removeprefix(f"{path}: "),
-                aside.name,
-            )
-    return results
-
-
-def remove_partial_results(run_dir: str | Path) -> None:
-    """Remove the partial results of a run whose summary is written (files set aside as unreadable
-    stay for the user to look at)."""
-    for path in (Path(run_dir) / _PARTIAL).glob("init*.json"):
-        path.unlink()
-    with contextlib.suppress(OSError):
-        (Path(run_dir) / _PARTIAL).rmdir()
 
 
 def trajectory_rows(result: AttackResult) -> list[dict]:

@@ -6,7 +6,7 @@ import torch
 
 from kadv.geometry import intrinsics_from_fov, look_at, pixel_rays
 from kadv.render import ExactRenderer, Shading
-from kadv.render.raycast import pixel_angle
+from kadv.render.exact import pixel_angle
 from kadv.scenes import Material, assemble_scene, box_room
 from kadv.scenes.parts import quad_part
 
