@@ -13,18 +13,15 @@ def _warn(old: str, new: str) -> None:
     warnings.warn(f"{old} was renamed {new}; the old name goes in the next release", FutureWarning, stacklevel=3)
 
 
-def renamed_exports(package: str, renamed: dict[str, str], fallback=None) -> Callable[[str], object]:
+def renamed_exports(package: str, renamed: dict[str, str]) -> Callable[[str], object]:
     """The module-level ``__getattr__`` (PEP 562) of ``package``: each old name of ``renamed`` warns and
-    returns the object of its new name (``renamed[old]``, in the package); any other name goes to
-    ``fallback`` (another ``__getattr__``, such as :func:`kadv._lazy.lazy_exports`'), or is an
+    returns the object of its new name (``renamed[old]``, in the package); any other name is an
     ``AttributeError``."""
 
     def __getattr__(name: str) -> object:
         if name in renamed:
             _warn(f"{package}.{name}", f"{package}.{renamed[name]}")
             return getattr(importlib.import_module(package), renamed[name])
-        if fallback is not None:
-            return fallback(name)
         raise AttributeError(f"module {package!r} has no attribute {name!r}")
 
     return __getattr__

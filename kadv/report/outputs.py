@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import csv
 import io
-import logging
 import platform
 from dataclasses import fields
 from importlib import metadata
@@ -57,7 +56,6 @@ __all__ = [
 
 TRAJECTORY = "trajectory.csv"
 PROFILE_PNG = "profile.png"
-log = logging.getLogger(__name__)
 _PACKAGES = ("kadv", "torch", "kornia", "open3d-cpu", "trimesh", "transformers", "numpy", "cma", "nevergrad")
 _MAX_VIDEO_FRAMES = 200
 # the video's panels are this many pixels high (upscaled from small attack renders)

@@ -19,7 +19,7 @@ __all__ = ["LaneSettings", "check_trust_region", "trust_region_refine"]
 
 @dataclass(frozen=True)
 class LaneSettings:
-    """The lanes' steps (the method that runs them checks and names them: ``attack.hybrid``).
+    """The lanes' steps (checked, and named in errors, by the method whose settings they come from).
 
     Attributes:
         lr_rotation, lr_translation, lr_fov_deg: a lane's first step lengths (radians, metres,
