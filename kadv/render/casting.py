@@ -105,15 +105,26 @@ class Open3DCaster(RayCaster):
     def first_hits(
         self, origins: torch.Tensor, directions: torch.Tensor, live: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, ...]:
+        if live is None:
+            return self._first_hits(origins, directions)
+        # Embree casts every ray of a call: the live ones alone are cast (a depth peel's later casts
+        # have a few per cent of them), the others reported as misses
+        rows = torch.nonzero(live)[:, 0]
+        t = torch.full((len(live),), torch.inf, dtype=torch.float32)
+        ids = torch.full((len(live),), -1, dtype=torch.int64)
+        bary = torch.zeros(len(live), 2, dtype=torch.float32)
+        if len(rows):
+            found = self._first_hits(origins.index_select(0, rows), directions.index_select(0, rows))
+            for into, values in zip((t, ids, bary), found):
+                into.index_copy_(0, rows, values)
+        return t, ids, bary
+
+    def _first_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         result = self.scene.cast_rays(self._rays(origins, directions))
         # Open3D's ids are uint32, 2**32 - 1 on a miss: read as int32, that is -1 (and scenes have far
         # fewer than 2**31 triangles); one conversion instead of a comparison and a select
         ids = torch.from_numpy(result["primitive_ids"].numpy().view(np.int32)).long()
-        t, bary = torch.from_numpy(result["t_hit"].numpy()), torch.from_numpy(result["primitive_uvs"].numpy())
-        if live is None:
-            return t, ids, bary
-        # Embree casts every ray of a call; the dead ones are reported as misses
-        return torch.where(live, t, torch.inf), torch.where(live, ids, -1), torch.where(live[:, None], bary, 0.0)
+        return torch.from_numpy(result["t_hit"].numpy()), ids, torch.from_numpy(result["primitive_uvs"].numpy())
 
     def all_hits(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         if len(origins) == 0:  # Open3D's list_intersections crashes the process on no rays

@@ -440,9 +440,11 @@ def _on_surface(points_P: torch.Tensor, normals_P: torch.Tensor, A_T_P: torch.Te
     to A_T_P X_P and differentiable as the point where each pixel's ray meets its surface's plane
     (normals (B, N, 3), current frame), which stays put in the anchor's frame as the pose moves."""
     A_T_P = A_T_P.to(points_P.device, _DTYPE)
-    rotation, origin = A_T_P[:, None, :3, :3], A_T_P[:, None, :3, 3].expand_as(points_P)
-    ray = (rotation @ points_P[..., None])[..., 0]  # the pixel's ray in the anchor frame, to the hit
-    normal = (rotation.detach() @ normals_P[..., None])[..., 0]
+    # row vectors times R^T: one matrix product a view, whose backward is one more (a broadcast
+    # product of N 3 x 3 matrices would sum N of them)
+    rotation_T, origin = A_T_P[:, :3, :3].transpose(1, 2), A_T_P[:, None, :3, 3].expand_as(points_P)
+    ray = points_P @ rotation_T  # the pixel's ray in the anchor frame, to the hit
+    normal = normals_P @ rotation_T.detach()
     hit = (ray + origin).detach()
     plane = Hyperplane(Vector3(normal), Scalar(-dot(normal, hit)))
     # kornia's intersection needs |n . direction| above an absolute eps: the unit ray's
@@ -454,7 +456,12 @@ def _on_surface(points_P: torch.Tensor, normals_P: torch.Tensor, A_T_P: torch.Te
 
 
 def _lookup(
-    maps: torch.Tensor, q: torch.Tensor, expected: torch.Tensor, P_T_A: torch.Tensor, tolerance: float, smooth: bool
+    maps: torch.Tensor,
+    q: torch.Tensor,
+    expected: torch.Tensor,
+    P_T_A: torch.Tensor,
+    tolerance: float,
+    smooth: bool,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """One boxed layer (B, 10, h, w) read at boxed-pixel coordinates q (B, M, 2), whose points should
     be ``expected`` (B, M, 3, anchor frame): colour (B, 3, M), current-frame z-depth (B, M) and
@@ -462,29 +469,34 @@ def _lookup(
     height, width = maps.shape[-2:]
     scale = q.new_tensor([2.0 / width, 2.0 / height])
 
-    def read_at(grid: torch.Tensor) -> torch.Tensor:  # (B, lookups, M, 2) -> (B, 10, lookups, M)
+    def read_at(channels: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
+        """Maps (B, C, h, w) read at (B, lookups, M, 2): (B, C, lookups, M)."""
         # grid_sample's coordinates with align_corners=False: pixel i's centre, i + 0.5, at (2i + 1) / n - 1
         grid = (grid * scale - 1.0).to(maps.dtype)
-        return F.grid_sample(maps, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+        return F.grid_sample(channels, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
 
     with torch.no_grad():
-        read = read_at(q.detach()[:, None])
-    if smooth:
-        read = torch.cat([read, read_at(q[:, None] + q.new_tensor(_DIAGONALS)[:, None])], dim=2)
+        centre = read_at(maps[:, :7], q.detach()[:, None])[:, :, 0]
     tolerance = tolerance * expected[..., 2].detach()
-    expected = expected.detach().transpose(1, 2)[:, :, None]
-    off = read[:, 3:6] - expected
-    # the centre lookup must read the point expected; the diagonal ones, half a pixel away, a point
-    # on its plane (written out channel by channel: a reduction over a strided channel axis is slow)
-    centre = off[:, :, 0]
-    near = centre[:, 0] * centre[:, 0] + centre[:, 1] * centre[:, 1] + centre[:, 2] * centre[:, 2]
-    holds = (read[:, 6, 0] >= _FULL) & (near <= tolerance * tolerance)  # (B, M)
-    colour, point = read[:, 0:3, 0], read[:, 3:6, 0]
+    expected = expected.detach().transpose(1, 2)
+    # the centre lookup must read the point expected (written out channel by channel: a reduction
+    # over a strided channel axis is slow)
+    off = centre[:, 3:6] - expected
+    near = off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1] + off[:, 2] * off[:, 2]
+    holds = (centre[:, 6] >= _FULL) & (near <= tolerance * tolerance)  # (B, M)
+    colour, point = centre[:, 0:3], centre[:, 3:6]
     if smooth:
-        diagonal, normal = off[:, :, 1:], read[:, 7:10, 1:]
-        on_plane = (diagonal[:, 0] * normal[:, 0] + diagonal[:, 1] * normal[:, 1] + diagonal[:, 2] * normal[:, 2]).abs()
-        both = ((read[:, 6, 1:] >= _FULL) & (on_plane <= tolerance[:, None])).all(1)[:, None]
-        mean = read[:, :6, 1:].mean(2)
+        # the diagonal lookups, half a pixel away, must each read a point on its own plane: the
+        # values read with their gradient, the hit fraction and the normals without (a slice of
+        # one read would zero-fill a copy of all of it in the backward pass)
+        grid = q[:, None] + q.new_tensor(_DIAGONALS)[:, None]
+        diagonal = read_at(maps[:, :6], grid)
+        with torch.no_grad():
+            tests = read_at(maps[:, 6:10], grid.detach())
+            off, n = diagonal[:, 3:6] - expected[:, :, None], tests[:, 1:4]
+            on_plane = (off[:, 0] * n[:, 0] + off[:, 1] * n[:, 1] + off[:, 2] * n[:, 2]).abs()
+            both = ((tests[:, 0] >= _FULL) & (on_plane <= tolerance[:, None])).all(1)[:, None]
+        mean = diagonal.mean(2)
         colour = torch.where(both, straight_through(mean[:, 0:3], onto=colour), colour)
         point = torch.where(both, straight_through(mean[:, 3:6], onto=point), point)
     z = transform_points(P_T_A[:, None], point.transpose(1, 2))[..., 2]

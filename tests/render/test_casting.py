@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from kadv.geometry import intrinsics_from_fov
+from kadv.geometry.camera import pixel_rays
 from kadv.penalties import distance_to_surface, random_valid_poses
 from kadv.render import ExactRenderer, Shading
 from kadv.render.backends import make_caster, resolve_backend
@@ -113,3 +114,25 @@ def test_a_scene_too_large_for_the_device_is_refused_with_the_figures(monkeypatc
     monkeypatch.setattr(warp_caster, "free_memory", lambda device: 1024)
     with pytest.raises(ValueError, match=rf"scene: {room.num_triangles} triangles need about .* MiB of cpu memory"):
         make_caster(room.vertices, room.faces, "warp")
+
+
+def test_an_open3d_cast_of_some_live_rays_is_the_full_cast_with_the_others_missing() -> None:
+    """Open3D's caster casts only the live rays (a depth peel's later casts have few): each live
+    ray's hit is the one a cast of every ray gives, and the others are misses."""
+    renderer = ExactRenderer(box_room(seed=0), backend="open3d")
+    camera = renderer.scene.cameras[0]
+    origins, directions = (
+        rays.reshape(-1, 3).float()
+        for rays in pixel_rays(
+            camera.world_T_cam[None].double(), intrinsics_from_fov(70.0, HEIGHT, WIDTH), HEIGHT, WIDTH
+        )
+    )
+    live = torch.from_numpy(np.random.default_rng(0).uniform(size=len(origins)) < 0.2)
+    t_all, ids_all, bary_all = renderer.caster.first_hits(origins, directions)
+    t, ids, bary = renderer.caster.first_hits(origins, directions, live)
+    assert int((ids_all[live] >= 0).sum()) > 0.9 * int(live.sum())
+    assert torch.equal(t[live], t_all[live]) and torch.equal(ids[live], ids_all[live])
+    assert torch.equal(bary[live], bary_all[live])
+    assert bool(torch.isinf(t[~live]).all()) and bool((ids[~live] == -1).all()) and float(bary[~live].abs().max()) == 0
+    none = renderer.caster.first_hits(origins, directions, torch.zeros_like(live))
+    assert bool((none[1] == -1).all())

@@ -6,7 +6,7 @@ import torch
 
 from kadv.geometry import intrinsics_from_fov
 from kadv.penalties import random_valid_poses
-from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer
+from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer, dibr
 from kadv.render import differentiable as differentiable_module
 
 K_SMALL = intrinsics_from_fov(70.0, 48, 64)
@@ -127,6 +127,25 @@ def test_between_refreshes_the_warp_renders_no_shaded_image(room_renderer: Exact
     assert calls["anchors"] == 3 and calls["shaded"] == 4 and calls["bare"] == 6
     # the warped steps (1-3 and 5-7) shaded only their holes: far fewer rays than their frames'
     assert 0 < warped_rays < 0.15 * 6 * config.supersample**2 * (48 + 2) * (64 + 2)
+
+
+def test_the_warp_preset_reads_the_boxed_anchor_at_its_refreshes_too(room_renderer: ExactRenderer, monkeypatch) -> None:
+    """values=warp never runs the closed-form at-anchor warp (the default step's): a refresh's
+    gradient comes from the boxed anchor, as the steps between refreshes do, and it is nonzero."""
+
+    def closed_form(*args, **kwargs):
+        raise AssertionError("the closed-form warp ran under values=warp")
+
+    monkeypatch.setattr(dibr, "_anchor_layer_pixels", closed_form)
+    camera = room_renderer.scene.cameras[0]
+    differentiable = DifferentiableRenderer(
+        room_renderer, DiffRenderConfig(values="warp", refresh="every_k", every_k=2)
+    )
+    for step in range(4):
+        params = (0.3 * _trajectory(step, 4)).requires_grad_(True)
+        out = differentiable(params, camera.world_T_cam[None], K_SMALL, 48, 64)
+        (out.rgb.sum() + out.depth.sum()).backward()
+        assert out.refreshed == (step % 2 == 0) and float(params.grad.abs().sum()) > 0
 
 
 def _counting(fn, calls: dict):
