@@ -18,7 +18,7 @@ from kadv.render.irradiance import BakedLighting
 from kadv.render.layers import AnchorLayers, BoxedLayers, render_anchor
 from kadv.render.lights import scene_lights
 from kadv.render.shading import Shading
-from kadv.render.silhouette import EdgePairs, find_edge_pairs, silhouette_term
+from kadv.render.silhouette import EdgePairs, find_edge_pairs, silhouette_term, track_edge_pairs
 from kadv.render.surface import Surfaces
 from kadv.render.textures import sample_texture
 
@@ -45,5 +45,6 @@ __all__ = [
     "sample_texture",
     "scene_lights",
     "silhouette_term",
+    "track_edge_pairs",
     "warp_boxed",
 ]

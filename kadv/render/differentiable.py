@@ -24,11 +24,13 @@ from kadv.geometry.pose import perturb_world_T_cam
 from kadv.render.dibr import Reprojection, reproject, warp_boxed
 from kadv.render.exact import ExactRenderer, RenderOutput, pixel_angle, views_apart
 from kadv.render.layers import RING, AnchorLayers, camera_face_normals, render_anchor, ring_view
-from kadv.render.silhouette import find_edge_pairs, silhouette_term
+from kadv.render.silhouette import EdgePairs, find_edge_pairs, silhouette_term, track_edge_pairs
 from kadv.render.straight_through import straight_through
 
 __all__ = ["DiffRenderConfig", "DiffRenderOutput", "DifferentiableRenderer", "WarpAgreement"]
 
+# what a search's pairs carry besides the marks of an uncompacted search
+_PAIR_FIELDS = ("batch", "a", "b", "horizontal", "edge", "t")
 # Missed pixels hold depth 0; the relative depth error divides by at least this (they are invalid anyway).
 _MIN_DEPTH = 1e-6
 
@@ -109,7 +111,7 @@ class DiffRenderOutput:
         rgb: (B, 3, H, W); depth: (B, 1, H, W) z-depth (0 invalid); mask: (B, 1, H, W) bool; on
             the renderer's device.
         exact: the exact render at the current poses (no gradient), on the exact renderer's device;
-            between refreshes under ``values="warp"``, a cast without shading (its ``rgb`` None).
+            between refreshes under ``values="warp"``, a cast without shading (its ``rgb`` and ``normals`` None).
         world_T_cam: (B, 4, 4) current poses (differentiable), on the pose parameters' device.
         coverage: (B,) fraction of hit pixels with a valid warp; it and the errors on the renderer's device.
         rgb_error: (B,) mean |rgb_warp - rgb_exact| over valid pixels (NaN where the values
@@ -171,6 +173,8 @@ class DifferentiableRenderer:
         self._anchor_key: _ViewKey | None = None
         self._steps_since_refresh = 0
         self._exact_next = False
+        # the last edge search's pairs (compacted), poses and intrinsics, followed between refreshes
+        self._searched_edges: tuple[EdgePairs, torch.Tensor, torch.Tensor] | None = None
 
     @property
     def compact_edges(self) -> bool:
@@ -188,6 +192,7 @@ class DifferentiableRenderer:
         """Forget the anchor (the next call renders a new one)."""
         self.anchor = None
         self._anchor_key = None
+        self._searched_edges = None
 
     def validate_next(self) -> None:
         """Render the next call's views exactly (values from the exact render, as at a refresh),
@@ -245,7 +250,7 @@ class DifferentiableRenderer:
             rgb, depth = frame.rgb, frame.depth
         self._steps_since_refresh += 1
         if self.config.silhouette:
-            pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K, self.compact_edges)
+            pairs = self._edge_pairs(frame, current, warped)
             K_edges = self._render_view(K_view, height, width)[1]  # frame.K, differentiable as K_view is
             values = torch.cat([frame.rgb_rendered, frame.depth_rendered], dim=1)
             term = silhouette_term(self.renderer, pairs, world_T_cam, K_edges, values)[frame.inside]
@@ -262,6 +267,20 @@ class DifferentiableRenderer:
             refreshed=refreshed,
             warped=warped,
         )
+
+    def _edge_pairs(self, frame: _ExactFrame, current: torch.Tensor, warped: bool) -> EdgePairs:
+        """The occlusion edges of the frame: searched in an exact frame, and under ``values="warp"``
+        followed from the last search between refreshes (:func:`~kadv.render.track_edge_pairs`),
+        which casts no ray."""
+        if warped:
+            return track_edge_pairs(self.renderer, *self._searched_edges, frame.rendered, current, frame.K)
+        pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K, self.compact_edges)
+        if self.config.values == "warp":
+            found = (
+                pairs if pairs.keep is None else EdgePairs(*(getattr(pairs, name)[pairs.keep] for name in _PAIR_FIELDS))
+            )
+            self._searched_edges = (found, current, frame.K)
+        return pairs
 
     def _due_for_refresh(self, K: torch.Tensor, height: int, width: int) -> bool:
         c = self.config

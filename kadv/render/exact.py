@@ -45,7 +45,8 @@ class RenderOutput:
         rgb: (B, 3, H, W) float32 in [0, 1]; None for a cast without shading (``colour=False``).
         depth: (B, 1, H, W) float32 z-depth in metres, 0 where invalid.
         mask: (B, 1, H, W) bool, True where a ray hit a surface (beyond a micrometre of the eye).
-        normals: (B, 3, H, W) float32 world-frame unit normals facing the camera side, 0 if invalid.
+        normals: (B, 3, H, W) float32 world-frame unit normals facing the camera side, 0 if invalid;
+            None for a cast without shading.
         triangle_ids: (B, 1, H, W) int64, -1 where invalid.
         points: (B, 3, H, W) float32 world-frame hit points, 0 where invalid.
         back_face: (B, 1, H, W) bool, True where the ray hit the back of a triangle.
@@ -190,12 +191,18 @@ class ExactRenderer:
         return hits.hit & self.baked.enclosed_at(hits.triangle_ids.clamp_min(0), hits.barycentrics.double(), back)
 
     def cast_and_shade(
-        self, origins: torch.Tensor, directions: torch.Tensor, pixel_angle: float, colour: bool, geometry: bool
+        self,
+        origins: torch.Tensor,
+        directions: torch.Tensor,
+        pixel_angle: float,
+        colour: bool,
+        geometry: bool,
+        normals: bool = True,
     ) -> tuple[RayHits, dict[str, torch.Tensor]]:
         """Hits and shaded maps (:meth:`Shader.shade`) of rays (N, 3) float64 on the renderer's
         device, cast and shaded in parts of at most :attr:`max_rays`."""
         parts = [
-            self._cast_and_shade(o, d, pixel_angle, colour, geometry)
+            self._cast_and_shade(o, d, pixel_angle, colour, geometry, normals)
             for o, d in zip(origins.split(self.max_rays), directions.split(self.max_rays))
         ]
         if len(parts) == 1:
@@ -204,10 +211,16 @@ class ExactRenderer:
         return hits, {key: torch.cat([maps[key] for _, maps in parts]) for key in parts[0][1]}
 
     def _cast_and_shade(
-        self, origins: torch.Tensor, directions: torch.Tensor, pixel_angle: float, colour: bool, geometry: bool
+        self,
+        origins: torch.Tensor,
+        directions: torch.Tensor,
+        pixel_angle: float,
+        colour: bool,
+        geometry: bool,
+        normals: bool,
     ) -> tuple[RayHits, dict[str, torch.Tensor]]:
         hits = self.cast(origins, directions)
-        return hits, self.shader.shade(hits, origins, directions, pixel_angle, colour=colour, geometry=geometry)
+        return hits, self.shader.shade(hits, origins, directions, pixel_angle, colour, geometry, normals)
 
     def _with_reflections(
         self,
@@ -303,7 +316,7 @@ class ExactRenderer:
                 "reflecting"; both where coats and metals reflect), when the caller has already
                 shaded them (an anchor render at this pose covers them): they are not cast again.
             colour: shade the colour; False casts the pixel-centre rays alone and returns every
-                map but ``rgb`` (None): a tenth of a shaded render's time.
+                map but ``rgb`` and the shading ``normals`` (None): a tenth of a shaded render's time.
 
         Raises:
             ValueError: on a NaN or non-rigid pose, bad intrinsics or a bad size.
@@ -313,7 +326,8 @@ class ExactRenderer:
         origins, directions = pixel_rays(world_T_cam, K, height, width, device=self.device)
         batch, s = origins.shape[0], supersample
         angle, shade_centres = pixel_angle(K), colour and s == 1
-        hits, maps = self.cast_and_shade(origins.reshape(-1, 3), directions.reshape(-1, 3), angle, shade_centres, True)
+        flat = (origins.reshape(-1, 3), directions.reshape(-1, 3))
+        hits, maps = self.cast_and_shade(*flat, angle, shade_centres, True, normals=colour)
         image = functools.partial(_image, batch=batch, height=height, width=width)
         rgb = None
         if colour and sub_rgb is not None:
@@ -332,7 +346,7 @@ class ExactRenderer:
             rgb=rgb,
             depth=image(torch.where(mask, hits.t, 0.0), 1),
             mask=image(mask, 1),
-            normals=image(maps["normals"], 3),
+            normals=image(maps["normals"], 3) if colour else None,
             triangle_ids=image(hits.triangle_ids, 1),
             points=image(maps["points"], 3),
             back_face=image(maps["back_face"], 1),

@@ -329,12 +329,14 @@ class Shader:
         pixel_angle: float,
         colour: bool = True,
         geometry: bool = True,
+        normals: bool = True,
     ) -> dict[str, torch.Tensor]:
         """Shade hits of rays (N, 3) float64 on the surfaces' device; ``pixel_angle`` (radians per
         sample) selects the texture mip level.
 
         Returns "rgb" (N, 3) float32 and, with ``geometry``, the masked "points", "normals" (N, 3)
-        float32 and "back_face" (N,) bool, on the same device. With ``colour`` False "rgb" is the
+        float32 (with ``normals``: interpolating them is most of a bare cast's shading) and
+        "back_face" (N,) bool, on the same device. With ``colour`` False "rgb" is the
         background: the caller takes colour from other rays. With ``colour`` when coats and metals
         reflect (:attr:`reflecting`), also "reflecting" (N, 6) float32: on their hits, the exposed
         radiance each keeps besides its mirror image and the factor of the mirrored light
@@ -350,9 +352,11 @@ class Shader:
         # hit points and shading normals, where something reads them: the maps, Lambert's term or
         # the delta lights (baked light alone needs neither)
         lit_at_points = self.shading.lighting == "direct" or (self.baked is not None and not self._delta_lights.empty)
-        points = normals = terms = None
+        points = shading_normals = terms = None
         if geometry or (colour and lit_at_points):
-            points, normals = origins + directions * t[:, None], self._shading_normals(ids, bary, back, directions)
+            points = origins + directions * t[:, None]
+        if (geometry and normals) or (colour and lit_at_points):
+            shading_normals = self._shading_normals(ids, bary, back, directions)
         rgb = self._background.expand(len(t), 3)
         if colour:
             footprint = _footprint(t, directions, facing, pixel_angle)
@@ -361,9 +365,9 @@ class Shader:
                 shaded = self.surfaces.captured(ids, bary, footprint)
             elif self.baked is None:
                 base = self.surfaces.albedo(ids, bary, footprint)
-                shaded = shade(self.shading, self._lights, points.float(), normals, base)
+                shaded = shade(self.shading, self._lights, points.float(), shading_normals, base)
             else:
-                baked = self._baked_colours(hits, bary, footprint, back, points, directions, normals)
+                baked = self._baked_colours(hits, bary, footprint, back, points, directions, shading_normals)
                 shaded, background, terms = baked
             rgb = torch.where(hit[:, None], shaded, background)
             if self._emitter_caster is not None:
@@ -372,11 +376,9 @@ class Shader:
         if colour and self.reflecting:
             maps["reflecting"] = terms
         if geometry:
-            maps.update(
-                points=torch.where(hit[:, None], points.float(), 0.0),
-                normals=torch.where(hit[:, None], normals, 0.0),
-                back_face=back,
-            )
+            maps.update(points=torch.where(hit[:, None], points.float(), 0.0), back_face=back)
+        if geometry and normals:
+            maps["normals"] = torch.where(hit[:, None], shading_normals, 0.0)
         return maps
 
     def _shading_normals(

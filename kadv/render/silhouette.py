@@ -26,7 +26,7 @@ from kadv.render.exact import ExactRenderer, RenderOutput
 from kadv.render.straight_through import straight_through
 from kadv.render.surface import Surfaces
 
-__all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term"]
+__all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term", "track_edge_pairs"]
 
 _BISECTION_STEPS = 6
 # bisection steps one cast decides (:func:`_bisect`): on a GPU a cast's cost is its launches (three
@@ -117,6 +117,18 @@ _MIN_PROJECTED_Z = 1e-9
 _ENDPOINT_SLACK = 1e-6
 
 
+def _edge_parameter(
+    vertices_cam: torch.Tensor, rays_a: torch.Tensor, rays_b: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Where edges (N, 2, 3) (camera frame) meet the plane of the rays a and b (N, 3): the share s
+    (N,) of the way from their first vertex, and m . (v1 - v0) (N,), 0 for an edge parallel to it."""
+    m = torch.linalg.cross(rays_a, rays_b)
+    v0, v1 = vertices_cam[:, 0], vertices_cam[:, 1]
+    denominator = dot(m, v1 - v0)
+    s = -dot(m, v0) / torch.where(denominator.abs() > _PARALLEL, denominator, torch.ones_like(denominator))
+    return s, denominator
+
+
 def edge_crossings(
     vertices_cam: torch.Tensor,
     rays_a: torch.Tensor,
@@ -126,10 +138,8 @@ def edge_crossings(
     uv_b: torch.Tensor,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Crossing t (N,) of edges (N, 2, 3) (camera frame) with the segment a->b, and whether it is genuine."""
-    m = torch.linalg.cross(rays_a, rays_b)
+    s, denominator = _edge_parameter(vertices_cam, rays_a, rays_b)
     v0, v1 = vertices_cam[:, 0], vertices_cam[:, 1]
-    denominator = dot(m, v1 - v0)
-    s = -dot(m, v0) / torch.where(denominator.abs() > _PARALLEL, denominator, torch.ones_like(denominator))
     point = v0 + s[:, None] * (v1 - v0)
     projected = (K @ point[..., None])[..., 0]
     uv = projected[:, :2] / projected[:, 2:3].clamp_min(_MIN_PROJECTED_Z)
@@ -177,6 +187,13 @@ class _Candidates:
         return _Candidates(*(torch.cat([getattr(p, f.name) for p in parts]) for f in fields(_Candidates)))
 
 
+def _jumps(za: torch.Tensor, zb: torch.Tensor, ia: torch.Tensor, ib: torch.Tensor) -> torch.Tensor:
+    """Whether neighbours with depths ``za``, ``zb`` (inf: no hit) on triangles ``ia``, ``ib`` may
+    straddle an occlusion edge: different triangles and a depth jump."""
+    near, far = torch.minimum(za, zb), torch.maximum(za, zb)
+    return (ia != ib) & torch.isfinite(near) & (~torch.isfinite(far) | ((far - near) > _MIN_JUMP * near))
+
+
 def _candidate_pairs(
     surfaces: Surfaces,
     z: torch.Tensor,
@@ -191,8 +208,7 @@ def _candidate_pairs(
     batch, _, width = z.shape
     za, zb = (z[:, :, :-1], z[:, :, 1:]) if horizontal else (z[:, :-1, :], z[:, 1:, :])
     ia, ib = (ids[:, :, :-1], ids[:, :, 1:]) if horizontal else (ids[:, :-1, :], ids[:, 1:, :])
-    near, far = torch.minimum(za, zb), torch.maximum(za, zb)
-    candidate = (ia != ib) & torch.isfinite(near) & (~torch.isfinite(far) | ((far - near) > _MIN_JUMP * near))
+    candidate = _jumps(za, zb, ia, ib)
     if compact:
         bi, yi, xi = torch.nonzero(candidate).unbind(dim=1)  # how many: a wait for the device
         live = torch.ones_like(bi, dtype=torch.bool)
@@ -388,6 +404,86 @@ def find_edge_pairs(
         return EdgePairs(*found, keep=keep, blocks=(height * (width - 1), (height - 1) * width))
     rows = torch.nonzero(keep)[:, 0]
     return EdgePairs(*(values.index_select(0, rows) for values in found))
+
+
+def track_edge_pairs(
+    renderer: ExactRenderer,
+    found: EdgePairs,
+    found_world_T_cam: torch.Tensor,
+    found_K: torch.Tensor,
+    exact: RenderOutput,
+    world_T_cam: torch.Tensor,
+    K: torch.Tensor,
+) -> EdgePairs:
+    """The occlusion-edge pairs ``found`` (:func:`find_edge_pairs`, compacted) in views at
+    ``found_world_T_cam`` with intrinsics ``found_K``, followed to nearby views ``world_T_cam`` (B,
+    4, 4) with intrinsics ``K`` whose cast is ``exact`` (the same size), without a ray: between a
+    warp's refreshes, the outlines are the anchor's, moved.
+
+    Each pair's crossing is a point on its occluder's edge; projected into the new view, the edge
+    crosses the pixel row (a horizontal pair's) or column nearest to it between two pixel centres,
+    which become the pair, kept where their depths in ``exact`` still jump and the edge is still
+    as steep as the pair's direction says. Pairs two crossings land on are kept once. An edge
+    that the anchor did not see (disoccluded, or come into the frame) has no pair until the search
+    runs again.
+    """
+    device = renderer.device
+    depth, ids = exact.depth[:, 0].double().to(device), exact.triangle_ids[:, 0].to(device)
+    batch, height, width = depth.shape
+    if not len(found.batch):
+        return found
+    bi, horizontal = found.batch, found.horizontal
+    vertices = renderer.surfaces.vertices.double().index_select(0, found.edge.reshape(-1)).reshape(-1, 2, 3)
+    # the point where the edge crossed its pair's segment in the view it was found in
+    pose = check_world_T_cam(found_world_T_cam).detach().double().to(device)
+    R, c = _rows(pose[:, :3, :3], bi), _rows(pose[:, :3, 3], bi)
+    found_K = batched_intrinsics(found_K, len(pose)).to(device)
+    K_inv = torch.linalg.inv(found_K)
+    ya, xa = found.a.div(width, rounding_mode="floor"), found.a.remainder(width)
+    uv_a = torch.stack([xa + 0.5, ya + 0.5], dim=1).double()
+    uv_b = uv_a + torch.stack([horizontal, ~horizontal], dim=1).double()
+    share, _ = _edge_parameter(
+        mat_vec(R.transpose(1, 2), vertices - c[:, None]), _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b)
+    )
+    point = vertices[:, 0] + share[:, None] * (vertices[:, 1] - vertices[:, 0])
+    # the point and the edge's direction in the new view (projected, to first order)
+    pose = check_world_T_cam(world_T_cam).detach().double().to(device)
+    KR = _rows(batched_intrinsics(K, batch).to(device) @ pose[:, :3, :3].transpose(1, 2), bi)
+    projected = mat_vec(KR, point - _rows(pose[:, :3, 3], bi))
+    z = projected[:, 2].clamp_min(_MIN_PROJECTED_Z)
+    uv = projected[:, :2] / z[:, None]
+    towards = mat_vec(KR, vertices[:, 1] - vertices[:, 0])
+    direction = (towards[:, :2] - uv * towards[:, 2:3]) / z[:, None]
+    # the row (or column) of pixel centres nearest the point, and where the edge crosses its centre line
+    along, across = torch.where(horizontal, uv[:, 1], uv[:, 0]), torch.where(horizontal, uv[:, 0], uv[:, 1])
+    d_along = torch.where(horizontal, direction[:, 1], direction[:, 0])
+    d_across = torch.where(horizontal, direction[:, 0], direction[:, 1])
+    # steep as the search judges it (:func:`_occluder_edge`), and crossing the line it runs along
+    edge_cam = mat_vec(_rows(pose[:, :3, :3].transpose(1, 2), bi), vertices[:, 1] - vertices[:, 0])
+    steep = edge_cam[:, 1].abs() >= edge_cam[:, 0].abs()
+    line = torch.floor(along)
+    across = across + (line + 0.5 - along) * d_across / torch.where(d_along != 0, d_along, 1.0)
+    first = torch.floor(across - 0.5)
+    t = across - (first + 0.5)
+    row, column = torch.where(horizontal, line, first).long(), torch.where(horizontal, first, line).long()
+    inside = (
+        (steep == horizontal) & (d_along != 0) & (projected[:, 2] > _MIN_PROJECTED_Z) & (row >= 0) & (column >= 0)
+        & (row < height - (~horizontal).long()) & (column < width - horizontal.long())
+    )  # fmt: skip
+    a = torch.where(inside, row * width + column, 0)
+    b = a + torch.where(horizontal, 1, width)
+    z_map = torch.where(depth > 0, depth, torch.inf).reshape(batch, -1)
+    flat_ids = ids.reshape(batch, -1)
+    keep = inside & _jumps(
+        _pixels(z_map, bi, a), _pixels(z_map, bi, b), _pixels(flat_ids, bi, a), _pixels(flat_ids, bi, b)
+    )
+    # one pair per pixel pair and direction: the first crossing that lands there
+    rows = torch.nonzero(keep)[:, 0]
+    key = (bi.index_select(0, rows) * 2 + horizontal.index_select(0, rows)) * (height * width) + a.index_select(0, rows)
+    unique, group = torch.unique(key, return_inverse=True)
+    firsts = torch.full((len(unique),), len(rows), dtype=torch.int64, device=device)
+    rows = rows.index_select(0, firsts.scatter_reduce(0, group, torch.arange(len(rows), device=device), "amin"))
+    return EdgePairs(*(values.index_select(0, rows) for values in (bi, a, b, horizontal, found.edge, t)))
 
 
 def _pair_poses(world_T_cam: torch.Tensor, pairs: EdgePairs) -> tuple[torch.Tensor, torch.Tensor]:

@@ -91,24 +91,34 @@ def test_warp_mode_tracks_exact_render_along_a_trajectory(grey_white_room) -> No
 
 
 def test_between_refreshes_the_warp_renders_no_shaded_image(room_renderer: ExactRenderer, monkeypatch) -> None:
-    """values=warp: a step between refreshes casts its view without shading and shades only the
-    pixels no anchor layer holds; the shaded renders are the refreshes' (one anchor and one frame
+    """values=warp: a step between refreshes casts its view without shading, shades only the
+    pixels no anchor layer holds and follows the occlusion edges found last instead of searching
+    them; the shaded renders and the edge searches are the refreshes' (one anchor and one frame
     each) and the view a search validates."""
     renderer = ExactRenderer(room_renderer.scene)
-    calls = {"shaded": 0, "bare": 0, "anchors": 0, "rays": 0}
+    calls = {"shaded": 0, "bare": 0, "anchors": 0, "rays": 0, "interpolated": 0, "in_bare": False}
+    calls |= {"edge searches": 0, "edges followed": 0}
     render, shade = renderer.render, renderer.cast_and_shade
 
     def counted_render(*args, colour: bool = True, **kwargs):
         calls["shaded" if colour else "bare"] += 1
-        return render(*args, colour=colour, **kwargs)
+        calls["in_bare"] = not colour
+        try:
+            return render(*args, colour=colour, **kwargs)
+        finally:
+            calls["in_bare"] = False
 
-    def counted_shade(origins, directions, pixel_angle, colour, geometry):
+    def counted_shade(origins, directions, pixel_angle, colour, geometry, normals=True):
         calls["rays"] += len(origins) if colour else 0
-        return shade(origins, directions, pixel_angle, colour, geometry)
+        calls["interpolated"] += len(origins) if normals and calls["in_bare"] else 0
+        return shade(origins, directions, pixel_angle, colour, geometry, normals)
 
     monkeypatch.setattr(renderer, "render", counted_render)
     monkeypatch.setattr(renderer, "cast_and_shade", counted_shade)
     monkeypatch.setattr(differentiable_module, "render_anchor", _counting(differentiable_module.render_anchor, calls))
+    search, follow = differentiable_module.find_edge_pairs, differentiable_module.track_edge_pairs
+    monkeypatch.setattr(differentiable_module, "find_edge_pairs", _counting(search, calls, "edge searches"))
+    monkeypatch.setattr(differentiable_module, "track_edge_pairs", _counting(follow, calls, "edges followed"))
     camera = renderer.scene.cameras[0]
     config = DiffRenderConfig(values="warp", refresh="every_k", every_k=4, layers=2)
     differentiable = DifferentiableRenderer(renderer, config)
@@ -125,6 +135,9 @@ def test_between_refreshes_the_warp_renders_no_shaded_image(room_renderer: Exact
             warped_rays += calls["rays"] - before
     # refreshes at steps 0, 4 and 8 (an anchor and a frame each), and step 9 validated exactly
     assert calls["anchors"] == 3 and calls["shaded"] == 4 and calls["bare"] == 6
+    assert calls["interpolated"] == 0  # the bare casts interpolate no shading normals
+    # the exact frames search their occlusion edges; the warped steps follow the last search's
+    assert calls["edge searches"] == 4 and calls["edges followed"] == 6
     # the warped steps (1-3 and 5-7) shaded only their holes: far fewer rays than their frames'
     assert 0 < warped_rays < 0.15 * 6 * config.supersample**2 * (48 + 2) * (64 + 2)
 
@@ -148,9 +161,9 @@ def test_the_warp_preset_reads_the_boxed_anchor_at_its_refreshes_too(room_render
         assert out.refreshed == (step % 2 == 0) and float(params.grad.abs().sum()) > 0
 
 
-def _counting(fn, calls: dict):
+def _counting(fn, calls: dict, key: str = "anchors"):
     def counted(*args, **kwargs):
-        calls["anchors"] += 1
+        calls[key] += 1
         return fn(*args, **kwargs)
 
     return counted

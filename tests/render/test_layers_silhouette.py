@@ -5,8 +5,15 @@ import pytest
 import torch
 
 from kadv import box_room
-from kadv.geometry import intrinsics_from_fov, look_at
-from kadv.render import ExactRenderer, find_edge_pairs, render_anchor, silhouette, silhouette_term
+from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam
+from kadv.render import (
+    ExactRenderer,
+    find_edge_pairs,
+    render_anchor,
+    silhouette,
+    silhouette_term,
+    track_edge_pairs,
+)
 from kadv.render.layers import guard_band_intrinsics
 from kadv.render.silhouette import edge_crossings
 from kadv.scenes import Material, assemble_scene
@@ -154,3 +161,28 @@ def test_crossing_of_a_known_edge() -> None:
     assert bool(genuine[0]) and float(t.detach()) == float(10 + 10 * 0.2 / 2 - 10.5)  # u = 11 -> t = 0.5
     t.sum().backward()  # dt/dx of the edge = focal / depth = 5 per vertex pair
     assert np.isclose(float(edge.grad[0, :, 0].sum()), 5.0)
+
+
+def test_edge_pairs_followed_to_a_nearby_view_are_the_pairs_a_search_there_finds() -> None:
+    """A panel's straight outline, moved in the image by a small turn and step of the camera: the
+    pairs followed from the first view, without a ray, are those a search in the second finds, with
+    the same edges and crossings."""
+    renderer = _panel_before_wall()
+    height = width = 32
+    K = intrinsics_from_fov(60.0, height, width)
+    found = find_edge_pairs(renderer, renderer.render(POSE, K, height, width), POSE, K)
+    moved = perturb_world_T_cam(
+        POSE,
+        torch.tensor([[0.004, -0.006, 0.003]], dtype=torch.float64),
+        torch.tensor([[0.03, 0.02, -0.05]], dtype=torch.float64),
+    )
+    exact = renderer.render(moved, K, height, width)
+    searched = find_edge_pairs(renderer, exact, moved, K)
+    followed = track_edge_pairs(renderer, found, POSE, K, exact, moved, K)
+    assert len(searched.a) > 40 and not torch.equal(searched.a, found.a)  # the outline moved
+    order = lambda pairs: torch.argsort(pairs.a * 2 + pairs.horizontal.long())
+    s, f = order(searched), order(followed)
+    for name in ("batch", "a", "b", "horizontal", "edge"):
+        assert torch.equal(getattr(searched, name)[s], getattr(followed, name)[f]), name
+    # the search's crossing is its bisection's last bracket (1/64 of a pixel wide); the followed one exact
+    assert float((searched.t[s] - followed.t[f]).abs().max()) <= 2.0**-7
