@@ -406,6 +406,25 @@ def find_edge_pairs(
     return EdgePairs(*(values.index_select(0, rows) for values in found))
 
 
+def _edge_points(
+    renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torch.Tensor, K: torch.Tensor, width: int
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each pair's edge (N, 2, 3) (world) and the point on it (N, 3) where it crosses the segment
+    between the pair's pixel centres, in views ``world_T_cam`` (B, 4, 4) with intrinsics ``K`` of
+    ``width`` pixels."""
+    device, bi, horizontal = renderer.device, pairs.batch, pairs.horizontal
+    vertices = renderer.surfaces.vertices.double().index_select(0, pairs.edge.reshape(-1)).reshape(-1, 2, 3)
+    pose = check_world_T_cam(world_T_cam).detach().double().to(device)
+    R, c = _rows(pose[:, :3, :3], bi), _rows(pose[:, :3, 3], bi)
+    K_inv = torch.linalg.inv(batched_intrinsics(K, len(pose)).to(device))
+    ya, xa = pairs.a.div(width, rounding_mode="floor"), pairs.a.remainder(width)
+    uv_a = torch.stack([xa + 0.5, ya + 0.5], dim=1).double()
+    uv_b = uv_a + torch.stack([horizontal, ~horizontal], dim=1).double()
+    vertices_cam = mat_vec(R.transpose(1, 2), vertices - c[:, None])
+    share, _ = _edge_parameter(vertices_cam, _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b))
+    return vertices, vertices[:, 0] + share[:, None] * (vertices[:, 1] - vertices[:, 0])
+
+
 def track_edge_pairs(
     renderer: ExactRenderer,
     found: EdgePairs,
@@ -433,56 +452,43 @@ def track_edge_pairs(
     if not len(found.batch):
         return found
     bi, horizontal = found.batch, found.horizontal
-    vertices = renderer.surfaces.vertices.double().index_select(0, found.edge.reshape(-1)).reshape(-1, 2, 3)
-    # the point where the edge crossed its pair's segment in the view it was found in
-    pose = check_world_T_cam(found_world_T_cam).detach().double().to(device)
-    R, c = _rows(pose[:, :3, :3], bi), _rows(pose[:, :3, 3], bi)
-    found_K = batched_intrinsics(found_K, len(pose)).to(device)
-    K_inv = torch.linalg.inv(found_K)
-    ya, xa = found.a.div(width, rounding_mode="floor"), found.a.remainder(width)
-    uv_a = torch.stack([xa + 0.5, ya + 0.5], dim=1).double()
-    uv_b = uv_a + torch.stack([horizontal, ~horizontal], dim=1).double()
-    share, _ = _edge_parameter(
-        mat_vec(R.transpose(1, 2), vertices - c[:, None]), _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b)
-    )
-    point = vertices[:, 0] + share[:, None] * (vertices[:, 1] - vertices[:, 0])
+    vertices, point = _edge_points(renderer, found, found_world_T_cam, found_K, width)
     # the point and the edge's direction in the new view (projected, to first order)
     pose = check_world_T_cam(world_T_cam).detach().double().to(device)
-    KR = _rows(batched_intrinsics(K, batch).to(device) @ pose[:, :3, :3].transpose(1, 2), bi)
+    R_T = _rows(pose[:, :3, :3].transpose(1, 2), bi)
+    KR = _rows(batched_intrinsics(K, batch).to(device), bi) @ R_T
     projected = mat_vec(KR, point - _rows(pose[:, :3, 3], bi))
     z = projected[:, 2].clamp_min(_MIN_PROJECTED_Z)
     uv = projected[:, :2] / z[:, None]
     towards = mat_vec(KR, vertices[:, 1] - vertices[:, 0])
     direction = (towards[:, :2] - uv * towards[:, 2:3]) / z[:, None]
-    # the row (or column) of pixel centres nearest the point, and where the edge crosses its centre line
+    # the line of pixel centres (a row for a horizontal pair) nearest the point, where the edge crosses it
     along, across = torch.where(horizontal, uv[:, 1], uv[:, 0]), torch.where(horizontal, uv[:, 0], uv[:, 1])
     d_along = torch.where(horizontal, direction[:, 1], direction[:, 0])
     d_across = torch.where(horizontal, direction[:, 0], direction[:, 1])
-    # steep as the search judges it (:func:`_occluder_edge`), and crossing the line it runs along
-    edge_cam = mat_vec(_rows(pose[:, :3, :3].transpose(1, 2), bi), vertices[:, 1] - vertices[:, 0])
-    steep = edge_cam[:, 1].abs() >= edge_cam[:, 0].abs()
     line = torch.floor(along)
     across = across + (line + 0.5 - along) * d_across / torch.where(d_along != 0, d_along, 1.0)
     first = torch.floor(across - 0.5)
-    t = across - (first + 0.5)
-    row, column = torch.where(horizontal, line, first).long(), torch.where(horizontal, first, line).long()
+    row = torch.where(horizontal, line, first).clamp(-1, height).long()
+    column = torch.where(horizontal, first, line).clamp(-1, width).long()
+    # steep as the search judges it (:func:`_occluder_edge`)
+    edge_cam = mat_vec(R_T, vertices[:, 1] - vertices[:, 0])
     inside = (
-        (steep == horizontal) & (d_along != 0) & (projected[:, 2] > _MIN_PROJECTED_Z) & (row >= 0) & (column >= 0)
+        ((edge_cam[:, 1].abs() >= edge_cam[:, 0].abs()) == horizontal) & (d_along != 0)
+        & (projected[:, 2] > _MIN_PROJECTED_Z) & (row >= 0) & (column >= 0)
         & (row < height - (~horizontal).long()) & (column < width - horizontal.long())
     )  # fmt: skip
     a = torch.where(inside, row * width + column, 0)
     b = a + torch.where(horizontal, 1, width)
-    z_map = torch.where(depth > 0, depth, torch.inf).reshape(batch, -1)
-    flat_ids = ids.reshape(batch, -1)
-    keep = inside & _jumps(
-        _pixels(z_map, bi, a), _pixels(z_map, bi, b), _pixels(flat_ids, bi, a), _pixels(flat_ids, bi, b)
-    )
+    z_map, flat_ids = torch.where(depth > 0, depth, torch.inf).reshape(batch, -1), ids.reshape(batch, -1)
+    jumps = _jumps(*(_pixels(z_map, bi, p) for p in (a, b)), *(_pixels(flat_ids, bi, p) for p in (a, b)))
     # one pair per pixel pair and direction: the first crossing that lands there
-    rows = torch.nonzero(keep)[:, 0]
-    key = (bi.index_select(0, rows) * 2 + horizontal.index_select(0, rows)) * (height * width) + a.index_select(0, rows)
-    unique, group = torch.unique(key, return_inverse=True)
+    rows = torch.nonzero(inside & jumps)[:, 0]
+    key = (bi * 2 + horizontal) * (height * width) + a
+    unique, group = torch.unique(key.index_select(0, rows), return_inverse=True)
     firsts = torch.full((len(unique),), len(rows), dtype=torch.int64, device=device)
     rows = rows.index_select(0, firsts.scatter_reduce(0, group, torch.arange(len(rows), device=device), "amin"))
+    t = across - (first + 0.5)
     return EdgePairs(*(values.index_select(0, rows) for values in (bi, a, b, horizontal, found.edge, t)))
 
 
