@@ -201,26 +201,14 @@ class ExactRenderer:
     ) -> tuple[RayHits, dict[str, torch.Tensor]]:
         """Hits and shaded maps (:meth:`Shader.shade`) of rays (N, 3) float64 on the renderer's
         device, cast and shaded in parts of at most :attr:`max_rays`."""
-        parts = [
-            self._cast_and_shade(o, d, pixel_angle, colour, geometry, normals)
-            for o, d in zip(origins.split(self.max_rays), directions.split(self.max_rays))
-        ]
+        parts = []
+        for o, d in zip(origins.split(self.max_rays), directions.split(self.max_rays)):
+            hits = self.cast(o, d)
+            parts.append((hits, self.shader.shade(hits, o, d, pixel_angle, colour, geometry, normals)))
         if len(parts) == 1:
             return parts[0]
         hits = RayHits(*(torch.cat([getattr(h, f.name) for h, _ in parts]) for f in fields(RayHits)))
         return hits, {key: torch.cat([maps[key] for _, maps in parts]) for key in parts[0][1]}
-
-    def _cast_and_shade(
-        self,
-        origins: torch.Tensor,
-        directions: torch.Tensor,
-        pixel_angle: float,
-        colour: bool,
-        geometry: bool,
-        normals: bool,
-    ) -> tuple[RayHits, dict[str, torch.Tensor]]:
-        hits = self.cast(origins, directions)
-        return hits, self.shader.shade(hits, origins, directions, pixel_angle, colour, geometry, normals)
 
     def _with_reflections(
         self,
