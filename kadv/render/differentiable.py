@@ -29,8 +29,6 @@ from kadv.render.straight_through import straight_through
 
 __all__ = ["DiffRenderConfig", "DiffRenderOutput", "DifferentiableRenderer", "WarpAgreement"]
 
-# what a search's pairs carry besides the marks of an uncompacted search
-_PAIR_FIELDS = ("batch", "a", "b", "horizontal", "edge", "t")
 # Missed pixels hold depth 0; the relative depth error divides by at least this (they are invalid anyway).
 _MIN_DEPTH = 1e-6
 
@@ -276,10 +274,7 @@ class DifferentiableRenderer:
             return track_edge_pairs(self.renderer, *self._searched_edges, frame.rendered, current, frame.K)
         pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K, self.compact_edges)
         if self.config.values == "warp":
-            found = (
-                pairs if pairs.keep is None else EdgePairs(*(getattr(pairs, name)[pairs.keep] for name in _PAIR_FIELDS))
-            )
-            self._searched_edges = (found, current, frame.K)
+            self._searched_edges = (pairs.compacted(), current, frame.K)
         return pairs
 
     def _due_for_refresh(self, K: torch.Tensor, height: int, width: int) -> bool:

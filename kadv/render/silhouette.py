@@ -64,6 +64,12 @@ class EdgePairs:
     keep: torch.Tensor | None = None
     blocks: tuple[int, ...] | None = None
 
+    def compacted(self) -> EdgePairs:
+        """The pairs that are occlusion edges alone (an uncompacted search's kept ones)."""
+        if self.keep is None:
+            return self
+        return EdgePairs(*(getattr(self, f.name)[self.keep] for f in fields(self) if f.name not in ("keep", "blocks")))
+
     def to(self, device: torch.device | str) -> EdgePairs:
         return EdgePairs(
             *(v.to(device) if isinstance(v := getattr(self, f.name), torch.Tensor) else v for f in fields(self))

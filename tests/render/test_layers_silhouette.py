@@ -120,8 +120,11 @@ def test_the_uncompacted_search_keeps_the_compacted_pairs_and_gives_the_same_gra
     every = find_edge_pairs(renderer, exact, poses, K, compact=False)
     assert compacted.keep is None and len(compacted.a) > 10 and set(compacted.batch.tolist()) == {0, 1}
     assert len(every.a) == 2 * (24 * 31 + 23 * 32)  # each view's horizontal and vertical neighbours
+    kept = every.compacted()
+    assert kept.keep is None and kept.blocks is None and compacted.compacted() is compacted
     for name in ("batch", "a", "b", "horizontal", "edge", "t"):
         assert torch.equal(getattr(every, name)[every.keep], getattr(compacted, name)), name
+        assert torch.equal(getattr(kept, name), getattr(compacted, name)), name
     values = torch.cat([exact.rgb, exact.depth], dim=1)
     weights = torch.rand(values.shape, generator=torch.Generator().manual_seed(0))
     gradients = []
