@@ -18,7 +18,7 @@ from kadv.render.irradiance import BakedLighting
 from kadv.render.layers import AnchorLayers, BoxedLayers, render_anchor
 from kadv.render.lights import scene_lights
 from kadv.render.shading import Shading
-from kadv.render.silhouette import EdgePairs, find_edge_pairs, silhouette_term, track_edge_pairs
+from kadv.render.silhouette import EdgePairs, FoundEdges, find_edge_pairs, silhouette_term, track_edge_pairs
 from kadv.render.surface import Surfaces
 from kadv.render.textures import sample_texture
 
@@ -32,6 +32,7 @@ __all__ = [
     "DifferentiableRenderer",
     "EdgePairs",
     "ExactRenderer",
+    "FoundEdges",
     "RayHits",
     "RenderOutput",
     "Reprojection",

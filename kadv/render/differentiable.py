@@ -24,7 +24,7 @@ from kadv.geometry.pose import perturb_world_T_cam
 from kadv.render.dibr import Reprojection, reproject, warp_boxed
 from kadv.render.exact import ExactRenderer, RenderOutput, pixel_angle, views_apart
 from kadv.render.layers import RING, AnchorLayers, camera_face_normals, render_anchor, ring_view
-from kadv.render.silhouette import EdgePairs, find_edge_pairs, silhouette_term, track_edge_pairs
+from kadv.render.silhouette import EdgePairs, FoundEdges, find_edge_pairs, silhouette_term, track_edge_pairs
 from kadv.render.straight_through import straight_through
 
 __all__ = ["DiffRenderConfig", "DiffRenderOutput", "DifferentiableRenderer", "WarpAgreement"]
@@ -171,8 +171,8 @@ class DifferentiableRenderer:
         self._anchor_key: _ViewKey | None = None
         self._steps_since_refresh = 0
         self._exact_next = False
-        # the last edge search's pairs (compacted), poses and intrinsics, followed between refreshes
-        self._searched_edges: tuple[EdgePairs, torch.Tensor, torch.Tensor] | None = None
+        # the last edge search's pairs and crossing points, followed between refreshes
+        self._searched_edges: FoundEdges | None = None
 
     @property
     def compact_edges(self) -> bool:
@@ -271,10 +271,10 @@ class DifferentiableRenderer:
         followed from the last search between refreshes (:func:`~kadv.render.track_edge_pairs`),
         which casts no ray."""
         if warped:
-            return track_edge_pairs(self.renderer, *self._searched_edges, frame.rendered, current, frame.K)
+            return track_edge_pairs(self.renderer, self._searched_edges, frame.rendered, current, frame.K)
         pairs = find_edge_pairs(self.renderer, frame.rendered, current, frame.K, self.compact_edges)
         if self.config.values == "warp":
-            self._searched_edges = (pairs.compacted(), current, frame.K)
+            self._searched_edges = FoundEdges.of(self.renderer, pairs, frame.rendered, current, frame.K)
         return pairs
 
     def _due_for_refresh(self, K: torch.Tensor, height: int, width: int) -> bool:

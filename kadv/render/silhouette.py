@@ -26,7 +26,7 @@ from kadv.render.exact import ExactRenderer, RenderOutput
 from kadv.render.straight_through import straight_through
 from kadv.render.surface import Surfaces
 
-__all__ = ["EdgePairs", "edge_crossings", "find_edge_pairs", "silhouette_term", "track_edge_pairs"]
+__all__ = ["EdgePairs", "FoundEdges", "edge_crossings", "find_edge_pairs", "silhouette_term", "track_edge_pairs"]
 
 _BISECTION_STEPS = 6
 # bisection steps one cast decides (:func:`_bisect`): on a GPU a cast's cost is its launches (three
@@ -412,38 +412,48 @@ def find_edge_pairs(
     return EdgePairs(*(values.index_select(0, rows) for values in found))
 
 
-def _edge_points(
-    renderer: ExactRenderer, pairs: EdgePairs, world_T_cam: torch.Tensor, K: torch.Tensor, width: int
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Each pair's edge (N, 2, 3) (world) and the point on it (N, 3) where it crosses the segment
-    between the pair's pixel centres, in views ``world_T_cam`` (B, 4, 4) with intrinsics ``K`` of
-    ``width`` pixels."""
-    device, bi, horizontal = renderer.device, pairs.batch, pairs.horizontal
-    vertices = renderer.surfaces.vertices.double().index_select(0, pairs.edge.reshape(-1)).reshape(-1, 2, 3)
-    pose = check_world_T_cam(world_T_cam).detach().double().to(device)
-    R, c = _rows(pose[:, :3, :3], bi), _rows(pose[:, :3, 3], bi)
-    K_inv = torch.linalg.inv(batched_intrinsics(K, len(pose)).to(device))
-    ya, xa = pairs.a.div(width, rounding_mode="floor"), pairs.a.remainder(width)
+def _pair_centres(a: torch.Tensor, horizontal: torch.Tensor, width: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Pixel coordinates (N, 2) float64 of the centres of pairs' pixels a (N,) (flat indices in
+    images ``width`` wide) and b (a's right neighbour where ``horizontal``, else the one below)."""
+    ya, xa = a.div(width, rounding_mode="floor"), a.remainder(width)
     uv_a = torch.stack([xa + 0.5, ya + 0.5], dim=1).double()
-    uv_b = uv_a + torch.stack([horizontal, ~horizontal], dim=1).double()
-    vertices_cam = mat_vec(R.transpose(1, 2), vertices - c[:, None])
-    share, _ = _edge_parameter(vertices_cam, _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b))
-    return vertices, vertices[:, 0] + share[:, None] * (vertices[:, 1] - vertices[:, 0])
+    return uv_a, uv_a + torch.stack([horizontal, ~horizontal], dim=1).double()
+
+
+@dataclass
+class FoundEdges:
+    """What :func:`track_edge_pairs` follows from one edge search: its pairs (compacted), each
+    pair's edge (N, 2, 3) and the point on it (N, 3) where it crossed the segment between the
+    pair's pixel centres (world frame), on the renderer's device. Computed once a search."""
+
+    pairs: EdgePairs
+    vertices: torch.Tensor
+    points: torch.Tensor
+
+    @classmethod
+    def of(
+        cls, renderer: ExactRenderer, pairs: EdgePairs, exact: RenderOutput, world_T_cam: torch.Tensor, K: torch.Tensor
+    ) -> FoundEdges:
+        """The pairs :func:`find_edge_pairs` found in ``exact``, rendered at ``world_T_cam`` (B, 4,
+        4) with intrinsics ``K``."""
+        pairs = pairs.compacted()
+        device, bi = renderer.device, pairs.batch
+        vertices = renderer.surfaces.vertices.double().index_select(0, pairs.edge.reshape(-1)).reshape(-1, 2, 3)
+        pose = check_world_T_cam(world_T_cam).detach().double().to(device)
+        R, c = _rows(pose[:, :3, :3], bi), _rows(pose[:, :3, 3], bi)
+        K_inv = torch.linalg.inv(batched_intrinsics(K, len(pose)).to(device))
+        uv_a, uv_b = _pair_centres(pairs.a, pairs.horizontal, exact.depth.shape[-1])
+        vertices_cam = mat_vec(R.transpose(1, 2), vertices - c[:, None])
+        share, _ = _edge_parameter(vertices_cam, _rays(K_inv, bi, uv_a), _rays(K_inv, bi, uv_b))
+        return cls(pairs, vertices, vertices[:, 0] + share[:, None] * (vertices[:, 1] - vertices[:, 0]))
 
 
 def track_edge_pairs(
-    renderer: ExactRenderer,
-    found: EdgePairs,
-    found_world_T_cam: torch.Tensor,
-    found_K: torch.Tensor,
-    exact: RenderOutput,
-    world_T_cam: torch.Tensor,
-    K: torch.Tensor,
+    renderer: ExactRenderer, found: FoundEdges, exact: RenderOutput, world_T_cam: torch.Tensor, K: torch.Tensor
 ) -> EdgePairs:
-    """The occlusion-edge pairs ``found`` (:func:`find_edge_pairs`, compacted) in views at
-    ``found_world_T_cam`` with intrinsics ``found_K``, followed to nearby views ``world_T_cam`` (B,
-    4, 4) with intrinsics ``K`` whose cast is ``exact`` (the same size), without a ray: between a
-    warp's refreshes, the outlines are the anchor's, moved.
+    """The occlusion-edge pairs of a search (``found``), followed to nearby views ``world_T_cam``
+    (B, 4, 4) with intrinsics ``K`` whose cast is ``exact`` (the searched render's size), without a
+    ray: between a warp's refreshes, the outlines are the anchor's, moved.
 
     Each pair's crossing is a point on its occluder's edge; projected into the new view, the edge
     crosses the pixel row (a horizontal pair's) or column nearest to it between two pixel centres,
@@ -455,10 +465,9 @@ def track_edge_pairs(
     device = renderer.device
     depth, ids = exact.depth[:, 0].double().to(device), exact.triangle_ids[:, 0].to(device)
     batch, height, width = depth.shape
-    if not len(found.batch):
-        return found
-    bi, horizontal = found.batch, found.horizontal
-    vertices, point = _edge_points(renderer, found, found_world_T_cam, found_K, width)
+    if not len(found.pairs.batch):
+        return found.pairs
+    bi, horizontal, vertices, point = found.pairs.batch, found.pairs.horizontal, found.vertices, found.points
     # the point and the edge's direction in the new view (projected, to first order)
     pose = check_world_T_cam(world_T_cam).detach().double().to(device)
     R_T = _rows(pose[:, :3, :3].transpose(1, 2), bi)
@@ -495,7 +504,7 @@ def track_edge_pairs(
     firsts = torch.full((len(unique),), len(rows), dtype=torch.int64, device=device)
     rows = rows.index_select(0, firsts.scatter_reduce(0, group, torch.arange(len(rows), device=device), "amin"))
     t = across - (first + 0.5)
-    return EdgePairs(*(values.index_select(0, rows) for values in (bi, a, b, horizontal, found.edge, t)))
+    return EdgePairs(*(values.index_select(0, rows) for values in (bi, a, b, horizontal, found.pairs.edge, t)))
 
 
 def _pair_poses(world_T_cam: torch.Tensor, pairs: EdgePairs) -> tuple[torch.Tensor, torch.Tensor]:
@@ -539,9 +548,7 @@ def silhouette_term(
     R, c = _pair_poses(world_T_cam, pairs)
     vertices = renderer.surfaces.vertices.to(pose_device)[pairs.edge]  # (N, 2, 3) world
     vertices_cam = (vertices - c[:, None]) @ R  # R^T (v - c), row-vector form
-    ya, xa = pairs.a.div(width, rounding_mode="floor"), pairs.a.remainder(width)
-    uv_a = torch.stack([xa + 0.5, ya + 0.5], dim=1).double()
-    uv_b = uv_a + torch.stack([pairs.horizontal, ~pairs.horizontal], dim=1).double()
+    uv_a, uv_b = _pair_centres(pairs.a, pairs.horizontal, width)
     K_inv = torch.linalg.inv_ex(K)[0][bi]  # per view; inv_ex: no wait to check for singular matrices
     ones = torch.ones(len(bi), 1, dtype=torch.float64, device=pose_device)
     rays_a = (K_inv @ torch.cat([uv_a, ones], 1)[..., None])[..., 0]

@@ -8,6 +8,7 @@ from kadv import box_room
 from kadv.geometry import intrinsics_from_fov, look_at, perturb_world_T_cam
 from kadv.render import (
     ExactRenderer,
+    FoundEdges,
     find_edge_pairs,
     render_anchor,
     silhouette,
@@ -173,7 +174,8 @@ def test_edge_pairs_followed_to_a_nearby_view_are_the_pairs_a_search_there_finds
     renderer = _panel_before_wall()
     height = width = 32
     K = intrinsics_from_fov(60.0, height, width)
-    found = find_edge_pairs(renderer, renderer.render(POSE, K, height, width), POSE, K)
+    searched_first = renderer.render(POSE, K, height, width)
+    found = find_edge_pairs(renderer, searched_first, POSE, K)
     moved = perturb_world_T_cam(
         POSE,
         torch.tensor([[0.004, -0.006, 0.003]], dtype=torch.float64),
@@ -181,7 +183,7 @@ def test_edge_pairs_followed_to_a_nearby_view_are_the_pairs_a_search_there_finds
     )
     exact = renderer.render(moved, K, height, width)
     searched = find_edge_pairs(renderer, exact, moved, K)
-    followed = track_edge_pairs(renderer, found, POSE, K, exact, moved, K)
+    followed = track_edge_pairs(renderer, FoundEdges.of(renderer, found, searched_first, POSE, K), exact, moved, K)
     assert len(searched.a) > 40 and not torch.equal(searched.a, found.a)  # the outline moved
     order = lambda pairs: torch.argsort(pairs.a * 2 + pairs.horizontal.long())
     s, f = order(searched), order(followed)
