@@ -35,6 +35,7 @@ from kadv.attack import AttackConfig, GradientSettings, Objective, Study, StudyS
 from kadv.geometry import intrinsics_from_fov, perturb_world_T_cam
 from kadv.losses import LossConfig
 from kadv.models import load_model
+from kadv.penalties import distance_to_surface
 from kadv.render import DiffRenderConfig, ExactRenderer, render_anchor
 from kadv.render.dibr import warp_boxed
 from kadv.render.layers import camera_face_normals
@@ -131,10 +132,15 @@ def preset_steps(study: Study, view, device: torch.device) -> dict[str, float]:
     renderer = study.renderer
     K = intrinsics_from_fov(view.fov_x_deg, HEIGHT, WIDTH)
     base = view.world_T_cam.double().reshape(1, 4, 4)
-    # small moves along a line, a few millimetres and tenths of a degree a step (an Adam run's scale)
+    # small moves along a line, about a centimetre and a few tenths of a degree a step (an Adam run's
+    # scale), in the room's free space as a search's steps are (the step guard keeps them there)
     moves = [
-        torch.tensor([[0.0, 0.004, 0.002, 0.01, 0.004, 0.006]], dtype=torch.float64) * i for i in range(PRESET_STEPS)
+        torch.tensor([[0.0, 0.004, 0.002, -0.01, -0.004, -0.006]], dtype=torch.float64) * i for i in range(PRESET_STEPS)
     ]
+    path = torch.cat([perturb_world_T_cam(base, move[:, :3], move[:, 3:]) for move in moves])
+    clearance = float(distance_to_surface(renderer, path[:, :3, 3]).min())
+    if clearance < study.settings.penalty.margin:
+        raise SystemExit(f"profile_step: the path of small moves comes within {clearance:.3f} m of a surface")
     weights = torch.linspace(-1.0, 1.0, 4 * HEIGHT * WIDTH, device=device).reshape(1, 4, HEIGHT, WIDTH)
     out = {}
     for name in ("exact", "warp"):

@@ -325,7 +325,8 @@ def reproject(
 
 
 # The smooth lookups of warp_boxed: half a fine pixel away diagonally. A bilinear lookup's derivative
-# at a pixel centre is a one-sided difference; the mean of these four is central.
+# at a pixel centre is a one-sided difference; the mean of these four is central, and is one lookup of
+# BoxedLayers.diagonal_means half a pixel on.
 _DIAGONALS = ((-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5))
 # a lookup whose taps all hit surfaces reads a hit fraction of 1 (bilinear weights sum to 1 up to rounding)
 _FULL = 1.0 - 1e-4
@@ -352,8 +353,9 @@ def warp_boxed(
     pixel's colour and the depth's gradient (its value is the exact depth it was tested against);
     the next layer is read only at the pixels where the layers before it failed. Values come from
     the lookup at q; gradients, where it is differentiable in the pose, from the mean of four
-    lookups half a fine pixel away diagonally (:data:`_DIAGONALS`), where all four hold (elsewhere
-    the pixel's value carries no gradient: the silhouette term's).
+    lookups half a fine pixel away diagonally (:data:`_DIAGONALS`; one lookup of
+    :attr:`BoxedLayers.diagonal_means`), where all four hold (elsewhere the pixel's value carries
+    no gradient: the silhouette term's).
 
     Args:
         boxed: the anchor's box-filtered layers (:attr:`AnchorLayers.boxed`), on ``depth``'s device.
@@ -411,7 +413,7 @@ def _read_layers(
     todo = hit
     for layer in range(boxed.maps.shape[1]):
         if layer == 0:  # every pixel: no compaction
-            c, z, ok = _lookup(boxed.maps[:, 0], q, points_A, P_T_A, tolerance, smooth)
+            c, z, ok = _lookup(boxed, 0, q, points_A, P_T_A, tolerance, smooth)
             ok = ok & hit
             colour, warped = torch.where(ok[:, None], c, colour), torch.where(ok, z, warped)
             layer_used, todo = torch.where(ok, 0, layer_used), todo & ~ok
@@ -425,7 +427,7 @@ def _read_layers(
         live = torch.arange(most, device=device)[None] < count[:, None]
         q_todo = q.gather(1, index[..., None].expand(-1, -1, 2))
         expected = points_A.gather(1, index[..., None].expand(-1, -1, 3))
-        c, z, ok = _lookup(boxed.maps[:, layer], q_todo, expected, P_T_A, tolerance, smooth)
+        c, z, ok = _lookup(boxed, layer, q_todo, expected, P_T_A, tolerance, smooth)
         ok = ok & live
         spread = index[:, None].expand(-1, 3, -1)
         colour = colour.scatter(2, spread, torch.where(ok[:, None], c, colour.gather(2, spread)))
@@ -456,24 +458,24 @@ def _on_surface(points_P: torch.Tensor, normals_P: torch.Tensor, A_T_P: torch.Te
 
 
 def _lookup(
-    maps: torch.Tensor,
+    boxed: BoxedLayers,
+    layer: int,
     q: torch.Tensor,
     expected: torch.Tensor,
     P_T_A: torch.Tensor,
     tolerance: float,
     smooth: bool,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """One boxed layer (B, 10, h, w) read at boxed-pixel coordinates q (B, M, 2), whose points should
-    be ``expected`` (B, M, 3, anchor frame): colour (B, 3, M), current-frame z-depth (B, M) and
-    whether the lookup holds (B, M). With ``smooth``, the gradients of the diagonal lookups."""
-    height, width = maps.shape[-2:]
-    scale = q.new_tensor([2.0 / width, 2.0 / height])
+    """Boxed layer ``layer`` read at boxed-pixel coordinates q (B, M, 2), whose points should be
+    ``expected`` (B, M, 3, anchor frame): colour (B, 3, M), current-frame z-depth (B, M) and whether
+    the lookup holds (B, M). With ``smooth``, the gradients of the diagonal lookups' mean."""
+    maps = boxed.maps[:, layer]
 
     def read_at(channels: torch.Tensor, grid: torch.Tensor) -> torch.Tensor:
-        """Maps (B, C, h, w) read at (B, lookups, M, 2): (B, C, lookups, M)."""
+        """Maps (B, C, h, w) read at pixel coordinates (B, lookups, M, 2): (B, C, lookups, M)."""
         # grid_sample's coordinates with align_corners=False: pixel i's centre, i + 0.5, at (2i + 1) / n - 1
-        grid = (grid * scale - 1.0).to(maps.dtype)
-        return F.grid_sample(channels, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+        scale = grid.new_tensor([2.0 / channels.shape[-1], 2.0 / channels.shape[-2]])
+        return F.grid_sample(channels, (grid * scale - 1.0).to(maps.dtype), align_corners=False)
 
     with torch.no_grad():
         centre = read_at(maps[:, :7], q.detach()[:, None])[:, :, 0]
@@ -486,17 +488,16 @@ def _lookup(
     holds = (centre[:, 6] >= _FULL) & (near <= tolerance * tolerance)  # (B, M)
     colour, point = centre[:, 0:3], centre[:, 3:6]
     if smooth:
-        # the diagonal lookups, half a pixel away, must each read a point on its own plane: the
-        # values read with their gradient, the hit fraction and the normals without (a slice of
-        # one read would zero-fill a copy of all of it in the backward pass)
-        grid = q[:, None] + q.new_tensor(_DIAGONALS)[:, None]
-        diagonal = read_at(maps[:, :6], grid)
+        # each diagonal lookup, half a pixel away, must read a point on its own plane (read without
+        # their gradient: that comes from one lookup of their mean); a pixel's four lookups side by
+        # side, where they share taps (half the time of four passes over the pixels on this CPU)
         with torch.no_grad():
-            tests = read_at(maps[:, 6:10], grid.detach())
-            off, n = diagonal[:, 3:6] - expected[:, :, None], tests[:, 1:4]
+            grid = (q.detach()[:, :, None] + q.new_tensor(_DIAGONALS)).reshape(len(q), 1, -1, 2)
+            tests = read_at(maps[:, 3:10], grid).reshape(len(q), 7, -1, len(_DIAGONALS))
+            off, n = tests[:, 0:3] - expected[..., None], tests[:, 4:7]
             on_plane = (off[:, 0] * n[:, 0] + off[:, 1] * n[:, 1] + off[:, 2] * n[:, 2]).abs()
-            both = ((tests[:, 0] >= _FULL) & (on_plane <= tolerance[:, None])).all(1)[:, None]
-        mean = diagonal.mean(2)
+            both = ((tests[:, 3] >= _FULL) & (on_plane <= tolerance[..., None])).all(-1)[:, None]
+        mean = read_at(boxed.diagonal_means[:, layer], q[:, None] + 0.5)[:, :, 0]
         colour = torch.where(both, straight_through(mean[:, 0:3], onto=colour), colour)
         point = torch.where(both, straight_through(mean[:, 3:6], onto=point), point)
     z = transform_points(P_T_A[:, None], point.transpose(1, 2))[..., 2]

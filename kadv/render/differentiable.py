@@ -83,9 +83,11 @@ class DiffRenderConfig:
 
     def __post_init__(self) -> None:
         if self.values not in ("exact", "warp"):
-            raise ValueError(f"render.values must be 'exact' or 'warp', got {self.values!r}")
+            raise ValueError(f"render.differentiable.values must be 'exact' or 'warp', got {self.values!r}")
         if self.refresh not in ("always", "on_drift", "every_k"):
-            raise ValueError(f"render.refresh must be 'always', 'on_drift' or 'every_k', got {self.refresh!r}")
+            raise ValueError(
+                f"render.differentiable.refresh must be 'always', 'on_drift' or 'every_k', got {self.refresh!r}"
+            )
         if self.edge_search not in ("auto", "compact", "every_pair"):
             raise ValueError(
                 f"render.differentiable.edge_search must be 'auto', 'compact' or 'every_pair', got {self.edge_search!r}"
@@ -93,7 +95,10 @@ class DiffRenderConfig:
         if not isinstance(self.cuda_graphs, bool):
             raise ValueError(f"render.differentiable.cuda_graphs must be true or false, got {self.cuda_graphs!r}")
         if self.layers < 1 or self.supersample < 1 or self.guard_band < 0 or self.every_k < 1:
-            raise ValueError("render.layers, supersample and every_k must be >= 1 and guard_band >= 0")
+            raise ValueError(
+                "render.differentiable.layers, supersample and every_k must be >= 1 and guard_band >= 0, got "
+                f"{self.layers}, {self.supersample}, {self.every_k} and {self.guard_band}"
+            )
         if not (self.depth_tolerance > 0 and self.plane_tolerance > 0):
             raise ValueError(
                 "render.differentiable.depth_tolerance and plane_tolerance must be positive, got "

@@ -93,6 +93,15 @@ class BoxedLayers:
     K: torch.Tensor
     maps: torch.Tensor
 
+    @cached_property
+    def diagonal_means(self) -> torch.Tensor:
+        """(B, L, 6, h + 1, w + 1) the colour and point of each 2 x 2 block of the maps (zero beyond
+        them): pixel (i, j) is the mean of maps (i - 1 .. i, j - 1 .. j), centred on the maps' pixel
+        corner (i, j). Its bilinear lookup at q is the mean of the maps' four lookups at q +- (1/2,
+        1/2), to rounding (both are piecewise linear with the same knots): one lookup for four."""
+        padded = torch.nn.functional.pad(self.maps[:, :, 0:6], (1, 1, 1, 1))
+        return _box_reduce(padded, 2, torch.empty_like(padded[..., 1:, 1:]), torch.add).mul_(0.25)
+
     @classmethod
     def of(cls, anchor: AnchorLayers) -> BoxedLayers:
         """Box-filter ``anchor``'s colour, points and normals (mean) and its mask (least) over s x s

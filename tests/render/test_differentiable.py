@@ -59,8 +59,10 @@ def test_bad_pose_params(room_renderer: ExactRenderer) -> None:
         )
     with pytest.raises(ValueError, match=r"\(B, 6\)"):
         DifferentiableRenderer(room_renderer)(torch.zeros(6), camera.world_T_cam[None], K_SMALL, 48, 64)
-    with pytest.raises(ValueError, match=r"render.values"):
+    with pytest.raises(ValueError, match=r"render\.differentiable\.values"):
         DiffRenderConfig(values="magic")
+    with pytest.raises(ValueError, match=r"render\.differentiable\.layers.*got 0,"):
+        DiffRenderConfig(layers=0)
 
 
 def _trajectory(step: int, steps: int) -> torch.Tensor:

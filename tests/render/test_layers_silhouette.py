@@ -80,6 +80,33 @@ def test_the_boxed_layers_are_each_block_s_mean_and_its_mask_s_least() -> None:
     assert 0 < float(least[1].mean()) < 1 and float(least[0].min()) == 1.0
 
 
+def test_one_lookup_of_the_diagonal_means_is_the_mean_of_four_lookups_half_a_pixel_away() -> None:
+    """The warp's gradient lookup: the boxed colour and point read at q + 1/2 in the diagonal means
+    equal the mean of the four bilinear lookups at q +- (1/2, 1/2), in value and in their slopes in
+    q, across the panel's outline and off the maps' edges too (zero beyond them)."""
+    renderer = _panel_before_wall()
+    anchor = render_anchor(renderer, POSE, intrinsics_from_fov(60.0, 16, 16), 16, 16, guard_band=2, supersample=2)
+    boxed = anchor.boxed
+    maps, means = boxed.maps[:, 0, 0:6], boxed.diagonal_means[:, 0]
+    assert means.shape[-2:] == (maps.shape[-2] + 1, maps.shape[-1] + 1)
+    generator = torch.Generator().manual_seed(0)
+    size = torch.tensor([maps.shape[-1], maps.shape[-2]], dtype=torch.float32)
+    q = (torch.rand(1, 400, 2, generator=generator) * (size + 2) - 1).requires_grad_(True)
+
+    def read(image: torch.Tensor, pixels: torch.Tensor) -> torch.Tensor:
+        scale = 2.0 / torch.tensor([image.shape[-1], image.shape[-2]], dtype=torch.float32)
+        return torch.nn.functional.grid_sample(image, pixels * scale - 1.0, align_corners=False)
+
+    diagonals = torch.tensor([[-0.5, -0.5], [0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]])
+    four = read(maps, q[:, None] + diagonals[:, None]).mean(2)
+    one = read(means, q[:, None] + 0.5)[:, :, 0]
+    torch.testing.assert_close(one, four, rtol=1e-5, atol=1e-5)
+    assert float(four[:, 0:3].detach().std()) > 0.1  # the lookups saw both the panel and the wall
+    weights = torch.randn(four.shape, generator=generator)
+    slopes_four, slopes_one = (torch.autograd.grad((v * weights).sum(), q)[0] for v in (four, one))
+    torch.testing.assert_close(slopes_one, slopes_four, rtol=1e-4, atol=1e-4)
+
+
 def test_guard_band_widens_the_view_around_the_same_centre() -> None:
     renderer = _panel_before_wall()
     K = intrinsics_from_fov(60.0, 16, 16)
