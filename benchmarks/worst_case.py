@@ -658,6 +658,15 @@ def parse_shares(parser: argparse.ArgumentParser, item: str) -> tuple[float, ...
     return values
 
 
+def seed_list(parser: argparse.ArgumentParser, option: str, text: str, empty: bool = False) -> list[int]:
+    """The seeds of a comma-separated option (``empty``: '' gives none); a bad one ends the script in
+    one line (exit status 2)."""
+    items = [item.strip() for item in text.split(",")] if text or not empty else []
+    if not all(item.isdigit() for item in items):
+        parser.error(f"{option}: non-negative integers, comma-separated, got {text!r}")
+    return [int(item) for item in items]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="outputs/worst_case")
@@ -691,7 +700,9 @@ def main() -> None:
     if not budgets or len(budgets) != len(args.budgets.split(",")) or min(budgets) < MIN_BUDGET:
         parser.error(f"--budgets: integers of at least {MIN_BUDGET}, comma-separated, got {args.budgets!r}")
     shares = [parse_shares(parser, item) for item in args.shares.split(",")]
-    seeds = [int(s) for s in args.seeds.split(",")]
+    seeds = seed_list(parser, "--seeds", args.seeds)
+    reference, study_seeds = (seed_list(parser, f"--{key}", getattr(args, key.replace("-", "_")), empty=True)
+                              for key in ("reference-seeds", "study-seeds"))  # fmt: skip
     if len(seeds) < 2:
         parser.error("--seeds: at least two, for the search noise")
     most: dict[str, int] = {}  # checked before any scene is built
@@ -706,14 +717,13 @@ def main() -> None:
     views = {name: min(len(cell.views), most.get(name, math.inf)) for name, cell in cells.items()}
     figures = {"passes_per_view": str(args.budget * len(DEFAULT_RADII))}
     if "regret" in parts:
-        reference = [int(s) for s in args.reference_seeds.split(",") if s]
         figures |= regret_part(Runs(Store(out), cells, views, seeds, args.budget, labels, reference))
     if "proxy" in parts:
         figures |= proxy_part(cells, out)
     if "budgets" in parts:
         figures |= budgets_part(Store(out), cells, views, seeds, budgets, args.budget_methods.split(","), shares)
     if "study" in parts:
-        figures |= study_part(Store(out), cells, [int(s) for s in args.study_seeds.split(",")], args.budget)
+        figures |= study_part(Store(out), cells, study_seeds, args.budget)
     print("worst_case " + " ".join(f"{k}={v}" for k, v in figures.items()))
 
 
