@@ -701,8 +701,8 @@ def main() -> None:
         parser.error(f"--budgets: integers of at least {MIN_BUDGET}, comma-separated, got {args.budgets!r}")
     shares = [parse_shares(parser, item) for item in args.shares.split(",")]
     seeds = seed_list(parser, "--seeds", args.seeds)
-    reference, study_seeds = (seed_list(parser, f"--{key}", getattr(args, key.replace("-", "_")), empty=True)
-                              for key in ("reference-seeds", "study-seeds"))  # fmt: skip
+    reference = seed_list(parser, "--reference-seeds", args.reference_seeds, empty=True)
+    study_seeds = seed_list(parser, "--study-seeds", args.study_seeds, empty=True)
     if len(seeds) < 2:
         parser.error("--seeds: at least two, for the search noise")
     most: dict[str, int] = {}  # checked before any scene is built
