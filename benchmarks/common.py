@@ -67,6 +67,18 @@ def check_names(parser: argparse.ArgumentParser, options: dict[str, tuple[list[s
             parser.error(f"{option}: no {', '.join(sorted(set(given) - set(known)))}; choose from {', '.join(known)}")
 
 
+def integer_list(
+    parser: argparse.ArgumentParser, option: str, text: str, least: int = 0, empty: bool = False
+) -> list[int]:
+    """The integers of a comma-separated option, each at least ``least`` (``empty``: '' gives none);
+    a bad one ends the script in one line (exit status 2)."""
+    items = [item.strip() for item in text.split(",")] if text or not empty else []
+    if not all(item.isdigit() and int(item) >= least for item in items):
+        kind = "non-negative integers" if least == 0 else f"integers of at least {least}"
+        parser.error(f"{option}: {kind}, comma-separated, got {text!r}")
+    return [int(item) for item in items]
+
+
 def default_lighting() -> str:
     """The lighting the commands render the benchmarks' scenes with by default (``render.lighting`` in
     conf/render/exact.yaml; ``auto`` is ``baked`` for a scene that is not a scan)."""

@@ -194,7 +194,7 @@ def main() -> None:
     out, parts = Path(args.out), args.parts.split(",")
     probes = list(PROBES) if args.probes == "all" else args.probes.split(",")
     common.check_names(parser, {"--parts": (parts, PARTS), "--probes": (probes, list(PROBES))})
-    seeds = [int(s) for s in args.seeds.split(",")]
+    seeds = common.integer_list(parser, "--seeds", args.seeds)
     tiny, dpt = load_model("kadv_tiny"), load_model("kadv_tiny_dpt")
 
     def cells(model: DepthModel, method: str = DEFAULT_METHOD) -> Cells:

@@ -658,15 +658,6 @@ def parse_shares(parser: argparse.ArgumentParser, item: str) -> tuple[float, ...
     return values
 
 
-def seed_list(parser: argparse.ArgumentParser, option: str, text: str, empty: bool = False) -> list[int]:
-    """The seeds of a comma-separated option (``empty``: '' gives none); a bad one ends the script in
-    one line (exit status 2)."""
-    items = [item.strip() for item in text.split(",")] if text or not empty else []
-    if not all(item.isdigit() for item in items):
-        parser.error(f"{option}: non-negative integers, comma-separated, got {text!r}")
-    return [int(item) for item in items]
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="outputs/worst_case")
@@ -696,13 +687,11 @@ def main() -> None:
         parser.error("--methods: the default is what the benchmark scores; name it")
     if args.budget < MIN_BUDGET:
         parser.error(f"--budget: at least {MIN_BUDGET} model passes (the default search's floor), got {args.budget}")
-    budgets = [int(b) for b in args.budgets.split(",") if b.strip().isdigit()]
-    if not budgets or len(budgets) != len(args.budgets.split(",")) or min(budgets) < MIN_BUDGET:
-        parser.error(f"--budgets: integers of at least {MIN_BUDGET}, comma-separated, got {args.budgets!r}")
+    budgets = common.integer_list(parser, "--budgets", args.budgets, least=MIN_BUDGET)
     shares = [parse_shares(parser, item) for item in args.shares.split(",")]
-    seeds = seed_list(parser, "--seeds", args.seeds)
-    reference = seed_list(parser, "--reference-seeds", args.reference_seeds, empty=True)
-    study_seeds = seed_list(parser, "--study-seeds", args.study_seeds, empty=True)
+    seeds = common.integer_list(parser, "--seeds", args.seeds)
+    reference = common.integer_list(parser, "--reference-seeds", args.reference_seeds, empty=True)
+    study_seeds = common.integer_list(parser, "--study-seeds", args.study_seeds, empty=True)
     if len(seeds) < 2:
         parser.error("--seeds: at least two, for the search noise")
     most: dict[str, int] = {}  # checked before any scene is built
