@@ -375,7 +375,10 @@ def warp_boxed(
     # pixels without a surface get a stand-in depth so that no NaN enters the graph; they stay invalid
     depth = torch.where(depth > 0, depth, torch.ones_like(depth))
     points_P = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False).reshape(batch, -1, 3)
-    points_A = _on_surface(points_P, normals.detach().to(device, _DTYPE).flatten(2).transpose(1, 2), A_T_P)
+    if torch.is_grad_enabled() and (A_T_P.requires_grad or K.requires_grad):
+        points_A = _on_surface(points_P, normals.detach().to(device, _DTYPE).flatten(2).transpose(1, 2), A_T_P)
+    else:  # the same points in value, without the plane that only shapes their gradient
+        points_A = transform_points(A_T_P[:, None].to(device, _DTYPE), points_P)
     q = project_points(points_A, boxed.K[:, None].to(device, _DTYPE, non_blocking=True))
     q = torch.where(torch.isfinite(q) & (points_A[..., 2:] > 0), q, torch.full_like(q, _OFF_IMAGE))
     P_T_A = torch.linalg.inv_ex(A_T_P.double())[0].to(device, _DTYPE)  # inv_ex: no wait for its check

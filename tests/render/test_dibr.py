@@ -109,6 +109,30 @@ def test_at_the_anchor_pose_the_lean_warp_reads_the_closed_form_values_and_slope
     assert float(cosine) > 0.99, float(cosine)
 
 
+def test_without_a_gradient_a_moved_view_reads_what_it_reads_with_one() -> None:
+    """Under no_grad the warp maps each pixel's point to the anchor as a rigid transform; with a
+    gradient it meets the surface's plane, which moves only the gradient: the pixels that hold and
+    the values they read are the same (to float32 rounding)."""
+    renderer = ExactRenderer(box_room(seed=0))
+    pose, K = renderer.scene.cameras[0].world_T_cam.double()[None], intrinsics_from_fov(60.0, H, W)
+    moved = perturb_world_T_cam(
+        pose,
+        torch.tensor([[0.01, -0.02, 0.0]], dtype=torch.float64),
+        torch.tensor([[0.03, 0.0, -0.05]], dtype=torch.float64),
+    )
+    anchor = render_anchor(renderer, pose, K, H, W, guard_band=4, supersample=2)
+    exact = renderer.render(moved, K, H, W)
+    normals = camera_face_normals(renderer.surfaces, exact.triangle_ids[:, 0], moved).permute(0, 3, 1, 2)
+    A_T_P = torch.linalg.inv(pose) @ moved
+    with torch.no_grad():
+        plain = dibr.warp_boxed(anchor.boxed, exact.depth, normals, A_T_P, K)
+    graded = dibr.warp_boxed(anchor.boxed, exact.depth, normals, A_T_P.clone().requires_grad_(True), K)
+    assert float(plain.valid.float().mean()) > 0.8
+    assert torch.equal(plain.valid, graded.valid)
+    torch.testing.assert_close(plain.rgb, graded.rgb.detach(), rtol=0, atol=1e-4)
+    torch.testing.assert_close(plain.depth, graded.depth.detach(), rtol=1e-6, atol=0)
+
+
 def test_the_closed_form_taps_are_the_same_in_bands_as_at_once(monkeypatch) -> None:
     """The CPU computes the taps in bands of rows, a GPU the batch at once: the rows' arithmetic is
     the same either way, so values and gradients are equal bit for bit."""
