@@ -35,8 +35,9 @@ import tempfile
 import time
 from collections.abc import Callable
 
-import torch
 from common import device_and_backend, fastest_seconds, load_bench_scene, timings
+
+import torch
 from transformers import DepthAnythingConfig, DepthAnythingForDepthEstimation, Dinov2Config
 
 from kadv.attack import AttackConfig, GradientSettings, Objective, Study, StudySettings, attack, file_init_views
@@ -148,6 +149,10 @@ class FixedRender:
 
     def reset(self) -> None:
         """Nothing to forget (the attack calls it before each init view)."""
+
+    def validate_next(self) -> None:
+        """Nothing to validate: every call gives the one render's output (the attack calls it before
+        the views a run ends on)."""
 
     def __call__(
         self, params: torch.Tensor, base: torch.Tensor, K: torch.Tensor, height: int, width: int

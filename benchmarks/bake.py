@@ -25,9 +25,9 @@ from common import REAL_SCENES, scene_file, scenes_root
 
 _CHILD = """
 import json, resource, sys, time
-import numpy as np, torch
 sys.path.insert(0, {here!r})
-from common import load_bench_scene
+from common import load_bench_scene  # first: kadv's runtime settings, before torch loads
+import numpy as np, torch
 from kadv.render import BakeConfig, ExactRenderer, Shading
 from kadv.scenes import procedural_room
 

@@ -20,8 +20,9 @@ import argparse
 import dataclasses
 import time
 
-import numpy as np
 from common import add_backend_option, checked_backend, render_preset, scenes_root
+
+import numpy as np
 
 from kadv.diagnostics import FUNCTIONALS, gradient_check_poses
 from kadv.render import ExactRenderer, Shading

@@ -5,9 +5,10 @@ Run: .venv/bin/python benchmarks/penalty.py
 
 from __future__ import annotations
 
+from common import median_seconds, scenes_root
+
 import numpy as np
 import torch
-from common import median_seconds, scenes_root
 
 from kadv.penalties import distance_to_surface, step_guard, view_validity
 from kadv.render import ExactRenderer

@@ -23,8 +23,9 @@ import time
 from collections import defaultdict
 from collections.abc import Callable
 
-import torch
 from common import device_and_backend, load_bench_scene, median_seconds, render_preset
+
+import torch
 from torch.profiler import ProfilerActivity, profile
 
 import kadv.attack.objective

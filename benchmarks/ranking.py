@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 import common  # first: kadv's runtime settings, before torch starts its thread pool
+
 import numpy as np
 import torch
 

@@ -33,6 +33,7 @@ import sys
 from pathlib import Path
 
 from common import REAL_SCENES, default_lighting, scene_file
+
 from tqdm import tqdm
 
 from kadv.attack import InitViewConfig, PenaltyConfig, file_init_views, sample_init_views

@@ -8,8 +8,9 @@ from __future__ import annotations
 import argparse
 import statistics
 
-import torch
 from common import add_backend_option, bench_scenes, checked_backend, median_seconds
+
+import torch
 
 from kadv.geometry import pixel_rays
 from kadv.render import DifferentiableRenderer, DiffRenderConfig, ExactRenderer

@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 
 import common  # noqa: F401  (first: kadv's runtime settings, before torch starts its thread pool)
+
 import numpy as np
 
 ROOM_EDGE = 0.05  # metres: the tile's triangles, as a fine reconstruction's

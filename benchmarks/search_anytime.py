@@ -27,12 +27,10 @@ import sys
 import time
 from pathlib import Path
 
-import matplotlib
+from common import REAL_SCENES, default_lighting, load_bench_scene
 
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-from common import REAL_SCENES, default_lighting, load_bench_scene
 
 from kadv.attack import (
     AttackConfig,

@@ -24,8 +24,9 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Callable
 
-import torch
 from profile_step import HEIGHT, WIDTH, tiny_attack, wrap_phases
+
+import torch
 from torch.optim.optimizer import register_optimizer_step_post_hook
 from torch.utils._python_dispatch import TorchDispatchMode
 

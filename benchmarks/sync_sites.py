@@ -18,6 +18,8 @@ import warnings
 from collections import Counter
 from pathlib import Path
 
+import common  # noqa: F401  first: kadv's runtime settings, before torch starts its thread pool
+
 import torch
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -24,8 +24,9 @@ import argparse
 import statistics
 from pathlib import Path
 
-import torch
 from common import REAL_SCENES, default_lighting, scene_file, timings
+
+import torch
 
 from kadv.attack import InitViewConfig, sample_valid_views
 from kadv.datasets import HELD_OUT_SEED, RoomMix, ViewBatch, render_procedural_views

@@ -84,6 +84,7 @@ import time
 from pathlib import Path
 
 import common  # first: kadv's runtime settings, before torch starts its thread pool
+
 import matplotlib
 import numpy as np
 import torch
