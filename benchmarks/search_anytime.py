@@ -296,7 +296,7 @@ def main() -> None:
     parser.add_argument("--scenes", default=",".join(("box_room", *REAL_SCENES)))
     parser.add_argument("--sampled", type=int, default=1, help="sampled init views per scene (beside the file camera)")
     parser.add_argument("--seconds", type=float, default=10.0, help="the budget per init view and pair")
-    parser.add_argument("--methods", default="gradient,random,cma,nevergrad,hybrid,hybrid@0.5")
+    parser.add_argument("--methods", default="halving,gradient,random,cma,nevergrad,hybrid,hybrid@0.5")
     parser.add_argument("--lighting", default=default_lighting(), choices=["direct", "baked"])
     parser.add_argument("--seed", type=int, default=0, help="seeds the sampled init views and the searches")
     parser.add_argument("--device", default="cpu")
