@@ -375,10 +375,7 @@ def warp_boxed(
     # pixels without a surface get a stand-in depth so that no NaN enters the graph; they stay invalid
     depth = torch.where(depth > 0, depth, torch.ones_like(depth))
     points_P = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False).reshape(batch, -1, 3)
-    if torch.is_grad_enabled() and (A_T_P.requires_grad or K.requires_grad):
-        points_A = _on_surface(points_P, normals.detach().to(device, _DTYPE).flatten(2).transpose(1, 2), A_T_P)
-    else:  # the same points in value, without the plane that only shapes their gradient
-        points_A = transform_points(A_T_P[:, None].to(device, _DTYPE), points_P)
+    points_A = _on_surface(points_P, normals.detach().to(device, _DTYPE).flatten(2).transpose(1, 2), A_T_P)
     q = project_points(points_A, boxed.K[:, None].to(device, _DTYPE, non_blocking=True))
     q = torch.where(torch.isfinite(q) & (points_A[..., 2:] > 0), q, torch.full_like(q, _OFF_IMAGE))
     P_T_A = torch.linalg.inv_ex(A_T_P.double())[0].to(device, _DTYPE)  # inv_ex: no wait for its check
@@ -441,14 +438,17 @@ def _read_layers(
 
 
 def _on_surface(points_P: torch.Tensor, normals_P: torch.Tensor, A_T_P: torch.Tensor) -> torch.Tensor:
-    """Anchor-frame points (B, N, 3) of current-frame points (B, N, 3) (detached), equal in value
+    """Anchor-frame points (B, N, 3) of current-frame points (B, N, 3), equal in value
     to A_T_P X_P and differentiable as the point where each pixel's ray meets its surface's plane
-    (normals (B, N, 3), current frame), which stays put in the anchor's frame as the pose moves."""
+    (normals (B, N, 3), current frame), which stays put in the anchor's frame as the pose moves.
+    Where no gradient is wanted, A_T_P X_P itself: the plane only shapes the gradient."""
     A_T_P = A_T_P.to(points_P.device, _DTYPE)
     # row vectors times R^T: one matrix product a view, whose backward is one more (a broadcast
     # product of N 3 x 3 matrices would sum N of them)
     rotation_T, origin = A_T_P[:, :3, :3].transpose(1, 2), A_T_P[:, None, :3, 3].expand_as(points_P)
     ray = points_P @ rotation_T  # the pixel's ray in the anchor frame, to the hit
+    if not ray.requires_grad:  # no gradient enabled, or none in the pose and the intrinsics
+        return ray + origin
     normal = normals_P @ rotation_T.detach()
     hit = (ray + origin).detach()
     plane = Hyperplane(Vector3(normal), Scalar(-dot(normal, hit)))
