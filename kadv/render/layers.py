@@ -86,8 +86,8 @@ class BoxedLayers:
 
     Attributes:
         K: (B, 3, 3) intrinsics of the boxed images (the fine anchor's, shifted by the block's centre).
-        maps: (B, L, 10, Hs - s + 1, Ws - s + 1) float32: colour (3), anchor-frame point (3), 1
-            where every sample of the block hit a surface (else 0), and anchor-frame face normal (3).
+        maps: (B, L, 7, Hs - s + 1, Ws - s + 1) float32: colour (3), anchor-frame point (3) and 1
+            where every sample of the block hit a surface (else 0).
     """
 
     K: torch.Tensor
@@ -104,18 +104,14 @@ class BoxedLayers:
 
     @classmethod
     def of(cls, anchor: AnchorLayers) -> BoxedLayers:
-        """Box-filter ``anchor``'s colour, points and normals (mean) and its mask (least) over s x s
+        """Box-filter ``anchor``'s colour and points (mean) and its mask (least) over s x s
         blocks at every fine pixel (stride 1), written straight into the maps: sums of shifted
         slices, a fifth of the time of avg_pool2d and max_pool2d over a concatenated copy on the CPU."""
         s = anchor.supersample
         batch, layers, _, height, width = anchor.rgb.shape
         size = (height - s + 1, width - s + 1)
-        maps = anchor.rgb.new_empty(batch, layers, 10, *size)
-        for source, channels in (
-            (anchor.rgb, slice(0, 3)),
-            (anchor.points, slice(3, 6)),
-            (anchor.normals, slice(7, 10)),
-        ):
+        maps = anchor.rgb.new_empty(batch, layers, 7, *size)
+        for source, channels in ((anchor.rgb, slice(0, 3)), (anchor.points, slice(3, 6))):
             _box_reduce(source, s, maps[:, :, channels], torch.add).div_(s * s)
         full = _box_reduce(anchor.mask, s, torch.empty_like(anchor.mask[..., : size[0], : size[1]]), torch.logical_and)
         maps[:, :, 6:7] = full
