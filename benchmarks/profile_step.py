@@ -39,6 +39,7 @@ from kadv.models import load_model
 from kadv.penalties import distance_to_surface
 from kadv.render import DiffRenderConfig, ExactRenderer, render_anchor
 from kadv.render.dibr import warp_boxed
+from kadv.render.layers import camera_face_normals
 
 HEIGHT, WIDTH = 240, 320
 EVAL_BATCH = 8
@@ -163,8 +164,9 @@ def preset_steps(study: Study, view, device: torch.device) -> dict[str, float]:
 
     def reprojection() -> None:
         cast = renderer.render(moved, K, HEIGHT, WIDTH, colour=False)
+        normals = camera_face_normals(renderer.surfaces, cast.triangle_ids[:, 0], moved).permute(0, 3, 1, 2)
         with torch.no_grad():
-            warp_boxed(boxed, cast.depth.to(device), A_T_P.to(device), K, preset.depth_tolerance)
+            warp_boxed(boxed, cast.depth.to(device), normals.to(device), A_T_P.to(device), K, preset.depth_tolerance)
 
     out["reprojection"] = median_seconds(reprojection) * 1e3
     print(f"\nrender presets on {device}, grey_white_room {HEIGHT}x{WIDTH} (ms; steps: forward and backward)")

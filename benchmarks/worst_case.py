@@ -102,7 +102,7 @@ from kadv.geometry import perturb_world_T_cam
 from kadv.io import atomic_write
 from kadv.models import load_model
 from kadv.render.dibr import Reprojection, warp_boxed
-from kadv.render.layers import render_anchor
+from kadv.render.layers import camera_face_normals, render_anchor
 from kadv.testing.options import CheckOptions, setup
 from kadv.testing.profile import DEFAULT_RADII, WARM_STARTS, warm_starts
 
@@ -546,12 +546,11 @@ def _proxy_cell(cell: Cells, degrees: float, metres: float) -> dict:
             b.renderer.render(chunk, context.K, height, width, colour=False)  # what the warp's depth test needs
             cast = time.perf_counter() - started
             started = time.perf_counter()
+            normals = camera_face_normals(b.renderer.surfaces, cheap.triangle_ids[:, 0], chunk).permute(0, 3, 1, 2)
             A_T_P = torch.linalg.inv(anchor.world_T_cam) @ chunk
             # view by view, as a search warps them: one anchor's maps, read in place
-            warps = [
-                warp_boxed(anchor.boxed, cheap.depth[i : i + 1], A_T_P[i : i + 1], context.K, diff.depth_tolerance)
-                for i in range(len(chunk))
-            ]
+            warps = [warp_boxed(anchor.boxed, cheap.depth[i : i + 1], normals[i : i + 1].float(), A_T_P[i : i + 1],
+                                context.K, diff.depth_tolerance) for i in range(len(chunk))]  # fmt: skip
             warp = Reprojection(
                 *(torch.cat([getattr(w, f) for w in warps]) for f in ("rgb", "depth", "valid", "layer"))
             )

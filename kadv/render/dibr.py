@@ -9,7 +9,7 @@ at q. Depth is the z of the anchor point read there, mapped back with P_T_A.
   and tests per pixel that the point read is the point expected (the same surface seen from both
   poses). Layers behind the first are read only where those before failed. (Not kornia's
   ``warp_frame_depth``: it takes one camera matrix for both frames, where the guard band moves the
-  anchor's principal point and the box filter its scale.)
+  anchor's principal point and the box filter its scale, and holds the point fixed along the ray.)
 - At the anchor's own pose (:func:`reproject` with ``at_anchor``), the samples sit on the anchor's
   pixel centres: each sub-sample's taps are tested against its own triangle's plane and the values
   and slopes come in closed form (:func:`_anchor_layer_pixels`), exact to the last bit. This is
@@ -30,6 +30,9 @@ import torch
 from kornia.geometry.camera.perspective import project_points
 from kornia.geometry.depth import depth_to_3d_v2
 from kornia.geometry.linalg import transform_points
+from kornia.geometry.line import ParametrizedLine
+from kornia.geometry.plane import Hyperplane
+from kornia.geometry.vector import Scalar, Vector3
 from torch.nn import functional as F
 
 from kadv.checks import check_shape
@@ -297,7 +300,7 @@ def reproject(
     K = batched_intrinsics(K, batch)
     check_shape(normals, "B 3 H W", "normals", sizes)
     if not _at_anchor(anchor, A_T_P, K, height, width, at_anchor):
-        return warp_boxed(anchor.boxed, depth, A_T_P, K, depth_tolerance)
+        return warp_boxed(anchor.boxed, depth, normals, A_T_P, K, depth_tolerance)
     device = depth.device
     depth = depth.detach().to(_DTYPE)
     valid_pixel = (depth[:, 0] > 0).reshape(batch, height * width)
@@ -328,17 +331,17 @@ _FULL = 1.0 - 1e-4
 def warp_boxed(
     boxed: BoxedLayers,
     depth: torch.Tensor,
+    normals: torch.Tensor,
     A_T_P: torch.Tensor,
     K: torch.Tensor,
     tolerance: float = 0.01,
 ) -> Reprojection:
     """Warp box-filtered anchor layers into current views: one bilinear lookup per pixel.
 
-    Each current pixel's point X_P (its exact depth along the pixel-centre ray, held fixed in the
-    current camera's frame) goes to the anchor, X_A = A_T_P X_P, and is looked up at its projection
-    q with ``grid_sample``. (Near the anchor, the only place a warp is read, this is the gradient of
-    the point sliding along its surface to first order: the two differ by a move along the ray, which
-    the anchor, seen from nearly the same centre, projects to nearly no move of q.)
+    Each current pixel's point X_P (its exact depth along the pixel-centre ray) goes to the anchor,
+    X_A = A_T_P X_P, and is looked up at its projection q with ``grid_sample``. As the pose moves,
+    X_A moves where the pixel's ray meets the plane of the surface it hit (fixed in the anchor's
+    frame): away from the anchor's own pose, the point sliding along the surface moves q too.
 
     A lookup holds if its taps all hit a surface and the point it reads lies within ``tolerance``
     (relative to depth) of X_A: the same surface, seen from both poses (one depth test per pixel).
@@ -351,12 +354,13 @@ def warp_boxed(
     Args:
         boxed: the anchor's box-filtered layers (:attr:`AnchorLayers.boxed`), on ``depth``'s device.
         depth: (B, 1, H, W) exact z-depth of the current views (detached; 0 = no surface).
+        normals: (B, 3, H, W) current-camera-frame normals of the surfaces the pixels hit.
         A_T_P: (B, 4, 4) current-to-anchor camera transform, differentiable in the pose.
         K: (3, 3) or (B, 3, 3) intrinsics of the current views.
         tolerance: the depth test's relative tolerance.
     """
     sizes = check_shape(depth, "B 1 H W", "depth")
-    check_shape(A_T_P, "B 4 4", "A_T_P", sizes)
+    check_shape(A_T_P, "B 4 4", "A_T_P", check_shape(normals, "B 3 H W", "normals", sizes))
     batch, _, height, width = depth.shape
     device = depth.device
     K = batched_intrinsics(K, batch).to(device, _DTYPE, non_blocking=True)
@@ -365,10 +369,7 @@ def warp_boxed(
     # pixels without a surface get a stand-in depth so that no NaN enters the graph; they stay invalid
     depth = torch.where(depth > 0, depth, torch.ones_like(depth))
     points_P = depth_to_3d_v2(depth[:, 0], _shift_half_pixel(K), normalize_points=False).reshape(batch, -1, 3)
-    A_T_P32 = A_T_P.to(device, _DTYPE)
-    # row vectors times R^T, one matrix product a view: forward and backward 2.4 ms here, kornia's
-    # transform_points (homogeneous coordinates, padded and divided by again) 6.1
-    points_A = points_P @ A_T_P32[:, :3, :3].transpose(1, 2) + A_T_P32[:, None, :3, 3]
+    points_A = _on_surface(points_P, normals.detach().to(device, _DTYPE).flatten(2).transpose(1, 2), A_T_P)
     q = project_points(points_A, boxed.K[:, None].to(device, _DTYPE, non_blocking=True))
     q = torch.where(torch.isfinite(q) & (points_A[..., 2:] > 0), q, torch.full_like(q, _OFF_IMAGE))
     P_T_A = torch.linalg.inv_ex(A_T_P.double())[0].to(device, _DTYPE)  # inv_ex: no wait for its check
@@ -430,6 +431,29 @@ def _read_layers(
     return colour, warped, layer_used
 
 
+def _on_surface(points_P: torch.Tensor, normals_P: torch.Tensor, A_T_P: torch.Tensor) -> torch.Tensor:
+    """Anchor-frame points (B, N, 3) of current-frame points (B, N, 3), equal in value
+    to A_T_P X_P and differentiable as the point where each pixel's ray meets its surface's plane
+    (normals (B, N, 3), current frame), which stays put in the anchor's frame as the pose moves.
+    Where no gradient is wanted, A_T_P X_P itself: the plane only shapes the gradient."""
+    A_T_P = A_T_P.to(points_P.device, _DTYPE)
+    # row vectors times R^T: one matrix product a view, whose backward is one more (a broadcast
+    # product of N 3 x 3 matrices would sum N of them)
+    rotation_T, origin = A_T_P[:, :3, :3].transpose(1, 2), A_T_P[:, None, :3, 3].expand_as(points_P)
+    ray = points_P @ rotation_T  # the pixel's ray in the anchor frame, to the hit
+    if not ray.requires_grad:  # no gradient enabled, or none in the pose and the intrinsics
+        return ray + origin
+    normal = normals_P @ rotation_T.detach()
+    hit = (ray + origin).detach()
+    plane = Hyperplane(Vector3(normal), Scalar(-dot(normal, hit)))
+    # kornia's intersection needs |n . direction| above an absolute eps: the unit ray's
+    length = ray.detach().norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    grazing = dot(normal, ray.detach() / length).abs() < _GRAZING_COSINE
+    _, point = ParametrizedLine(origin, ray / length).intersect(plane, eps=_GRAZING_COSINE)
+    # a ray grazing its plane keeps the point it hit, moving with the camera
+    return torch.where(grazing[..., None], ray + origin, point)
+
+
 def _lookup(
     boxed: BoxedLayers,
     layer: int,
@@ -466,11 +490,11 @@ def _lookup(
     # are linear); across an occlusion edge, or where a tap missed, it is pulled off: those pixels'
     # values carry no gradient (the silhouette term's)
     off = mean[:, 3:6].detach() - centre[:, 3:6]
-    smooth = (off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1] + off[:, 2] * off[:, 2] <= tolerance * tolerance)[:, None]
-    colour = torch.where(smooth, straight_through(mean[:, 0:3], onto=colour), colour)
-    point = torch.where(smooth, straight_through(mean[:, 3:6], onto=point), point)
+    planar = (off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1] + off[:, 2] * off[:, 2] <= tolerance * tolerance)[:, None]
+    colour = torch.where(planar, straight_through(mean[:, 0:3], onto=colour), colour)
+    point = torch.where(planar, straight_through(mean[:, 3:6], onto=point), point)
     z = _z_in(P_T_A, point)
-    return colour, torch.where(smooth[:, 0], z, z.detach()), holds  # a point that moves with nothing
+    return colour, torch.where(planar[:, 0], z, z.detach()), holds  # a point that moves with nothing
 
 
 def _z_in(P_T_A: torch.Tensor, points_A: torch.Tensor) -> torch.Tensor:

@@ -142,7 +142,7 @@ class _ExactFrame:
     """One call's exact frame: ``rendered`` (the frame and its ring, on the caster's device),
     ``exact`` (the frame), ``K`` of ``rendered``, the index of the frame ``inside`` it, and on the
     renderer's device the ring's rgb (B, 3, ...) and depth, the frame's rgb, depth, mask and
-    camera-frame normals (None where the boxed warp reads the anchor, which needs none)."""
+    camera-frame normals (None where the values come from the warp)."""
 
     rendered: RenderOutput
     exact: RenderOutput
@@ -298,10 +298,8 @@ class DifferentiableRenderer:
         border, K_render, render_height, render_width, inside = self._render_view(K, height, width)
         rendered = self._exact_render(current, K_render, render_height, render_width, border, anchor)
         exact = rendered.cropped(border) if border else rendered
-        normals = None  # the closed form's (values "exact"); the boxed warp needs none
-        if self.config.values == "exact":
-            normals = camera_face_normals(self.renderer.surfaces, exact.triangle_ids[:, 0], current)
-            normals = normals.permute(0, 3, 1, 2).to(self.device)
+        normals = camera_face_normals(self.renderer.surfaces, exact.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
+        normals = normals.to(self.device)
         rgb_rendered, depth_rendered = rendered.rgb.to(self.device), rendered.depth.to(self.device)
         return _ExactFrame(
             rendered,
@@ -328,7 +326,10 @@ class DifferentiableRenderer:
         cast = self.renderer.render(current, K_render, render_height, render_width, colour=False)
         cast_depth = cast.depth.to(self.device)
         A_T_P = torch.linalg.inv_ex(self.anchor.world_T_cam)[0] @ world_T_cam  # inv_ex: no wait for its check
-        warp = warp_boxed(self.anchor.boxed, cast_depth, A_T_P, K_warp, self.config.depth_tolerance)
+        normals = camera_face_normals(self.renderer.surfaces, cast.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
+        warp = warp_boxed(
+            self.anchor.boxed, cast_depth, normals.to(self.device), A_T_P, K_warp, self.config.depth_tolerance
+        )
         holes = self._shade_holes(current, K_render, render_height, render_width, ~warp.valid)
         rgb = torch.where(warp.valid, warp.rgb, holes)
         depth = torch.where(warp.valid, warp.depth, cast_depth)
@@ -433,7 +434,7 @@ class DifferentiableRenderer:
     def _warp(
         self,
         depth: torch.Tensor,
-        normals: torch.Tensor | None,
+        normals: torch.Tensor,
         world_T_cam: torch.Tensor,
         K: torch.Tensor,
         at_anchor: bool | None,
@@ -442,7 +443,7 @@ class DifferentiableRenderer:
         if self.config.values == "warp":
             # the preset's steps read the boxed anchor, its refreshes too: at the anchor's own pose the
             # lean warp's slopes agree with the closed form's (tests/render/test_dibr.py) at half its cost
-            return warp_boxed(self.anchor.boxed, depth, A_T_P, K, self.config.depth_tolerance)
+            return warp_boxed(self.anchor.boxed, depth, normals, A_T_P, K, self.config.depth_tolerance)
         return reproject(
             self.anchor,
             depth,

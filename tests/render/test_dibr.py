@@ -91,7 +91,7 @@ def test_at_the_anchor_pose_the_lean_warp_reads_the_closed_form_values_and_slope
     results = []
     for warp_of in (
         lambda A_T_P: reproject(anchor, exact.depth, normals, A_T_P, K),
-        lambda A_T_P: dibr.warp_boxed(anchor.boxed, exact.depth, A_T_P, K),
+        lambda A_T_P: dibr.warp_boxed(anchor.boxed, exact.depth, normals, A_T_P, K),
     ):
         params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
         current = perturb_world_T_cam(pose, params[:, :3], params[:, 3:])
@@ -110,7 +110,8 @@ def test_at_the_anchor_pose_the_lean_warp_reads_the_closed_form_values_and_slope
 
 
 def test_without_a_gradient_a_moved_view_reads_what_it_reads_with_one() -> None:
-    """Under no_grad the warp reads each pixel once; with a gradient it reads the diagonal means too,
+    """Under no_grad the warp maps each pixel's point to the anchor as a rigid transform and reads
+    it once; with a gradient the point meets its surface's plane and the diagonal means are read too,
     which shape only the gradient: the pixels that hold and the values they read are the same (to
     float32 rounding)."""
     renderer = ExactRenderer(box_room(seed=0))
@@ -122,10 +123,11 @@ def test_without_a_gradient_a_moved_view_reads_what_it_reads_with_one() -> None:
     )
     anchor = render_anchor(renderer, pose, K, H, W, guard_band=4, supersample=2)
     exact = renderer.render(moved, K, H, W)
+    normals = camera_face_normals(renderer.surfaces, exact.triangle_ids[:, 0], moved).permute(0, 3, 1, 2)
     A_T_P = torch.linalg.inv(pose) @ moved
     with torch.no_grad():
-        plain = dibr.warp_boxed(anchor.boxed, exact.depth, A_T_P, K)
-    graded = dibr.warp_boxed(anchor.boxed, exact.depth, A_T_P.clone().requires_grad_(True), K)
+        plain = dibr.warp_boxed(anchor.boxed, exact.depth, normals, A_T_P, K)
+    graded = dibr.warp_boxed(anchor.boxed, exact.depth, normals, A_T_P.clone().requires_grad_(True), K)
     assert float(plain.valid.float().mean()) > 0.8
     assert torch.equal(plain.valid, graded.valid)
     torch.testing.assert_close(plain.rgb, graded.rgb.detach(), rtol=0, atol=1e-4)
