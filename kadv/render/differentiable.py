@@ -299,7 +299,6 @@ class DifferentiableRenderer:
         rendered = self._exact_render(current, K_render, render_height, render_width, border, anchor)
         exact = rendered.cropped(border) if border else rendered
         normals = camera_face_normals(self.renderer.surfaces, exact.triangle_ids[:, 0], current).permute(0, 3, 1, 2)
-        normals = normals.to(self.device)
         rgb_rendered, depth_rendered = rendered.rgb.to(self.device), rendered.depth.to(self.device)
         return _ExactFrame(
             rendered,
@@ -311,7 +310,7 @@ class DifferentiableRenderer:
             rgb_rendered[inside],
             depth_rendered[inside],
             exact.mask.to(self.device),
-            normals,
+            normals.to(self.device),
         )
 
     def _warped_frame(
