@@ -477,11 +477,9 @@ def _lookup(
         centre = read_at(boxed.maps[:, layer], q.detach()[:, None])
     tolerance = tolerance * expected[..., 2].detach()
     expected = expected.detach().transpose(1, 2)
-    # the lookup must read the point expected (written out channel by channel: a reduction over a
-    # strided channel axis is slow)
-    off = centre[:, 3:6] - expected
-    near = off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1] + off[:, 2] * off[:, 2]
-    holds = (centre[:, 6] >= _FULL) & (near <= tolerance * tolerance)  # (B, M)
+    # the lookup must read the point expected
+    off = (centre[:, 3:6] - expected).mT
+    holds = (centre[:, 6] >= _FULL) & (dot(off, off) <= tolerance * tolerance)  # (B, M)
     colour, point = centre[:, 0:3], centre[:, 3:6]
     if not smooth:
         return colour, _z_in(P_T_A, point), holds
@@ -489,8 +487,8 @@ def _lookup(
     # the four lookups' mean point is the centre's on one plane (bilinear reads of a plane's points
     # are linear); across an occlusion edge, or where a tap missed, it is pulled off: those pixels'
     # values carry no gradient (the silhouette term's)
-    off = mean[:, 3:6].detach() - centre[:, 3:6]
-    planar = (off[:, 0] * off[:, 0] + off[:, 1] * off[:, 1] + off[:, 2] * off[:, 2] <= tolerance * tolerance)[:, None]
+    off = (mean[:, 3:6].detach() - centre[:, 3:6]).mT
+    planar = (dot(off, off) <= tolerance * tolerance)[:, None]
     colour = torch.where(planar, straight_through(mean[:, 0:3], onto=colour), colour)
     point = torch.where(planar, straight_through(mean[:, 3:6], onto=point), point)
     z = _z_in(P_T_A, point)
