@@ -2,7 +2,8 @@
 
 It checks the configurations the attack runs with: ``conf/render/exact.yaml`` (the default, the
 library's DiffRenderConfig()), ``conf/render/warp.yaml``, and the default without silhouettes. The
-warp preset is checked as it runs between refreshes: its anchor rendered 2 degrees and 5 cm away.
+warp preset is checked as far from its anchor as it ever warps: the anchor rendered just inside its
+reach (``anchor_reach_deg`` and ``anchor_reach_m``: 4 degrees and 10 cm) away.
 
 Per scene: 10 seeded poses (>= 0.3 m from any surface, >= 90% of pixels hit, reference confirmed
 by halving its step to cos >= 0.99), functionals sum(W * rgb) and sum(W * depth), interior and

@@ -36,6 +36,9 @@ __all__ = [
 
 FUNCTIONALS = ("rgb_interior", "depth_interior", "rgb_full", "depth_full")
 FOCAL_WEIGHTS = 8  # weight maps per functional whose focal-length derivatives are compared as one vector
+# a kept anchor is placed this share of its reach away: at the reach itself rounding may put the view
+# beyond it, and the call would render a new anchor instead of warping
+_INSIDE = 0.999
 
 
 def smooth_weights(seed: int, channels: int, height: int, width: int) -> torch.Tensor:
@@ -129,7 +132,7 @@ def check_pose(
     reference_supersample: int = 4,
     steps: tuple[float, ...] = (2e-3, 4e-3),
     edge_jump: float = 0.005,
-    anchor_offset: tuple[float, float] = (2.0, 0.05),
+    anchor_offset: tuple[float, float] | None = None,
     device: str | torch.device = "cpu",
 ) -> dict[str, GradientCheck]:
     """Compare analytic and finite-difference gradients of the four functionals at one pose.
@@ -137,9 +140,11 @@ def check_pose(
     The analytic gradients come from a DifferentiableRenderer on ``device``, the reference from
     exact renders on the CPU. A configuration that keeps its anchor between calls (``refresh``
     every_k or on_drift) is checked between refreshes: its anchor is rendered first ``anchor_offset``
-    (degrees, metres, directions seeded by ``weight_seed``) away. ``steps``: the reference's steps
-    in rotation (radians) and translation (metres) and, to check the focal length's derivative too
-    (square pixels, the principal point kept), its step as a share of the focal length.
+    (degrees, metres, directions seeded by ``weight_seed``) away; None: just inside the
+    configuration's reach (``anchor_reach_deg``, ``anchor_reach_m``), the farthest it warps a view.
+    ``steps``: the reference's steps in rotation (radians) and translation (metres) and, to check
+    the focal length's derivative too (square pixels, the principal point kept), its step as a
+    share of the focal length.
 
     Returns one :class:`GradientCheck` per configuration (the reference is shared); its
     ``step_agreement`` < 0.99 says the reference is not trustworthy there (resample the pose). The
@@ -163,13 +168,15 @@ def check_pose(
         )
         for f, name in enumerate(FUNCTIONALS):
             agreements[name] = min(agreements[name], _cos(focal_full[f], focal_half[f]))
-    away = _offset_params(weight_seed, *anchor_offset)
     results = {}
     for name, config in configs.items():
         differentiable = DifferentiableRenderer(renderer, config, device)
         if config.refresh != "always":
-            differentiable(away, base, K, height, width)
-        pose, focal_length = _analytic(differentiable, base, K, height, width, functionals)
+            offset = anchor_offset or (_INSIDE * config.anchor_reach_deg, _INSIDE * config.anchor_reach_m)
+            differentiable(_offset_params(weight_seed, *offset), base, K, height, width)
+        pose, focal_length, refreshed = _analytic(differentiable, base, K, height, width, functionals)
+        if refreshed and config.refresh != "always":
+            raise ValueError(f"gradient check: anchor_offset {offset} lies beyond {name}'s reach; it checks no warp")
         cosines = {f_name: _blocks(pose[f], half[f]) for f, f_name in enumerate(FUNCTIONALS)}
         if focal:
             cosines = {
@@ -219,9 +226,9 @@ def _focal_reference(maps, base, K, functionals: _Functionals, share: float) -> 
 
 def _analytic(
     differentiable: DifferentiableRenderer, base, K, height: int, width: int, functionals: _Functionals
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, bool]:
     """The functionals' analytic derivatives: in the pose (F, 6), and in the focal length (F, maps)
-    when their weight maps are more than one set."""
+    when their weight maps are more than one set; and whether the call rendered a new anchor."""
     params = torch.zeros(1, 6, dtype=torch.float64, requires_grad=True)
     change = torch.zeros((), dtype=torch.float64, requires_grad=True)  # of the focal length, pixels
     focal = len(functionals.sets) > 1
@@ -229,9 +236,9 @@ def _analytic(
     values = functionals(output.rgb.double().cpu(), output.depth.double().cpu(), every=True)
     pose = np.stack([torch.autograd.grad(v, params, retain_graph=True)[0][0].numpy() for v in values[:, 0]])
     if not focal:
-        return pose, np.zeros((len(values), 0))
+        return pose, np.zeros((len(values), 0)), output.refreshed
     grads = [[float(torch.autograd.grad(v, change, retain_graph=True)[0]) for v in row] for row in values]
-    return pose, np.array(grads)
+    return pose, np.array(grads), output.refreshed
 
 
 def _weights(w_rgb: torch.Tensor, w_depth: torch.Tensor, interior: torch.Tensor) -> list[tuple]:

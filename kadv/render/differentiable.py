@@ -13,6 +13,7 @@ the warp, and shades exactly only the pixels no anchor layer holds (holes, sky).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -20,7 +21,7 @@ import torch
 from kadv.checks import check_shape, check_values
 from kadv.device import resolve_device
 from kadv.geometry.camera import batched_intrinsics
-from kadv.geometry.pose import perturb_world_T_cam
+from kadv.geometry.pose import matrix_to_axis_angle, perturb_world_T_cam
 from kadv.render.dibr import Reprojection, reproject, warp_boxed
 from kadv.render.exact import ExactRenderer, RenderOutput, pixel_angle, views_apart
 from kadv.render.layers import RING, AnchorLayers, camera_face_normals, render_anchor, ring_view
@@ -60,6 +61,11 @@ class DiffRenderConfig:
         cuda_graphs: on CUDA, capture the gradient step in a CUDA graph and replay it
             (:class:`~kadv.attack.capture.StepGraph`) where the anchor is rendered on every step
             (``refresh="always"``); off for debugging.
+        anchor_reach_deg, anchor_reach_m: how far a view may lie from its anchor (rotation angle in
+            degrees, camera centre distance in metres) and still be warped from it; a view beyond
+            either renders a new anchor first, whatever ``refresh`` says. The warp's gradients are
+            checked out to this distance (``benchmarks/gradcheck.py``), and Adam's steps at the
+            default rates carry a view 3-8 degrees and 5-20 cm from its anchor in 4 steps.
         depth_tolerance: relative disagreement between a warped point and the exact one that
             invalidates a pixel.
         plane_tolerance: at the anchor's own pose, relative distance from a tap's surface plane
@@ -78,6 +84,8 @@ class DiffRenderConfig:
     silhouette: bool = True
     edge_search: str = "auto"
     cuda_graphs: bool = True
+    anchor_reach_deg: float = 4.0
+    anchor_reach_m: float = 0.1
     depth_tolerance: float = 0.01
     plane_tolerance: float = 0.02
 
@@ -98,6 +106,11 @@ class DiffRenderConfig:
             raise ValueError(
                 "render.differentiable.layers, supersample and every_k must be >= 1 and guard_band >= 0, got "
                 f"{self.layers}, {self.supersample}, {self.every_k} and {self.guard_band}"
+            )
+        if not (self.anchor_reach_deg > 0 and self.anchor_reach_m > 0):
+            raise ValueError(
+                "render.differentiable.anchor_reach_deg and anchor_reach_m must be positive, got "
+                f"{self.anchor_reach_deg} and {self.anchor_reach_m}"
             )
         if not (self.depth_tolerance > 0 and self.plane_tolerance > 0):
             raise ValueError(
@@ -237,7 +250,7 @@ class DifferentiableRenderer:
         K_view = batched_intrinsics(K, base.shape[0])  # the warps' and the edges' (differentiable)
         K = K_view.detach()  # the casts'
         current = world_T_cam.detach()
-        refreshed = self._due_for_refresh(K, height, width)
+        refreshed = self._due_for_refresh(current, K, height, width)
         warped, exact_next, self._exact_next = False, self._exact_next, False
         if self.config.values == "warp" and not (refreshed or exact_next):
             frame, agreement = self._warped_frame(current, world_T_cam, K_view, height, width)
@@ -282,14 +295,25 @@ class DifferentiableRenderer:
             self._searched_edges = FoundEdges.of(self.renderer, pairs, frame.rendered, current, frame.K)
         return pairs
 
-    def _due_for_refresh(self, K: torch.Tensor, height: int, width: int) -> bool:
+    def _due_for_refresh(self, world_T_cam: torch.Tensor, K: torch.Tensor, height: int, width: int) -> bool:
         c = self.config
         return (
             self.anchor is None
             or _view_key(K, height, width) != self._anchor_key
             or c.refresh == "always"
             or (c.refresh == "every_k" and self._steps_since_refresh >= c.every_k)
+            or self._beyond_reach(world_T_cam)
         )
+
+    def _beyond_reach(self, world_T_cam: torch.Tensor) -> bool:
+        """Whether any of the views (B, 4, 4) lies farther from the anchor than
+        ``anchor_reach_deg`` or ``anchor_reach_m`` (read on the host)."""
+        anchor = self.anchor.world_T_cam.detach().double().cpu()
+        current = world_T_cam.detach().double().cpu()
+        turned = matrix_to_axis_angle(anchor[:, :3, :3].transpose(1, 2) @ current[:, :3, :3]).norm(dim=-1)
+        moved = (current[:, :3, 3] - anchor[:, :3, 3]).norm(dim=-1)
+        c = self.config
+        return bool(((turned > math.radians(c.anchor_reach_deg)) | (moved > c.anchor_reach_m)).any())
 
     def _exact_frame(
         self, current: torch.Tensor, K: torch.Tensor, height: int, width: int, anchor: AnchorLayers | None

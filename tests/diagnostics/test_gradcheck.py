@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from kadv.diagnostics import FUNCTIONALS, gradient_check_poses, occlusion_edge_mask, smooth_weights
+from kadv.diagnostics import FUNCTIONALS, check_pose, gradient_check_poses, occlusion_edge_mask, smooth_weights
 from kadv.geometry import intrinsics_from_fov, look_at
 from kadv.render import DiffRenderConfig, ExactRenderer
 from kadv.scenes import box_room
@@ -53,3 +53,17 @@ def test_the_focal_length_s_derivative_meets_the_pose_s_thresholds() -> None:
     # the silhouette term carries the edges' motion under a zoom: without it the full rgb falls short
     bare = np.array([c.focal_score("rgb_full") for c in checks["no silhouettes"]])
     assert bare.min() < scores[:, 2].min()
+
+
+def test_a_kept_anchor_is_checked_inside_its_reach_and_refused_beyond_it() -> None:
+    """The warp preset is checked where it warps: by default its anchor sits just inside the reach
+    (and the check warps, its gradient nonzero); an offset beyond the reach would check a fresh
+    anchor instead of the warp, and is refused."""
+    renderer = ExactRenderer(box_room(seed=0))
+    camera = renderer.scene.cameras[0]
+    K = intrinsics_from_fov(camera.fov_x_deg, 24, 32)
+    warp = {"warp": DiffRenderConfig(values="warp", refresh="every_k")}
+    check = check_pose(renderer, camera.world_T_cam, K, 24, 32, warp)["warp"]
+    assert check.score("depth_interior") >= 0.99  # it warped (else refused), with the warp's gradient
+    with pytest.raises(ValueError, match="beyond warp's reach"):
+        check_pose(renderer, camera.world_T_cam, K, 24, 32, warp, anchor_offset=(6.0, 0.0))

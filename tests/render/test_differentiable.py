@@ -63,6 +63,8 @@ def test_bad_pose_params(room_renderer: ExactRenderer) -> None:
         DiffRenderConfig(values="magic")
     with pytest.raises(ValueError, match=r"render\.differentiable\.layers.*got 0,"):
         DiffRenderConfig(layers=0)
+    with pytest.raises(ValueError, match=r"render\.differentiable\.anchor_reach_deg.*got 0\.0 and 0\.1"):
+        DiffRenderConfig(anchor_reach_deg=0.0)
 
 
 def _trajectory(step: int, steps: int) -> torch.Tensor:
@@ -161,6 +163,29 @@ def test_the_warp_preset_reads_the_boxed_anchor_at_its_refreshes_too(room_render
         out = differentiable(params, camera.world_T_cam[None], K_SMALL, 48, 64)
         (out.rgb.sum() + out.depth.sum()).backward()
         assert out.refreshed == (step % 2 == 0) and float(params.grad.abs().sum()) > 0
+
+
+@pytest.mark.parametrize(
+    ("move", "refreshed"),
+    [
+        ([0.0, 0.06, 0.0, 0.0, 0.0, 0.0], False),  # 3.4 degrees, within the 4 degrees
+        ([0.0, 0.08, 0.0, 0.0, 0.0, 0.0], True),  # 4.6 degrees
+        ([0.0, 0.0, 0.0, 0.06, 0.0, 0.06], False),  # 8.5 cm, within the 10 cm
+        ([0.0, 0.0, 0.0, 0.08, 0.0, 0.08], True),  # 11.3 cm
+    ],
+)
+def test_a_view_beyond_the_anchor_s_reach_renders_a_new_anchor_whatever_the_step_count(
+    room_renderer: ExactRenderer, move: list[float], refreshed: bool
+) -> None:
+    """The warp's gradients hold out to the anchor's reach (benchmarks/gradcheck.py checks them
+    there): a view beyond it, by its rotation or its centre, renders a new anchor first, long
+    before ``every_k`` steps, and one within it is warped."""
+    camera = room_renderer.scene.cameras[0]
+    config = DiffRenderConfig(values="warp", refresh="every_k", every_k=100, anchor_reach_deg=4.0, anchor_reach_m=0.1)
+    differentiable = DifferentiableRenderer(room_renderer, config)
+    assert differentiable(torch.zeros(1, 6, dtype=torch.float64), camera.world_T_cam[None], K_SMALL, 48, 64).refreshed
+    out = differentiable(torch.tensor([move], dtype=torch.float64), camera.world_T_cam[None], K_SMALL, 48, 64)
+    assert out.refreshed == refreshed and out.warped != refreshed
 
 
 def _counting(fn, calls: dict, key: str = "anchors"):
