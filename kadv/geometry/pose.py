@@ -17,6 +17,7 @@ __all__ = [
     "look_at",
     "matrix_to_axis_angle",
     "perturb_world_T_cam",
+    "pose_distance",
     "rc_from_world_T_cam",
     "rotation_from_yaw_pitch_roll",
     "world_T_cam_from_rc",
@@ -51,6 +52,23 @@ def matrix_to_axis_angle(rotation: torch.Tensor) -> torch.Tensor:
     """
     shape = rotation.shape[:-2]
     return rotation_matrix_to_axis_angle(rotation.reshape(-1, 3, 3)).reshape(*shape, 3)
+
+
+def pose_distance(a_world_T_cam: torch.Tensor, b_world_T_cam: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """How far apart two poses (..., 4, 4) are: the angle (...) in radians of the rotation between
+    their orientations, and the distance (...) between their centres.
+
+    Examples:
+        >>> import math
+        >>> a = torch.eye(4, dtype=torch.float64)
+        >>> b = world_T_cam_from_rc(axis_angle_to_matrix(torch.tensor([0.0, 0.1, 0.0], dtype=torch.float64)),
+        ...                         torch.tensor([0.3, 0.0, 0.4], dtype=torch.float64))
+        >>> [round(float(d), 6) for d in pose_distance(a, b)]
+        [0.1, 0.5]
+    """
+    turn = a_world_T_cam[..., :3, :3].transpose(-1, -2) @ b_world_T_cam[..., :3, :3]
+    centres = b_world_T_cam[..., :3, 3] - a_world_T_cam[..., :3, 3]
+    return matrix_to_axis_angle(turn).norm(dim=-1), centres.norm(dim=-1)
 
 
 def world_T_cam_from_rc(rotation: torch.Tensor, centre: torch.Tensor) -> torch.Tensor:

@@ -21,7 +21,7 @@ import torch
 from kadv.checks import check_shape, check_values
 from kadv.device import resolve_device
 from kadv.geometry.camera import batched_intrinsics
-from kadv.geometry.pose import matrix_to_axis_angle, perturb_world_T_cam
+from kadv.geometry.pose import perturb_world_T_cam, pose_distance
 from kadv.render.dibr import Reprojection, reproject, warp_boxed
 from kadv.render.exact import ExactRenderer, RenderOutput, pixel_angle, views_apart
 from kadv.render.layers import RING, AnchorLayers, camera_face_normals, render_anchor, ring_view
@@ -308,10 +308,8 @@ class DifferentiableRenderer:
     def _beyond_reach(self, world_T_cam: torch.Tensor) -> bool:
         """Whether any of the views (B, 4, 4) lies farther from the anchor than
         ``anchor_reach_deg`` or ``anchor_reach_m`` (read on the host)."""
-        anchor = self.anchor.world_T_cam.detach().double().cpu()
-        current = world_T_cam.detach().double().cpu()
-        turned = matrix_to_axis_angle(anchor[:, :3, :3].transpose(1, 2) @ current[:, :3, :3]).norm(dim=-1)
-        moved = (current[:, :3, 3] - anchor[:, :3, 3]).norm(dim=-1)
+        anchor, current = (pose.detach().double().cpu() for pose in (self.anchor.world_T_cam, world_T_cam))
+        turned, moved = pose_distance(anchor, current)
         c = self.config
         return bool(((turned > math.radians(c.anchor_reach_deg)) | (moved > c.anchor_reach_m)).any())
 
