@@ -65,7 +65,8 @@ class DiffRenderConfig:
             degrees, camera centre distance in metres) and still be warped from it; a view beyond
             either renders a new anchor first, whatever ``refresh`` says. The warp's gradients are
             checked out to this distance (``benchmarks/gradcheck.py``), and Adam's steps at the
-            default rates carry a view 3-8 degrees and 5-20 cm from its anchor in 4 steps.
+            default rates carry a view up to 8 degrees and 20 cm from its anchor in 4 steps. The
+            poses are compared on the host: on a GPU such a step waits for its poses.
         depth_tolerance: relative disagreement between a warped point and the exact one that
             invalidates a pixel.
         plane_tolerance: at the anchor's own pose, relative distance from a tap's surface plane
