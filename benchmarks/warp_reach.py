@@ -6,8 +6,10 @@ rates) from grey_white_room's file view at 240x320, under ``render=exact``, ``re
 of a call of the differentiable renderer within the whole step (networks, loss, penalty, guard and
 validity included), and the refreshes. Without the reach, each warped view's distance from its
 anchor: how far the gradient would have to hold (``benchmarks/gradcheck.py`` checks it at the reach).
+``--picture`` draws each call's distance from its anchor under both warp presets against the reach.
 
-Run: .venv/bin/python benchmarks/warp_reach.py [--rounds N] [--device cpu|cuda|auto] [--backend ...]
+Run: .venv/bin/python benchmarks/warp_reach.py [--rounds N] [--picture docs/warp_reach.png]
+     [--device cpu|cuda|auto] [--backend ...]
 """
 
 from __future__ import annotations
@@ -17,11 +19,18 @@ import dataclasses
 import math
 import statistics
 import time
+from pathlib import Path
 
 from common import device_and_backend, load_bench_scene, render_preset
 
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
 from kadv.attack import AttackConfig, GradientSettings, Study, StudySettings, attack, file_init_views
 from kadv.geometry import pose_distance
+from kadv.io import save_figure
 from kadv.losses import LossConfig
 from kadv.models import load_model
 from kadv.render import DifferentiableRenderer, DiffRenderConfig
@@ -37,11 +46,12 @@ def presets() -> dict[str, DiffRenderConfig]:
 
 class Recorder:
     """Wraps :meth:`DifferentiableRenderer.forward` for the run: counts calls and refreshes, and
-    records each warped call's largest distance (degrees, metres) of a view from its anchor."""
+    records each call's largest distance (degrees, metres) of a view from the anchor it was
+    rendered with (0 where it rendered a new one) and whether it was warped."""
 
     def __init__(self) -> None:
         self.calls = self.refreshes = 0
-        self.distances: list[tuple[float, float]] = []
+        self.trace: list[tuple[float, float, bool]] = []
         self._forward = DifferentiableRenderer.forward
 
     def __enter__(self) -> Recorder:
@@ -51,11 +61,10 @@ class Recorder:
             out = forward(renderer, *args)
             recorder.calls += 1
             recorder.refreshes += out.refreshed
-            if out.warped:
-                turned, moved = pose_distance(
-                    *(pose.detach().double().cpu() for pose in (renderer.anchor.world_T_cam, out.world_T_cam))
-                )
-                recorder.distances.append((math.degrees(float(turned.max())), float(moved.max())))
+            turned, moved = pose_distance(
+                *(pose.detach().double().cpu() for pose in (renderer.anchor.world_T_cam, out.world_T_cam))
+            )
+            recorder.trace.append((math.degrees(float(turned.max())), float(moved.max()), out.warped))
             return out
 
         DifferentiableRenderer.forward = recorded
@@ -65,9 +74,29 @@ class Recorder:
         DifferentiableRenderer.forward = self._forward
 
 
+def picture(path: Path, traces: dict[str, list[tuple[float, float, bool]]], reach: DiffRenderConfig) -> None:
+    """Each call's distance from its anchor, in degrees and in metres, per preset, the reach dashed."""
+    figure, axes = plt.subplots(1, 2, figsize=(11, 3.4))
+    for name, trace in traces.items():
+        degrees, metres, _ = zip(*trace, strict=True)
+        label = "render=warp" if name == "warp" else "render=warp without its reach"
+        for axis, values in zip(axes, (degrees, metres), strict=True):
+            axis.plot(values, marker="o", markersize=3, label=label)
+    for axis, bound, unit in zip(
+        axes, (reach.anchor_reach_deg, reach.anchor_reach_m), ("degrees", "metres"), strict=True
+    ):
+        axis.axhline(bound, color="black", linestyle="--", linewidth=1, label="reach (the gradient check's)")
+        axis.set_xlabel("call (Adam step)")
+        axis.set_ylabel(f"distance from the anchor ({unit})")
+    axes[0].legend(fontsize=8)
+    figure.suptitle("a gradient attack's views and their anchor (0: a new anchor), grey_white_room, kadv-tiny + SSIM")
+    save_figure(path, figure)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description="How far a gradient attack strays from the warp's anchor.")
     parser.add_argument("--rounds", type=int, default=2, help="alternating rounds of the three presets")
+    parser.add_argument("--picture", type=Path, default=None, help="a PNG of each call's distance from its anchor")
     device, backend, args = device_and_backend(parser.description, parser)
     if args.rounds < 1:
         parser.exit(2, f"{parser.prog}: error: --rounds must be at least 1, got {args.rounds}\n")
@@ -77,7 +106,7 @@ def main() -> None:
     config = AttackConfig("gradient", GradientSettings(), budget_passes=None)
     milliseconds: dict[str, list[float]] = {name: [] for name in presets()}
     refreshes: dict[str, int] = {}
-    reached: list[tuple[float, float]] = []
+    traces: dict[str, list[tuple[float, float, bool]]] = {}
     print(f"whole gradient attacks, grey_white_room {HEIGHT}x{WIDTH}, kadv-tiny + SSIM, on {device} (ms a call)")
     for round_ in range(args.rounds):
         for name, render in presets().items():
@@ -88,18 +117,20 @@ def main() -> None:
                 seconds = time.perf_counter() - started
             milliseconds[name].append(seconds / recorder.calls * 1e3)
             refreshes[name] = recorder.refreshes
-            if name == "unreached":
-                reached = recorder.distances
+            traces[name] = recorder.trace
             print(
                 f"  round {round_} {name:<10} {milliseconds[name][-1]:7.0f}  "
                 f"({recorder.calls} calls, {recorder.refreshes} refreshes)"
             )
+    reached = [(degrees, metres) for degrees, metres, warped in traces["unreached"] if warped]
     degrees, metres = zip(*reached, strict=True) if reached else ((0.0,), (0.0,))
     print(
         "\nwithout the reach, a warped view's distance from its anchor: "
         f"median {statistics.median(degrees):.2f} deg / {statistics.median(metres):.3f} m, "
         f"most {max(degrees):.2f} deg / {max(metres):.3f} m over {len(reached)} warped calls"
     )
+    if args.picture is not None:
+        picture(args.picture, {name: traces[name] for name in ("warp", "unreached")}, presets()["warp"])
     median = {name: statistics.median(values) for name, values in milliseconds.items()}
     print(
         f"warp_reach exact_ms={median['exact']:.0f} warp_ms={median['warp']:.0f} "
