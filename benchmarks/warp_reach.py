@@ -45,12 +45,12 @@ def presets() -> dict[str, DiffRenderConfig]:
 
 
 class Recorder:
-    """Wraps :meth:`DifferentiableRenderer.forward` for the run: counts calls and refreshes, and
-    records each call's largest distance (degrees, metres) of a view from the anchor it was
-    rendered with (0 where it rendered a new one) and whether it was warped."""
+    """Wraps :meth:`DifferentiableRenderer.forward` for the run: counts refreshes, and records each
+    call's largest distance (degrees, metres) of a view from the anchor it was rendered with (0
+    where it rendered a new one) and whether it was warped."""
 
     def __init__(self) -> None:
-        self.calls = self.refreshes = 0
+        self.refreshes = 0
         self.trace: list[tuple[float, float, bool]] = []
         self._forward = DifferentiableRenderer.forward
 
@@ -59,7 +59,6 @@ class Recorder:
 
         def recorded(renderer: DifferentiableRenderer, *args):
             out = forward(renderer, *args)
-            recorder.calls += 1
             recorder.refreshes += out.refreshed
             turned, moved = pose_distance(
                 *(pose.detach().double().cpu() for pose in (renderer.anchor.world_T_cam, out.world_T_cam))
@@ -104,23 +103,25 @@ def main() -> None:
     study = Study.build(load_bench_scene("grey_white_room"), load_model("kadv_tiny"), settings)
     view = file_init_views(study.renderer, settings.penalty.margin)[0]
     config = AttackConfig("gradient", GradientSettings(), budget_passes=None)
-    milliseconds: dict[str, list[float]] = {name: [] for name in presets()}
+    configs = presets()
+    milliseconds: dict[str, list[float]] = {name: [] for name in configs}
     refreshes: dict[str, int] = {}
     traces: dict[str, list[tuple[float, float, bool]]] = {}
     print(f"whole gradient attacks, grey_white_room {HEIGHT}x{WIDTH}, kadv-tiny + SSIM, on {device} (ms a call)")
     for round_ in range(args.rounds):
-        for name, render in presets().items():
+        for name, render in configs.items():
             variant = study.variant(render=render)
             with Recorder() as recorder:
                 started = time.perf_counter()
                 attack(variant.objective, variant.differentiable, [view], HEIGHT, WIDTH, config, 0, progress=False)
                 seconds = time.perf_counter() - started
-            milliseconds[name].append(seconds / recorder.calls * 1e3)
+            calls = len(recorder.trace)
+            milliseconds[name].append(seconds / calls * 1e3)
             refreshes[name] = recorder.refreshes
             traces[name] = recorder.trace
             print(
                 f"  round {round_} {name:<10} {milliseconds[name][-1]:7.0f}  "
-                f"({recorder.calls} calls, {recorder.refreshes} refreshes)"
+                f"({calls} calls, {recorder.refreshes} refreshes)"
             )
     reached = [(degrees, metres) for degrees, metres, warped in traces["unreached"] if warped]
     degrees, metres = zip(*reached, strict=True) if reached else ((0.0,), (0.0,))
@@ -130,7 +131,7 @@ def main() -> None:
         f"most {max(degrees):.2f} deg / {max(metres):.3f} m over {len(reached)} warped calls"
     )
     if args.picture is not None:
-        picture(args.picture, {name: traces[name] for name in ("warp", "unreached")}, presets()["warp"])
+        picture(args.picture, {name: traces[name] for name in ("warp", "unreached")}, configs["warp"])
     median = {name: statistics.median(values) for name, values in milliseconds.items()}
     print(
         f"warp_reach exact_ms={median['exact']:.0f} warp_ms={median['warp']:.0f} "

@@ -59,7 +59,6 @@ def pose_distance(a_world_T_cam: torch.Tensor, b_world_T_cam: torch.Tensor) -> t
     their orientations, and the distance (...) between their centres.
 
     Examples:
-        >>> import math
         >>> a = torch.eye(4, dtype=torch.float64)
         >>> b = world_T_cam_from_rc(axis_angle_to_matrix(torch.tensor([0.0, 0.1, 0.0], dtype=torch.float64)),
         ...                         torch.tensor([0.3, 0.0, 0.4], dtype=torch.float64))
