@@ -4,8 +4,9 @@ kadv-tiny + SSIM (one restart), on grey_white_room at 240x320.
 
 Then the render presets' steps, in one process: PRESET_STEPS small moves rendered forward and
 backward through the differentiable renderer under ``render=exact`` (the default) and
-``render=warp`` (refreshes included), against one exact render at supersample 2 and the warp of a
-moved view with the cast it needs (forward).
+``render=warp`` (refreshes included; then its refreshes' steps and the steps between them apart,
+medians), against one exact render at supersample 2 and the warp of a moved view with the cast it
+needs (forward).
 
 Each phase is a function of kadv wrapped for this run: the device is synchronised before and after
 it, so that its time is its own (what the phases leave out is the rest of the step: the optimiser,
@@ -19,6 +20,7 @@ Run: .venv/bin/python benchmarks/profile_step.py [--device cpu|cuda|auto] [--bac
 from __future__ import annotations
 
 import argparse
+import statistics
 import time
 from collections import defaultdict
 from collections.abc import Callable
@@ -74,20 +76,22 @@ def wrap_phases(around: Callable[[Callable, str], Callable]) -> Callable[[], Non
     return put_back
 
 
+def synchronise(device: torch.device) -> None:
+    """Wait for ``device``'s queued work (a GPU's), so that a clock read after it counts it."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
 def timed_into(device: torch.device, seconds: dict[str, float]) -> Callable[[Callable, str], Callable]:
     """A :func:`wrap_phases` wrapper that adds each call's time to ``seconds[phase]``, the device
     synchronised before and after it, so that its time is its own."""
 
-    def synchronise() -> None:
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-
     def timed(fn: Callable, phase: str) -> Callable:
         def run(*args, **kwargs):
-            synchronise()
+            synchronise(device)
             start = time.perf_counter()
             out = fn(*args, **kwargs)
-            synchronise()
+            synchronise(device)
             seconds[phase] += time.perf_counter() - start
             return out
 
@@ -129,7 +133,9 @@ def tiny_attack(description: str) -> tuple[torch.device, str, argparse.Namespace
 
 def preset_steps(study: Study, view, device: torch.device) -> dict[str, float]:
     """Milliseconds of a step through each render preset (its refreshes spread over the steps), of
-    one exact render at supersample 2, and of a moved view's reprojection with its cast."""
+    the warp preset's refresh steps and steps between refreshes (medians; and its refreshes in
+    ``refreshes``), of one exact render at supersample 2, and of a moved view's reprojection with
+    its cast."""
     renderer = study.renderer
     K = intrinsics_from_fov(view.fov_x_deg, HEIGHT, WIDTH)
     base = view.world_T_cam.double().reshape(1, 4, 4)
@@ -146,15 +152,25 @@ def preset_steps(study: Study, view, device: torch.device) -> dict[str, float]:
     out = {}
     for name in ("exact", "warp"):
         differentiable = study.variant(render=render_preset(name)).differentiable
+        runs: list[list[tuple[bool, float]]] = []  # per run, each step's (refreshed, seconds)
 
         def steps() -> None:
             differentiable.reset()
+            runs.append([])
             for move in moves:
+                start = time.perf_counter()
                 params = move.to(device).requires_grad_(True)
                 rendered = differentiable(params, base, K, HEIGHT, WIDTH)
                 (torch.cat([rendered.rgb, rendered.depth], dim=1) * weights).sum().backward()
+                synchronise(device)
+                runs[-1].append((rendered.refreshed, time.perf_counter() - start))
 
         out[name] = median_seconds(steps, repeats=3) / PRESET_STEPS * 1e3
+    # the warp preset's timed runs (the warm-up's left out), its refreshes apart from the steps between
+    timed = [call for run in runs[1:] for call in run]
+    for key, refreshed in (("warp refresh", True), ("warp between", False)):
+        out[key] = statistics.median(seconds for kind, seconds in timed if kind == refreshed) * 1e3
+    out["refreshes"] = sum(kind for kind, _ in runs[-1])
     moved = perturb_world_T_cam(base, moves[3][:, :3], moves[3][:, 3:])
     out["exact render"] = median_seconds(lambda: renderer.render(moved, K, HEIGHT, WIDTH, supersample=2)) * 1e3
     preset = render_preset("warp")
@@ -173,6 +189,8 @@ def preset_steps(study: Study, view, device: torch.device) -> dict[str, float]:
     labels = {
         "exact": "render=exact step",
         "warp": "render=warp step",
+        "warp refresh": f"  a refresh ({out['refreshes']} of {PRESET_STEPS})",
+        "warp between": "  a step between refreshes",
         "exact render": "exact render, s=2",
         "reprojection": "reprojection of a moved view",
     }
@@ -197,12 +215,10 @@ def main() -> None:
     def evaluate() -> None:
         with torch.no_grad():
             rgb = renderer.render(poses, K, HEIGHT, WIDTH, supersample=2).rgb
-            if device.type == "cuda":
-                torch.cuda.synchronize(device)
+            synchronise(device)
             start = time.perf_counter()
             model(rgb)
-            if device.type == "cuda":
-                torch.cuda.synchronize(device)
+            synchronise(device)
             seconds["model forward"] += time.perf_counter() - start
 
     seconds: dict[str, float] = defaultdict(float)
@@ -232,6 +248,8 @@ def main() -> None:
     print(
         f"profile_step default_ms={presets['exact']:.0f} warp_ms={presets['warp']:.0f} "
         f"exact_ms={presets['exact render']:.0f} reproject_ms={presets['reprojection']:.1f} "
+        f"warp_refresh_ms={presets['warp refresh']:.0f} warp_between_ms={presets['warp between']:.0f} "
+        f"refreshes={presets['refreshes']} "
         f"step_ms={step * 1e3:.0f} eval_render_ms={render * 1e3:.0f} "
         f"anchor_ms={seconds['anchor render'] / (STEPS + 1) * 1e3:.0f} "
         f"silhouette_ms={seconds['silhouette search'] / (STEPS + 1) * 1e3:.0f} device={device.type} backend={backend} "
