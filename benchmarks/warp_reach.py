@@ -29,7 +29,6 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 from kadv.attack import AttackConfig, GradientSettings, Study, StudySettings, attack, file_init_views
-from kadv.geometry import pose_distance
 from kadv.io import save_figure
 from kadv.losses import LossConfig
 from kadv.models import load_model
@@ -60,9 +59,7 @@ class Recorder:
         def recorded(renderer: DifferentiableRenderer, *args):
             out = forward(renderer, *args)
             recorder.refreshes += out.refreshed
-            turned, moved = pose_distance(
-                *(pose.detach().double().cpu() for pose in (renderer.anchor.world_T_cam, out.world_T_cam))
-            )
+            turned, moved = renderer.anchor_distance(out.world_T_cam)
             recorder.trace.append((math.degrees(float(turned.max())), float(moved.max()), out.warped))
             return out
 

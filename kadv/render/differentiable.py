@@ -306,11 +306,15 @@ class DifferentiableRenderer:
             or self._beyond_reach(world_T_cam)
         )
 
+    def anchor_distance(self, world_T_cam: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """How far views (B, 4, 4) lie from the anchor (:func:`~kadv.geometry.pose_distance`, read on
+        the host): the rotation angle (B,) in radians and the centre distance (B,) in metres."""
+        return pose_distance(*(pose.detach().double().cpu() for pose in (self.anchor.world_T_cam, world_T_cam)))
+
     def _beyond_reach(self, world_T_cam: torch.Tensor) -> bool:
         """Whether any of the views (B, 4, 4) lies farther from the anchor than
-        ``anchor_reach_deg`` or ``anchor_reach_m`` (read on the host)."""
-        anchor, current = (pose.detach().double().cpu() for pose in (self.anchor.world_T_cam, world_T_cam))
-        turned, moved = pose_distance(anchor, current)
+        ``anchor_reach_deg`` or ``anchor_reach_m``."""
+        turned, moved = self.anchor_distance(world_T_cam)
         c = self.config
         return bool(((turned > math.radians(c.anchor_reach_deg)) | (moved > c.anchor_reach_m)).any())
 

@@ -186,6 +186,10 @@ def test_a_view_beyond_the_anchor_s_reach_renders_a_new_anchor_whatever_the_step
     assert differentiable(torch.zeros(1, 6, dtype=torch.float64), camera.world_T_cam[None], K_SMALL, 48, 64).refreshed
     out = differentiable(torch.tensor([move], dtype=torch.float64), camera.world_T_cam[None], K_SMALL, 48, 64)
     assert out.refreshed == refreshed and out.warped != refreshed
+    # warped: the view lies its move from the anchor; refreshed: on the new anchor
+    turned, moved = differentiable.anchor_distance(out.world_T_cam)
+    expected = (0.0, 0.0) if refreshed else (float(torch.tensor(move[:3]).norm()), float(torch.tensor(move[3:]).norm()))
+    assert (float(turned), float(moved)) == pytest.approx(expected, abs=1e-9)
 
 
 def _counting(fn, calls: dict, key: str = "anchors"):
