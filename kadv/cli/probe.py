@@ -11,7 +11,8 @@ Each model is profiled on each probe scene (:mod:`kadv.probes`), the probe built
 seed: the worst delta1 within each nested radius of the camera's move and the camera envelope,
 the failure rate of views drawn at the largest radius, and the score (mean ± spread over the
 seeds). The table ends with a ``ranking:`` line; it is printed as Markdown and written with a PNG of
-the profile curves to ``out`` (``scorecard.md``, ``scorecard.png``, ``views/``).
+the profile curves to ``out`` (``scorecard.md``, ``scorecard.json``: every profile, to rank again with
+:meth:`kadv.testing.Scorecard.from_dict`; ``scorecard.png``, ``views/``).
 
 A plain command rather than a Hydra app: a scorecard is one job over its models and probes (the
 sweep is inside it), so it needs neither launchers nor a run directory per override. Its keys are
@@ -26,6 +27,7 @@ from kadv.runtime import configure_runtime
 
 configure_runtime()
 
+import json
 import sys
 from pathlib import Path
 
@@ -127,10 +129,11 @@ def main(argv: list[str] | None = None) -> None:
     except (RobustnessInputError, ValueError) as error:
         print(f"kadv-probe: error: {' '.join(str(error).split())}", file=sys.stderr)
         sys.exit(2)
-    table = card.markdown()
+    table, data = card.markdown(), json.dumps(card.to_dict())
     atomic_write(out / "scorecard.md", lambda tmp: tmp.write_text(table + "\n"))
+    atomic_write(out / "scorecard.json", lambda tmp: tmp.write_text(data + "\n"))
     card.save_png(out / "scorecard.png")
-    print(f"\n{table}\n\nscorecard: {out / 'scorecard.md'}, {out / 'scorecard.png'}")
+    print(f"\n{table}\n\nscorecard: {out / 'scorecard.md'}, {out / 'scorecard.json'}, {out / 'scorecard.png'}")
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ ranking and one picture."""
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,9 +52,16 @@ class PairedDifference:
         return self.low > 0 or self.high < 0
 
 
-def paired_difference(a: list[float], b: list[float], seed: int = 0) -> PairedDifference:
+def paired_difference(a: list[float], b: list[float], seed: int = 0, strata: list | None = None) -> PairedDifference:
     """a - b over paired units, with a 95% percentile bootstrap interval of the mean (deterministic
     for ``seed``); a unit where either is NaN is left out.
+
+    ``strata``: a label per unit (a scorecard's probe). Where every stratum keeps two units or more,
+    the bootstrap resamples units within each stratum (the strata fixed, as a scorecard's probes
+    are: the interval is what a new draw of each probe's rooms and searches would move the mean),
+    each stratum's differences first spread about their mean by sqrt(n / (n - 1)) so that a few
+    units do not understate their variance (Davison and Hinkley, *Bootstrap Methods*, 3.7).
+    Otherwise, and without strata, it resamples all units together.
 
     Examples:
         >>> d = paired_difference([0.9, 0.8, 0.85], [0.7, 0.75, 0.6])
@@ -62,16 +70,34 @@ def paired_difference(a: list[float], b: list[float], seed: int = 0) -> PairedDi
         >>> paired_difference([0.9, 0.7], [0.8, 0.8]).separated
         False
     """
-    if len(a) != len(b):
-        raise RobustnessInputError(f"paired_difference: {len(a)} units against {len(b)}; pair the same units")
+    if len(a) != len(b) or (strata is not None and len(strata) != len(a)):
+        counts = f"{len(a)} units against {len(b)}" + ("" if strata is None else f" and {len(strata)} strata labels")
+        raise RobustnessInputError(f"paired_difference: {counts}; pair the same units")
     differences = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
-    differences = differences[~np.isnan(differences)]
+    kept = ~np.isnan(differences)
+    differences = differences[kept]
     if len(differences) == 0:
         return PairedDifference(float("nan"), float("nan"), float("nan"), 0)
-    picks = np.random.default_rng(seed).integers(0, len(differences), size=(_BOOTSTRAP_DRAWS, len(differences)))
-    means = differences[picks].mean(axis=1)
+    rng = np.random.default_rng(seed)
+    groups = [differences] if strata is None else _strata(differences, np.asarray(strata, dtype=object)[kept])
+    if min(len(group) for group in groups) < 2:
+        groups = [differences]
+    if len(groups) == 1:
+        means = differences[rng.integers(0, len(differences), size=(_BOOTSTRAP_DRAWS, len(differences)))].mean(axis=1)
+    else:
+        sums = np.zeros(_BOOTSTRAP_DRAWS)
+        for group in groups:
+            spread = group.mean() + math.sqrt(len(group) / (len(group) - 1)) * (group - group.mean())
+            sums += spread[rng.integers(0, len(group), size=(_BOOTSTRAP_DRAWS, len(group)))].sum(axis=1)
+        means = sums / len(differences)
     low, high = np.percentile(means, [2.5, 97.5])
     return PairedDifference(float(differences.mean()), float(low), float(high), len(differences))
+
+
+def _strata(values: np.ndarray, labels: np.ndarray) -> list[np.ndarray]:
+    """``values`` grouped by ``labels``, in the order the labels first appear."""
+    order = list(dict.fromkeys(labels.tolist()))
+    return [values[labels == label] for label in order]
 
 
 @dataclass(frozen=True)
@@ -88,6 +114,19 @@ class Scorecard:
     probes: list[str]
     results: dict[str, dict[str, Profile]]
 
+    def to_dict(self) -> dict:
+        """The models, probes and every profile (:meth:`Profile.to_dict`), as plain JSON values."""
+        results = {probe: {model: p.to_dict() for model, p in row.items()} for probe, row in self.results.items()}
+        return {"models": list(self.models), "probes": list(self.probes), "results": results}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Scorecard:
+        """The scorecard :meth:`to_dict` wrote: its rankings and table computed again."""
+        results = {
+            probe: {model: Profile.from_dict(p) for model, p in row.items()} for probe, row in data["results"].items()
+        }
+        return cls(list(data["models"]), list(data["probes"]), results)
+
     def unit_scores(self, model: str, kind: str = "typical") -> list[float]:
         """The model's area under its ``kind`` curve ("typical" or "worst") per probe and seed, in
         the order of :attr:`probes` then seeds: the units two models are paired on (the same room,
@@ -95,8 +134,11 @@ class Scorecard:
         return [value for probe in self.probes for value in getattr(self.results[probe][model], _UNITS[kind])]
 
     def difference(self, a: str, b: str, kind: str = "typical") -> PairedDifference:
-        """``a``'s area minus ``b``'s, paired probe by probe and seed by seed, with its bootstrap interval."""
-        return paired_difference(self.unit_scores(a, kind), self.unit_scores(b, kind))
+        """``a``'s area minus ``b``'s, paired probe by probe and seed by seed, with its bootstrap
+        interval: over the seeds within each probe when each probe has two seeds or more (the probes
+        fixed), over the probes otherwise."""
+        strata = [probe for probe in self.probes for _ in getattr(self.results[probe][a], _UNITS[kind])]
+        return paired_difference(self.unit_scores(a, kind), self.unit_scores(b, kind), strata=strata)
 
     def ranking(self, kind: str = "typical") -> str:
         """``ranking (typical area): a (0.61) > b (0.55)``: the models by mean area under their

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
 
 from kadv.cli.probe import main
+from kadv.testing import Scorecard
 
 
 def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_path: Path, capsys) -> None:
@@ -19,6 +21,9 @@ def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_pat
     assert "\nranking (worst-case area): kadv_tiny (" in printed and "\nranking (typical area): kadv_tiny (" in printed
     assert (tmp_path / "scorecard.md").read_text().strip() in printed
     assert (tmp_path / "scorecard.png").stat().st_size > 10_000
+    # every profile, to rank again later: the same table read back
+    again = Scorecard.from_dict(json.loads((tmp_path / "scorecard.json").read_text()))
+    assert again.markdown() == (tmp_path / "scorecard.md").read_text().strip()
     # the worst view at each of the three radii, per probe, in the upright envelope by default
     assert len(list((tmp_path / "views").glob("*-upright-radius*.png"))) == 6
 

