@@ -58,10 +58,10 @@ def paired_difference(a: list[float], b: list[float], seed: int = 0, strata: lis
 
     ``strata``: a label per unit (a scorecard's probe). Where every stratum keeps two units or more,
     the bootstrap resamples units within each stratum (the strata fixed, as a scorecard's probes
-    are: the interval is what a new draw of each probe's rooms and searches would move the mean),
-    each stratum's differences first spread about their mean by sqrt(n / (n - 1)) so that a few
-    units do not understate their variance (Davison and Hinkley, *Bootstrap Methods*, 3.7).
-    Otherwise, and without strata, it resamples all units together.
+    are: the interval is what a new draw of each probe's rooms and searches would move the mean);
+    otherwise, and without strata, it resamples all units together. Either way the n differences
+    resampled together are first spread about their mean by sqrt(n / (n - 1)), so that a few units
+    do not understate their variance (Davison and Hinkley, *Bootstrap Methods*, 1997, section 3.7).
 
     Examples:
         >>> d = paired_difference([0.9, 0.8, 0.85], [0.7, 0.75, 0.6])
@@ -82,14 +82,12 @@ def paired_difference(a: list[float], b: list[float], seed: int = 0, strata: lis
     groups = [differences] if strata is None else _strata(differences, np.asarray(strata, dtype=object)[kept])
     if min(len(group) for group in groups) < 2:
         groups = [differences]
-    if len(groups) == 1:
-        means = differences[rng.integers(0, len(differences), size=(_BOOTSTRAP_DRAWS, len(differences)))].mean(axis=1)
-    else:
-        sums = np.zeros(_BOOTSTRAP_DRAWS)
-        for group in groups:
-            spread = group.mean() + math.sqrt(len(group) / (len(group) - 1)) * (group - group.mean())
-            sums += spread[rng.integers(0, len(group), size=(_BOOTSTRAP_DRAWS, len(group)))].sum(axis=1)
-        means = sums / len(differences)
+    sums = np.zeros(_BOOTSTRAP_DRAWS)
+    for group in groups:
+        if len(group) > 1:
+            group = group.mean() + math.sqrt(len(group) / (len(group) - 1)) * (group - group.mean())
+        sums += group[rng.integers(0, len(group), size=(_BOOTSTRAP_DRAWS, len(group)))].sum(axis=1)
+    means = sums / len(differences)
     low, high = np.percentile(means, [2.5, 97.5])
     return PairedDifference(float(differences.mean()), float(low), float(high), len(differences))
 
