@@ -24,7 +24,8 @@ candidates for it: ``halving`` (black-box lanes, a screen at one ray per pixel),
 (gradient lanes through the render at one ray per pixel, each step they take validated exactly; the
 same screen), ``halving_exact`` (black-box lanes, every view exact), ``halving_gradient_exact``
 (gradient lanes through the exact render, every view exact), ``hybrid``, ``random``, ``cma``,
-``nevergrad``, ``turbo`` (a Gaussian process in a trust region, BoTorch); each over the same
+``nevergrad``, ``turbo`` (a Gaussian process in a trust region, BoTorch), ``halving_halved`` (four
+black-box lanes, the lower half stopped every two steps); each over the same
 ``--seeds`` (five by default) in both regimes.
 The default takes halving_exact's settings under a pass budget (those runs are shared) and, here,
 halving's under a seconds budget: the three are one method for W*.
@@ -123,6 +124,8 @@ CANDIDATES = {
     "cma": ("cma", None),
     "nevergrad": ("nevergrad", None),
     "turbo": ("turbo", None),
+    # four local lanes, the lower half stopped every two steps (attack.halving.halve_every)
+    "halving_halved": ("halving", HalvingSettings(screen_supersample=None, lanes=4, halve_every=2)),
     "hybrid_warp": ("hybrid", None),
     "halving_gradient_warp": ("halving", HalvingSettings(screen_supersample=None, refine="gradient")),
 }

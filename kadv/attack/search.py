@@ -45,13 +45,13 @@ DEFAULT_PASSES = 123
 def check_settings(settings: Any, node: str) -> None:
     """Refuse a settings dataclass holding a negative count, a non-positive rate or a NaN, naming
     ``<node>.<field>``. Fields named ``*_fraction`` must lie in (0, 1]; others are positive numbers,
-    and integers at least 1 (``steps`` at least 0)."""
+    and integers at least 1 (``steps`` and ``halve_every``, where 0 means none, at least 0)."""
     for field in dataclasses.fields(settings):
         value = getattr(settings, field.name)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             continue
         if isinstance(value, int):
-            least = 0 if field.name == "steps" else 1
+            least = 0 if field.name in ("steps", "halve_every") else 1
             if value < least:
                 raise ValueError(f"{node}.{field.name} must be an integer >= {least}, got {value!r}")
         elif field.name.endswith("_fraction"):

@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import ast
+import collections
 import dataclasses
 import math
 import time
@@ -697,6 +698,17 @@ def test_halving_starts_from_warm_starts_and_its_local_lanes_step_within_their_t
     assert all(np.max(np.abs(np.asarray(r.params)) / half) < 1.0 + 6 * widest for r in proposals)
 
 
+def test_halved_local_lanes_stop_the_lower_half_every_so_many_steps(tiny_objective, differentiable, file_view) -> None:
+    settings = HalvingSettings(screen_supersample=None, local_views=3, lanes=4, halve_every=2)
+    config = AttackConfig("halving", settings, budget_passes=100)
+    view = attack(tiny_objective, differentiable, [file_view], H, W, config, 0, progress=False).views[0]
+    assert view.budget.passes == 100
+    drawn = collections.Counter(r.step for r in view.records if r.step >= 4)
+    # the init view and 50 screened; four lanes of three draws for two steps, two for two more, then
+    # one lane to the end, its last step one draw
+    assert [drawn[step] for step in sorted(drawn)] == [12, 12, 6, 6, 3, 3, 3, 3, 1]
+
+
 @pytest.mark.parametrize(
     "settings, budget, message",
     [
@@ -725,6 +737,10 @@ def test_halving_settings_out_of_range_name_their_key() -> None:
         AttackConfig("halving", budget_passes=1)  # refused when the config is made, before any work
     with pytest.raises(ValueError, match=r"attack.halving.refine must be 'gradient' or 'local', got 'adam'"):
         HalvingSettings(refine="adam")
+    with pytest.raises(ValueError, match=r"attack.halving.halve_every must be an integer >= 0, got -1"):
+        AttackConfig("halving", HalvingSettings(halve_every=-1))
+    with pytest.raises(ValueError, match=r"attack.halving.halve_every applies to refine=local, got refine='gradient'"):
+        HalvingSettings(refine="gradient", halve_every=2)
     with pytest.raises(ValueError, match=r"attack.halving.screen_fraction must be in \(0, 1\], got 1.5"):
         HalvingSettings(screen_fraction=1.5)
     with pytest.raises(ValueError, match=r"attack.halving.rescore_fraction must be in \(0, 1\], got 1.5"):

@@ -57,6 +57,9 @@ class HalvingSettings:
             gradient step) by ``grow``; one that does not, by ``shrink``.
         stall_scale: a lane whose trust region shrank below this share of the first restarts from
             the next best separated exact view.
+        halve_every: with ``refine=local``, every this many steps the lanes whose objective is in the
+            lower half stop, and their passes go to the others, down to one lane (successive
+            halving of the lanes); 0: every lane runs to the end.
     """
 
     screen_fraction: float = 0.5
@@ -70,10 +73,13 @@ class HalvingSettings:
     grow: float = 1.5
     shrink: float = 0.5
     stall_scale: float = 0.1
+    halve_every: int = 0
 
     def __post_init__(self) -> None:
         if self.refine not in ("gradient", "local"):
             raise ValueError(f"attack.halving.refine must be 'gradient' or 'local', got {self.refine!r}")
+        if self.halve_every and self.refine != "local":
+            raise ValueError(f"attack.halving.halve_every applies to refine=local, got refine={self.refine!r}")
         check_trust_region(self, "attack.halving", ("screen_fraction", "step_fraction", "shrink", "stall_scale"))
         value = self.screen_supersample
         if value not in (None, AUTO) and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
@@ -162,7 +168,8 @@ def local_refine(
     at the screening's fidelity, and re-scores the best of each lane exactly when that is cheap;
     the lane's best becomes the incumbent if it raises the lane's objective (the region grows),
     else the region shrinks. A lane whose region shrank below ``stall_scale`` restarts from the
-    next view of ``pool``. Its records, screened ones included."""
+    next view of ``pool``. Every ``halve_every`` steps (when set) the lanes in the lower half by
+    objective stop. Its records, screened ones included."""
     clock = context.clock
     if clock.remaining() < 1 + settings.cheap:
         return []
@@ -174,7 +181,7 @@ def local_refine(
     best = np.array([r.objective for r in starts[:lanes]])
     region = np.ones(lanes)
     records: list[ViewRecord] = []
-    step = first_step
+    step, taken = first_step, 0
     while True:
         # every lane while whole steps fit; then the first lanes; then the first lane's last, fewer draws
         views, active = settings.local_views, clock.allows(lanes, _lane_step(settings))
@@ -207,7 +214,10 @@ def local_refine(
                 if pool:
                     restart = pool.pop(0)
                     current[lane], best[lane] = restart.params, restart.objective
-        step += 2
+        step, taken = step + 2, taken + 1
+        if settings.halve_every and taken % settings.halve_every == 0 and lanes > 1:
+            kept = np.argsort(-best, kind="stable")[: lanes // 2]
+            current, best, region, lanes = current[kept], best[kept], region[kept], len(kept)
     return records
 
 
