@@ -488,7 +488,24 @@ def settings_from_node(cls: type, node: dict | None, prefix: str) -> Any:
             f"unknown key(s) {', '.join(f'{prefix}.{k}' for k in unknown)}; "
             f"{prefix} takes {', '.join(sorted(known)) or 'no keys'}"
         )
+    for field in dataclasses.fields(cls):
+        if field.name in node:
+            _check_kind(node[field.name], field.default, f"{prefix}.{field.name}")
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in node.items()})
+
+
+def _check_kind(value: Any, default: Any, key: str) -> None:
+    """Refuse, naming ``key``, a value of another kind than its default's where that is a flag, an
+    integer or a number (text where a number belongs would otherwise fail deep inside a search, or
+    a flag read as true); a key whose default is None, text or a list may take several kinds."""
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise ValueError(f"{key} must be true or false, got {value!r}")
+    elif isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"{key} must be an integer, got {value!r}")
+    elif isinstance(default, float) and (isinstance(value, bool) or not isinstance(value, (int, float))):
+        raise ValueError(f"{key} must be a number, got {value!r}")
 
 
 def model_from_config(node: Any) -> DepthModel:

@@ -268,6 +268,12 @@ BAD_INPUTS = [
         "attack.turbo needs 0 < length_min < length_init <= length_max, got 2, 0.8, 1.6",
     ),
     ("kadv-attack", ["attack=turbo", "attack.turbo.batch=0"], "attack.turbo.batch must be an integer >= 1, got 0"),
+    # text where a number belongs, a number where an integer does, text for a flag: refused by kind
+    ("kadv-attack", ["attack=turbo", "attack.turbo.batch=four"], "attack.turbo.batch must be an integer, got 'four'"),
+    ("kadv-attack", ["attack.halving.lanes=2.5"], "attack.halving.lanes must be an integer, got 2.5"),
+    ("kadv-attack", ["attack.halving.grow=big"], "attack.halving.grow must be a number, got 'big'"),
+    ("kadv-attack", ["attack=cma", "attack.cma.ipop=maybe"], "attack.cma.ipop must be true or false, got 'maybe'"),
+    ("kadv-attack", ["attack.halving.halve_every=-1"], "attack.halving.halve_every must be an integer >= 0, got -1"),
     (
         "kadv-attack",
         ["loss.alignment=none"],
