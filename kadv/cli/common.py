@@ -16,6 +16,7 @@ import re
 import shutil
 import sys
 import tempfile
+import typing
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -476,7 +477,9 @@ def camera_from_config(cfg: DictConfig, scene: Scene) -> tuple[torch.Tensor, flo
 
 def settings_from_node(cls: type, node: dict | None, prefix: str) -> Any:
     """The settings dataclass ``cls`` from a config node (a dict; None: the defaults); a key it does
-    not know is an error naming ``<prefix>.<key>``. Lists become tuples."""
+    not know is an error naming ``<prefix>.<key>``, and so is a value of another kind than the
+    key's default (a flag, an integer, a number; null only where the key's type takes it). Lists
+    become tuples."""
     node = dict(node or {})
     known = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(node) - known)
@@ -488,9 +491,11 @@ def settings_from_node(cls: type, node: dict | None, prefix: str) -> Any:
             f"unknown key(s) {', '.join(f'{prefix}.{k}' for k in unknown)}; "
             f"{prefix} takes {', '.join(sorted(known)) or 'no keys'}"
         )
+    hints = typing.get_type_hints(cls)
     for field in dataclasses.fields(cls):
-        if field.name in node:
-            _check_kind(node[field.name], field.default, f"{prefix}.{field.name}")
+        if field.name not in node or (node[field.name] is None and type(None) in typing.get_args(hints[field.name])):
+            continue  # a default, or null where the type takes it
+        _check_kind(node[field.name], field.default, f"{prefix}.{field.name}")
     return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in node.items()})
 
 

@@ -161,3 +161,24 @@ def test_a_preset_s_renamed_key_is_refused_naming_the_new_one(cls, node, prefix,
     with pytest.raises(ValueError, match=re.escape(named)):
         settings_from_node(cls, node, prefix)
     assert settings_from_node(cls, {"enclosure_rays": 256}, prefix).enclosure_rays == 256
+
+
+def test_a_settings_key_takes_its_default_s_kind_and_null_only_where_its_type_allows_it() -> None:
+    from kadv.attack import AttackConfig, HalvingSettings
+
+    halving = settings_from_node(HalvingSettings, {"lanes": 4, "grow": 2, "screen_supersample": None}, "h")
+    assert (halving.lanes, halving.grow, halving.screen_supersample) == (4, 2, None)  # an integer for a number
+    for node, message in [
+        ({"lanes": "two"}, "h.lanes must be an integer, got 'two'"),
+        ({"lanes": 2.5}, "h.lanes must be an integer, got 2.5"),
+        ({"lanes": True}, "h.lanes must be an integer, got True"),
+        ({"lanes": None}, "h.lanes must be an integer, got None"),
+        ({"grow": "big"}, "h.grow must be a number, got 'big'"),
+    ]:
+        with pytest.raises(ValueError, match=re.escape(message)):
+            settings_from_node(HalvingSettings, node, "h")
+    # budget_passes: int | None, max_distance: float | None: null is theirs to take
+    config = settings_from_node(AttackConfig, {"method": "gradient", "budget_passes": None, "max_distance": None}, "a")
+    assert config.budget_passes is None and config.max_distance is None
+    with pytest.raises(ValueError, match=re.escape("a.max_distance must be a number, got 'far'")):
+        settings_from_node(AttackConfig, {"max_distance": "far"}, "a")
