@@ -507,8 +507,7 @@ def _check_kind(value: Any, default: Any, key: str) -> None:
         if not isinstance(value, bool):
             raise ValueError(f"{key} must be true or false, got {value!r}")
     elif isinstance(default, int):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ValueError(f"{key} must be an integer, got {value!r}")
+        config_int(value, key)
     elif isinstance(default, float) and (isinstance(value, bool) or not isinstance(value, (int, float))):
         raise ValueError(f"{key} must be a number, got {value!r}")
 

@@ -181,7 +181,7 @@ def local_refine(
     best = np.array([r.objective for r in starts[:lanes]])
     region = np.ones(lanes)
     records: list[ViewRecord] = []
-    step, taken = first_step, 0
+    step = first_step
     while True:
         # every lane while whole steps fit; then the first lanes; then the first lane's last, fewer draws
         views, active = settings.local_views, clock.allows(lanes, _lane_step(settings))
@@ -214,8 +214,8 @@ def local_refine(
                 if pool:
                     restart = pool.pop(0)
                     current[lane], best[lane] = restart.params, restart.objective
-        step, taken = step + 2, taken + 1
-        if settings.halve_every and taken % settings.halve_every == 0 and lanes > 1:
+        step += 2
+        if settings.halve_every and ((step - first_step) // 2) % settings.halve_every == 0 and lanes > 1:
             kept = np.argsort(-best, kind="stable")[: lanes // 2]
             current, best, region, lanes = current[kept], best[kept], region[kept], len(kept)
     return records
