@@ -458,7 +458,7 @@ def regret_part(runs: Runs) -> dict[str, str]:
             if baseline in BASELINES:
                 figures[f"win_{baseline}_{'passes' if regime == 'passes' else 's'}"] = f"{share:.2f}"
         print(f"| {baseline} | " + " | ".join(text) + " |")
-    for k in (0, 1):
+    for k in (0, 1) if "random" in runs.labels else ():  # no random search run: no ratio to print
         ratio = drops[k][0] / drops[k][1] if drops[k][1] > 0 else math.inf
         figures[f"drop_vs_random_r{k}"] = f"{ratio:.2f}"
         print(f"   delta1 drop over random's at equal seconds within {DEFAULT_RADII[k][0]:g}°: {ratio:.2f}")

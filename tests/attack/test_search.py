@@ -823,6 +823,41 @@ def test_turbo_closes_in_on_an_analytic_maximum_where_its_design_alone_does_not(
     assert -best[-1] < 0.02 < -best[0]
 
 
+@pytest.mark.parametrize("growth", [1.0, 1.25, 2.0])
+def test_turbo_fits_its_process_again_once_the_views_have_grown_by_refit_growth(
+    tiny_objective, differentiable, file_view, monkeypatch, growth
+) -> None:
+    import botorch.fit
+
+    from kadv.attack.methods.turbo import TurboProposer
+
+    fitted_on: list[int] = []  # the views each fit of the hyper-parameters saw
+    fit = botorch.fit.fit_gpytorch_mll
+    monkeypatch.setattr(
+        botorch.fit, "fit_gpytorch_mll", lambda mll: fitted_on.append(len(mll.model.train_targets)) or fit(mll)
+    )
+    config = AttackConfig(
+        "turbo", TurboSettings(init_views=8, refit_growth=growth), budget_passes=None, budget_seconds=1.0
+    )
+    proposer = TurboProposer(
+        SearchContext(tiny_objective, differentiable, file_view, H, W, config), np.random.default_rng(0)
+    )
+    for _ in range(12):
+        params = proposer.ask(8)
+        proposer.tell(
+            [
+                dataclasses.replace(_record(0.0, [0.0] * 3), params=p.tolist(), objective=-float(p.square().sum()))
+                for p in params
+            ]
+        )
+    expected = [8]
+    for views in range(12, len(proposer.y), 4):  # the process drawn before each batch of 4 after the design's 8
+        if views >= growth * expected[-1]:
+            expected.append(views)
+    assert fitted_on == expected
+    assert len(expected) == (11 if growth == 1.0 else 7 if growth == 1.25 else 3)
+
+
 def test_turbo_refuses_a_trust_region_that_cannot_shrink_to_its_restart_in_one_line() -> None:
     with pytest.raises(
         ValueError, match=r"^attack.turbo needs 0 < length_min < length_init <= length_max, got 0.9, 0.8, 1.6$"
@@ -830,6 +865,8 @@ def test_turbo_refuses_a_trust_region_that_cannot_shrink_to_its_restart_in_one_l
         TurboSettings(length_min=0.9)
     with pytest.raises(ValueError, match=r"^attack.turbo.candidates must be at least attack.turbo.batch \(4\), got 2$"):
         TurboSettings(candidates=2)
+    with pytest.raises(ValueError, match=r"^attack.turbo.refit_growth must be at least 1, got 0.5$"):
+        TurboSettings(refit_growth=0.5)
 
 
 def test_turbo_scores_its_warm_starts_first(tiny_objective, differentiable, file_view) -> None:

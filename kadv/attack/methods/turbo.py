@@ -29,12 +29,15 @@ class TurboSettings:
     Attributes:
         init_views: poses of the space-filling design that starts the search and each restart
             (scrambled Sobol points spread over the bounds' balls).
-        batch: poses chosen per fit of the process, scored in one model call.
+        batch: poses chosen per draw of the process, scored in one model call.
         candidates: Thompson-sampling candidates drawn in the trust region per batch.
         length_init, length_min, length_max: the trust region's side in the unit cube (scaled per
             axis by the process's length scales) at a start, below which it restarts, and at most.
         success_tolerance, failure_tolerance: batches in a row that raise (do not raise) the best
             objective before the region doubles (halves).
+        refit_growth: the process's hyper-parameters are fitted again (from the last fit's) once
+            the views scored have grown by this factor since that fit; between fits the process
+            takes the new views with the hyper-parameters held (1: a fit every batch).
     """
 
     init_views: int = 12
@@ -45,8 +48,11 @@ class TurboSettings:
     length_max: float = 1.6
     success_tolerance: int = 3
     failure_tolerance: int = 2
+    refit_growth: float = 1.25
 
     def __post_init__(self) -> None:
+        if self.refit_growth < 1.0:
+            raise ValueError(f"attack.turbo.refit_growth must be at least 1, got {self.refit_growth}")
         if not (0 < self.length_min < self.length_init <= self.length_max):
             raise ValueError(
                 "attack.turbo needs 0 < length_min < length_init <= length_max, got "
@@ -74,6 +80,8 @@ class TurboProposer(Proposer):
         self.x = torch.zeros(0, self.space.dims, dtype=torch.float64)
         self.y = torch.zeros(0, dtype=torch.float64)
         self.design: list[torch.Tensor] = []  # poses of a space-filling design still to ask
+        self.hypers: dict[str, torch.Tensor] = {}  # the last fit's, where the next fit starts
+        self.fitted_on = 0  # views the last fit saw
         self._restart()
         self.design = list(context.starts) + self.design  # views found bad before (a smaller radius) join the first
 
@@ -134,7 +142,14 @@ class TurboProposer(Proposer):
             warnings.simplefilter("ignore", InputDataWarning)  # a constant y (all views invalid) is fitted as it is
             warnings.simplefilter("ignore", NumericalWarning)  # jitter for repeated poses (a ball's surface, a wall)
             gp = SingleTaskGP(self.x, y[:, None], outcome_transform=Standardize(m=1))
-            fit_gpytorch_mll(ExactMarginalLogLikelihood(gp.likelihood, gp))
+            # a batch moves the optimum little: from the last fit, L-BFGS takes a fraction of its
+            # steps, and a fit only every so many views keeps the fits' share of a long search flat
+            gp.load_state_dict(self.hypers, strict=False)
+            if len(y) >= self.settings.refit_growth * self.fitted_on:
+                fit_gpytorch_mll(ExactMarginalLogLikelihood(gp.likelihood, gp))
+                self.hypers = {name: value.detach().clone() for name, value in gp.named_parameters()}
+                self.fitted_on = len(y)
+            gp.eval()
             own = torch.arange(len(y)) >= self.start
             centre = self.x[own][y[own].argmax()]
             scales = gp.covar_module.lengthscale.detach().reshape(-1)
