@@ -142,14 +142,14 @@ class TurboProposer(Proposer):
             warnings.simplefilter("ignore", InputDataWarning)  # a constant y (all views invalid) is fitted as it is
             warnings.simplefilter("ignore", NumericalWarning)  # jitter for repeated poses (a ball's surface, a wall)
             gp = SingleTaskGP(self.x, y[:, None], outcome_transform=Standardize(m=1))
-            # a batch moves the optimum little: from the last fit, L-BFGS takes a fraction of its
-            # steps, and a fit only every so many views keeps the fits' share of a long search flat
+            # a batch moves the likelihood's optimum little: each fit starts where the last ended,
+            # and fitting only once the views have grown by a factor keeps the fits' share of a
+            # long search flat (the fits were most of this method's seconds)
             gp.load_state_dict(self.hypers, strict=False)
             if len(y) >= self.settings.refit_growth * self.fitted_on:
                 fit_gpytorch_mll(ExactMarginalLogLikelihood(gp.likelihood, gp))
                 self.hypers = {name: value.detach().clone() for name, value in gp.named_parameters()}
                 self.fitted_on = len(y)
-            gp.eval()
             own = torch.arange(len(y)) >= self.start
             centre = self.x[own][y[own].argmax()]
             scales = gp.covar_module.lengthscale.detach().reshape(-1)
