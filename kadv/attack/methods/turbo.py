@@ -2,8 +2,8 @@
 process on the pose normalised to the unit cube, batches chosen by Thompson sampling inside a box
 around the best view, the box grown on success, shrunk on failure and restarted once it collapses.
 
-One batch of ``batch`` poses is one model call, so the model scores several poses per fit of the
-process. The fitting and sampling take host seconds that no model pass pays for: the method suits
+One batch of ``batch`` poses is one model call, so the model scores several poses per draw of the
+process. The fitting and sampling take host seconds that no model pass pays for: the method is for
 budgets counted in passes of a model dearer than a fit (docs/attack.md).
 """
 
