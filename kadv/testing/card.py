@@ -129,14 +129,20 @@ class Scorecard:
         """The model's area under its ``kind`` curve ("typical" or "worst") per probe and seed, in
         the order of :attr:`probes` then seeds: the units two models are paired on (the same room,
         init views and drawn views)."""
-        return [value for probe in self.probes for value in getattr(self.results[probe][model], _UNITS[kind])]
+        return [value for _, value in self._units(model, kind)]
+
+    def _units(self, model: str, kind: str) -> list[tuple[str, float]]:
+        """(probe, area) per probe and seed, in the order of :meth:`unit_scores`."""
+        return [(probe, value) for probe in self.probes for value in getattr(self.results[probe][model], _UNITS[kind])]
 
     def difference(self, a: str, b: str, kind: str = "typical") -> PairedDifference:
         """``a``'s area minus ``b``'s, paired probe by probe and seed by seed, with its bootstrap
         interval: over the seeds within each probe when each probe has two seeds or more (the probes
         fixed), over the probes otherwise."""
-        strata = [probe for probe in self.probes for _ in getattr(self.results[probe][a], _UNITS[kind])]
-        return paired_difference(self.unit_scores(a, kind), self.unit_scores(b, kind), strata=strata)
+        units = self._units(a, kind)
+        return paired_difference(
+            [value for _, value in units], self.unit_scores(b, kind), strata=[probe for probe, _ in units]
+        )
 
     def ranking(self, kind: str = "typical") -> str:
         """``ranking (typical area): a (0.61) > b (0.55)``: the models by mean area under their

@@ -138,6 +138,13 @@ def _record(l_depth: float, centre: list[float], verdict: str = "valid", theta=(
     )
 
 
+def _scored(params: torch.Tensor, objectives: list[float]) -> list[ViewRecord]:
+    """Valid records of the poses ``params`` (N, 6) at the given objectives, as a proposer is told them."""
+    return [
+        dataclasses.replace(_record(0.0, [0.0] * 3), params=p.tolist(), objective=o) for p, o in zip(params, objectives)
+    ]
+
+
 def test_top_views_skip_invalid_and_uninformative_views_and_keep_their_separation() -> None:
     records = [
         _record(0.9, [0.0, 0.0, 0.0], verdict="inside an object"),
@@ -806,10 +813,7 @@ def test_turbo_closes_in_on_an_analytic_maximum_where_its_design_alone_does_not(
 
     def told(params: torch.Tensor) -> list[ViewRecord]:
         misses = ((params - target) / half).square().sum(dim=1)  # a smooth bowl in the unit box
-        return [
-            dataclasses.replace(_record(0.0, [0.0] * 3), params=p.tolist(), objective=-m)
-            for p, m in zip(params, misses.tolist())
-        ]
+        return _scored(params, (-misses).tolist())
 
     proposer = TurboProposer(context, np.random.default_rng(0))
     best = []
@@ -844,12 +848,7 @@ def test_turbo_fits_its_process_again_once_the_views_have_grown_by_refit_growth(
     )
     for _ in range(12):
         params = proposer.ask(8)
-        proposer.tell(
-            [
-                dataclasses.replace(_record(0.0, [0.0] * 3), params=p.tolist(), objective=-float(p.square().sum()))
-                for p in params
-            ]
-        )
+        proposer.tell(_scored(params, (-params.square().sum(dim=1)).tolist()))
     expected = [8]
     for views in range(12, len(proposer.y), 4):  # the process drawn before each batch of 4 after the design's 8
         if views >= growth * expected[-1]:
