@@ -11,7 +11,7 @@ from pathlib import Path
 from kadv.errors import WriteError
 from kadv.interrupts import deferred_interrupts
 
-__all__ = ["TEMPORARY_MARK", "atomic_write", "remove_temporaries", "save_figure", "write_json"]
+__all__ = ["TEMPORARY_MARK", "atomic_write", "file_slug", "remove_temporaries", "save_figure", "write_json"]
 
 # in the name of every file atomic_write has not finished: ".summary.kadv-tmp-x1y2z3.json"
 TEMPORARY_MARK = ".kadv-tmp-"
@@ -79,3 +79,9 @@ def save_figure(path: str | Path, figure, tight: bool = True) -> Path:
         return atomic_write(path, lambda tmp: figure.savefig(tmp, format="png", dpi=100, bbox_inches=bbox))
     finally:
         plt.close(figure)
+
+
+def file_slug(name: str) -> str:
+    """A name (a model's, a scene's: ``probe/stairs``) as a file name: other characters than letters,
+    digits, ``-``, ``_`` and ``.`` become ``_``, at most 80 of them."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)[:80]

@@ -32,6 +32,7 @@ ORDER = (
     "probes",
     "report",
     "diagnostics",
+    "bench",
     "testing",
     "cli",
 )

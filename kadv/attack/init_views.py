@@ -250,7 +250,7 @@ _SURFACE_SHARE = 0.05
 
 
 def score_views(
-    model: DepthModel,
+    model: DepthModel | None,
     renderer: ExactRenderer,
     poses: torch.Tensor,
     fov_x_deg: torch.Tensor,
@@ -260,20 +260,21 @@ def score_views(
     alignment: str = "scale_shift",
 ) -> ViewScores:
     """Score N views at poses (N, 4, 4) with fields of view (N,) at the given size (delta1 after
-    ``alignment``, :func:`kadv.losses.depth_metrics`)."""
+    ``alignment``, :func:`kadv.losses.depth_metrics`; NaN with no ``model``: what the views show
+    alone, as a suite's model-free choice of init views reads it)."""
     scores: dict[str, list[torch.Tensor]] = {"delta1": [], "surfaces": [], "depth_range": [], "structure": []}
     with torch.no_grad():
         for start in range(0, len(poses), batch_size):
             chunk = slice(start, start + batch_size)
             K = torch.stack([intrinsics_from_fov(float(f), height, width) for f in fov_x_deg[chunk]])
             out = renderer.render(poses[chunk], K, height, width)
-            prediction = model(out.rgb, K)
-            scores["delta1"].append(
-                depth_metrics(
-                    prediction.double(), out.depth.double(), out.mask, model.output_kind, alignment=alignment
-                )["delta1"]
-            )
             depth = out.depth.double()
+            if model is None:
+                scores["delta1"].append(torch.full((len(depth),), math.nan, dtype=torch.float64))
+            else:
+                prediction = model(out.rgb, K).double()
+                metrics = depth_metrics(prediction, depth, out.mask, model.output_kind, alignment=alignment)
+                scores["delta1"].append(metrics["delta1"])
             far = torch.where(out.mask, depth, torch.zeros_like(depth)).amax(dim=(1, 2, 3))
             near = torch.where(out.mask, depth, torch.full_like(depth, torch.inf)).amin(dim=(1, 2, 3))
             scores["depth_range"].append(torch.log(far.clamp_min(_MIN_DEPTH) / near.clamp_min(_MIN_DEPTH)))

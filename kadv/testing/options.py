@@ -11,6 +11,7 @@ from pathlib import Path
 
 from kadv.attack.records import worst_record
 from kadv.attack.search import DEFAULT_METHOD, RENAMED_BUDGET
+from kadv.io import file_slug as slug
 from kadv.testing.inputs import RobustnessInputError, resolve_model, resolve_scene
 from kadv.testing.session import current
 
@@ -188,7 +189,3 @@ def check_radii(radii) -> tuple[tuple[float, float], ...]:
                 f"radii must increase (each holds the one before), got ({d0:g}, {m0:g}) then ({d1:g}, {m1:g})"
             )
     return pairs
-
-
-def slug(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)[:80]

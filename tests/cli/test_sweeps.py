@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from kadv.cli.report import main as report_main
+from tests.cli.browser import rendered_dom
 from tests.cli.in_process import call_main
 from tests.cli.waiting import wait_for
 
@@ -161,28 +162,7 @@ def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(killed_sweep:
     assert len(methods) == 5 and {"gradient", "random"} <= {line.split(",")[2] for line in methods[1:]}
     transfer = (out / "transfer_delta1.csv").read_text().splitlines()
     assert transfer[0] == "views of \\ scored by,kadv_tiny" and len(transfer) == 2
-    chromium = "/usr/bin/chromium"
-    assert Path(chromium).exists(), "headless Chromium is missing: apt-get install -y chromium"
-    dom = subprocess.run(
-        [
-            chromium,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-quic",
-            "--no-first-run",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            f"--user-data-dir={tmp_path / 'chromium'}",
-            "--virtual-time-budget=5000",
-            "--dump-dom",
-            (out / "report.html").as_uri(),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    ).stdout
+    dom = rendered_dom(out / "report.html", tmp_path / "chromium")
     assert dom.count("<table") == 7  # tables 2 and 3 of each method, methods, transfer delta1 and L_depth
     assert dom.count("<tr>") == 4 * 3 + 5 + 2 * 2  # tables 2 and 3: header, model, Avg; methods; transfer
     images = int(dom.split('data-images="')[1].split('"')[0])
