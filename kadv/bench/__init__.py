@@ -7,7 +7,7 @@ imports Hydra.
 
 from __future__ import annotations
 
-from kadv.bench.board import Leaderboard, leaderboard, read_entries
+from kadv.bench.board import Leaderboard, leaderboard, read_entries, suite_table2
 from kadv.bench.digest import COLOUR_LEVELS, LENGTH_STEP, scene_digest
 from kadv.bench.entry import (
     ENTRY_FORMAT,
@@ -74,6 +74,7 @@ __all__ = [
     "scenes_root",
     "shipped_specs",
     "suite_score",
+    "suite_table2",
     "suite_units",
     "unit_path",
     "verify_entry",

@@ -22,8 +22,9 @@ from kadv.bench.scores import Z95, Pooled, SuiteScore, best_known, paired_differ
 from kadv.bench.suite import BenchError, Suite
 from kadv.bench.verify import check_complete
 from kadv.io import atomic_write, save_figure, write_json
+from kadv.report.sweep import Table
 
-__all__ = ["DIVERGENT_VERSIONS", "Leaderboard", "Row", "leaderboard", "read_entries"]
+__all__ = ["DIVERGENT_VERSIONS", "Leaderboard", "Row", "leaderboard", "read_entries", "suite_table2"]
 
 # kadv versions whose entries give other figures than today's for the same suite and model (a bug
 # fixed since): their entries are refused in a table. None yet.
@@ -226,3 +227,29 @@ def read_entries(paths: list[str | Path]) -> dict[str, Entry]:
     from kadv.bench.entry import load_entry
 
     return {str(path): load_entry(path) for path in paths}
+
+
+def suite_table2(suite: Suite, entries: dict[str, Entry]) -> Table:
+    """The study's Table 2 from suite entries: per model (rows) and scene (column pairs), the
+    adversarial L_depth and delta1 at the largest radius, means over the scene's init views and the
+    entries' seeds, then their averages over scenes."""
+    largest = suite.protocol.radii[-1]
+    protocol = suite.protocol
+    table = Table(
+        f"Table 2: adversarial views within {largest[0]:g}°, {largest[1]:g} m (suite {suite.name}, "
+        f"{protocol.method}; delta1 after {protocol.alignment} alignment in {protocol.space} space)",
+        ["model"]
+        + [f"{s.name} {v}" for s in suite.scenes for v in ("L_depth", "delta1")]
+        + ["Avg L_depth", "Avg delta1"],
+    )
+    models: dict[str, list[Entry]] = {}
+    for entry in entries.values():
+        models.setdefault(entry.model["name"], []).append(entry)
+    for name, group in sorted(models.items()):
+        row: list = [name]
+        for scene in range(len(suite.scenes)):
+            cells = [u.cells[-1] for e in group for u in e.units if u.scene == scene]
+            row += [float(np.mean([c.l_depth for c in cells])), float(np.mean([c.delta1 for c in cells]))]
+        row += [float(np.mean(row[1::2])), float(np.mean(row[2::2]))]
+        table.rows.append(row)
+    return table

@@ -27,7 +27,10 @@ gain, model passes and seconds, when the runs hold more than one), transfer_delt
 transfer_l_depth.{md,csv} (every model scored on every model's adversarial views, re-rendered from
 their saved poses), curves.png (anytime curves per model and method), and report.html
 (self-contained: tables, curves, gallery, maps); with --reference, reference_<run>.{md,csv} (each
-kept adversarial view and its init view re-rendered by Mitsuba 3 and scored on both renderers)."""
+kept adversarial view and its init view re-rendered by Mitsuba 3 and scored on both renderers).
+Paths may also be suite entries (kadv-bench's entry.json files): for them it writes
+table2_<suite>.{md,csv}, the study's Table 2 at the suite's largest radius (--suite names a suite
+file when the entries' suite is not a shipped one)."""
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -45,6 +48,7 @@ def _parser() -> argparse.ArgumentParser:
         "and write reference_<run>.{md,csv}: delta1 init -> adversarial on kadv's renders and on Mitsuba's",
     )
     parser.add_argument("--reference-spp", type=int, default=64, help="Mitsuba samples per pixel (denoised)")
+    parser.add_argument("--suite", help="the suite file of the entries given (default: their shipped suite)")
     return parser
 
 
@@ -78,21 +82,46 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.reference_spp < 1:  # before the report's minutes, not after them
         parser.error(f"--reference-spp must be >= 1, got {args.reference_spp}")
+    entries = [path for path in args.paths if Path(path).suffix == ".json"]
+    runs = [path for path in args.paths if path not in entries]
     try:
-        sources = None if args.no_transfer else _FromConfig()
-        written = write_report(
-            args.paths,
-            args.out,
-            sources and sources.study_of,
-            sources and sources.model_of,
-            progress=not args.no_progress,
-        )
+        written = _entry_tables(entries, args.suite, args.out)
+        sources = None if args.no_transfer or not runs else _FromConfig()
+        if runs:
+            written += write_report(
+                runs,
+                args.out,
+                sources and sources.study_of,
+                sources and sources.model_of,
+                progress=not args.no_progress,
+            )
         if args.reference:
             written += _reference_tables(args, sources or _FromConfig())
     except USER_ERRORS as error:
         print(f"kadv-report: error: {' '.join(str(error).split())}", file=sys.stderr)
         sys.exit(2)
     print("\n".join(str(path) for path in written))
+
+
+def _entry_tables(paths: list[str], suite: str | None, out: Path | None) -> list[Path]:
+    """The study's Table 2 of suite entries, one per suite (``out``: None, beside the first entry)."""
+    if not paths:
+        return []
+    out = out if out is not None else Path(paths[0]).parent / "report"
+    from kadv.bench import load_suite, read_entries, suite_table2
+
+    entries = read_entries(paths)
+    by_suite: dict[str, dict] = {}
+    for path, entry in entries.items():
+        by_suite.setdefault(suite or entry.suite["name"], {})[path] = entry
+    written = []
+    for name, group in by_suite.items():
+        frozen = load_suite(name)
+        for path, entry in group.items():
+            if entry.suite["hash"] != frozen.hash:
+                raise ValueError(f"entry {path}: suite.hash is not suite {frozen.name!r}'s")
+        written += suite_table2(frozen, group).write(out, f"table2_{frozen.name}")
+    return written
 
 
 def _reference_tables(args: argparse.Namespace, sources: _FromConfig) -> list[Path]:

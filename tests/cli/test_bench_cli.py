@@ -137,3 +137,19 @@ def test_a_run_with_too_few_seeds_or_a_bad_shard_says_so_in_one_line(suite_file,
             command.append("seeds=[0]")
         result = subprocess.run(command, capture_output=True, text=True, timeout=300)
         assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr, result.stderr
+
+
+def test_kadv_report_writes_the_study_s_table_2_from_suite_entries(suite_file, entry, tmp_path) -> None:
+    from kadv.cli.report import main as report_main
+
+    result = call_main(
+        report_main, ["kadv-report", str(entry / "entry.json"), "--suite", str(suite_file), "-o", str(tmp_path)]
+    )
+    assert result.returncode == 0, result.stderr
+    header, row = (tmp_path / "table2_boxes.csv").read_text().splitlines()
+    assert header.split(",") == [
+        "model", "box0 L_depth", "box0 delta1", "box1 L_depth", "box1 delta1", "Avg L_depth", "Avg delta1"
+    ]  # fmt: skip
+    units = json.loads((entry / "entry.json").read_text())["units"]
+    box1 = [u["cells"][-1]["delta1"] for u in units if u["scene"] == 1]  # the largest radius, every view and seed
+    assert row.startswith("kadv_tiny,") and float(row.split(",")[4]) == pytest.approx(sum(box1) / len(box1))
