@@ -90,6 +90,12 @@ class Leaderboard:
         for first, second, mean, se in self.pairs:
             lines.append(f"paired: {first} - {second} = {mean:+.3f} ± {1.96 * se:.3f} (95% over seeds)")
         lines += [f"warning: {w}" for w in self.warnings]
+        names = [row.name for row in self.rows]
+        lines += ["", "per scene, the worst delta1 at each radius (" + ", ".join(radii) + "):", ""]
+        lines += ["| scene | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
+        for scene in self.suite.scenes:
+            cells = [" / ".join(f"{v:.3f}" for v in row.score.per_scene[scene.name]) for row in self.rows]
+            lines.append(f"| {scene.name} | " + " | ".join(cells) + " |")
         return "\n".join(lines)
 
     def to_dict(self) -> dict:

@@ -93,7 +93,8 @@ def test_the_leaderboard_page_renders_in_headless_chromium(suite_file, entry, tm
     assert result.returncode == 0, result.stderr
     assert {p.name for p in out.iterdir()} == {f"leaderboard.{e}" for e in ("md", "json", "png", "html")}
     dom = rendered_dom(out / "leaderboard.html", tmp_path / "chromium")
-    assert dom.count("<table>") == 1 and dom.count("<tr>") == 2 and "<td>kadv_tiny</td>" in dom
+    # the scores (a header and a model) and the per-scene table (a header and two scenes)
+    assert dom.count("<table>") == 2 and dom.count("<tr>") == 2 + 3 and "<td>kadv_tiny</td>" in dom
     assert "ranking: kadv_tiny" in dom and 'src="data:image/png;base64,' in dom
 
 

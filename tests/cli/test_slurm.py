@@ -91,3 +91,19 @@ def test_a_job_signalled_as_at_its_time_limit_is_requeued_and_resumes(cluster, t
     assert done and done == list(range(len(done))) and len(summary["init_views"]) == 3
     restarts = subprocess.run(["scontrol", "show", "job", job], env=cluster, capture_output=True, text=True).stdout
     assert "Restarts=1" in restarts
+
+
+def test_a_suite_run_s_shards_run_as_slurm_jobs_and_merge_into_one_entry(cluster, tmp_path: Path) -> None:
+    from kadv.bench import Protocol, SceneSpec, freeze_suite
+
+    protocol = Protocol(radius_passes=(4, 4, 4), min_seeds=1, size=(24, 32), lighting="direct")
+    suite = freeze_suite("boxes", [SceneSpec("box", {"kind": "box_room", "seed": 0})], protocol, views_per_scene=2)
+    suite.save(tmp_path / "suite.json")
+    out = tmp_path / "entry"
+    command = [str(BIN / "kadv-bench"), "run", "-m", *LAUNCHER, f"suite={tmp_path / 'suite.json'}", "seeds=[0]"]
+    command += [f"out={out}", "progress=false", "shard=0,1", "shards=2"]
+    result = subprocess.run(command, cwd=tmp_path, env=cluster, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    units = json.loads((out / "entry.json").read_text())["units"]
+    assert [(u["view"], u["seed"]) for u in units] == [(0, 0), (1, 0)]
+    assert len(list((out / "jobs" / ".submitit").rglob("*_log.out"))) == 2  # one Slurm job a shard
