@@ -22,6 +22,7 @@ from kadv.bench.entry import (
     suite_units,
     unit_path,
 )
+from kadv.bench.pooled import pooled_worst
 from kadv.bench.scores import SuiteScore, best_known, paired_difference, pool_units, suite_score
 from kadv.bench.sheet import save_suite_sheet
 from kadv.bench.shipped import SHIPPED, shipped_specs
@@ -67,6 +68,7 @@ __all__ = [
     "model_identity",
     "paired_difference",
     "pool_units",
+    "pooled_worst",
     "read_entries",
     "run_suite",
     "save_suite_sheet",

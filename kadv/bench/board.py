@@ -52,6 +52,7 @@ class Leaderboard:
     rows: list[Row]
     pairs: list[tuple[str, str, float, float]]
     warnings: list[str]
+    pooled: dict[str, tuple[float, list[float]]] | None = None
 
     def ranking_text(self) -> str:
         """``a > b ~ c``: ``>`` where the paired difference's 95% interval over seeds excludes 0."""
@@ -74,8 +75,8 @@ class Leaderboard:
             f"{protocol.method}, {protocol.passes_per_view} passes per init view and seed",
             "",
             "| model | init | " + " | ".join(radii) + " | suite score (95% over seeds) | over scenes (95%) "
-            "| best-known | AbsRel | seeds |",
-            "|---" * (len(radii) + 7) + "|",
+            "| best-known | AbsRel | seeds |" + (" pooled worst (the others' poses too) |" if self.pooled else ""),
+            "|---" * (len(radii) + 7 + bool(self.pooled)) + "|",
         ]
         for row in self.rows:
             score = row.score
@@ -85,6 +86,7 @@ class Leaderboard:
             lines.append(
                 f"| {row.name} | {score.init:.3f} | {cells} | {score.overall:.3f} ({lo:.3f}-{hi:.3f}) | "
                 f"{slo:.3f}-{shi:.3f} | {row.best[0]:.3f} | {score.abs_rel:.3f} | {len(score.seeds)} |"
+                + (f" {self.pooled[row.name][0]:.3f} |" if self.pooled else "")
             )
         lines += ["", f"ranking: {self.ranking_text()}"]
         for first, second, mean, se in self.pairs:
@@ -109,6 +111,7 @@ class Leaderboard:
                     "score": row.score.to_dict(),
                     "best_known": {"overall": row.best[0], "per_radius": row.best[1]},
                 }
+                | ({"pooled_worst": dict(zip(("overall", "per_radius"), self.pooled[row.name]))} if self.pooled else {})
                 for row in self.rows
             ],
             "paired": [{"first": a, "second": b, "difference": m, "se": s} for a, b, m, s in self.pairs],
@@ -181,8 +184,11 @@ def _page(title: str, table: str, picture: str) -> str:
     )
 
 
-def leaderboard(suite: Suite, entries: dict[str, Entry]) -> Leaderboard:
-    """The leaderboard of ``entries`` (by file) on ``suite`` (see the module docstring).
+def leaderboard(
+    suite: Suite, entries: dict[str, Entry], pooled: dict[str, tuple[float, list[float]]] | None = None
+) -> Leaderboard:
+    """The leaderboard of ``entries`` (by file) on ``suite`` (see the module docstring), with the
+    models' pooled worst case (:func:`kadv.bench.pooled_worst`) as a column of its own when given.
 
     Raises:
         BenchError: in one line naming the file and the field.
@@ -213,9 +219,9 @@ def leaderboard(suite: Suite, entries: dict[str, Entry]) -> Leaderboard:
         group.append((path, entry))
     rows = []
     for name, group in groups.items():
-        pooled = pool_units(suite, [entry for _, entry in group])
+        cells = pool_units(suite, [entry for _, entry in group])
         rows.append(
-            Row(name, group[0][1].model, [p for p, _ in group], pooled, suite_score(suite, pooled), best_known(pooled))
+            Row(name, group[0][1].model, [p for p, _ in group], cells, suite_score(suite, cells), best_known(cells))
         )
     rows.sort(key=lambda row: (-row.score.overall, row.name))
     pairs = []
@@ -225,7 +231,7 @@ def leaderboard(suite: Suite, entries: dict[str, Entry]) -> Leaderboard:
         except ValueError:
             mean, se = first.score.overall - second.score.overall, float("nan")
         pairs.append((first.name, second.name, mean, se))
-    return Leaderboard(suite, rows, pairs, warnings)
+    return Leaderboard(suite, rows, pairs, warnings, pooled)
 
 
 def read_entries(paths: list[str | Path]) -> dict[str, Entry]:

@@ -17,7 +17,7 @@ from kadv.io import file_slug
 from kadv.models import DepthModel
 from kadv.report.outputs import ViewRenderer, save_view_picture
 
-__all__ = ["TOLERANCE_PIXELS", "Verification", "check_complete", "verify_entry"]
+__all__ = ["TOLERANCE_PIXELS", "Verification", "cell_context", "check_complete", "verify_entry"]
 
 # another CPU's rounding moves the aligned prediction by a hair, and a few pixels across delta1's
 # threshold with it: a stored delta1 may differ from the one verified by this many pixels' share
@@ -102,17 +102,7 @@ def verify_entry(
             init = scene.views[unit.view].init_view()
             for k, cell in enumerate(unit.cells):
                 name = f"{where}: scene {scene.name!r}, view {unit.view}, seed {unit.seed}, radius {k}"
-                degrees, metres = suite.protocol.radii[k]
-                config = dataclasses.replace(settings.attack, max_angle_deg=degrees, max_distance=metres)
-                context = SearchContext(study.objective, study.differentiable, init, height, width, config)
-                params = torch.tensor([cell.params], dtype=torch.float64)
-                _check_pose(name, cell, context, params, degrees, metres)
-                _, fraction = context.guard(torch.zeros(1, 3, dtype=torch.float64), params[:, 3:6])
-                if float(fraction[0]) < 1.0:
-                    raise BenchError(f"{name}: world_T_cam lies behind a surface: the camera's path to it crosses one")
-                (record,) = context.score(0, params, fraction)
-                if not record.valid:
-                    raise BenchError(f"{name}: world_T_cam is not a valid view ({record.verdict})")
+                record = _verified(name, cell, cell_context(study, suite, init, k), suite.protocol.radii[k])
                 off = abs(record.delta1 - cell.delta1) * height * width
                 if not off <= tolerance_pixels:
                     raise BenchError(
@@ -123,11 +113,33 @@ def verify_entry(
                 if k == len(unit.cells) - 1 and (worst is None or record.delta1 < worst[0].delta1):
                     worst = (record, init)
         if pictures is not None and worst is not None:
-            record, init = worst
-            render = ViewRenderer(study.objective, height, width, supersample=2)
+            degrees, metres = suite.protocol.radii[-1]
             label = f"{model.name} on {scene.name}: worst within {degrees:g}°, {metres:g} m"
-            save_view_picture(Path(pictures) / f"{file_slug(scene.name)}.png", render, init, record, label)
+            render = ViewRenderer(study.objective, height, width, supersample=2)
+            save_view_picture(Path(pictures) / f"{file_slug(scene.name)}.png", render, worst[1], worst[0], label)
     return Verification(cells, largest, tolerance_pixels, height * width)
+
+
+def cell_context(study: Study, suite: Suite, init, radius: int) -> SearchContext:
+    """The search context of a cell: ``study``'s model from the init view within the suite's
+    ``radius``-th radius (its bounds, envelope and render size)."""
+    degrees, metres = suite.protocol.radii[radius]
+    config = dataclasses.replace(study.settings.attack, max_angle_deg=degrees, max_distance=metres)
+    return SearchContext(study.objective, study.differentiable, init, *suite.protocol.size, config)
+
+
+def _verified(name: str, cell, context: SearchContext, radius: tuple[float, float]):
+    """The stored pose of ``cell`` rendered and scored again, or :class:`BenchError` naming the cell
+    where it is not its parameters' pose, lies outside the radius, behind a surface, or is no valid view."""
+    params = torch.tensor([cell.params], dtype=torch.float64)
+    _check_pose(name, cell, context, params, *radius)
+    _, fraction = context.guard(torch.zeros(1, 3, dtype=torch.float64), params[:, 3:6])
+    if float(fraction[0]) < 1.0:
+        raise BenchError(f"{name}: world_T_cam lies behind a surface: the camera's path to it crosses one")
+    (record,) = context.score(0, params, fraction)
+    if not record.valid:
+        raise BenchError(f"{name}: world_T_cam is not a valid view ({record.verdict})")
+    return record
 
 
 def _check_pose(name: str, cell, context: SearchContext, params: torch.Tensor, degrees: float, metres: float) -> None:

@@ -6,7 +6,7 @@
     kadv-bench run -m suite=offline-v1 shard=0,1,2,3 shards=4 hydra/launcher=joblib
     kadv-bench merge suite=offline-v1 model=kadv_tiny seeds=0,1,2 out=outputs/bench/offline-v1-kadv_tiny
     kadv-bench verify outputs/bench/offline-v1-kadv_tiny/entry.json model=kadv_tiny pictures=worst/
-    kadv-bench table a/entry.json b/entry.json out=outputs/leaderboard
+    kadv-bench table a/entry.json b/entry.json out=outputs/leaderboard pooled=true
 
 ``freeze`` writes a suite file and a sheet of its init views (PNG); ``run`` writes one model's
 units and, once all are there, its ``entry.json``; ``merge`` assembles the entry from shards'
@@ -41,7 +41,7 @@ _KEYS = {
                "lighting": None, "size": None},
     "merge": {"suite": None, "model": "kadv_tiny", "seeds": "0,1,2", "out": None},
     "verify": {"suite": None, "model": "kadv_tiny", "scenes": None, "tolerance": None, "pictures": None},
-    "table": {"suite": None, "out": "outputs/leaderboard"},
+    "table": {"suite": None, "out": "outputs/leaderboard", "pooled": "false", "scenes": None},
 }  # fmt: skip
 
 
@@ -169,13 +169,19 @@ def _verify(values: dict, positional: list[str]) -> None:
 
 
 def _table(values: dict, positional: list[str]) -> None:
-    from kadv.bench import leaderboard, read_entries
+    from kadv.bench import leaderboard, pooled_worst, read_entries
 
     if not positional:
         raise ValueError("kadv-bench table takes one or more entry files")
+    if values["pooled"] not in ("true", "false"):
+        raise ValueError(f"pooled must be true or false, got {values['pooled']!r}")
     entries = read_entries(positional)
     suite = _suite_of(values, next(iter(entries.values())))
-    board = leaderboard(suite, entries)
+    pooled = None
+    if values["pooled"] == "true":  # every model scored at the others' worst poses: they must load by name
+        models = {name: _model(name) for name in dict.fromkeys(e.model["name"] for e in entries.values())}
+        pooled = pooled_worst(suite, entries, models, values["scenes"])
+    board = leaderboard(suite, entries, pooled)
     written = board.write(values["out"])
     print(f"{board.markdown()}\n\nleaderboard: {', '.join(str(p) for p in written)}")
 

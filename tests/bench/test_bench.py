@@ -20,8 +20,11 @@ from kadv.bench import (
     freeze_suite,
     leaderboard,
     load_suite,
+    pool_units,
+    pooled_worst,
     run_suite,
     shipped_specs,
+    suite_score,
     unit_path,
     verify_entry,
 )
@@ -206,3 +209,22 @@ def test_two_labs_entries_merged_give_the_table_of_one_lab_that_ran_both(run, su
     merged = leaderboard(suite, {"a.json": lab_a, "b.json": lab_b})
     assert merged.markdown() == leaderboard(suite, {"both.json": both}).markdown()
     assert math.isfinite(merged.rows[0].score.overall_se) and "kadv_tiny" in merged.markdown()
+
+
+def test_the_pooled_worst_case_scores_each_model_at_the_others_worst_poses(run, suite, model, tmp_path) -> None:
+    entry, _ = run
+    # a twin of kadv-tiny whose entry holds kadv-tiny's own poses: scored there, it finds nothing lower
+    twin = dataclasses.replace(entry, model=entry.model | {"name": "twin"})
+    same = pooled_worst(suite, {"a": entry, "b": twin}, {"kadv_tiny": model, "twin": model})
+    own = suite_score(suite, pool_units(suite, [entry]))
+    assert same["kadv_tiny"][0] == pytest.approx(own.overall, abs=2 / 768)  # a pixel or two of 24 x 32
+    dpt = load_model("kadv_tiny_dpt")
+    other = run_suite(suite, dpt, (0, 1), tmp_path, progress=False)
+    pooled = pooled_worst(suite, {"a": entry, "b": other}, {"kadv_tiny": model, "kadv_tiny_dpt": dpt})
+    assert pooled["kadv_tiny"][0] <= own.overall and all(
+        p <= s + 1e-12 for p, s in zip(pooled["kadv_tiny"][1], own.per_radius)
+    )
+    board = leaderboard(suite, {"a": entry, "b": other}, pooled)
+    assert "pooled worst" in board.markdown() and board.to_dict()["models"][0]["pooled_worst"]["overall"] <= 1
+    with pytest.raises(BenchError, match="two models or more"):
+        pooled_worst(suite, {"a": entry}, {"kadv_tiny": model})
