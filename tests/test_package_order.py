@@ -96,3 +96,15 @@ def test_a_cycle_between_two_packages_is_found_even_through_an_import_inside_a_f
         "scenes is not in the order",
         "render/cast.py imports kadv.scenes, which the order leaves out",
     ]
+
+
+def test_the_library_never_imports_hydra() -> None:
+    """Only the commands (``kadv.cli``) import Hydra: the library and the benchmark do not."""
+    import subprocess
+    import sys
+
+    packages = [name for name in ORDER if name != "cli" and (PACKAGE / name).is_dir()]
+    code = "; ".join(f"import kadv.{name}" for name in packages) + "; import sys; print('hydra' in sys.modules)"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "bench" in packages and result.stdout.strip() == "False"
