@@ -1,8 +1,8 @@
 """Whether a suite's score holds under any seed: entries of each model under disjoint seed sets
 (run, or resumed, with kadv.bench.run_suite under ``--out``), then per entry the 95% interval of
 the suite score over seeds at each radius, whether the entries of a model agree (any two within
-1.96 x sqrt(2) x their pooled standard error), the paired verdict between the first two models
-under each seed set, and what each entry cost.
+1.96 x sqrt(2) x their pooled standard error, overall and at each radius), the paired verdict
+between the first two models under each seed set, and what each entry cost.
 
     python benchmarks/suite_score.py --suite offline-v1 --models kadv_tiny,kadv_tiny_dpt \
         --seed-sets 0,1,2:3,4,5:6,7,8 --out outputs/suite_score
@@ -46,7 +46,7 @@ def main() -> None:
             entries.setdefault(name, []).append(run_suite(suite, model, seeds, out, root=args.scenes))
     radii = [f"{d:g}°/{m:g} m" for d, m in suite.protocol.radii]
     print(f"suite {suite.name} ({suite.hash[:12]}), {len(suite.cells)} cells, seed sets {args.seed_sets}\n")
-    print("| model | seeds | " + " | ".join(radii) + " | overall | over scenes | minutes (CPU of the units) |")
+    print("| model | seeds | " + " | ".join(radii) + " | overall | over scenes | search minutes (sum over units) |")
     print("|---" * (len(radii) + 5) + "|")
     half_max, minutes_max = 0.0, 0.0
     for name, runs in entries.items():
@@ -67,10 +67,18 @@ def main() -> None:
     for name, runs in entries.items():
         for a, b in itertools.combinations(runs, 2):
             sa, sb = (suite_score(suite, pool_units(suite, [e])) for e in (a, b))
-            bound = Z95 * math.sqrt(2) * math.sqrt((sa.overall_se**2 + sb.overall_se**2) / 2)
-            ok = abs(sa.overall - sb.overall) <= bound
-            agree &= ok
-            print(f"{name}: seeds {a.seeds} against {b.seeds}: {sa.overall - sb.overall:+.4f} (bound {bound:.4f}) {ok}")
+            pairs = [(sa.overall, sb.overall, sa.overall_se, sb.overall_se, "overall")]
+            pairs += [
+                (ma, mb, ea, eb, radius)
+                for ma, mb, ea, eb, radius in zip(
+                    sa.per_radius, sb.per_radius, sa.per_radius_se, sb.per_radius_se, radii
+                )
+            ]
+            for ma, mb, ea, eb, where in pairs:
+                bound = Z95 * math.sqrt(2) * math.sqrt((ea**2 + eb**2) / 2)
+                ok = abs(ma - mb) <= bound
+                agree &= ok
+                print(f"{name}: seeds {a.seeds} against {b.seeds}, {where}: {ma - mb:+.4f} (bound {bound:.4f}) {ok}")
     verdicts = []
     names = list(entries)
     if len(names) >= 2:

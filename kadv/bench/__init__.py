@@ -21,6 +21,7 @@ from kadv.bench.entry import (
     run_suite,
     suite_units,
     unit_path,
+    unit_search_seed,
 )
 from kadv.bench.pooled import pooled_worst
 from kadv.bench.scores import SuiteScore, best_known, paired_difference, pool_units, suite_score
@@ -79,5 +80,6 @@ __all__ = [
     "suite_table2",
     "suite_units",
     "unit_path",
+    "unit_search_seed",
     "verify_entry",
 ]

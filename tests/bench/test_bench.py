@@ -26,6 +26,7 @@ from kadv.bench import (
     shipped_specs,
     suite_score,
     unit_path,
+    unit_search_seed,
     verify_entry,
 )
 from kadv.bench.board import DIVERGENT_VERSIONS
@@ -228,3 +229,14 @@ def test_the_pooled_worst_case_scores_each_model_at_the_others_worst_poses(run, 
     assert "pooled worst" in board.markdown() and board.to_dict()["models"][0]["pooled_worst"]["overall"] <= 1
     with pytest.raises(BenchError, match="two models or more"):
         pooled_worst(suite, {"a": entry}, {"kadv_tiny": model})
+
+
+def test_the_cells_of_one_seed_search_independently(suite, model, tmp_path) -> None:
+    # one init view twice: under the seed alone both would search the same design and find the same
+    scene = dataclasses.replace(suite.scenes[0], views=(suite.scenes[0].views[0],) * 2)
+    twice = dataclasses.replace(suite, scenes=(scene,), protocol=dataclasses.replace(PROTOCOL, min_seeds=1))
+    entry = run_suite(twice, model, (0,), tmp_path, progress=False)
+    first, second = entry.units
+    assert first.delta1_init == second.delta1_init
+    assert [c.params for c in first.cells] != [c.params for c in second.cells]
+    assert unit_search_seed((0, 0, 0)) == unit_search_seed((0, 0, 0)) != unit_search_seed((0, 0, 1))
