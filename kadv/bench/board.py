@@ -3,8 +3,9 @@ picture of each model's worst delta1 against the radius.
 
 Entries of one model identity (its weights' digest) with disjoint seeds pool as more replicates.
 Entries of another suite, one model name with two identities, overlapping seeds of one identity,
-an entry missing a cell, and entries of kadv versions listed in :data:`DIVERGENT_VERSIONS` are
-refused in one line naming the file and the field; another torch build or device only warns.
+an entry missing a cell, entries whose bake version is not the suite's, and entries of kadv
+versions listed in :data:`DIVERGENT_VERSIONS` are refused in one line naming the file and the
+field; another torch build or device only warns.
 """
 
 from __future__ import annotations
@@ -203,6 +204,11 @@ def leaderboard(
         )
     for path, entry in entries.items():
         check_complete(entry, suite, f"entry {path}")
+        if entry.bake_version != suite.bake_version:
+            raise BenchError(
+                f"entry {path}: bake_version {entry.bake_version} lights the scenes otherwise than the suite's "
+                f"{suite.bake_version}"
+            )
         if entry.kadv_version in DIVERGENT_VERSIONS:
             reason = DIVERGENT_VERSIONS[entry.kadv_version]
             raise BenchError(f"entry {path}: kadv_version {entry.kadv_version} gives other figures ({reason})")

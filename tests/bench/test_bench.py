@@ -195,6 +195,8 @@ def test_the_leaderboard_pools_disjoint_seeds_and_refuses_mixed_entries(run, sui
         leaderboard(suite, {"a.json": entry, "b.json": renamed})
     with pytest.raises(BenchError, match=r"entry b.json: misses the cell"):
         leaderboard(suite, {"a.json": entry, "b.json": dataclasses.replace(other, units=other.units[1:])})
+    with pytest.raises(BenchError, match=r"entry b.json: bake_version 0 lights the scenes otherwise"):
+        leaderboard(suite, {"a.json": entry, "b.json": dataclasses.replace(other, bake_version=0)})
     monkeypatch.setitem(DIVERGENT_VERSIONS, entry.kadv_version, "a fixed bug")
     with pytest.raises(BenchError, match=r"kadv_version .* gives other figures"):
         leaderboard(suite, {"a.json": entry})
