@@ -153,7 +153,7 @@ def test_an_entry_verifies_and_a_forged_one_is_refused_naming_the_cell_and_field
     better = forged(lambda c: dataclasses.replace(c, delta1=c.delta1 - 0.01))
     with pytest.raises(BenchError, match=r"scene 'box0', view 0, seed 0, radius 2: delta1"):
         verify_entry(better, suite, model)
-    moved = forged(lambda c: dataclasses.replace(c, params=[p * 1.01 for p in c.params]))
+    moved = forged(lambda c: dataclasses.replace(c, params=[c.params[0] + 0.01, *c.params[1:]]))  # turned 0.6°
     with pytest.raises(BenchError, match="radius 2: world_T_cam is not the pose its params give"):
         verify_entry(moved, suite, model)
 
@@ -224,7 +224,7 @@ def test_the_pooled_worst_case_scores_each_model_at_the_others_worst_poses(run, 
     dpt = load_model("kadv_tiny_dpt")
     other = run_suite(suite, dpt, (0, 1), tmp_path, progress=False)
     pooled = pooled_worst(suite, {"a": entry, "b": other}, {"kadv_tiny": model, "kadv_tiny_dpt": dpt})
-    assert pooled["kadv_tiny"][0] <= own.overall and all(
+    assert pooled["kadv_tiny"][0] <= own.overall + 1e-12 and all(
         p <= s + 1e-12 for p, s in zip(pooled["kadv_tiny"][1], own.per_radius)
     )
     board = leaderboard(suite, {"a": entry, "b": other}, pooled)
