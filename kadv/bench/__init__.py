@@ -19,6 +19,7 @@ from kadv.bench.entry import (
     load_entry,
     model_identity,
     run_suite,
+    suite_settings,
     suite_units,
     unit_path,
     unit_search_seed,
@@ -26,8 +27,9 @@ from kadv.bench.entry import (
 from kadv.bench.pooled import pooled_worst
 from kadv.bench.scores import SuiteScore, best_known, paired_difference, pool_units, suite_score
 from kadv.bench.sheet import save_suite_sheet
-from kadv.bench.shipped import SHIPPED, shipped_specs
+from kadv.bench.shipped import shipped_specs
 from kadv.bench.suite import (
+    SHIPPED,
     SUITE_FORMAT,
     BenchError,
     FrozenView,
@@ -77,6 +79,7 @@ __all__ = [
     "scenes_root",
     "shipped_specs",
     "suite_score",
+    "suite_settings",
     "suite_table2",
     "suite_units",
     "unit_path",

@@ -42,6 +42,7 @@ __all__ = [
     "load_entry",
     "model_identity",
     "run_suite",
+    "suite_settings",
     "suite_units",
     "unit_path",
     "unit_search_seed",
@@ -208,7 +209,8 @@ def unit_path(out: str | Path, key: tuple[int, int, int]) -> Path:
     return Path(out) / "units" / f"scene{key[0]:03d}-view{key[1]:02d}-seed{key[2]}.json"
 
 
-def _settings(suite: Suite, device) -> StudySettings:
+def suite_settings(suite: Suite, device) -> StudySettings:
+    """The study settings a suite's protocol fixes (size, lighting, loss, search), on ``device``."""
     protocol = suite.protocol
     config = AttackConfig(protocol.method, envelope=get_envelope(protocol.envelope), restarts=protocol.restarts)
     return StudySettings(
@@ -296,7 +298,7 @@ def run_suite(
         raise BenchError(f"shard must be i/n with 0 <= i < n, got {index}/{count}")
     every = suite_units(suite, seeds)
     todo = [key for k, key in enumerate(every) if k % count == index and not unit_path(out, key).is_file()]
-    settings = _settings(suite, device)
+    settings = suite_settings(suite, device)
     bar = tqdm(total=len(todo), desc=f"{suite.name} on {model.name}", unit="unit", disable=not progress)
     for scene_index in sorted({key[0] for key in todo}):
         study = Study.build(suite.scenes[scene_index].load(root), model, settings)

@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from kadv.attack import Study
-from kadv.bench.entry import Entry, _settings
+from kadv.bench.entry import Entry, suite_settings
 from kadv.bench.suite import BenchError, Suite
 from kadv.bench.verify import cell_context
 from kadv.models import DepthModel
@@ -46,7 +46,7 @@ def pooled_worst(
         raise BenchError("the models' entries share no seed: a pooled worst case needs common seeds")
     radii = len(suite.protocol.radii)
     lowest = {name: np.full((len(suite.views), radii, len(seeds)), np.nan) for name in models}
-    settings = _settings(suite, device)
+    settings = suite_settings(suite, device)
     for s, scene in enumerate(suite.scenes):
         loaded = scene.load(root)
         study = None

@@ -33,6 +33,7 @@ from kadv.render import ExactRenderer, Shading
 from kadv.scenes import Scene
 
 __all__ = [
+    "SHIPPED",
     "SUITE_FORMAT",
     "BenchError",
     "FrozenView",
@@ -44,9 +45,12 @@ __all__ = [
     "load_suite",
     "read_json",
     "scenes_root",
+    "shipped_suite_path",
 ]
 
 SUITE_FORMAT = 1
+SHIPPED = ("offline-v1", "real-v1")  # the suites that ship with kadv (frozen from kadv.bench.shipped's specs)
+_SHIPPED_FOLDER = Path(__file__).parent / "suites"
 _CANDIDATES = 96  # sampled candidate views per scene, ranked by content
 _SPACING = 0.5  # metres (and 5 degrees per 0.1 m) between two views of a scene
 
@@ -258,8 +262,6 @@ def load_suite(path: str | Path) -> Suite:
     Raises:
         BenchError: a missing or unreadable file, or one that is not a suite.
     """
-    from kadv.bench.shipped import shipped_suite_path
-
     path = shipped_suite_path(str(path)) or Path(path)
     return Suite.from_dict(read_json(path, f"suite {path}", "no such file (or shipped suite)"), f"suite {path}")
 
@@ -272,6 +274,11 @@ def read_json(path: str | Path, what: str, missing: str = "no such file") -> dic
         raise BenchError(f"{what}: {missing}") from None
     except (OSError, json.JSONDecodeError) as error:
         raise BenchError(f"{what}: cannot read it ({error})") from None
+
+
+def shipped_suite_path(name: str) -> Path | None:
+    """The file of a shipped suite by name, or None for another name."""
+    return _SHIPPED_FOLDER / f"{name}.json" if name in SHIPPED else None
 
 
 def scenes_root(root: str | Path | None = None) -> Path:

@@ -10,7 +10,7 @@ from pathlib import Path
 import torch
 
 from kadv.attack import SearchContext, Study
-from kadv.bench.entry import Entry, _settings, model_identity, suite_units
+from kadv.bench.entry import Entry, model_identity, suite_settings, suite_units
 from kadv.bench.suite import BenchError, Suite
 from kadv.geometry import perturb_world_T_cam
 from kadv.io import file_slug
@@ -92,7 +92,7 @@ def verify_entry(
     weights = model_identity(model)["weights"]
     if entry.model.get("weights") != weights:
         raise BenchError(f"{where}: model.weights {str(entry.model.get('weights'))[:16]} is not {model.name}'s")
-    settings = _settings(suite, device)
+    settings = suite_settings(suite, device)
     height, width = suite.protocol.size
     largest, cells = 0.0, 0
     for scene_index, scene in enumerate(suite.scenes):

@@ -106,7 +106,7 @@ def _freeze(values: dict, positional: list[str]) -> None:
     if values["size"]:
         protocol["size"] = _ints(values["size"], "size")
     if values["min_seeds"]:
-        protocol["min_seeds"] = config_int(int(_ints(values["min_seeds"], "min_seeds")[0]), "min_seeds", 1)
+        protocol["min_seeds"] = config_int(_ints(values["min_seeds"], "min_seeds")[0], "min_seeds", 1)
     protocol |= {key: values[key] for key in ("method", "envelope", "lighting") if values[key]}
     specs = _specs(_required(values, "scenes", "freeze"), values["root"], values["licence"])
     suite = freeze_suite(
