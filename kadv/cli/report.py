@@ -109,6 +109,7 @@ def _entry_tables(paths: list[str], suite: str | None, out: Path | None) -> list
         return []
     out = out if out is not None else Path(paths[0]).parent / "report"
     from kadv.bench import load_suite, read_entries, suite_table2
+    from kadv.bench.verify import check_complete
 
     entries = read_entries(paths)
     by_suite: dict[str, dict] = {}
@@ -117,9 +118,8 @@ def _entry_tables(paths: list[str], suite: str | None, out: Path | None) -> list
     written = []
     for name, group in by_suite.items():
         frozen = load_suite(name)
-        for path, entry in group.items():
-            if entry.suite["hash"] != frozen.hash:
-                raise ValueError(f"entry {path}: suite.hash is not suite {frozen.name!r}'s")
+        for path, entry in group.items():  # of the suite, and holding every cell the table averages
+            check_complete(entry, frozen, f"entry {path}")
         written += suite_table2(frozen, group).write(out, f"table2_{frozen.name}")
     return written
 
