@@ -24,6 +24,7 @@ __all__ = [
     "TYPICAL_VIEWS",
     "WARM_STARTS",
     "SeedProfile",
+    "draw_typical",
     "profile_views",
     "radius_budgets",
     "ramp_shares",
@@ -43,7 +44,7 @@ SEARCH_SEED_STRIDE = 10_000
 _DRAW_ROUNDS = 32  # rounds of 4 x typical_views draws at most, for the envelope to keep enough
 
 
-def _typical(study: Study, init, config, seed: int, index: int, count: int) -> tuple[list[float], int]:
+def draw_typical(study: Study, init, config, seed: int, index: int, count: int) -> tuple[list[float], int]:
     """delta1 of the valid views among ``count`` drawn uniformly (Sobol) from the radius and the
     envelope around ``init``, and the model passes spent on them."""
     from scipy.stats import qmc  # scipy loads only where views are drawn
@@ -77,7 +78,7 @@ class SeedProfile:
         typical, failure: per radius, as :class:`Profile`'s ``*_by_seed`` rows.
         draws: per radius, the delta1 of every valid drawn view.
         found: per radius and init view, the (init view, record) of the worst view found within
-            that radius (by its own search, or scored at views other searches found: :meth:`pool`).
+            that radius (by its own search).
         results: per radius, the attack's result within it.
         search_noise: per radius, the sd (ddof 1) of :attr:`worst` over the search seeds (empty: one).
         cost: per init view, the searches' passes and seconds over all radii, the draws' passes.
@@ -112,17 +113,6 @@ class SeedProfile:
     def worst_views(self) -> list[tuple]:
         """Per radius, the (init view, record) of the worst view within it, over the init views."""
         return [min(row, key=lambda pair: pair[1].delta1) for row in self.carried]
-
-    def pool(self, radius: int, view: int, records: list) -> None:
-        """Take ``records`` (this model's scores at views found by other searches within
-        ``radius`` from init view ``view``) into account: the worst rankable one lowers the view's
-        worst there if it is lower."""
-        rankable = [r for r in records if r.rankable]
-        if rankable:
-            init, current = self.found[radius][view]
-            lowest = worst_record(rankable)
-            if lowest.delta1 < current.delta1:
-                self.found[radius][view] = (init, lowest)
 
 
 def worst_views(records: list, count: int, min_distance: float, min_angle_deg: float) -> list:
@@ -232,7 +222,7 @@ def profile_views(
         within = dataclasses.replace(config, max_angle_deg=degrees, max_distance=metres)
         typical: list[float] = []
         for i, view in enumerate(result.views):
-            drawn, passes = _typical(study, view.init, within, seed, i, typical_views)
+            drawn, passes = draw_typical(study, view.init, within, seed, i, typical_views)
             typical += drawn
             draw_passes += passes
         if k == 0:

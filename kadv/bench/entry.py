@@ -38,10 +38,12 @@ __all__ = [
     "Entry",
     "UnitResult",
     "assemble_entry",
+    "claim_run_folder",
     "environment",
     "load_entry",
     "model_identity",
     "run_suite",
+    "run_units",
     "suite_settings",
     "suite_units",
     "unit_path",
@@ -61,6 +63,8 @@ class CellResult:
         world_T_cam: (4, 4) its pose.
         fov_x_deg: its horizontal field of view.
         passes, seconds: what the search at this radius spent (model passes, as its clock counts).
+        agreement: the search's runs at this radius: [runs that reached their worst, runs made,
+            1 if one run alone found it] (:class:`kadv.attack.Agreement`; empty: not recorded).
     """
 
     delta1: float
@@ -71,6 +75,7 @@ class CellResult:
     fov_x_deg: float
     passes: int
     seconds: float
+    agreement: list[int] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -242,9 +247,10 @@ def _run_unit(study: Study, suite: Suite, key: tuple[int, int, int]) -> UnitResu
     init = results[0].views[0].init_record
     cells, worst = [], None
     for result in results:
-        found = worst_record(result.views[0].records)
+        searched = result.views[0]
+        found = worst_record(searched.records)
         worst = found if worst is None or found.delta1 < worst.delta1 else worst
-        cells.append(_cell(worst, result.views[0].budget))
+        cells.append(_cell(worst, searched.budget, searched.agreement))
     return UnitResult(
         scene_index, view_index, seed, init.delta1, init.abs_rel, init.l_depth, tuple(cells), count.passes
     )
@@ -259,14 +265,14 @@ def unit_search_seed(key: tuple[int, int, int]) -> int:
     return int(np.random.SeedSequence(list(key)).generate_state(1)[0])
 
 
-def _cell(record, budget) -> CellResult:
-    """A unit's worst view within a radius, with what the search there cost."""
+def _cell(record, budget, agreement) -> CellResult:
+    """A unit's worst view within a radius, with what the search there cost and how its runs agreed."""
     pose = torch.eye(4, dtype=torch.float64)
     pose[:3, :3] = axis_angle_to_matrix(torch.tensor(record.theta, dtype=torch.float64)[None])[0]
     pose[:3, 3] = torch.tensor(record.centre, dtype=torch.float64)
     return CellResult(
         record.delta1, record.abs_rel, record.l_depth, list(record.params), pose.tolist(), record.fov_x_deg,
-        budget.passes, budget.seconds,
+        budget.passes, budget.seconds, [agreement.reached, agreement.runs, int(agreement.alone)],
     )  # fmt: skip
 
 
@@ -296,17 +302,47 @@ def run_suite(
     index, count = shard
     if not (0 <= index < count):
         raise BenchError(f"shard must be i/n with 0 <= i < n, got {index}/{count}")
+    claim_run_folder(out, suite, model)
     every = suite_units(suite, seeds)
     todo = [key for k, key in enumerate(every) if k % count == index and not unit_path(out, key).is_file()]
     settings = suite_settings(suite, device)
     bar = tqdm(total=len(todo), desc=f"{suite.name} on {model.name}", unit="unit", disable=not progress)
     for scene_index in sorted({key[0] for key in todo}):
         study = Study.build(suite.scenes[scene_index].load(root), model, settings)
-        for key in (key for key in todo if key[0] == scene_index):
-            write_json(unit_path(out, key), asdict(_run_unit(study, suite, key)))
-            bar.update(1)
+        run_units(study, suite, [key for key in todo if key[0] == scene_index], out, bar.update)
     bar.close()
     return assemble_entry(suite, model, seeds, out, device)
+
+
+def run_units(study: Study, suite: Suite, keys: list[tuple[int, int, int]], out: str | Path, done=None) -> None:
+    """Run the units ``keys`` of one scene on its ``study`` (the suite's settings), each written
+    under ``out`` as it ends; a unit already written is kept. ``done(1)`` is called after each."""
+    for key in keys:
+        if not unit_path(out, key).is_file():
+            write_json(unit_path(out, key), asdict(_run_unit(study, suite, key)))
+        if done is not None:
+            done(1)
+
+
+def claim_run_folder(out: str | Path, suite: Suite, model: DepthModel) -> None:
+    """Mark ``out`` as the folder of ``model``'s run of ``suite`` (``run.json``), so that a run of
+    another suite or model never resumes from its units.
+
+    Raises:
+        BenchError: ``out`` holds the units of another suite or model.
+    """
+    claim = {"suite": suite.hash, "weights": model_identity(model)["weights"]}
+    path = Path(out) / "run.json"
+    if path.is_file():
+        held = read_json(path, f"run folder {out}")
+        for key, what in (("suite", "suite"), ("weights", "model")):
+            if held.get(key) != claim[key]:
+                raise BenchError(
+                    f"out={out} holds the run of another {what} ({key} {str(held.get(key))[:16]}, this run's "
+                    f"{claim[key][:16]}): give another out"
+                )
+        return
+    write_json(path, claim)
 
 
 def assemble_entry(
@@ -315,6 +351,7 @@ def assemble_entry(
     """The entry of the units under ``out`` (written to ``out/entry.json``), or None while one of
     the run's units is missing."""
     out = Path(out)
+    claim_run_folder(out, suite, model)
     paths = [unit_path(out, key) for key in suite_units(suite, tuple(seeds))]
     if not all(path.is_file() for path in paths):
         return None

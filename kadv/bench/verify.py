@@ -17,7 +17,7 @@ from kadv.io import file_slug
 from kadv.models import DepthModel
 from kadv.report.outputs import ViewRenderer, save_view_picture
 
-__all__ = ["TOLERANCE_PIXELS", "Verification", "cell_context", "check_complete", "verify_entry"]
+__all__ = ["TOLERANCE_PIXELS", "Verification", "cell_context", "check_complete", "verified_record", "verify_entry"]
 
 # another CPU's rounding moves the aligned prediction by a hair, and a few pixels across delta1's
 # threshold with it: a stored delta1 may differ from the one verified by this many pixels' share
@@ -102,7 +102,7 @@ def verify_entry(
             init = scene.views[unit.view].init_view()
             for k, cell in enumerate(unit.cells):
                 name = f"{where}: scene {scene.name!r}, view {unit.view}, seed {unit.seed}, radius {k}"
-                record = _verified(name, cell, cell_context(study, suite, init, k), suite.protocol.radii[k])
+                record = verified_record(name, cell, cell_context(study, suite, init, k), suite.protocol.radii[k])
                 off = abs(record.delta1 - cell.delta1) * height * width
                 if not off <= tolerance_pixels:
                     raise BenchError(
@@ -128,7 +128,7 @@ def cell_context(study: Study, suite: Suite, init, radius: int) -> SearchContext
     return SearchContext(study.objective, study.differentiable, init, *suite.protocol.size, config)
 
 
-def _verified(name: str, cell, context: SearchContext, radius: tuple[float, float]):
+def verified_record(name: str, cell, context: SearchContext, radius: tuple[float, float]):
     """The stored pose of ``cell`` rendered and scored again, or :class:`BenchError` naming the cell
     where it is not its parameters' pose, lies outside the radius, behind a surface, or is no valid view."""
     params = torch.tensor([cell.params], dtype=torch.float64)

@@ -7,12 +7,16 @@
     kadv-probe model=kadv_tiny probes=thin_structures,window budget=96 out=outputs/probe_tiny
     kadv-probe model=kadv_tiny radius_shares=1,1,1     (the passes split equally over the radii)
 
-Each model is profiled on each probe scene (:mod:`kadv.probes`), the probe built anew for each
-seed: the worst delta1 within each nested radius of the camera's move and the camera envelope,
-the failure rate of views drawn at the largest radius, and the score (mean ± spread over the
-seeds). The table ends with a ``ranking:`` line; it is printed as Markdown and written with a PNG of
-the profile curves to ``out`` (``scorecard.md``, ``scorecard.json``: every profile, to rank again with
-:meth:`kadv.testing.Scorecard.from_dict`; ``scorecard.png``, ``views/``).
+Each model is profiled on each probe scene (:mod:`kadv.probes`), the probe built at each seed:
+the worst delta1 within each nested radius of the camera's move and the camera envelope, the
+failure rate of views drawn at the largest radius, and the score (mean ± spread over the seeds).
+It is a suite run (:mod:`kadv.bench`): the probes at the seeds are frozen into a suite with
+model-free init views, and each model's run is an entry that ``kadv-bench verify`` checks; each
+model's suite score stands beside its areas. The table ends with ``ranking:`` lines; it is printed
+as Markdown and written with a PNG of the profile curves to ``out`` (``scorecard.md``,
+``scorecard.json``: every profile, to rank again with :meth:`kadv.testing.Scorecard.from_dict`;
+``scorecard.png``; ``views/``: the worst views' pictures, the suite file and the entries). Run
+again with the same ``out``, it resumes from the run units already written.
 
 A plain command rather than a Hydra app: a scorecard is one job over its models and probes (the
 sweep is inside it), so it needs neither launchers nor a run directory per override. Its keys are
@@ -133,7 +137,12 @@ def main(argv: list[str] | None = None) -> None:
     atomic_write(out / "scorecard.md", lambda tmp: tmp.write_text(table + "\n"))
     atomic_write(out / "scorecard.json", lambda tmp: tmp.write_text(data + "\n"))
     card.save_png(out / "scorecard.png")
+    views, short = out / "views", card.suite["hash"][:12]
     print(f"\n{table}\n\nscorecard: {out / 'scorecard.md'}, {out / 'scorecard.json'}, {out / 'scorecard.png'}")
+    print(
+        f"suite and entries: {views / f'suite-{short}.json'}, {views / 'entries'}/<model>-{short}/entry.json "
+        f"(kadv-bench verify ENTRY suite={views / f'suite-{short}.json'} model=MODEL checks one)"
+    )
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -16,12 +16,10 @@ from kadv.testing.profile import (
     FAIL_BELOW,
     TYPICAL_VIEWS,
     Profile,
-    pool_worst_views,
     profile_settings,
     save_profile_panels,
-    save_worst_pictures,
-    seed_run,
 )
+from kadv.testing.session import current
 
 __all__ = ["PairedDifference", "Scorecard", "paired_difference", "scorecard"]
 
@@ -106,16 +104,33 @@ class Scorecard:
         models: the models' names.
         probes: the probes' names.
         results: ``results[probe][model]``, over all the seeds.
+        suite_scores: per model, its suite score on the scorecard's suite
+            (:meth:`kadv.bench.SuiteScore.to_dict`).
+        pooled: per model, its pooled worst case (overall, then per radius): the mean over cells of
+            the lowest of its own worst and its delta1 at the other models' worst poses; empty with
+            one model. It depends on which models ran together, so it is never the suite score.
+        suite: the scorecard's suite: its name and hash.
     """
 
     models: list[str]
     probes: list[str]
     results: dict[str, dict[str, Profile]]
+    suite_scores: dict[str, dict] = field(default_factory=dict)
+    pooled: dict[str, list[float]] = field(default_factory=dict)
+    suite: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        """The models, probes and every profile (:meth:`Profile.to_dict`), as plain JSON values."""
+        """The models, probes, every profile (:meth:`Profile.to_dict`), the suite scores and the
+        pooled worst cases, as plain JSON values."""
         results = {probe: {model: p.to_dict() for model, p in row.items()} for probe, row in self.results.items()}
-        return {"models": list(self.models), "probes": list(self.probes), "results": results}
+        return {
+            "models": list(self.models),
+            "probes": list(self.probes),
+            "results": results,
+            "suite_scores": self.suite_scores,
+            "pooled": self.pooled,
+            "suite": self.suite,
+        }
 
     @classmethod
     def from_dict(cls, data: dict) -> Scorecard:
@@ -123,7 +138,14 @@ class Scorecard:
         results = {
             probe: {model: Profile.from_dict(p) for model, p in row.items()} for probe, row in data["results"].items()
         }
-        return cls(list(data["models"]), list(data["probes"]), results)
+        return cls(
+            list(data["models"]),
+            list(data["probes"]),
+            results,
+            data.get("suite_scores", {}),
+            data.get("pooled", {}),
+            data.get("suite", {}),
+        )
 
     def unit_scores(self, model: str, kind: str = "typical") -> list[float]:
         """The model's area under its ``kind`` curve ("typical" or "worst") per probe and seed, in
@@ -224,10 +246,38 @@ class Scorecard:
                 f"{np.mean([c['search_seconds'] for c in costs]):.1f} s; "
                 f"{np.mean([c['draw_passes'] for c in costs]):.0f} passes on drawn views"
             )
+        notes += self._suite_lines(radii)
         rankings = [self.ranking("worst"), self.ranking("typical")]
         if len(self.models) > 1:
             rankings += self.differences("worst") + self.differences("typical")
         return "\n".join(lines) + "\n\n" + "\n".join(notes) + "\n\n" + "\n".join(rankings)
+
+    def _suite_lines(self, radii) -> list[str]:
+        """Each model's suite score on the scorecard's suite (95% over search seeds) and, with two
+        models or more, its pooled worst case."""
+        if not self.suite_scores:
+            return []
+        per = ", ".join(f"{d:g}°/{m:g} m" for d, m in radii)
+        lines = [
+            f"suite score (suite {self.suite.get('name')} {str(self.suite.get('hash'))[:12]}: the worst delta1, mean "
+            f"over the cells of every probe, seed and init view; per radius {per}; 95% over the search seeds):"
+        ]
+        for model in self.models:
+            score = self.suite_scores[model]
+            low, high = score["overall_interval"]
+            interval = "n/a: one search seed" if math.isnan(low) else f"95% {low:.3f}-{high:.3f}"
+            radius_text = " / ".join(f"{v:.3f}" for v in score["per_radius"])
+            line = f"- {model}: {score['overall']:.3f} ({interval}); {radius_text}"
+            if model in self.pooled:
+                pooled = self.pooled[model]
+                line += f"; pooled worst {pooled[0]:.3f} ({' / '.join(f'{v:.3f}' for v in pooled[1:])})"
+            lines.append(line)
+        if self.pooled:
+            lines.append(
+                "pooled worst: each model also scored at the other models' worst poses (it depends on which "
+                "models ran together: a column of its own, never the suite score)"
+            )
+        return lines
 
     def save_png(self, path: str | Path) -> Path:
         """One panel per probe: each model's worst (solid) and typical (dashed) delta1 against the
@@ -275,47 +325,55 @@ def scorecard(
     progress: bool = False,
     **options,
 ) -> Scorecard:
-    """Profile each model on each probe scene (:func:`kadv.testing.robustness_profile`), each probe
-    built anew for each seed.
+    """Profile each model on each probe scene, each probe built at each seed: a suite run.
+
+    The probes at the seeds are frozen into a suite (:func:`kadv.testing.runs.probe_suite`: init
+    views by a model-free rule, so every model starts from the same views); each model runs it as
+    an entry, under ``search_seeds`` search seeds per init view (its units and ``entry.json`` under
+    ``artifacts/entries/``, the suite at ``artifacts/suite-<hash>.json``); typical views are drawn
+    beside each init view. The profiles, areas and rankings come from those runs, and the suite
+    score (:func:`kadv.bench.suite_score`) stands beside them.
 
     Args:
         models: what :func:`kadv.testing.viewpoint_robustness` takes as a model.
         probes: probe names (:data:`kadv.probes.PROBES`); None: all of them.
-        seeds: the probes' and the searches' seeds.
+        seeds: the seeds the probes are built at (each a scene of the suite).
         envelope, radii, typical_views, fail_below, search_seeds: as
-            :func:`kadv.testing.robustness_profile` takes them.
-        pool: score every model also at the worst views the other models' searches found (same
-            probe, seed and init views), so that each model's worst case is the worst over all the
-            searches (:func:`kadv.testing.profile.pool_worst_views`); False: each its own search's.
-        progress: print a line per probe, model and seed as each finishes.
+            :func:`kadv.testing.robustness_profile` takes them (the envelope a preset's name).
+        pool: with two models or more, also score every model at the worst poses the others found
+            (:func:`kadv.bench.pooled_worst`), as a column of its own beside each model's worst.
+        progress: print a line per probe scene and model as each finishes.
         options: more of :func:`kadv.testing.robustness_profile`'s arguments (``budget_passes``,
             ``artifacts``, ``lighting``, ...).
 
     Raises:
-        RobustnessInputError: an unknown probe (listing the probes), no seeds, or a bad model.
+        RobustnessInputError: an unknown probe (listing the probes), no seeds, or a bad model or setting.
     """
-    from kadv.catalogue.probes import probe_scene
+    import tempfile
+
+    from kadv.bench import pool_units, pooled_worst, suite_score
+    from kadv.losses.align import check_alignment
+    from kadv.testing.runs import probe_suite, profiles, run_model
 
     probes, seeds, loaded = _checked_inputs(models, probes, seeds)
-    names = [model.name for model in loaded]
     settings = profile_settings(radii, envelope, typical_views, fail_below, options, "scorecard", search_seeds)
-    results: dict[str, dict[str, Profile]] = {}
-    for probe in probes:
-        profiles: dict[str, list[Profile]] = {name: [] for name in names}
-        for seed in seeds:
-            built = probe_scene(probe, seed)
-            runs = [seed_run(model, built, settings, seed) for model in loaded]
-            if pool and len(runs) > 1:
-                pool_worst_views(runs, settings.radii)
-            for model, run in zip(loaded, runs):
-                profile = settings.profile([run], save_worst_pictures(run, settings.radii))
-                profiles[model.name].append(profile)
-                if progress:
-                    worst = " ".join(f"{v:.3f}" for v in profile.worst)
-                    print(
-                        f"{probe} x {model.name}, seed {seed}: worst {worst}, worst-case area "
-                        f"{profile.worst_score:.3f}, typical area {profile.score:.3f}",
-                        flush=True,
-                    )
-        results[probe] = {name: Profile.merge(profiles[name]) for name in names}
-    return Scorecard(names, probes, results)
+    try:
+        for model in loaded:
+            check_alignment(settings.checked.alignment, model.output_kind, f"model {model.name}")
+    except ValueError as error:
+        raise RobustnessInputError(str(error)) from None
+    suite = probe_suite(probes, seeds, settings)
+    folder = settings.checked.artifacts or current().artifacts or tempfile.mkdtemp(prefix="kadv-")
+    suite.save(Path(folder) / f"suite-{suite.hash[:12]}.json")
+    runs = {model.name: run_model(suite, model, settings.typical_views, Path(folder), progress) for model in loaded}
+    results = {probe: {} for probe in probes}
+    for name, run in runs.items():
+        for probe, profile in profiles(suite, run, probes, settings.fail_below).items():
+            results[probe][name] = profile
+    scores = {name: suite_score(suite, pool_units(suite, [run.entry])).to_dict() for name, run in runs.items()}
+    pooled = {}
+    if pool and len(loaded) > 1:
+        found = pooled_worst(suite, {n: r.entry for n, r in runs.items()}, {m.name: m for m in loaded})
+        pooled = {name: [overall, *per_radius] for name, (overall, per_radius) in found.items()}
+    names = [model.name for model in loaded]
+    return Scorecard(names, probes, results, scores, pooled, {"name": suite.name, "hash": suite.hash})

@@ -14,8 +14,6 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-import torch
-
 from kadv.attack.profile import Profile, curve_area, save_profile_panels
 from kadv.attack.radii import (
     DEFAULT_RADII,
@@ -45,7 +43,6 @@ __all__ = [
     "SeedProfile",
     "SeedRun",
     "curve_area",
-    "pool_worst_views",
     "profile_settings",
     "profile_views",
     "robustness_profile",
@@ -201,36 +198,3 @@ def save_worst_pictures(run: SeedRun, radii) -> list[str]:
         path = run.built.folder / f"{run.built.stem}-{run.config.envelope.name}-radius{k}.png"
         pictures.append(str(save_view_picture(path, run.built.render, init, record, label)))
     return pictures
-
-
-def pool_worst_views(runs: list[SeedRun], radii, count: int = WARM_STARTS) -> int:
-    """Score every run's model at the ``count`` worst views each other run's search found, per
-    radius and init view, and lower its worst there where one of them is worse for it (the worst
-    case over all the searches: common views for every model, as RobustBench pools its attacks).
-    The runs must share their init views (the same scene and seed). Returns the views scored."""
-    from kadv.attack import SearchContext
-
-    scored = 0
-    for run in runs:
-        for k, (degrees, metres) in enumerate(radii):
-            within = dataclasses.replace(run.config, max_angle_deg=degrees, max_distance=metres)
-            for i, init in enumerate(run.views):
-                others = [
-                    record
-                    for other in runs
-                    if other is not run and torch.equal(other.views[i].world_T_cam, init.world_T_cam)
-                    for record in worst_views(
-                        other.seeded.results[k].views[i].records,
-                        count,
-                        within.min_separation,
-                        within.min_separation_deg,
-                    )
-                ]
-                if not others:
-                    continue
-                b = run.built
-                context = SearchContext(b.objective, b.differentiable, init, *b.size, within)
-                params = torch.tensor([r.params for r in others], dtype=torch.float64)
-                run.seeded.pool(k, i, context.evaluate(0, params))
-                scored += len(others)
-    return scored

@@ -109,6 +109,8 @@ def test_an_entry_records_every_unit_within_its_budget(run, suite) -> None:
         assert unit.model_passes == sum(c.passes for c in unit.cells) <= PROTOCOL.passes_per_view
         worst = [c.delta1 for c in unit.cells]
         assert worst == sorted(worst, reverse=True) and worst[0] <= unit.delta1_init  # nested radii
+        # one run a search (protocol.restarts): each worst found by that run alone
+        assert all(c.agreement == [1, 1, 1] for c in unit.cells)
     assert entry.suite == {"name": "boxes", "hash": suite.hash} and entry.model["output_kind"] == "disparity"
     assert len(entry.model["weights"]) == 64 and entry.environment["device"] == "cpu"
 
@@ -136,6 +138,16 @@ def test_a_run_resumes_and_shards_give_the_same_entry(run, suite, model, tmp_pat
     assert _without_seconds(sharded) == _without_seconds(entry)
     with pytest.raises(BenchError, match="2 distinct seeds"):
         run_suite(suite, model, (0,), tmp_path)
+
+
+def test_a_run_folder_never_resumes_from_another_suite_s_or_model_s_units(run, suite, model) -> None:
+    _, out = run
+    other = dataclasses.replace(suite, protocol=dataclasses.replace(PROTOCOL, radius_passes=(6, 6, 9)))
+    with pytest.raises(BenchError, match=r"holds the run of another suite \(suite [0-9a-f]{16}, this run's"):
+        run_suite(other, model, (0, 1), out, progress=False)
+    dpt = load_model("kadv_tiny_dpt")
+    with pytest.raises(BenchError, match="holds the run of another model"):
+        run_suite(suite, dpt, (0, 1), out, progress=False)
 
 
 def test_an_entry_verifies_and_a_forged_one_is_refused_naming_the_cell_and_field(run, suite, model) -> None:

@@ -26,6 +26,11 @@ def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_pat
     assert again.markdown() == (tmp_path / "scorecard.md").read_text().strip()
     # the worst view at each of the three radii, per probe, in the upright envelope by default
     assert len(list((tmp_path / "views").glob("*-upright-radius*.png"))) == 6
+    # a suite run: the suite and the entry another lab can verify, named on the last line
+    (suite,) = (tmp_path / "views").glob("suite-*.json")
+    (entry,) = (tmp_path / "views").glob("entries/kadv_tiny-*/entry.json")
+    assert printed.rstrip().splitlines()[-1].startswith(f"suite and entries: {suite}, ")
+    assert json.loads(entry.read_text())["suite"]["hash"] == json.loads(suite.read_text())["hash"]
 
 
 @pytest.mark.parametrize(

@@ -18,7 +18,6 @@ from kadv.testing import (
     settings,
     viewpoint_robustness,
 )
-from kadv.testing.profile import seed_run
 
 # small and quick: the checks' arithmetic is the same at any budget
 QUICK = {"budget_passes": 8, "init_count": 1, "size": (48, 64), "lighting": "direct"}
@@ -134,43 +133,34 @@ def test_the_scorecard_profiles_each_model_on_each_probe_and_ranks_them(tmp_path
         assert image.width > 2 * 200 and image.height > 150
 
 
-def test_pooling_scores_each_model_at_the_other_searches_worst_views_and_never_raises_its_worst() -> None:
-    from kadv.catalogue import probe_scene
-    from kadv.testing.profile import pool_worst_views, profile_settings, worst_views
+def test_the_scorecard_is_a_suite_run_whose_entries_verify_and_resume(tmp_path: Path) -> None:
+    from kadv.bench import load_entry, load_suite, verify_entry
+    from kadv.models import load_model
 
-    options = {"budget_passes": 6, "size": (24, 32), "lighting": "direct", "init_count": 2}
-    settings = profile_settings(((5, 0.1), (30, 0.6)), "upright", 4, 0.6, options, "test")
-    room = probe_scene("window", 0)
-    runs = [seed_run(model, room, settings, 0) for model in ("kadv_tiny", (Constant(), "depth"))]
-    before = [[[record.delta1 for _, record in row] for row in run.seeded.found] for run in runs]
-    expected = {  # the views each run's model is scored at: the other's two worst per radius and init view
-        id(run): [
-            [[r.params for r in worst_views(other.seeded.results[k].views[i].records, 2, 0.05, 3.0)] for i in range(2)]
-            for k in range(2)
-        ]
-        for run, other in ((runs[0], runs[1]), (runs[1], runs[0]))
-    }
-    scored = pool_worst_views(runs, settings.radii)
-    assert scored == sum(len(views) for run in runs for row in expected[id(run)] for views in row)
-    for run, old in zip(runs, before):
-        for k, row in enumerate(run.seeded.found):
-            for i, (_, record) in enumerate(row):
-                assert record.delta1 <= old[k][i]  # pooling never raises a worst
-                if record.delta1 < old[k][i]:  # and a lower one is one of the other search's views
-                    assert any(np.allclose(record.params, p) for p in expected[id(run)][k][i])
-
-
-def test_a_pooled_view_lowers_the_worst_at_its_radius_and_every_larger_one() -> None:
-    from kadv.attack import ViewRecord
-    from kadv.testing.profile import SeedProfile
-
-    def record(delta1: float, verdict: str = "valid") -> ViewRecord:
-        return ViewRecord(0, 0, [0.0] * 6, [0.0] * 3, [1.0, 1.5, 1.0], 0.1, 0.0, 0.1, delta1, 0.1, verdict)
-
-    found = [[("a", record(0.8)), ("b", record(0.9))], [("a", record(0.7)), ("b", record(0.95))]]
-    seeded = SeedProfile(0.95, [], [], [[], []], found, [])
-    assert seeded.worst == pytest.approx([0.85, 0.8])  # nested: view b keeps 0.9 at the larger radius
-    seeded.pool(0, 1, [record(0.5), record(0.1, "inside an object")])  # the invalid one is left out
-    assert seeded.worst == pytest.approx([0.65, 0.6]) and seeded.worst_views[1][1].delta1 == 0.5
-    seeded.pool(1, 0, [record(0.75)])  # not lower than that radius's own 0.7: nothing changes
-    assert seeded.worst == pytest.approx([0.65, 0.6])
+    quick = {**QUICK, "budget_passes": 4, "size": (24, 32), "typical_views": 4, "radii": ((5, 0.1), (30, 0.6))}
+    models = ["kadv_tiny", "kadv_tiny_dpt"]
+    card = scorecard(models, ["stairs"], seeds=(0,), search_seeds=2, artifacts=tmp_path, **quick)
+    (suite_file,) = tmp_path.glob("suite-*.json")
+    suite = load_suite(suite_file)
+    assert suite.hash == card.suite["hash"] and [s.name for s in suite.scenes] == ["probe/stairs/seed0"]
+    assert sum(suite.protocol.radius_passes) == 2 * 4 and suite.protocol.min_seeds == 2  # 4 a radius on average
+    entries = {}
+    for name in models:
+        (path,) = tmp_path.glob(f"entries/{name}-{suite.hash[:12]}/entry.json")
+        entries[name] = load_entry(path)
+        checked = verify_entry(entries[name], suite, load_model(name))  # another lab can check it
+        assert checked.cells == 2 * 2 and checked.largest_pixels <= checked.tolerance_pixels
+        # the profile's worst is the entry's cells, averaged over the init view's two search seeds
+        cells = np.array([[c.delta1 for c in u.cells] for u in entries[name].units])
+        assert card.results["stairs"][name].worst == pytest.approx(cells.mean(axis=0).tolist())
+        score = card.suite_scores[name]
+        assert score["per_radius"] == pytest.approx(cells.mean(axis=0).tolist())
+        # the pooled worst, a column of its own: never above the model's own worst
+        assert all(p <= o + 1e-12 for p, o in zip(card.pooled[name], [score["overall"], *score["per_radius"]]))
+    table = card.markdown()
+    assert "\nsuite score (suite probes " in table and "\n- kadv_tiny: " in table and "; pooled worst " in table
+    # run again in the same folder: every unit is read back, none searched again
+    stamps = {path: path.stat().st_mtime_ns for path in tmp_path.glob("entries/*/units/*.json")}
+    again = scorecard(models, ["stairs"], seeds=(0,), search_seeds=2, artifacts=tmp_path, **quick)
+    assert {path: path.stat().st_mtime_ns for path in stamps} == stamps
+    assert again.markdown() == table
