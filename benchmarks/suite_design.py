@@ -24,10 +24,11 @@ import math
 from pathlib import Path
 
 import common  # noqa: F401  first: kadv's runtime settings, before torch starts its thread pool
+
 import numpy as np
 
 from kadv.bench import load_suite, pool_units, run_suite, suite_score
-from kadv.bench.scores import Z95
+from kadv.bench.scores import Z95, Pooled
 from kadv.models import load_model
 
 
@@ -36,24 +37,24 @@ def _seeds(text: str) -> tuple[int, ...]:
     return tuple(range(int(first), int(last or first) + 1))
 
 
-def _half_widths(worst: np.ndarray) -> np.ndarray:
-    """95% half-widths over seeds, per radius then overall, of cells (views, radii, seeds)."""
-    n = worst.shape[2]
-    per_radius = [math.sqrt((worst[:, k].var(axis=1, ddof=1) / n).sum()) / worst.shape[0] for k in range(worst.shape[1])]
-    every = worst.transpose(1, 0, 2).reshape(-1, n)
-    overall = math.sqrt((every.var(axis=1, ddof=1) / n).sum()) / every.shape[0]
-    return Z95 * np.array([*per_radius, overall])
-
-
-def _subsampled(worst: np.ndarray, scene_of: np.ndarray, seeds: int, views: int, draws: int, rng) -> np.ndarray:
-    """The mean half-widths over ``draws`` subsets of ``seeds`` seeds and ``views`` views a scene."""
+def _subsampled(suite, pooled: Pooled, seeds: int, views: int, draws: int, rng) -> np.ndarray:
+    """The suite score's 95% half-widths over seeds, per radius then overall, averaged over
+    ``draws`` subsets of ``seeds`` seeds and ``views`` views a scene."""
     rows = []
     for _ in range(draws):
         kept = np.concatenate(
-            [rng.choice(np.flatnonzero(scene_of == s), views, replace=False) for s in np.unique(scene_of)]
+            [rng.choice(np.flatnonzero(pooled.scene_of == s), views, replace=False) for s in range(len(suite.scenes))]
         )
-        columns = rng.choice(worst.shape[2], seeds, replace=False)
-        rows.append(_half_widths(worst[kept][:, :, columns]))
+        columns = rng.choice(len(pooled.seeds), seeds, replace=False)
+        subset = Pooled(
+            pooled.worst[kept][:, :, columns],
+            pooled.init[kept][:, columns],
+            pooled.abs_rel[kept][:, :, columns],
+            pooled.scene_of[kept],
+            tuple(pooled.seeds[c] for c in columns),
+        )
+        score = suite_score(suite, subset)
+        rows.append(Z95 * np.array([*score.per_radius_se, score.overall_se]))
     return np.mean(rows, axis=0)
 
 
@@ -75,7 +76,10 @@ def main() -> None:
     )
     folder = Path(args.out) / suite.name / model.name
     runs = {}
-    for name, run_on, seeds in (("protocol", suite, _seeds(args.seeds)), ("doubled", doubled, _seeds(args.double_seeds))):
+    for name, run_on, seeds in (
+        ("protocol", suite, _seeds(args.seeds)),
+        ("doubled", doubled, _seeds(args.double_seeds)),
+    ):
         sets = [seeds[i : i + args.set_size] for i in range(0, len(seeds), args.set_size)]
         entries = []
         for chunk in sets:
@@ -92,7 +96,7 @@ def main() -> None:
     print("|---" * (len(radii) + 4) + "|")
     chosen = None
     for n, v in itertools.product(range(2, len(pooled.seeds) + 1), range(1, views_a_scene + 1)):
-        halves = _subsampled(pooled.worst, pooled.scene_of, n, v, args.draws, rng)
+        halves = _subsampled(suite, pooled, n, v, args.draws, rng)
         units = n * v * len(suite.scenes)
         print(f"| {n} | {v} | {units} | " + " | ".join(f"±{h:.4f}" for h in halves) + " |")
         if halves.max() <= args.target and (chosen is None or units < chosen[2]):

@@ -16,7 +16,16 @@ from dataclasses import dataclass
 import torch
 
 from kadv.device import resolve_device
-from kadv.losses import AlignedLoss, check_alignment, depth_metrics, minmax_normalize, ssim_loss, to_comparison_space
+from kadv.losses import (
+    SPACES,
+    AlignedLoss,
+    check_alignment,
+    depth_metrics,
+    kind_fit,
+    minmax_normalize,
+    ssim_loss,
+    to_comparison_space,
+)
 from kadv.models import DepthModel
 from kadv.penalties import PenaltyConfig, distance_to_surface, shortcut_penalty
 from kadv.render import ExactRenderer
@@ -62,12 +71,15 @@ class Objective:
         loss: per-sample discrepancy (B,) of two normalised maps (B, 1, H, W), or an aligned loss.
         renderer: the scene's exact renderer (for the distance to the nearest surface).
         penalty: d_th and lambda.
-        space: "disparity" or "depth".
+        space: "disparity" or "depth": where L_depth and the aligned losses compare the maps
+            (``loss.space``); None: the space the model's kind is fitted in
+            (:func:`kadv.losses.kind_fit`).
         alignment: how the prediction meets the ground truth before the aligned losses and the
-            metrics score it (``loss.alignment``): ``scale_shift`` (least squares in ``space``; the
-            study's protocol), ``scale`` (least squares on scale alone) or ``none`` (the prediction
-            as metric depth: a relative model is refused). L_depth compares min-max normalised maps
-            whatever it is.
+            metrics score it (``loss.alignment``): ``scale_shift`` (least squares; the study's
+            protocol), ``scale`` (least squares on scale alone) or ``none`` (the prediction as
+            metric depth: a relative model is refused); None: the kind's own. L_depth compares
+            min-max normalised maps whatever it is. The metrics are fitted in the kind's own space
+            (:attr:`metric_space`).
         device: where the model and the loss run (see :mod:`kadv.device`); they are moved there.
             Inputs may live anywhere; the terms stay on that device (nothing is read back to the host).
     """
@@ -78,14 +90,15 @@ class Objective:
         loss: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
         renderer: ExactRenderer,
         penalty: PenaltyConfig,
-        space: str = "disparity",
+        space: str | None = None,
         device: str | torch.device = "cpu",
-        alignment: str = "scale_shift",
+        alignment: str | None = None,
     ) -> None:
-        if space not in ("disparity", "depth"):
+        if space not in (*SPACES, None):
             raise ValueError(f"loss.space must be 'disparity' or 'depth', got {space!r}")
-        check_alignment(alignment, model.output_kind, f"model {getattr(model, 'name', type(model).__name__)}")
-        self.alignment = alignment
+        self.metric_space, self.alignment = kind_fit(model.output_kind, alignment=alignment)
+        space = space or self.metric_space
+        check_alignment(self.alignment, model.output_kind, f"model {getattr(model, 'name', type(model).__name__)}")
         self.device = resolve_device(device)
         self.model = model.to(self.device)
         self.loss = loss.to(self.device) if isinstance(loss, torch.nn.Module) else loss
@@ -148,7 +161,12 @@ class Objective:
         l_dist = shortcut_penalty(distance, self.penalty.d_th)
         with torch.no_grad():
             metrics = depth_metrics(
-                prediction.double(), depth.double(), mask, self.model.output_kind, alignment=self.alignment
+                prediction.double(),
+                depth.double(),
+                mask,
+                self.model.output_kind,
+                alignment=self.alignment,
+                space=self.metric_space,
             )
         return ObjectiveTerms(
             objective=loss - self.penalty.weight * l_dist,

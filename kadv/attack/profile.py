@@ -47,6 +47,7 @@ class Profile:
             the init views: [runs that reached their worst, runs made, init views whose worst one
             run alone found] (:class:`kadv.attack.Agreement`).
         alignment: how every delta1 met the ground truth (``loss.alignment``).
+        space: where that alignment was fitted (the model's output kind's own space).
     """
 
     model: str
@@ -65,6 +66,7 @@ class Profile:
     cost_by_seed: list[dict[str, float]] = dataclasses.field(default_factory=list)
     agreement_by_seed: list[list[list[int]]] = dataclasses.field(default_factory=list)
     alignment: str = "scale_shift"
+    space: str = "disparity"
 
     @property
     def worst(self) -> list[float]:
@@ -103,6 +105,7 @@ class Profile:
         fail_below: float = FAIL_BELOW,
         pictures: list[str] | None = None,
         alignment: str = "scale_shift",
+        space: str = "disparity",
     ) -> Profile:
         """The profile of ``seed_profiles`` (one per seed, :func:`profile_views`)."""
         return cls(
@@ -122,6 +125,7 @@ class Profile:
             cost_by_seed=[p.cost for p in seed_profiles],
             agreement_by_seed=[p.agreement for p in seed_profiles],
             alignment=alignment,
+            space=space,
         )
 
     @classmethod
@@ -237,7 +241,7 @@ class Profile:
         """A table: per radius, the worst and typical delta1, the failure rate; then the score."""
         lines = [
             f"{self.model} on {self.scene}, envelope {self.envelope}, seeds {list(self.seeds)}, delta1 after "
-            f"{self.alignment} alignment: {np.mean(self.delta1_init):.3f} at the init views",
+            f"{self.alignment} alignment in {self.space} space: {np.mean(self.delta1_init):.3f} at the init views",
             "",
             f"| radius | worst delta1 | agreement | typical delta1 (95%) | failure rate, delta1 < {self.fail_below:g} "
             "(95%) |",

@@ -72,7 +72,7 @@ class Leaderboard:
         radii = [f"{d:g}°/{m:g} m" for d, m in protocol.radii]
         lines = [
             f"suite {self.suite.name} ({self.suite.hash[:12]}): worst delta1 found, mean over cells of the "
-            f"seed-averaged worst; delta1 after {protocol.alignment} alignment in {protocol.space} space; "
+            f"seed-averaged worst; delta1 after {protocol.fit_text}; "
             f"{protocol.method}, {protocol.passes_per_view} passes per init view and seed",
             "",
             "| model | init | " + " | ".join(radii) + " | suite score (95% over seeds) | over scenes (95%) "
@@ -255,7 +255,7 @@ def suite_table2(suite: Suite, entries: dict[str, Entry]) -> Table:
     protocol = suite.protocol
     table = Table(
         f"Table 2: adversarial views within {largest[0]:g}°, {largest[1]:g} m (suite {suite.name}, "
-        f"{protocol.method}; delta1 after {protocol.alignment} alignment in {protocol.space} space)",
+        f"{protocol.method}; delta1 after {protocol.fit_text})",
         ["model"]
         + [f"{s.name} {v}" for s in suite.scenes for v in ("L_depth", "delta1")]
         + ["Avg L_depth", "Avg delta1"],

@@ -221,7 +221,7 @@ def suite_settings(suite: Suite, device) -> StudySettings:
     return StudySettings(
         size=protocol.size,
         shading=Shading(lighting=protocol.lighting),
-        loss=LossConfig(kind=protocol.loss, alignment=protocol.alignment),
+        loss=LossConfig(kind=protocol.loss, space=protocol.space, alignment=protocol.alignment),
         attack=config,
         device=device,
         progress=False,

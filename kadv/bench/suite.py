@@ -74,8 +74,10 @@ class Protocol:
         loss: the attacked loss.
         metric: the scored figure (``delta1``: the share of pixels with max(d/d̂, d̂/d) < threshold).
         threshold: the metric's ratio threshold.
-        alignment: how a prediction meets the ground truth before it is scored.
-        space: the space the alignment is fitted in.
+        alignment: how a prediction meets the ground truth before it is scored; None: each
+            model's output kind's own (:func:`kadv.losses.kind_fit`).
+        space: the space the loss's alignment is fitted in; None: each model's kind's own (the
+            metric is fitted in the kind's own space).
         restarts: independent runs per search.
     """
 
@@ -89,9 +91,16 @@ class Protocol:
     loss: str = "delta1"
     metric: str = "delta1"
     threshold: float = 1.25
-    alignment: str = "scale_shift"
-    space: str = "disparity"
+    alignment: str | None = "scale_shift"
+    space: str | None = "disparity"
     restarts: int = 1
+
+    @property
+    def fit_text(self) -> str:
+        """How its figures are fitted, as words: ``scale_shift alignment in disparity space``."""
+        alignment = self.alignment or "each model's own"
+        space = f"{self.space} space" if self.space else "its output kind's space"
+        return f"{alignment} alignment in {space}"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "radii", tuple((float(d), float(m)) for d, m in self.radii))

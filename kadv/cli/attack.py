@@ -139,7 +139,9 @@ def _init_views(
 
 def _table(summary: RunSummary) -> str:
     """The run's table and, under it, what each init view's search cost."""
-    fit, searched = summary.alignment, summary.fov_deg is not None
+    # the study's disparity space is the one a header leaves unsaid (make demo's table as it was)
+    fit = summary.alignment if summary.space == "disparity" else f"{summary.alignment} in {summary.space}"
+    searched = summary.fov_deg is not None
     fov = f" fov init | fov adv ({summary.fov_deg[0]:g}° to {summary.fov_deg[1]:g}°) |" if searched else ""
     lines = [
         f"| init view | L_depth init | L_depth adv | delta1 init ({fit}) | delta1 adv ({fit}) | agreement |{fov}",
@@ -247,7 +249,8 @@ def _profile(study: Study, views: list, radii: tuple, seed: int, results: list) 
         study, views, config, radii, seed, progress=study.settings.progress, searched=dict(enumerate(results))
     )
     names = (study.model.name, study.scene.name, config.envelope.name)
-    return Profile.of(*names, radii, (seed,), [seeded], alignment=study.objective.alignment)
+    objective = study.objective
+    return Profile.of(*names, radii, (seed,), [seeded], alignment=objective.alignment, space=objective.metric_space)
 
 
 def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:

@@ -50,7 +50,7 @@ _KEYS = {
     "search_seeds": "1",
     "restarts": "1",
     "radius_shares": None,
-    "alignment": "scale_shift",
+    "alignment": None,
     "lighting": "baked",
     "out": "outputs/probe",
     "hydra.run.dir": None,

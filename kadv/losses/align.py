@@ -1,5 +1,5 @@
-"""Comparison spaces, min-max normalisation and the least-squares alignments: scale and shift, or
-scale alone.
+"""Output kinds, comparison spaces, min-max normalisation and the least-squares alignments: scale
+and shift, or scale alone.
 
 All maps are (B, 1, H, W); ``mask`` (B, 1, H, W) bool marks valid pixels.
 """
@@ -10,9 +10,13 @@ import torch
 
 __all__ = [
     "ALIGNMENTS",
+    "KINDS",
+    "SPACES",
     "align_scale",
     "align_scale_shift",
     "check_alignment",
+    "check_kind",
+    "kind_fit",
     "minmax_normalize",
     "to_comparison_space",
 ]
@@ -22,6 +26,41 @@ _EPS = 1e-8
 # how a prediction is fitted to the ground truth before it is scored (``loss.alignment``): least
 # squares on scale and shift, or on scale alone, in the loss's space; or not at all (metric depth)
 ALIGNMENTS = ("scale_shift", "scale", "none")
+SPACES = ("disparity", "depth")
+
+# what a model's prediction holds (``model.output_kind``), with the space its values live in and
+# the space and alignment its figures are fitted in by default: its own ambiguity in its own space
+KINDS = {
+    "disparity": ("disparity", "disparity", "scale_shift"),  # relative inverse depth, affine-invariant
+    "depth": ("depth", "disparity", "scale_shift"),  # metric depth, scored as the study scored it
+    "affine_depth": ("depth", "depth", "scale_shift"),  # depth up to scale and shift (Marigold)
+    "scale_depth": ("depth", "depth", "scale"),  # depth up to scale
+}
+_KIND_WORDS = {
+    "disparity": "relative disparity",
+    "affine_depth": "affine-invariant depth",
+    "scale_depth": "scale-invariant depth",
+}
+
+
+def check_kind(kind: str, key: str = "output_kind") -> str:
+    """``kind`` if it is one of :data:`KINDS`, else a ``ValueError`` naming ``key`` and the kinds."""
+    if kind not in KINDS:
+        raise ValueError(f"{key} must be one of {', '.join(KINDS)}, got {kind!r}")
+    return kind
+
+
+def kind_fit(kind: str, space: str | None = None, alignment: str | None = None) -> tuple[str, str]:
+    """The (space, alignment) a prediction of ``kind`` is fitted in: the ones given, else the
+    kind's own (disparity and metric depth: scale and shift in disparity space; affine-invariant
+    depth: scale and shift in depth space; scale-invariant depth: scale in depth space).
+
+    Examples:
+        >>> kind_fit("affine_depth"), kind_fit("scale_depth"), kind_fit("depth", alignment="none")
+        (('depth', 'scale_shift'), ('depth', 'scale'), ('disparity', 'none'))
+    """
+    _, own_space, own_alignment = KINDS[check_kind(kind)]
+    return space or own_space, alignment or own_alignment
 
 
 def check_alignment(alignment: str, prediction_kind: str, model: str = "the model") -> None:
@@ -31,8 +70,8 @@ def check_alignment(alignment: str, prediction_kind: str, model: str = "the mode
         raise ValueError(f"loss.alignment must be one of {', '.join(ALIGNMENTS)}, got {alignment!r}")
     if alignment == "none" and prediction_kind != "depth":
         raise ValueError(
-            f"loss.alignment=none scores the prediction as metric depth, but {model} outputs relative "
-            f"{prediction_kind}: use scale_shift or scale"
+            f"loss.alignment=none scores the prediction as metric depth, but {model} outputs "
+            f"{_KIND_WORDS.get(prediction_kind, prediction_kind)}: use scale_shift or scale"
         )
 
 
@@ -41,7 +80,8 @@ def to_comparison_space(values: torch.Tensor, kind: str, space: str, mask: torch
 
     Args:
         values: (B, 1, H, W) map.
-        kind: what ``values`` holds: "depth" (metres) or "disparity" (relative inverse depth).
+        kind: what ``values`` holds: "depth" (metres), "disparity" (relative inverse depth), or
+            depth up to an affine map or a scale ("affine_depth", "scale_depth": depth space).
         space: the space to compare in.
         mask: (B, 1, H, W) valid pixels.
 
@@ -51,11 +91,11 @@ def to_comparison_space(values: torch.Tensor, kind: str, space: str, mask: torch
         tensor([[[[0.5000, 0.2500],
                   [0.0000, 0.1250]]]])
     """
-    for name, value in (("kind", kind), ("space", space)):
-        if value not in ("depth", "disparity"):
-            raise ValueError(f"{name} must be 'depth' or 'disparity', got {value!r}")
-    valid = mask & (values > _EPS) if kind != space else mask
-    converted = values if kind == space else 1.0 / values.clamp_min(_EPS)
+    if space not in SPACES:
+        raise ValueError(f"space must be 'depth' or 'disparity', got {space!r}")
+    own = KINDS[check_kind(kind, "kind")][0]
+    valid = mask & (values > _EPS) if own != space else mask
+    converted = values if own == space else 1.0 / values.clamp_min(_EPS)
     return torch.where(valid, converted, torch.zeros_like(converted))
 
 

@@ -31,12 +31,12 @@ def absrel_loss(
     gt_depth: torch.Tensor,
     mask: torch.Tensor,
     prediction_kind: str = "disparity",
-    space: str = "disparity",
+    space: str | None = None,
     min_depth: float = 1e-3,
-    alignment: str = "scale_shift",
+    alignment: str | None = None,
 ) -> torch.Tensor:
     """Mean |aligned - gt| / gt over valid pixels (B,); the ``abs_rel`` of
-    :func:`kadv.losses.depth_metrics` when ``space`` is disparity (or ``alignment`` is none).
+    :func:`kadv.losses.depth_metrics` in the same space and alignment (None: the kind's own).
 
     Examples:
         >>> depth = 1.0 + torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4) / 4
@@ -55,10 +55,10 @@ def soft_delta1_loss(
     gt_depth: torch.Tensor,
     mask: torch.Tensor,
     prediction_kind: str = "disparity",
-    space: str = "disparity",
+    space: str | None = None,
     temperature: float = DELTA1_TEMPERATURE,
     min_depth: float = 1e-3,
-    alignment: str = "scale_shift",
+    alignment: str | None = None,
 ) -> torch.Tensor:
     """A smooth share of pixels that delta1 counts wrong (B,): per pixel
     sigmoid((|log(aligned / gt)| - log 1.25) / temperature), rescaled so that a perfect prediction

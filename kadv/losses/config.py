@@ -20,17 +20,20 @@ class LossConfig:
 
     Attributes:
         kind: ``"delta1"``, ``"absrel"``, ``"ssim"`` or ``"perceptual"`` (:func:`kadv.losses.depth_loss`).
-        space: ``"disparity"`` or ``"depth"``: where the maps are compared.
+        space: ``"disparity"`` or ``"depth"``: where the maps are compared; None: where the
+            model's output kind is fitted (:func:`kadv.losses.kind_fit`: disparity for
+            ``disparity`` and ``depth``, depth for ``affine_depth`` and ``scale_depth``).
         alignment: how the prediction meets the ground truth: ``scale_shift``, ``scale`` or
-            ``none`` (metric depth as predicted).
+            ``none`` (metric depth as predicted); None: the kind's own (``scale`` for
+            ``scale_depth``, ``scale_shift`` otherwise).
         vgg_weights: the perceptual loss's VGG-16 state dict (None: the torch hub's cache).
         window_size: the SSIM loss's window.
         temperature: the smooth delta1's step width, in log-ratio units.
     """
 
     kind: str = "delta1"
-    space: str = "disparity"
-    alignment: str = "scale_shift"
+    space: str | None = None
+    alignment: str | None = None
     vgg_weights: str | Path | None = None
     window_size: int = 11
     temperature: float = DELTA1_TEMPERATURE

@@ -1,11 +1,12 @@
-"""Standard depth metrics after an alignment (``loss.alignment``: scale and shift, by default, or
-scale alone, in disparity space by default; or none, for metric depth)."""
+"""Standard depth metrics after an alignment (``loss.alignment``: scale and shift, or scale alone,
+or none, for metric depth), fitted by default with the prediction kind's own ambiguity in its own
+space (:func:`kadv.losses.kind_fit`)."""
 
 from __future__ import annotations
 
 import torch
 
-from kadv.losses.align import align_scale, align_scale_shift, check_alignment, to_comparison_space
+from kadv.losses.align import align_scale, align_scale_shift, check_alignment, kind_fit, to_comparison_space
 
 __all__ = ["aligned_depth", "aligned_on_valid", "depth_metrics", "mean_on_valid"]
 
@@ -15,13 +16,14 @@ def aligned_depth(
     gt_depth: torch.Tensor,
     mask: torch.Tensor,
     prediction_kind: str = "disparity",
-    space: str = "disparity",
-    alignment: str = "scale_shift",
+    space: str | None = None,
+    alignment: str | None = None,
 ) -> torch.Tensor:
     """The prediction as metric depth (B, 1, H, W): converted to ``space``, aligned to the ground
     truth there by least squares on ``mask`` (``alignment``: on scale and shift, or on scale
     alone), and converted back; under ``none``, a metric depth prediction as it is (a value at or
-    below 0 as a depth of 1e-8 m: wrong). Differentiable in both maps.
+    below 0 as a depth of 1e-8 m: wrong). ``space`` and ``alignment`` None: the kind's own
+    (:func:`kadv.losses.kind_fit`). Differentiable in both maps.
 
     Aligned values are clamped at the end of the ground truth's range on the side where depth would
     turn negative (disparity at 1/max(gt), depth at min(gt)), so a prediction that needs a negative
@@ -34,6 +36,7 @@ def aligned_depth(
         >>> torch.allclose(aligned_depth(disparity, depth, mask, "disparity"), depth)
         True
     """
+    space, alignment = kind_fit(prediction_kind, space, alignment)
     check_alignment(alignment, prediction_kind)
     if alignment == "none":
         return prediction.clamp_min(1e-8)
@@ -52,9 +55,9 @@ def aligned_on_valid(
     gt_depth: torch.Tensor,
     mask: torch.Tensor,
     prediction_kind: str = "disparity",
-    space: str = "disparity",
+    space: str | None = None,
     min_depth: float = 1e-3,
-    alignment: str = "scale_shift",
+    alignment: str | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
     """What the metrics and the aligned losses score on: the valid pixels (ground truth above
     ``min_depth``), their count per map (B,), the ground truth with 1 elsewhere (safe to divide by),
@@ -76,20 +79,24 @@ def depth_metrics(
     mask: torch.Tensor,
     prediction_kind: str = "disparity",
     min_depth: float = 1e-3,
-    alignment: str = "scale_shift",
+    alignment: str | None = None,
+    space: str | None = None,
 ) -> dict[str, torch.Tensor]:
     """delta1/2/3, abs_rel and rmse per map (B,) on valid pixels.
 
-    The prediction is aligned as :func:`aligned_depth` does, in disparity space, so a prediction
-    that needs a negative depth counts as wrong rather than being dropped.
+    The prediction is aligned as :func:`aligned_depth` does, so a prediction that needs a
+    negative depth counts as wrong rather than being dropped.
 
     Args:
         prediction: (B, 1, H, W) model output.
         gt_depth: (B, 1, H, W) z-depth in metres.
         mask: (B, 1, H, W) valid ground-truth pixels.
-        prediction_kind: "disparity" (relative, affine-invariant) or "depth".
+        prediction_kind: one of :data:`kadv.losses.KINDS`: "disparity" (relative,
+            affine-invariant), "depth" (metric), "affine_depth" or "scale_depth".
         min_depth: ground truth below this is treated as invalid.
-        alignment: ``scale_shift``, ``scale`` or ``none`` (a metric depth prediction as it is).
+        alignment: ``scale_shift``, ``scale`` or ``none`` (a metric depth prediction as it is);
+            None: the kind's own.
+        space: where the alignment is fitted, ``disparity`` or ``depth``; None: the kind's own.
 
     Examples:
         >>> depth = 1.0 + torch.arange(16.0, dtype=torch.float64).reshape(1, 1, 4, 4) / 4
@@ -99,7 +106,7 @@ def depth_metrics(
         ([1.0], True)
     """
     mask, count, safe_gt, pred_depth = aligned_on_valid(
-        prediction, gt_depth, mask, prediction_kind, min_depth=min_depth, alignment=alignment
+        prediction, gt_depth, mask, prediction_kind, space, min_depth=min_depth, alignment=alignment
     )
     ratio = torch.maximum(pred_depth / safe_gt, safe_gt / pred_depth)
     result = {f"delta{k}": mean_on_valid((ratio < 1.25**k).to(gt_depth.dtype), mask, count) for k in (1, 2, 3)}

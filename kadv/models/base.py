@@ -6,6 +6,7 @@ import torch
 from torch import nn
 
 from kadv.checks import check_shape
+from kadv.losses.align import check_kind
 from kadv.models.preprocess import Preprocess
 
 __all__ = ["DepthModel"]
@@ -19,7 +20,9 @@ class DepthModel(nn.Module):
     is). Parameters are frozen and the module stays in eval mode.
 
     Attributes:
-        output_kind: "disparity" (relative inverse depth, affine-invariant) or "depth" (metric).
+        output_kind: what the prediction holds (:data:`kadv.losses.KINDS`): "disparity" (relative
+            inverse depth, affine-invariant), "depth" (metric), "affine_depth" (depth up to scale
+            and shift) or "scale_depth" (depth up to scale).
         name: a label for reports.
     """
 
@@ -27,10 +30,8 @@ class DepthModel(nn.Module):
 
     def __init__(self, preprocess: Preprocess | None, output_kind: str, name: str) -> None:
         super().__init__()
-        if output_kind not in ("disparity", "depth"):
-            raise ValueError(f"output_kind must be 'disparity' or 'depth', got {output_kind!r}")
         self.preprocess = preprocess
-        self.output_kind = output_kind
+        self.output_kind = check_kind(output_kind)
         self.name = name
 
     def freeze(self) -> DepthModel:

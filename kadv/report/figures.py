@@ -59,8 +59,8 @@ def save_four_panel(
 
     Args:
         rgb: (H, W, 3) in [0, 1]; depth, prediction: (H, W) metres (the prediction aligned to the
-            ground truth by ``alignment``, which its panel names), sharing one colour map; mask:
-            (H, W) valid ground truth.
+            ground truth by ``alignment``, which its panel names: ``none`` or, e.g.,
+            ``scale_shift in disparity``), sharing one colour map; mask: (H, W) valid ground truth.
         title: the figure's title (the view's metrics).
     """
     low, high = depth_range(depth, mask)

@@ -134,8 +134,15 @@ class ViewRenderer:
         with torch.no_grad():
             out = self.objective.renderer.render(poses, K, self.height, self.width, self.supersample).to("cpu")
             prediction = self.objective.model(out.rgb, K)
-            kind, alignment = self.objective.model.output_kind, self.objective.alignment
-            aligned = aligned_depth(prediction.double(), out.depth.double(), out.mask, kind, alignment=alignment)
+            objective = self.objective
+            aligned = aligned_depth(
+                prediction.double(),
+                out.depth.double(),
+                out.mask,
+                objective.model.output_kind,
+                objective.metric_space,
+                objective.alignment,
+            )
         return {
             "rgb": out.rgb.permute(0, 2, 3, 1).numpy(),
             "depth": out.depth[:, 0].numpy(),
@@ -154,15 +161,16 @@ def _title(label: str, record: ViewRecord, init: InitView) -> str:
     )
 
 
-def _four_panel(path: Path, maps: dict[str, np.ndarray], b: int, title: str, alignment: str) -> Path:
-    """View ``b`` of a :class:`ViewRenderer`'s maps as a four-panel PNG."""
+def _four_panel(path: Path, maps: dict[str, np.ndarray], b: int, title: str, objective: Objective) -> Path:
+    """View ``b`` of a :class:`ViewRenderer`'s maps as a four-panel PNG, its fit named."""
     views = (maps["rgb"][b], maps["depth"][b], maps["aligned"][b], maps["mask"][b])
-    return save_four_panel(path, *views, title, alignment)
+    fit = "none" if objective.alignment == "none" else f"{objective.alignment} in {objective.metric_space}"
+    return save_four_panel(path, *views, title, fit)
 
 
 def save_view_picture(path: str | Path, render: ViewRenderer, init: InitView, record: ViewRecord, label: str) -> Path:
     """The recorded view ``record`` from ``init`` as a four-panel PNG at ``path``, titled with its metrics."""
-    return _four_panel(Path(path), render(init, [record]), 0, _title(label, record, init), render.objective.alignment)
+    return _four_panel(Path(path), render(init, [record]), 0, _title(label, record, init), render.objective)
 
 
 def _save_views(views_dir: Path, index: int, view: InitViewResult, render: ViewRenderer) -> list[str]:
@@ -171,7 +179,7 @@ def _save_views(views_dir: Path, index: int, view: InitViewResult, render: ViewR
     maps = render(view.init, records)
     for b, (name, record) in enumerate(zip(names, records)):
         label = "init view" if b == 0 else f"adversarial view {b}"
-        _four_panel(views_dir / f"{name}.png", maps, b, _title(label, record, view.init), render.objective.alignment)
+        _four_panel(views_dir / f"{name}.png", maps, b, _title(label, record, view.init), render.objective)
         arrays = {k: v[b] for k, v in maps.items()}
         atomic_write(views_dir / f"{name}.npz", lambda tmp, a=arrays: np.savez_compressed(str(tmp), **a))
     return [f"views/{name}.png" for name in names]
@@ -270,6 +278,7 @@ def write_run(
         init_views=per_view,
         profile=None if profile is None else profile.to_dict(),
         alignment=objective.alignment,
+        space=objective.metric_space,
     )
     if profile is not None:
         profile.save_png(run_dir / PROFILE_PNG)

@@ -158,7 +158,8 @@ class RunSummary(RunInfo):
     The means are over the init views that kept an adversarial view; ``budget`` is the run's total.
     ``profile``: a profile run's (``attack.radii``) :meth:`kadv.attack.Profile.to_dict`, else None.
     ``alignment``: how every delta1 and AbsRel here met the ground truth (``loss.alignment``:
-    ``scale_shift``, ``scale`` or ``none``).
+    ``scale_shift``, ``scale`` or ``none``), and ``space``: where it was fitted (``disparity`` or
+    ``depth``: the model's output kind's own, :func:`kadv.losses.kind_fit`).
     """
 
     method: str
@@ -173,6 +174,7 @@ class RunSummary(RunInfo):
     schema: int = SCHEMA_VERSION
     profile: dict | None = None
     alignment: str = "scale_shift"
+    space: str = "disparity"
 
     def to_dict(self) -> dict:
         """Everything as plain JSON values, each budget with its passes."""

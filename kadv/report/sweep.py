@@ -165,15 +165,17 @@ def _paired_table(
 
 
 def _alignments(runs: list[RunRecord], method: str) -> str:
-    """The alignments (``loss.alignment``) that one method's runs scored delta1 after."""
-    return " or ".join(sorted({r.summary.alignment for r in runs if r.method == method}))
+    """The alignments (``loss.alignment``) that one method's runs scored delta1 after, each with
+    the space it was fitted in: ``scale_shift alignment in disparity space``."""
+    fits = {f"{r.summary.alignment} alignment in {r.summary.space} space" for r in runs if r.method == method}
+    return " or ".join(sorted(fits))
 
 
 def table2(runs: list[RunRecord], method: str) -> Table:
     """The study's Table 2 for one method's runs: adversarial L_depth (higher: worse for the model)
     and delta1 (lower: worse)."""
     return _paired_table(
-        f"Table 2: adversarial views ({method} attack; delta1 after {_alignments(runs, method)} alignment)",
+        f"Table 2: adversarial views ({method} attack; delta1 after {_alignments(runs, method)})",
         runs,
         method,
         ("L_depth", lambda r: r.summary.adversarial_l_depth),
@@ -185,7 +187,7 @@ def table3(runs: list[RunRecord], method: str) -> Table:
     """The study's Table 3 for one method's runs: adversarial - init for L_depth, init - adversarial
     for delta1."""
     return _paired_table(
-        f"Table 3: change from the init views ({method} attack; delta1 after {_alignments(runs, method)} alignment)",
+        f"Table 3: change from the init views ({method} attack; delta1 after {_alignments(runs, method)})",
         runs,
         method,
         ("dL_depth", lambda r: r.summary.adversarial_l_depth - r.summary.init_l_depth),

@@ -12,7 +12,7 @@ import torch
 from tqdm import tqdm
 
 from kadv.attack import Study
-from kadv.losses import depth_metrics
+from kadv.losses import depth_metrics, kind_fit
 from kadv.models import DepthModel
 from kadv.report.sweep import RunRecord, Table, main_method
 
@@ -47,11 +47,13 @@ def transfer_tables(
     models = {r.model: r for r in runs}
     names = sorted(models)
     scores: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: {"delta1": [], "l_depth": []})
+    kinds: dict[str, str] = {}
     with tqdm(total=len(runs) * len(names), desc="transfer: re-rendering views", disable=not progress) as bar:
         for run in runs:
-            # every model is scored after the same alignment, which models of both kinds share
+            # every model is scored in its own output kind's space and alignment (a metric model's
+            # scale and shift too, so that relative and metric models share one fit)
             study = study_of(run)
-            study = study.variant(loss=dataclasses.replace(study.settings.loss, alignment="scale_shift"))
+            study = study.variant(loss=dataclasses.replace(study.settings.loss, alignment=None))
             renderer = study.renderer
             poses, Ks = _adversarial_poses(run)
             height, width = run.summary.height, run.summary.width
@@ -61,6 +63,7 @@ def transfer_tables(
                 for name in names:
                     objective = study.variant(model=model_of(models[name])).objective
                     model = objective.model
+                    kinds[name] = model.output_kind
                     prediction = model(out.rgb, Ks)
                     l_depth = objective.l_depth(out.depth.double(), prediction.double(), out.mask)
                     delta1 = depth_metrics(prediction.double(), out.depth.double(), out.mask, model.output_kind)[
@@ -70,8 +73,9 @@ def transfer_tables(
                     scores[run.model, name]["l_depth"] += l_depth.tolist()
                     bar.update(1)
     tables = []
+    fits = "; ".join(f"{name}: {' in '.join(reversed(kind_fit(kinds[name])))}" for name in names)
     for key, title in (
-        ("delta1", "Transfer: delta1 of each model (columns) on each model's adversarial views (rows)"),
+        ("delta1", f"Transfer: delta1 of each model (columns) on each model's adversarial views (rows); fitted {fits}"),
         ("l_depth", "Transfer: L_depth of each model (columns) on each model's adversarial views (rows)"),
     ):
         table = Table(title, ["views of \\ scored by", *names])

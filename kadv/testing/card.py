@@ -232,7 +232,7 @@ class Scorecard:
                 f"**{np.mean(typical):.3f}** |"
             )
         notes = [
-            f"delta1 after {self.results[self.probes[0]][self.models[0]].alignment} alignment; agreement: the "
+            f"delta1 after {_fits(self.results[self.probes[0]])}; agreement: the "
             "searches' runs that reached their worst, of the runs made, over seeds and init views "
             "(alone: init views whose worst one run found and none confirmed; attack.restarts); search noise: the "
             "sd of the worst over the search seeds with the init views fixed (n/a: one search seed); ± after an "
@@ -287,6 +287,15 @@ class Scorecard:
             for probe in self.probes
         }
         return save_profile_panels(path, panels)
+
+
+def _fits(profiles: dict[str, Profile]) -> str:
+    """How the models' delta1 met the ground truth: ``scale_shift alignment in disparity space``,
+    or per model where their output kinds are fitted differently."""
+    fits = {name: f"{p.alignment} alignment in {p.space} space" for name, p in profiles.items()}
+    if len(set(fits.values())) == 1:
+        return next(iter(fits.values()))
+    return ", ".join(f"{fit} ({name})" for name, fit in fits.items())
 
 
 def _checked_inputs(models: list, probes: list[str] | None, seeds) -> tuple[list[str], tuple, list]:
@@ -352,14 +361,15 @@ def scorecard(
     import tempfile
 
     from kadv.bench import pool_units, pooled_worst, suite_score
-    from kadv.losses.align import check_alignment
+    from kadv.losses.align import check_alignment, kind_fit
     from kadv.testing.runs import probe_suite, profiles, run_model
 
     probes, seeds, loaded = _checked_inputs(models, probes, seeds)
     settings = profile_settings(radii, envelope, typical_views, fail_below, options, "scorecard", search_seeds)
     try:
         for model in loaded:
-            check_alignment(settings.checked.alignment, model.output_kind, f"model {model.name}")
+            fitted = kind_fit(model.output_kind, alignment=settings.checked.alignment)[1]
+            check_alignment(fitted, model.output_kind, f"model {model.name}")
     except ValueError as error:
         raise RobustnessInputError(str(error)) from None
     suite = probe_suite(probes, seeds, settings)

@@ -42,7 +42,8 @@ class CheckOptions:
         restarts: independent runs of the search per init view at most, each a share of the
             budget (``attack.restarts``; their agreement is reported beside the worst).
         alignment: how delta1 meets the ground truth (``loss.alignment``): ``scale_shift``,
-            ``scale`` or ``none`` (metric depth as predicted; a relative model is refused).
+            ``scale`` or ``none`` (metric depth as predicted; a relative model is refused); None:
+            the model's output kind's own (:func:`kadv.losses.kind_fit`).
         radius_shares: a profile's split of its passes over its radii, one positive share a
             radius (``attack.radius_shares``; None: the k-th radius gets k shares).
     """
@@ -59,7 +60,7 @@ class CheckOptions:
     artifacts: str | Path | None = None
     progress: bool = False
     restarts: int = 1
-    alignment: str = "scale_shift"
+    alignment: str | None = None
     radius_shares: tuple[float, ...] | None = None
 
     @classmethod
@@ -165,7 +166,7 @@ def _init_views(study, count: int, seed: int) -> list:
     views = file_init_views(renderer, penalty.margin)[:count]
     views += sample_init_views(
         renderer, study.model, count - len(views), seed, InitViewConfig(), penalty, height, width,
-        alignment=study.settings.loss.alignment,
+        alignment=study.objective.alignment,
     )  # fmt: skip
     check_init_views(renderer, views, penalty, height, width)
     return views

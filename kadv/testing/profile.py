@@ -117,7 +117,10 @@ class ProfileSettings:
         names = (built.model_name, built.scene_name, self.config.envelope.name)
         seeds = tuple(run.seed for run in runs)
         seeded = [run.seeded for run in runs]
-        return Profile.of(*names, self.radii, seeds, seeded, self.fail_below, pictures, self.checked.alignment)
+        objective = built.study.objective
+        return Profile.of(
+            *names, self.radii, seeds, seeded, self.fail_below, pictures, objective.alignment, objective.metric_space
+        )
 
 
 def profile_settings(

@@ -18,6 +18,7 @@ from kadv.bench import BenchError, Entry, Protocol, SceneSpec, Suite, freeze_sui
 from kadv.bench.entry import assemble_entry, claim_run_folder, run_units, suite_settings
 from kadv.bench.verify import cell_context, verified_record
 from kadv.io import file_slug
+from kadv.losses import kind_fit
 from kadv.testing.inputs import RobustnessInputError
 from kadv.testing.session import current
 
@@ -53,6 +54,7 @@ def probe_suite(probes: list[str], seeds: tuple[int, ...], settings) -> Suite:
         lighting=checked.lighting,
         loss=checked.loss,
         alignment=checked.alignment,
+        space=None,
         restarts=checked.restarts,
     )
     specs = [
@@ -179,7 +181,8 @@ def profiles(suite: Suite, run: ModelRun, probes: list[str], fail_below: float) 
             search_noise_by_seed=[row["noise"] for row in rows],
             cost_by_seed=[row["cost"] for row in rows],
             agreement_by_seed=[row["agreement"] for row in rows],
-            alignment=suite.protocol.alignment,
+            alignment=kind_fit(run.entry.model["output_kind"], alignment=suite.protocol.alignment)[1],
+            space=kind_fit(run.entry.model["output_kind"])[0],
         )
     return out
 

@@ -103,7 +103,8 @@ def test_run_directory_holds_every_artefact(demo_runs: Path) -> None:
     run = demo_runs / "first"
     summary = json.loads((run / "summary.json").read_text())
     assert summary["complete"] and summary["seed"] == 0 and summary["device"] == "cpu"
-    assert summary["alignment"] == "scale_shift"  # every delta1 and AbsRel in it after a scale-and-shift fit
+    # every delta1 and AbsRel in it after a scale-and-shift fit in disparity space: the relative model's own
+    assert (summary["alignment"], summary["space"]) == ("scale_shift", "disparity")
     assert {"torch", "kornia", "kadv"} <= set(summary["versions"])
     assert len(summary["init_views"]) == 2
     init_params = json.loads((run / "init_params.json").read_text())["init_views"]

@@ -17,7 +17,7 @@ def test_the_scorecard_prints_its_table_and_ranking_and_writes_its_files(tmp_pat
     printed = capsys.readouterr().out
     assert "| probe | model | worst delta1 5°/0.1 m | worst delta1 15°/0.3 m | worst delta1 45°/1 m |" in printed
     assert "| window | kadv_tiny | " in printed and "| stairs | kadv_tiny | " in printed
-    assert "\ndelta1 after scale_shift alignment; agreement: " in printed  # how every figure was scored
+    assert "\ndelta1 after scale_shift alignment in disparity space; agreement: " in printed  # how it was scored
     assert "\nranking (worst-case area): kadv_tiny (" in printed and "\nranking (typical area): kadv_tiny (" in printed
     assert (tmp_path / "scorecard.md").read_text().strip() in printed
     assert (tmp_path / "scorecard.png").stat().st_size > 10_000

@@ -157,11 +157,13 @@ def test_kadv_report_writes_the_tables_and_a_page_chromium_renders(killed_sweep:
     for method in ("gradient", "random"):  # the study's tables for each method in the sweep
         table2 = (out / f"table2_{method}.md").read_text()
         assert "| kadv_tiny |" in table2 and "box_room_0 L_depth" in table2 and "Avg delta1" in table2
+        assert "delta1 after scale_shift alignment in disparity space)" in table2  # its fit, named
         assert (out / f"table3_{method}.csv").read_text().startswith("model,box_room_0 dL_depth,")
     methods = (out / "methods.csv").read_text().splitlines()
     assert len(methods) == 5 and {"gradient", "random"} <= {line.split(",")[2] for line in methods[1:]}
     transfer = (out / "transfer_delta1.csv").read_text().splitlines()
     assert transfer[0] == "views of \\ scored by,kadv_tiny" and len(transfer) == 2
+    assert "; fitted kadv_tiny: scale_shift in disparity" in (out / "transfer_delta1.md").read_text()
     dom = rendered_dom(out / "report.html", tmp_path / "chromium")
     assert dom.count("<table") == 7  # tables 2 and 3 of each method, methods, transfer delta1 and L_depth
     assert dom.count("<tr>") == 4 * 3 + 5 + 2 * 2  # tables 2 and 3: header, model, Avg; methods; transfer

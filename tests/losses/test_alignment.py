@@ -8,7 +8,17 @@ import torch
 
 from kadv import ExactRenderer, box_room
 from kadv.attack import Objective, PenaltyConfig
-from kadv.losses import ALIGNMENTS, absrel_loss, align_scale, aligned_depth, depth_metrics, soft_delta1_loss
+from kadv.losses import (
+    ALIGNMENTS,
+    KINDS,
+    absrel_loss,
+    align_scale,
+    aligned_depth,
+    check_kind,
+    depth_metrics,
+    kind_fit,
+    soft_delta1_loss,
+)
 from kadv.models import load_model
 
 DEPTH = 1.0 + torch.arange(64.0, dtype=torch.float64).reshape(1, 1, 8, 8) / 16  # 1 to 4.9 m
@@ -50,3 +60,67 @@ def test_a_relative_prediction_cannot_be_scored_as_metres_and_an_unknown_alignme
         Objective(load_model("kadv_tiny"), lambda a, b: a.mean(), renderer, PenaltyConfig(), alignment="none")
     with pytest.raises(ValueError, match=r"^loss.alignment must be one of scale_shift, scale, none, got 'affine'$"):
         depth_metrics(DEPTH, DEPTH, MASK, "depth", alignment="affine")
+
+
+# a depth range wide enough (0.5 m to 8 m) that an affine map of depth is not one of disparity
+WIDE = torch.linspace(0.5, 8.0, 64, dtype=torch.float64).reshape(1, 1, 8, 8)
+EVERYWHERE = torch.ones_like(WIDE, dtype=torch.bool)
+
+
+def _delta1(prediction: torch.Tensor, kind: str) -> float:
+    return float(depth_metrics(prediction, WIDE, EVERYWHERE, kind)["delta1"])
+
+
+@pytest.mark.parametrize("kind", sorted(KINDS))
+def test_a_perfect_prediction_scores_delta1_1_under_every_kind(kind: str) -> None:
+    perfect = 1.0 / WIDE if kind == "disparity" else WIDE
+    assert _delta1(perfect, kind) == 1.0
+
+
+def test_an_affine_map_of_depth_is_right_as_affine_depth_and_wrong_as_disparity() -> None:
+    affine = 0.2 * WIDE - 0.05  # Marigold's kind: depth up to scale and shift
+    assert _delta1(affine, "affine_depth") == 1.0
+    assert _delta1(affine, "disparity") < 0.9
+
+
+def test_an_affine_map_of_disparity_is_right_as_disparity_and_wrong_as_affine_depth() -> None:
+    affine = 3.0 / WIDE + 0.4
+    assert _delta1(affine, "disparity") == 1.0
+    assert _delta1(affine, "affine_depth") < 0.9
+
+
+@pytest.mark.parametrize("kind", ["disparity", "affine_depth", "scale_depth"])
+def test_a_scale_of_the_right_map_is_right_under_every_relative_kind(kind: str) -> None:
+    right = 1.0 / WIDE if kind == "disparity" else WIDE
+    assert _delta1(7.5 * right, kind) == 1.0
+
+
+def test_each_kind_is_fitted_with_its_own_ambiguity_in_its_own_space_by_default() -> None:
+    assert {kind: kind_fit(kind) for kind in KINDS} == {
+        "disparity": ("disparity", "scale_shift"),
+        "depth": ("disparity", "scale_shift"),
+        "affine_depth": ("depth", "scale_shift"),
+        "scale_depth": ("depth", "scale"),
+    }
+    # scale alone in depth space: a shifted depth is not a scale-invariant one
+    assert _delta1(WIDE + 2.0, "scale_depth") < 0.9
+    with pytest.raises(ValueError, match="outputs affine-invariant depth: use scale_shift or scale"):
+        depth_metrics(WIDE, WIDE, EVERYWHERE, "affine_depth", alignment="none")
+    with pytest.raises(ValueError, match="output_kind must be one of disparity, depth, affine_depth, scale_depth"):
+        check_kind("inverse_depth")
+
+
+def test_an_objective_fits_its_metrics_in_the_model_kind_s_space() -> None:
+    from kadv.models import wrap_model
+
+    class Affine(torch.nn.Module):
+        def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+            return rgb.mean(dim=1, keepdim=True) + 1.0
+
+    renderer = ExactRenderer(box_room(seed=0))
+    objective = Objective(
+        wrap_model(Affine(), "affine_depth"), lambda a, b: (a - b).abs().mean((1, 2, 3)), renderer, PenaltyConfig()
+    )
+    assert (objective.space, objective.metric_space, objective.alignment) == ("depth", "depth", "scale_shift")
+    relative = Objective(load_model("kadv_tiny"), lambda a, b: (a - b).abs().mean((1, 2, 3)), renderer, PenaltyConfig())
+    assert (relative.space, relative.metric_space, relative.alignment) == ("disparity", "disparity", "scale_shift")

@@ -59,7 +59,7 @@ def test_the_score_is_the_mean_trapezoid_under_the_typical_curve_from_the_init_v
     table = profile.markdown()
     # the draws' intervals: 0.8 ± 1.96 * 0.0816 / 2; Wilson's for 0 of 4 and 1 of 4 failed
     assert "| 15°, 0.3 m | 0.450 | - | 0.800 (0.720-0.880) | 5% (0%-49%) |" in table  # no agreement recorded
-    assert "seeds [0, 1], delta1 after scale_shift alignment: 0.850 at the init views" in table
+    assert "seeds [0, 1], delta1 after scale_shift alignment in disparity space: 0.850 at the init views" in table
     assert profile.failure_interval[2] == pytest.approx((0.0456, 0.6994), abs=1e-4)
     merged = Profile.merge([profile, profile])
     assert merged.seeds == (0, 1, 0, 1) and merged.score == pytest.approx(profile.score)
