@@ -89,7 +89,7 @@ def test_a_scene_whose_content_changed_is_refused_naming_it(suite) -> None:
 
 def test_the_shipped_offline_suite_holds_held_out_rooms_and_the_probes() -> None:
     suite = load_suite("offline-v1")
-    assert suite.protocol.passes_per_view == 144 and suite.protocol.min_seeds == 3
+    assert suite.protocol.passes_per_view == 288 and suite.protocol.min_seeds == 3
     config = TinyTrainConfig()
     trained = {seed * 100_003 + i for seed in (config.seed, config.val_seed) for i in range(100_003)}
     seeds = [s.node["seed"] for s in suite.scenes]
