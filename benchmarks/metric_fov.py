@@ -16,12 +16,20 @@ metres (chosen under ``none``); a file camera may be one it gets wrong. Last lin
 ``metric_fov worst_fixed_5deg= worst_free_5deg= hidden_fixed_5deg= ...``: medians per radius over
 the init views it gets right in metres (delta1 unaligned at least ``RIGHT``; ``views=`` of them).
 
-Run: .venv/bin/python benchmarks/metric_fov.py [--budget 123] [--picture docs/metric_fov.png]
+``--camera``: a check that the wiring carries K, not a model's measurement. kadv-tiny-metric
+wrapped to scale its depth by fx / f_ref, as Depth Anything 3 and Metric3D scale theirs by the
+focal length (f_ref: the focal of a 60-degree view), is searched with the field of view free, its
+K given (``model.intrinsics=given``: each view's own) against withheld (as at 60 degrees). Last
+line: ``metric_fov_camera worst_given_5deg= worst_withheld_5deg= ...`` (medians over every init
+view).
+
+Run: .venv/bin/python benchmarks/metric_fov.py [--budget 123] [--picture docs/metric_fov.png] [--camera]
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from pathlib import Path
 
@@ -33,6 +41,7 @@ import torch
 from kadv.attack import AttackConfig, InitView, ViewRecord, attack
 from kadv.geometry import intrinsics_from_fov
 from kadv.losses import aligned_depth, depth_metrics
+from kadv.models import load_model, wrap_model
 from kadv.penalties import Envelope
 from kadv.report.figures import save_four_panel
 from kadv.testing.options import CheckOptions, setup, worst_record
@@ -41,6 +50,23 @@ FOV_RANGE = (40.0, 100.0)
 SIZE = (96, 128)
 RADII = ((5.0, 0.1), (45.0, 1.0))  # degrees, metres
 RIGHT = 0.5  # an init view the model gets right in metres: delta1 unaligned at least this
+REFERENCE_FOV = 60.0  # degrees: the field of view at which the focal-scaled model is kadv-tiny-metric
+
+
+class FocalScaled(torch.nn.Module):
+    """kadv-tiny-metric's depth times fx / f_ref, f_ref the focal of a REFERENCE_FOV view; without
+    K, kadv-tiny-metric's depth as it is."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.tiny = load_model("kadv_tiny_metric")
+
+    def forward(self, rgb: torch.Tensor, K: torch.Tensor | None = None) -> torch.Tensor:
+        depth = self.tiny(rgb)
+        if K is None:
+            return depth
+        reference = 0.5 * rgb.shape[-1] / math.tan(math.radians(REFERENCE_FOV) / 2)
+        return depth * (K.reshape(-1, 3, 3)[:, 0, 0] / reference).reshape(-1, 1, 1, 1).to(depth)
 
 
 def rescored(built, init: InitView, record: ViewRecord) -> dict[str, object]:
@@ -101,6 +127,35 @@ def picture(path: Path, pair: tuple[dict, dict]) -> None:
         p.unlink()
 
 
+def camera(budget: int) -> None:
+    """The focal-scaled model searched with its K given and withheld (see the module docstring)."""
+    options = CheckOptions(init_count=2, size=SIZE, lighting=common.default_lighting(), alignment="none")
+    free = Envelope("free_fov", fov_deg=FOV_RANGE)
+    worst: dict[tuple[str, float], list[float]] = {}
+    print("| scene | init view | radius | delta1 init | worst, K given (its fov) | worst, K withheld (its fov) |")
+    print("|---|---|---|---|---|---|")
+    for scene in common.bench_scenes():
+        built = setup(wrap_model(FocalScaled(), "depth", name="focal_scaled"), scene, options)
+        for radius in RADII:
+            pairs = {}
+            for choice in ("given", "withheld"):
+                built.objective.model.intrinsics = choice
+                pairs[choice] = search(built, free, radius, budget)
+            for index, view in enumerate(built.views):
+                given, withheld = pairs["given"][index], pairs["withheld"][index]
+                print(
+                    f"| {scene.name} | {view.name} | {radius[0]:g}°, {radius[1]:g} m | "
+                    f"{given[0]['delta1']['none']:.3f} | "
+                    f"{given[1]['delta1']['none']:.3f} ({given[1]['fov']:.0f}°) | "
+                    f"{withheld[1]['delta1']['none']:.3f} ({withheld[1]['fov']:.0f}°) |",
+                    flush=True,
+                )
+                for choice, pair in (("given", given), ("withheld", withheld)):
+                    worst.setdefault((choice, radius[0]), []).append(pair[1]["delta1"]["none"])
+    summary = " ".join(f"worst_{c}_{r:g}deg={np.median(v):.3f}" for (c, r), v in worst.items())
+    print(f"metric_fov_camera {summary} budget_passes={budget} views={len(worst['given', RADII[0][0]])}")
+
+
 def main(budget: int, picture_path: Path | None) -> None:
     scenes = {scene.name: scene for scene in common.bench_scenes()}
     options = CheckOptions(init_count=2, size=SIZE, lighting=common.default_lighting(), alignment="none")
@@ -149,5 +204,9 @@ if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--budget", type=int, default=123, help="model passes per init view and search")
     parser.add_argument("--picture", type=Path, default=None, help="where to write the box room's picture")
+    parser.add_argument("--camera", action="store_true", help="K given against withheld (a check of the wiring)")
     arguments = parser.parse_args()
-    main(arguments.budget, arguments.picture)
+    if arguments.camera:
+        camera(arguments.budget)
+    else:
+        main(arguments.budget, arguments.picture)

@@ -160,6 +160,8 @@ def _table(summary: RunSummary) -> str:
     lines += ["", "model passes and seconds per init view:"]
     lines += [f"  {view.name}: {view.budget.text()}" for view in summary.init_views]
     lines.append(f"  (choosing the init views: {summary.init_passes} passes)")
+    if summary.intrinsics != "not taken":  # a model that takes the camera: was it told?
+        lines.append(f"camera intrinsics: {summary.intrinsics} (model.intrinsics)")
     return "\n".join(lines)
 
 
@@ -302,7 +304,7 @@ def _attack(cfg: DictConfig, run_dir: Path, progress: dict) -> float:
     fov = attack_config.envelope.fov_deg
     info = RunInfo(
         scene.name, study.model.name, cfg.loss.kind, seed, str(device), height, width, sorted(completed), init_passes,
-        fov_deg=None if fov is None else list(fov),
+        fov_deg=None if fov is None else list(fov), intrinsics=study.model.camera_text,
     )  # fmt: skip
     summary = write_run(run_dir, result, objective, info, supersample, video=cfg.video, profile=profile)
     print(f"run directory: {run_dir}\n{_table(summary)}")

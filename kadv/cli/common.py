@@ -37,7 +37,7 @@ from kadv.errors import WeightsUnavailable, WriteError
 from kadv.geometry import look_at
 from kadv.io import write_json
 from kadv.losses import DELTA1_TEMPERATURE, LossConfig
-from kadv.models import EMBEDDED, PRESETS, DepthModel, load_custom, load_model
+from kadv.models import EMBEDDED, PRESETS, DepthModel, check_intrinsics, load_custom, load_model
 from kadv.render import BakeConfig, DiffRenderConfig, Shading
 from kadv.render.exact import DEFAULT_MAX_RAYS
 from kadv.report.store import LOCK_FILES, RunDirectoryBusy
@@ -514,10 +514,15 @@ def _check_kind(value: Any, default: Any, key: str) -> None:
 
 def model_from_config(node: Any) -> DepthModel:
     """The ``model`` node's model: ``model=custom`` instantiates ``model.target(**model.args)``
-    with its declared ``model.output_kind``; any other preset loads by name (and ``model.weights``)."""
+    with its declared ``model.output_kind``; any other preset loads by name (and ``model.weights``).
+    ``model.intrinsics`` (given, the default, or withheld) says whether a model that takes the
+    camera's K receives it."""
     node = OmegaConf.to_container(node, resolve=True) if isinstance(node, DictConfig) else dict(node)
+    intrinsics = check_intrinsics(node.get("intrinsics") or "given")
     if node.get("name") == "custom":
-        return load_custom(node.get("target") or "", node.get("output_kind", "disparity"), node.get("args"))
+        model = load_custom(node.get("target") or "", node.get("output_kind", "disparity"), node.get("args"))
+        model.intrinsics = intrinsics
+        return model
     preset = EMBEDDED.get(node["name"]) or PRESETS.get(node["name"])
     for key in ("hub_id", "output_kind"):
         if preset is not None and node.get(key) is not None and node[key] != getattr(preset, key):
@@ -525,4 +530,6 @@ def model_from_config(node: Any) -> DepthModel:
                 f"model.{key}: the preset {node['name']!r} has {key} {getattr(preset, key)!r}, fixed by its "
                 f"checkpoint, not {node[key]!r}; for other weights use model=huggingface model.name=<id or dir>"
             )
-    return load_model(node["name"], node.get("weights"))
+    model = load_model(node["name"], node.get("weights"))
+    model.intrinsics = intrinsics
+    return model

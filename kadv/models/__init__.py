@@ -14,6 +14,7 @@ _EXPORTS = {
     "DepthModel": "kadv.models.base",
     "HuggingFaceDepthModel": "kadv.models.huggingface",
     "EMBEDDED": "kadv.models.presets",
+    "INTRINSICS": "kadv.models.base",
     "KadvTiny": "kadv.models.tiny",
     "ModelWeightsUnavailable": "kadv.models.huggingface",
     "ModuleDepthModel": "kadv.models.custom",
@@ -24,6 +25,7 @@ _EXPORTS = {
     "Preset": "kadv.models.presets",
     "TinyDepthNet": "kadv.models.tiny",
     "check_depth_model": "kadv.models.custom",
+    "check_intrinsics": "kadv.models.base",
     "count_passes": "kadv.models.counting",
     "load_custom": "kadv.models.custom",
     "load_huggingface": "kadv.models.huggingface",
@@ -38,7 +40,7 @@ _EXPORTS = {
 }
 
 if TYPE_CHECKING:  # the same names, for type checkers and the API reference
-    from kadv.models.base import DepthModel
+    from kadv.models.base import INTRINSICS, DepthModel, check_intrinsics
     from kadv.models.counting import PassCount, count_passes
     from kadv.models.custom import ModuleDepthModel, check_depth_model, load_custom, wrap_model
     from kadv.models.huggingface import HuggingFaceDepthModel, ModelWeightsUnavailable, load_huggingface
@@ -50,6 +52,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and the API reference
 
 __all__ = [
     "EMBEDDED",
+    "INTRINSICS",
     "PRESETS",
     "DepthModel",
     "HuggingFaceDepthModel",
@@ -62,6 +65,7 @@ __all__ = [
     "Preset",
     "TinyDepthNet",
     "check_depth_model",
+    "check_intrinsics",
     "count_passes",
     "load_custom",
     "load_huggingface",

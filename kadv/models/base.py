@@ -9,7 +9,17 @@ from kadv.checks import check_shape
 from kadv.losses.align import check_kind
 from kadv.models.preprocess import Preprocess
 
-__all__ = ["DepthModel"]
+__all__ = ["INTRINSICS", "DepthModel", "check_intrinsics"]
+
+# what a model that takes the camera receives (``model.intrinsics``): each view's own K, or none
+INTRINSICS = ("given", "withheld")
+
+
+def check_intrinsics(choice: str) -> str:
+    """``choice`` if it is one of :data:`INTRINSICS`, else a ``ValueError`` naming ``model.intrinsics``."""
+    if choice not in INTRINSICS:
+        raise ValueError(f"model.intrinsics must be given or withheld, got {choice!r}")
+    return choice
 
 
 class DepthModel(nn.Module):
@@ -24,15 +34,31 @@ class DepthModel(nn.Module):
             inverse depth, affine-invariant), "depth" (metric), "affine_depth" (depth up to scale
             and shift) or "scale_depth" (depth up to scale).
         name: a label for reports.
+        takes_K: whether the model takes the camera's intrinsics (Depth Pro; a custom module whose
+            ``forward`` has a parameter ``K``).
+        intrinsics: for a model that takes K, ``given`` (each view's own K, that of the image the
+            network sees after the preprocessing's resize and padding) or ``withheld`` (None: the
+            model estimates it or uses its default); ``model.intrinsics``.
     """
 
     output_kind: str = "disparity"
+    takes_K: bool = False
 
     def __init__(self, preprocess: Preprocess | None, output_kind: str, name: str) -> None:
         super().__init__()
         self.preprocess = preprocess
         self.output_kind = check_kind(output_kind)
         self.name = name
+        self.intrinsics = "given"
+
+    @property
+    def camera_text(self) -> str:
+        """What the model was told of the camera: ``given``, ``withheld`` or ``not taken``."""
+        return self.intrinsics if self.takes_K else "not taken"
+
+    def camera(self, K: torch.Tensor | None) -> torch.Tensor | None:
+        """The intrinsics the model receives: ``K`` where it takes them and they are given, else None."""
+        return K if self.takes_K and self.intrinsics == "given" else None
 
     def freeze(self) -> DepthModel:
         for parameter in self.parameters():
@@ -43,8 +69,9 @@ class DepthModel(nn.Module):
         """Stays in eval mode: attacks need deterministic, batch-independent predictions."""
         return super().train(False)
 
-    def predict(self, pixel_values: torch.Tensor) -> torch.Tensor:
-        """Network output (B, h, w) or (B, 1, h, w) for normalised input (B, 3, h, w)."""
+    def predict(self, pixel_values: torch.Tensor, K: torch.Tensor | None = None) -> torch.Tensor:
+        """Network output (B, h, w) or (B, 1, h, w) for normalised input (B, 3, h, w); ``K``: the
+        network input's intrinsics, for a model that takes them (None: withheld or not taken)."""
         raise NotImplementedError
 
     def forward(self, rgb: torch.Tensor, K: torch.Tensor | None = None) -> torch.Tensor:
@@ -53,16 +80,20 @@ class DepthModel(nn.Module):
 
         Args:
             rgb: (B, 3, H, W) images in [0, 1].
-            K: (3, 3) or (B, 3, 3) pinhole intrinsics of the images, for models whose metric scale
-                depends on the focal length (DepthPro); the others ignore it.
+            K: (3, 3) or (B, 3, 3) pinhole intrinsics of the images, for models that take them
+                (:attr:`takes_K`) while they are given; the others never see it.
         """
         check_shape(rgb, "B 3 H W", "rgb")
         parameter = next(self.parameters(), None)
         x = rgb if parameter is None else rgb.to(parameter.device)
+        K = self.camera(K)
+        if K is not None:
+            K = K.to(device=x.device, dtype=x.dtype)
         if self.preprocess is None:
-            return self._as_map(self.predict(x)).to(rgb.device)
+            return self._as_map(self.predict(x, K)).to(rgb.device)
         pixel_values, layout = self.preprocess.to_network(x)
-        return self.preprocess.from_network(self._as_map(self.predict(pixel_values)), layout).to(rgb.device)
+        network_K = None if K is None else layout.network_K(K)
+        return self.preprocess.from_network(self._as_map(self.predict(pixel_values, network_K)), layout).to(rgb.device)
 
     @staticmethod
     def _as_map(out: torch.Tensor) -> torch.Tensor:

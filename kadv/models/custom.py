@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import inspect
 from pathlib import Path
 from typing import Any
 
@@ -28,13 +29,22 @@ _PROBE_SIZE = (64, 64)
 class ModuleDepthModel(DepthModel):
     """A user's module; without a :class:`Preprocess` it sees rgb in [0, 1] at the render's size."""
 
-    def __init__(self, module: nn.Module, output_kind: str, name: str, preprocess: Preprocess | None = None) -> None:
+    def __init__(
+        self,
+        module: nn.Module,
+        output_kind: str,
+        name: str,
+        preprocess: Preprocess | None = None,
+        takes_K: bool | None = None,
+    ) -> None:
         super().__init__(preprocess, output_kind, name)
         self.module = module
+        # a module declares that it takes the camera by a forward parameter named K, or by the flag
+        self.takes_K = "K" in inspect.signature(module.forward).parameters if takes_K is None else takes_K
         self.freeze()
 
-    def predict(self, pixel_values: torch.Tensor) -> torch.Tensor:
-        out = self.module(pixel_values)
+    def predict(self, pixel_values: torch.Tensor, K: torch.Tensor | None = None) -> torch.Tensor:
+        out = self.module(pixel_values, K=K) if self.takes_K else self.module(pixel_values)
         if not isinstance(out, torch.Tensor):  # a user's module may return anything; say what
             raise TypeError(f"expected a tensor (B, 1, H, W), got {type(out).__name__}")
         return out
@@ -77,16 +87,24 @@ def check_depth_model(model: DepthModel) -> DepthModel:
 
 
 def wrap_model(
-    module: nn.Module | DepthModel, output_kind: str, preprocess: Preprocess | None = None, name: str | None = None
+    module: nn.Module | DepthModel,
+    output_kind: str,
+    preprocess: Preprocess | None = None,
+    name: str | None = None,
+    takes_K: bool | None = None,
 ) -> DepthModel:
     """A checked, frozen :class:`DepthModel` from any module.
 
     Args:
         module: maps rgb (B, 3, H, W) in [0, 1] (or, with ``preprocess``, the resized, normalised
             image) to (B, 1, H, W); a :class:`DepthModel` is only checked.
-        output_kind: "disparity" (relative inverse depth) or "depth" (metres).
+        output_kind: one of :data:`kadv.losses.KINDS`: "disparity" (relative inverse depth),
+            "depth" (metres), "affine_depth" or "scale_depth".
         preprocess: how to resize and normalise the input first (None: the image as rendered).
         name: a label for reports (defaults to the module's class name).
+        takes_K: whether ``module(x, K=K)`` takes the intrinsics (3, 3) or (B, 3, 3) of the image
+            it sees (after ``preprocess``), or None when withheld; None: it does when its
+            ``forward`` has a parameter named ``K``.
 
     Raises:
         ValueError: a bad output kind, or a module that fails :func:`check_depth_model`.
@@ -105,7 +123,7 @@ def wrap_model(
         return check_depth_model(module)
     if not isinstance(module, nn.Module):
         raise ValueError(f"model {name or module!r} is a {type(module).__name__}, not a torch.nn.Module")
-    return check_depth_model(ModuleDepthModel(module, output_kind, name or type(module).__name__, preprocess))
+    return check_depth_model(ModuleDepthModel(module, output_kind, name or type(module).__name__, preprocess, takes_K))
 
 
 def _resolve(target: str) -> Any:

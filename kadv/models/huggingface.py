@@ -160,7 +160,7 @@ class HuggingFaceDepthModel(DepthModel):
         self.network = network
         self.freeze()
 
-    def predict(self, pixel_values: torch.Tensor) -> torch.Tensor:
+    def predict(self, pixel_values: torch.Tensor, K: torch.Tensor | None = None) -> torch.Tensor:
         return self.network(pixel_values=pixel_values).predicted_depth
 
 
@@ -170,12 +170,16 @@ class DepthProDepthModel(HuggingFaceDepthModel):
 
     Given intrinsics K, f is the true focal length fx, so the metric scale is the scene's; without
     K it comes from the field of view the network predicts (as its processor's post-processing
-    does), and without that the canonical inverse depth is inverted as it is.
+    does), and without that the canonical inverse depth is inverted as it is. ``model.intrinsics=
+    withheld`` leaves K out, so that its own field of view sets the scale.
     """
+
+    takes_K = True
 
     def forward(self, rgb: torch.Tensor, K: torch.Tensor | None = None) -> torch.Tensor:
         width = rgb.shape[-1]
         x = rgb.to(next(self.parameters()).device)
+        K = self.camera(K)
         pixel_values, layout = self.preprocess.to_network(x)
         output = self.network(pixel_values=pixel_values)
         inverse = self.preprocess.from_network(self._as_map(output.predicted_depth), layout)

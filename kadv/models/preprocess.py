@@ -62,6 +62,25 @@ class NetworkLayout:
     network_pad: tuple[int, int, int, int] = (0, 0, 0, 0)
     network_size: tuple[int, int] = (0, 0)
 
+    def network_K(self, K: torch.Tensor) -> torch.Tensor:
+        """The intrinsics of the network input, (3, 3) or (B, 3, 3) as ``K`` is, from the image's:
+        its reflect padding, its resize and its zero padding applied to the focal lengths and the
+        principal point (pixel corners at integers, as :func:`kadv.geometry.fov_intrinsics` has them).
+
+        Examples:
+            >>> K = torch.tensor([[100.0, 0.0, 32.0], [0.0, 100.0, 24.0], [0.0, 0.0, 1.0]])
+            >>> NetworkLayout((48, 64), (0, 0), (2, 2, 0, 0), (100, 128)).network_K(K)  # resized x2, padded
+            tensor([[200.,   0.,  64.],
+                    [  0., 200.,  50.],
+                    [  0.,   0.,   1.]])
+        """
+        (height, width), (pad_h, pad_w) = self.size, self.source_pad
+        top, bottom, left, right = self.network_pad
+        scale_y = (self.network_size[0] - top - bottom) / (height + 2 * pad_h)
+        scale_x = (self.network_size[1] - left - right) / (width + 2 * pad_w)
+        to_network = [[scale_x, 0.0, pad_w * scale_x + left], [0.0, scale_y, pad_h * scale_y + top], [0.0, 0.0, 1.0]]
+        return torch.tensor(to_network, dtype=K.dtype, device=K.device) @ K
+
 
 @dataclass(frozen=True)
 class Preprocess:

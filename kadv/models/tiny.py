@@ -82,7 +82,7 @@ class KadvTiny(DepthModel):
         self.network = network
         self.freeze()
 
-    def predict(self, pixel_values: torch.Tensor) -> torch.Tensor:
+    def predict(self, pixel_values: torch.Tensor, K: torch.Tensor | None = None) -> torch.Tensor:
         return self.network(pixel_values)
 
 

@@ -137,7 +137,8 @@ class RunInfo:
     """What a run was: scene, model, loss, seed, device, image size, the init views it resumed, the
     model passes that chose its init views (counted apart from the searches' budgets) and the
     range of horizontal fields of view the search could set (``envelope.fov_deg``; None: each view
-    kept its init view's)."""
+    kept its init view's), and whether the model received the camera's intrinsics (``given``,
+    ``withheld``, or ``not taken`` by a model that does not take them: ``model.intrinsics``)."""
 
     scene: str
     model: str
@@ -149,6 +150,7 @@ class RunInfo:
     resumed_init_views: list[int]
     init_passes: int
     fov_deg: list[float] | None = field(default=None, kw_only=True)
+    intrinsics: str = field(default="not taken", kw_only=True)
 
 
 @dataclass

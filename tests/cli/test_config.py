@@ -20,7 +20,7 @@ from kadv.cli.common import (
     shading_from_config,
     study_settings,
 )
-from kadv.losses import LossConfig
+from kadv.losses import KINDS, LossConfig
 from kadv.models import EMBEDDED, PRESETS
 from kadv.penalties import PenaltyConfig
 from kadv.render import DiffRenderConfig, Shading
@@ -60,7 +60,7 @@ def test_every_group_option_composes_into_valid_settings() -> None:
             PenaltyConfig(**OmegaConf.to_container(cfg.penalty))
             DiffRenderConfig(supersample=cfg.render.supersample, **OmegaConf.to_container(cfg.render.differentiable))
             _shading(cfg.render)
-            assert cfg.loss.space in ("disparity", "depth")
+            assert cfg.loss.space in (None, "disparity", "depth")  # null: the model's output kind's own
             if cfg.loss.kind != "perceptual":  # its VGG-16 weights would be a download
                 loss_settings(cfg.loss).loss()
             assert (
@@ -69,7 +69,7 @@ def test_every_group_option_composes_into_valid_settings() -> None:
                 or (
                     cfg.model.name == "custom"
                     and OmegaConf.is_missing(cfg.model, "target")
-                    and cfg.model.output_kind in ("disparity", "depth")
+                    and cfg.model.output_kind in KINDS
                 )
             )
             assert cfg.scene.kind in ("box_room", "procedural", "file")

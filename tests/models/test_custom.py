@@ -112,3 +112,68 @@ def test_a_bad_target_is_named(target: str, message: str) -> None:
     with pytest.raises(ValueError, match=r"model.target") as error:
         load_custom(target, "disparity")
     assert message in str(error.value)
+
+
+class Camera(Brightness):
+    """Declares that it takes the camera by a forward parameter named K; records what it receives."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: list = []
+
+    def forward(self, rgb: torch.Tensor, K: torch.Tensor | None = None) -> torch.Tensor:
+        self.seen.append(None if K is None else K.clone())
+        return super().forward(rgb)
+
+
+def _K(fx: float, width: int, height: int) -> torch.Tensor:
+    return torch.tensor([[fx, 0.0, width / 2], [0.0, fx, height / 2], [0.0, 0.0, 1.0]])
+
+
+def test_a_model_that_takes_the_camera_receives_the_view_s_K_when_given_and_none_when_withheld() -> None:
+    module = Camera()
+    model = wrap_model(module, "depth")
+    assert model.takes_K and model.camera_text == "given"
+    K = _K(50.0, 32, 24)
+    model(torch.rand(1, 3, 24, 32), K)
+    assert torch.equal(module.seen[-1], K)
+    model.intrinsics = "withheld"
+    model(torch.rand(1, 3, 24, 32), K)
+    assert module.seen[-1] is None and model.camera_text == "withheld"
+    # a module without a K parameter never sees it; the flag declares one that takes it another way
+    assert wrap_model(Brightness(), "depth").camera_text == "not taken"
+    assert wrap_model(Brightness(), "depth", takes_K=False).takes_K is False
+
+
+def test_the_K_a_model_receives_is_that_of_the_image_its_network_sees() -> None:
+    module = Camera()
+    model = wrap_model(module, "depth", Preprocess(size=(48, 64), pad_multiple=32))  # x2, then 48 -> 64 rows
+    model(torch.rand(2, 3, 24, 32), _K(50.0, 32, 24))
+    assert torch.allclose(module.seen[-1], _K(100.0, 64, 48) + torch.tensor([[0, 0, 0], [0, 0, 8.0], [0, 0, 0]]))
+
+
+def test_the_objective_passes_each_view_s_K_to_a_model_that_takes_it() -> None:
+    from kadv import ExactRenderer, box_room
+    from kadv.attack import Objective, PenaltyConfig
+    from kadv.geometry import fov_intrinsics
+
+    module = Camera()
+    renderer = ExactRenderer(box_room(seed=0))
+    objective = Objective(
+        wrap_model(module, "depth"), lambda a, b: (a - b).abs().mean((1, 2, 3)), renderer, PenaltyConfig()
+    )
+    K = fov_intrinsics(torch.tensor([60.0, 90.0]), 24, 32)
+    world_T_cam = torch.eye(4, dtype=torch.float64).expand(2, 4, 4).clone()
+    world_T_cam[:, :3, 3] = torch.tensor(renderer.scene.bounds.mean(axis=0))  # the room's middle
+    depth, mask = torch.ones(2, 1, 24, 32, dtype=torch.float64), torch.ones(2, 1, 24, 32, dtype=torch.bool)
+    objective(torch.rand(2, 3, 24, 32), depth, mask, world_T_cam, K)
+    assert torch.allclose(module.seen[-1].double(), K)  # each view's own K, two fields of view
+
+
+def test_model_intrinsics_is_read_from_the_config_and_a_bad_value_named() -> None:
+    from kadv.cli.common import model_from_config
+
+    node = {"name": "custom", "target": f"{__name__}.Camera", "output_kind": "depth", "intrinsics": "withheld"}
+    assert model_from_config(node).camera_text == "withheld"
+    with pytest.raises(ValueError, match="model.intrinsics must be given or withheld, got 'sometimes'"):
+        model_from_config(node | {"intrinsics": "sometimes"})
