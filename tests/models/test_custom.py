@@ -175,5 +175,5 @@ def test_model_intrinsics_is_read_from_the_config_and_a_bad_value_named() -> Non
 
     node = {"name": "custom", "target": f"{__name__}.Camera", "output_kind": "depth", "intrinsics": "withheld"}
     assert model_from_config(node).camera_text == "withheld"
-    with pytest.raises(ValueError, match="model.intrinsics must be given or withheld, got 'sometimes'"):
+    with pytest.raises(ValueError, match=r"model\.intrinsics must be given or withheld, got 'sometimes'"):
         model_from_config(node | {"intrinsics": "sometimes"})
