@@ -19,9 +19,11 @@ the init views it gets right in metres (delta1 unaligned at least ``RIGHT``; ``v
 ``--camera``: a check that the wiring carries K, not a model's measurement. kadv-tiny-metric
 wrapped to scale its depth by fx / f_ref, as Depth Anything 3 and Metric3D scale theirs by the
 focal length (f_ref: the focal of a 60-degree view), is searched with the field of view free, its
-K given (``model.intrinsics=given``: each view's own) against withheld (as at 60 degrees). Last
-line: ``metric_fov_camera worst_given_5deg= worst_withheld_5deg= ...`` (medians over every init
-view).
+K given (``model.intrinsics=given``: each view's own) against withheld (as at 60 degrees); at the
+worst view the K-given search found, the ratio of the model's depth with K given to its depth
+with K withheld, against fx / f_ref there. Last line: ``metric_fov_camera worst_given_5deg=
+worst_withheld_5deg= ... ratio_error_max=`` (medians over every init view; the largest relative
+difference between the ratio and fx / f_ref).
 
 Run: .venv/bin/python benchmarks/metric_fov.py [--budget 123] [--picture docs/metric_fov.png] [--camera]
 """
@@ -132,8 +134,12 @@ def camera(budget: int) -> None:
     options = CheckOptions(init_count=2, size=SIZE, lighting=common.default_lighting(), alignment="none")
     free = Envelope("free_fov", fov_deg=FOV_RANGE)
     worst: dict[tuple[str, float], list[float]] = {}
-    print("| scene | init view | radius | delta1 init | worst, K given (its fov) | worst, K withheld (its fov) |")
-    print("|---|---|---|---|---|---|")
+    print(
+        "| scene | init view | radius | delta1 init | worst, K given (its fov) | worst, K withheld (its fov) "
+        "| depth given / withheld there | fx / f_ref |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    errors = []
     for scene in common.bench_scenes():
         built = setup(wrap_model(FocalScaled(), "depth", name="focal_scaled"), scene, options)
         for radius in RADII:
@@ -143,17 +149,34 @@ def camera(budget: int) -> None:
                 pairs[choice] = search(built, free, radius, budget)
             for index, view in enumerate(built.views):
                 given, withheld = pairs["given"][index], pairs["withheld"][index]
+                ratio, expected = _camera_ratio(built, given[1])
+                errors.append(abs(ratio / expected - 1.0))
                 print(
                     f"| {scene.name} | {view.name} | {radius[0]:g}°, {radius[1]:g} m | "
                     f"{given[0]['delta1']['none']:.3f} | "
                     f"{given[1]['delta1']['none']:.3f} ({given[1]['fov']:.0f}°) | "
-                    f"{withheld[1]['delta1']['none']:.3f} ({withheld[1]['fov']:.0f}°) |",
+                    f"{withheld[1]['delta1']['none']:.3f} ({withheld[1]['fov']:.0f}°) | {ratio:.4f} | {expected:.4f} |",
                     flush=True,
                 )
                 for choice, pair in (("given", given), ("withheld", withheld)):
                     worst.setdefault((choice, radius[0]), []).append(pair[1]["delta1"]["none"])
     summary = " ".join(f"worst_{c}_{r:g}deg={np.median(v):.3f}" for (c, r), v in worst.items())
-    print(f"metric_fov_camera {summary} budget_passes={budget} views={len(worst['given', RADII[0][0]])}")
+    views = len(worst["given", RADII[0][0]])
+    print(f"metric_fov_camera {summary} ratio_error_max={max(errors):.2e} budget_passes={budget} views={views}")
+
+
+def _camera_ratio(built, view: dict) -> tuple[float, float]:
+    """At a rescored view: the median of the model's depth with K given over its depth with K
+    withheld, and fx / f_ref at its field of view (what the ratio is when K reaches the model)."""
+    model, rgb = built.objective.model, view["out"].rgb
+    K = intrinsics_from_fov(view["fov"], *SIZE)
+    with torch.no_grad():
+        model.intrinsics = "given"
+        given = model(rgb, K).double()
+        model.intrinsics = "withheld"
+        withheld = model(rgb, K).double()
+    expected = math.tan(math.radians(REFERENCE_FOV) / 2) / math.tan(math.radians(view["fov"]) / 2)
+    return float((given / withheld).median()), expected
 
 
 def main(budget: int, picture_path: Path | None) -> None:
