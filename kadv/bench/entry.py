@@ -314,14 +314,27 @@ def run_suite(
     return assemble_entry(suite, model, seeds, out, device)
 
 
-def run_units(study: Study, suite: Suite, keys: list[tuple[int, int, int]], out: str | Path, done=None) -> None:
+def run_units(
+    study: Study, suite: Suite, keys: list[tuple[int, int, int]], out: str | Path, done=None
+) -> list[UnitResult]:
     """Run the units ``keys`` of one scene on its ``study`` (the suite's settings), each written
-    under ``out`` as it ends; a unit already written is kept. ``done(1)`` is called after each."""
+    under ``out`` as it ends; a unit already written is read back. ``done(1)`` is called after
+    each. Returns the units, in the order of ``keys``."""
+    units = []
     for key in keys:
-        if not unit_path(out, key).is_file():
-            write_json(unit_path(out, key), asdict(_run_unit(study, suite, key)))
+        path = unit_path(out, key)
+        if path.is_file():
+            units.append(_read_unit(path))
+        else:
+            units.append(_run_unit(study, suite, key))
+            write_json(path, asdict(units[-1]))
         if done is not None:
             done(1)
+    return units
+
+
+def _read_unit(path: Path) -> UnitResult:
+    return UnitResult.from_dict(json.loads(path.read_text()))
 
 
 def claim_run_folder(out: str | Path, suite: Suite, model: DepthModel) -> None:
@@ -351,13 +364,12 @@ def assemble_entry(
     """The entry of the units under ``out`` (written to ``out/entry.json``), or None while one of
     the run's units is missing."""
     out = Path(out)
-    claim_run_folder(out, suite, model)
     paths = [unit_path(out, key) for key in suite_units(suite, tuple(seeds))]
     if not all(path.is_file() for path in paths):
         return None
     import kadv
 
-    units = tuple(UnitResult.from_dict(json.loads(path.read_text())) for path in paths)
+    units = tuple(_read_unit(path) for path in paths)
     entry = Entry(
         {"name": suite.name, "hash": suite.hash},
         model_identity(model),

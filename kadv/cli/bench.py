@@ -137,10 +137,13 @@ def _model(name: str):
 
 def _merge(values: dict, positional: list[str]) -> None:
     from kadv.bench import assemble_entry, suite_units, unit_path
+    from kadv.bench.entry import claim_run_folder
 
     suite = _suite_of(values)
     out, seeds = Path(_required(values, "out", "merge")), _ints(values["seeds"], "seeds")
-    entry = assemble_entry(suite, _model(values["model"]), seeds, out)
+    model = _model(values["model"])
+    claim_run_folder(out, suite, model)  # the shards' units are this suite's and this model's
+    entry = assemble_entry(suite, model, seeds, out)
     if entry is None:
         keys = suite_units(suite, seeds)
         done = sum(unit_path(out, key).is_file() for key in keys)

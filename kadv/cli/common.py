@@ -521,8 +521,15 @@ def model_from_config(node: Any) -> DepthModel:
     intrinsics = check_intrinsics(node.get("intrinsics") or "given")
     if node.get("name") == "custom":
         model = load_custom(node.get("target") or "", node.get("output_kind", "disparity"), node.get("args"))
-        model.intrinsics = intrinsics
-        return model
+    else:
+        model = _preset_model(node)
+    model.intrinsics = intrinsics
+    return model
+
+
+def _preset_model(node: dict) -> DepthModel:
+    """A preset's model by name (and ``model.weights``); a hub id or output kind other than the
+    preset's is refused naming the key."""
     preset = EMBEDDED.get(node["name"]) or PRESETS.get(node["name"])
     for key in ("hub_id", "output_kind"):
         if preset is not None and node.get(key) is not None and node[key] != getattr(preset, key):
@@ -530,6 +537,4 @@ def model_from_config(node: Any) -> DepthModel:
                 f"model.{key}: the preset {node['name']!r} has {key} {getattr(preset, key)!r}, fixed by its "
                 f"checkpoint, not {node[key]!r}; for other weights use model=huggingface model.name=<id or dir>"
             )
-    model = load_model(node["name"], node.get("weights"))
-    model.intrinsics = intrinsics
-    return model
+    return load_model(node["name"], node.get("weights"))

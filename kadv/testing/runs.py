@@ -101,12 +101,12 @@ def run_model(suite: Suite, model, typical_views: int, folder: Path, progress: b
     run = ModelRun(None, {}, {}, {}, out)
     for s, scene in enumerate(suite.scenes):
         study = Study.build(scene.load(), model, settings)
-        run_units(study, suite, [(s, v, j) for v in range(len(scene.views)) for j in seeds], out)
+        keys = [(s, v, j) for v in range(len(scene.views)) for j in seeds]
+        units = [unit for unit in run_units(study, suite, keys, out) if unit.seed == 0]
         for v, frozen in enumerate(scene.views):
             run.draws[(s, v)], run.draw_passes[(s, v)] = _draw(
                 study, suite, frozen.init_view(), scene.node["seed"], v, typical_views
             )
-        units = [_read_unit(out, (s, v, 0)) for v in range(len(scene.views))]
         run.pictures[s] = [
             _worst_picture(study, suite, s, units, k, Path(folder)) for k in range(len(suite.protocol.radii))
         ]
@@ -144,14 +144,6 @@ def _worst_picture(study, suite: Suite, s: int, units: list, k: int, folder: Pat
     name = f"{file_slug(study.model.name)}-{file_slug(scene.name)}-{suite.protocol.envelope}-radius{k}.png"
     label = f"worst within {degrees:g}°, {metres:g} m"
     return str(save_view_picture(folder / name, render, init, record, label))
-
-
-def _read_unit(out: Path, key: tuple[int, int, int]):
-    import json
-
-    from kadv.bench.entry import UnitResult, unit_path
-
-    return UnitResult.from_dict(json.loads(unit_path(out, key).read_text()))
 
 
 def profiles(suite: Suite, run: ModelRun, probes: list[str], fail_below: float) -> dict[str, Profile]:
