@@ -32,7 +32,7 @@ test-packages:
 
 # The demo needs the core only, and --no-compile skips pip's byte-compiling of every module of
 # torch, transformers, Open3D and the rest (one process imports a fraction of them, compiled on
-# first use). The tests add their tools and the reference path tracer, and compile everything on
+# first use). The tests add their tools, the reference path tracer and diffusers, and compile everything on
 # both cores: they start dozens of Python processes, each of which would otherwise compile its
 # imports from source where bytecode is not written (PYTHONDONTWRITEBYTECODE). As in pip's own
 # compiling, a file that does not compile is left alone (torch ships one for Python 3.12 only).
@@ -42,7 +42,7 @@ $(STAMP): pyproject.toml | demo-packages
 	touch $@
 
 $(TEST_STAMP): $(STAMP)
-	$(BIN)/pip install --quiet --no-compile -e ".[test,reference]"
+	$(BIN)/pip install --quiet --no-compile -e ".[test,reference,diffusers]"
 	$(BIN)/python -m compileall -q -j 0 $(VENV)/lib >/dev/null || true
 	touch $@
 

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
-__all__ = ["WeightsUnavailable", "WriteError"]
+__all__ = ["MissingExtra", "WeightsUnavailable", "WriteError"]
+
+
+class MissingExtra(ImportError):
+    """An optional dependency a feature needs is not installed; the message says what to install."""
 
 
 class WeightsUnavailable(RuntimeError):

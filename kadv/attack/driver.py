@@ -10,7 +10,7 @@ from tqdm import tqdm
 from kadv.attack.init_views import InitView, fit_into_envelope
 from kadv.attack.objective import Objective
 from kadv.attack.records import AttackResult, InitViewResult
-from kadv.attack.registry import get_method
+from kadv.attack.registry import check_searchable, get_method
 from kadv.attack.restarts import restarted_search
 from kadv.attack.search import AttackConfig, SearchContext
 from kadv.render import DifferentiableRenderer
@@ -52,6 +52,7 @@ def attack(
             (:class:`~kadv.attack.search.SearchContext`'s ``starts``).
     """
     config.check_run(get_method(config.method).check, differentiable.config.supersample)
+    check_searchable(config.method, objective.model)
     # all of them before any search: a view that cannot be moved in is refused before work is spent
     fit = lambda init: fit_into_envelope(differentiable.renderer, init, config.envelope, objective.penalty.margin)
     init_views = [fit(init) for init in init_views]

@@ -75,7 +75,7 @@ def register_proposer(
     :func:`proposer_search` (``check``: as :func:`~kadv.attack.registry.register_method`'s)."""
 
     def decorate(proposer: type) -> type:
-        register_method(name, settings, check=check)(functools.partial(proposer_search, proposer))
+        register_method(name, settings, check=check, gradient=False)(functools.partial(proposer_search, proposer))
         return proposer
 
     return decorate

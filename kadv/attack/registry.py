@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["METHODS", "NoSettings", "SearchMethod", "get_method", "register_method"]
+__all__ = ["METHODS", "NoSettings", "SearchMethod", "check_searchable", "get_method", "register_method"]
 
 
 @dataclass(frozen=True)
@@ -38,6 +38,8 @@ class SearchMethod:
             key when its settings cannot work within a budget of model passes (None: no count limit)
             or with the run's rays per pixel side; called when an attack's config is made (without
             ``supersample``) and before an attack starts (with it).
+        gradient: whether it follows the model's gradient (then a model whose prediction is not
+            differentiable, a Marigold ensemble, is refused); black-box proposers do not.
     """
 
     name: str
@@ -45,6 +47,7 @@ class SearchMethod:
     search: Callable[..., Any]
     passes: Callable[[Any], int | None]
     check: Callable[..., None] = lambda settings, passes, supersample=None: None
+    gradient: bool = True
 
 
 METHODS: dict[str, SearchMethod] = {}
@@ -55,11 +58,12 @@ def register_method(
     settings: type = NoSettings,
     passes: Callable[[Any], int | None] = lambda settings: None,
     check: Callable[..., None] | None = None,
+    gradient: bool = True,
 ) -> Callable:
     """Decorator: register ``search(context, rng, bar)`` as method ``name``."""
 
     def decorate(search: Callable) -> Callable:
-        method = SearchMethod(name, settings, search, passes)
+        method = SearchMethod(name, settings, search, passes, gradient=gradient)
         METHODS[name] = method if check is None else dataclasses.replace(method, check=check)
         return search
 
@@ -71,3 +75,18 @@ def get_method(name: str) -> SearchMethod:
     if name not in METHODS:
         raise ValueError(f"attack.method must be one of {', '.join(sorted(METHODS))}, got {name!r}")
     return METHODS[name]
+
+
+def check_searchable(method: str, model: Any) -> None:
+    """Refuse, in one line, a gradient method on a model that is not differentiable as set.
+
+    Raises:
+        ValueError: naming ``attack.method`` and the black-box methods that would do.
+    """
+    if get_method(method).gradient and not getattr(model, "differentiable", True):
+        black_box = sorted(name for name, other in METHODS.items() if not other.gradient)
+        raise ValueError(
+            f"attack.method={method} follows the gradient, and model {getattr(model, 'name', '')!r} is not "
+            f"differentiable as set (model.ensemble_size above 1); use a black-box method ({', '.join(black_box)}) "
+            "or model.ensemble_size=1"
+        )

@@ -16,6 +16,7 @@ import torch
 from kadv.attack.driver import attack
 from kadv.attack.objective import Objective
 from kadv.attack.records import AttackResult, InitViewResult
+from kadv.attack.registry import check_searchable
 from kadv.attack.search import AttackConfig
 from kadv.losses import LossConfig
 from kadv.models import DepthModel
@@ -97,6 +98,7 @@ class Study:
     @classmethod
     def _on(cls, renderer: ExactRenderer, model: DepthModel, settings: StudySettings, function=None) -> Study:
         """The study on an exact renderer; ``function``: the loss function when one is at hand."""
+        check_searchable(settings.attack.method, model)
         loss = settings.loss
         function = loss.loss() if function is None else function
         objective = Objective(model, function, renderer, settings.penalty, loss.space, settings.device, loss.alignment)

@@ -1,7 +1,8 @@
 """A leaderboard of entries from any lab: one Markdown table, one HTML page and one JSON file, and a
 picture of each model's worst delta1 against the radius.
 
-Entries of one model identity (its weights' digest) with disjoint seeds pool as more replicates.
+Entries of one model identity (its weights' digest and inference settings) with disjoint seeds
+pool as more replicates.
 Entries of another suite, one model name with two identities, overlapping seeds of one identity,
 an entry missing a cell, entries whose bake version is not the suite's, and entries of kadv
 versions listed in :data:`DIVERGENT_VERSIONS` are refused in one line naming the file and the
@@ -214,10 +215,11 @@ def leaderboard(
             raise BenchError(f"entry {path}: kadv_version {entry.kadv_version} gives other figures ({reason})")
         group = groups.setdefault(entry.model["name"], [])
         for other_path, other in group:
-            if other.model.get("weights") != entry.model.get("weights"):
-                raise BenchError(
-                    f"entry {path}: model.weights: {entry.model['name']!r} has another identity in {other_path}"
-                )
+            for field in ("weights", "settings"):
+                if other.model.get(field, {}) != entry.model.get(field, {}):
+                    raise BenchError(
+                        f"entry {path}: model.{field}: {entry.model['name']!r} has another identity in {other_path}"
+                    )
             if set(other.seeds) & set(entry.seeds):
                 raise BenchError(
                     f"entry {path}: seeds {sorted(set(other.seeds) & set(entry.seeds))} also in {other_path}"

@@ -17,6 +17,8 @@ LENGTH_STEP = 1e-6  # metres, and the step of every other real number but colour
 COLOUR_LEVELS = 255  # colours, textures and masks to 8 bits
 _DIRECTION_STEP = 1e-4  # unit normals: float32 normals renormalised differ in the 7th digit
 _FORMAT = "kadv-scene-digest-1"
+# material fields newer than the format, with their defaults
+_LATER_FIELDS = {"mirror": False}
 
 
 def _fixed(values, step: float) -> bytes:
@@ -32,11 +34,13 @@ def _colour(values) -> bytes:
 
 
 def _material(material) -> bytes:
-    """Every field of a material but its name (a label), each to its own quantum."""
+    """Every field of a material but its name (a label), each to its own quantum; a field added
+    after the format (:data:`_LATER_FIELDS`) only where it differs from its default, so that the
+    digests of scenes without it stay as they were."""
     parts = []
     for field in fields(material):
         value = getattr(material, field.name)
-        if field.name == "name":
+        if field.name == "name" or (field.name in _LATER_FIELDS and value == _LATER_FIELDS[field.name]):
             continue
         if field.name in ("base_color", "texture", "opacity"):
             parts.append(b"-" if value is None else _colour(value))

@@ -166,8 +166,9 @@ def load_entry(path: str | Path) -> Entry:
 
 
 def model_identity(model: DepthModel) -> dict:
-    """What says which model an entry is of: its name, class, output kind, preprocessing, and the
-    SHA-256 of its weights (every parameter and buffer by name, dtype, shape and bytes)."""
+    """What says which model an entry is of: its name, class, output kind, preprocessing, its
+    inference settings (:meth:`~kadv.models.DepthModel.inference_settings`), and the SHA-256 of its
+    weights (every parameter and buffer by name, dtype, shape and bytes)."""
     digest = hashlib.sha256()
     for name, tensor in sorted({**dict(model.named_parameters()), **dict(model.named_buffers())}.items()):
         value = tensor.detach().cpu().contiguous()
@@ -179,6 +180,7 @@ def model_identity(model: DepthModel) -> dict:
         "class": type(model).__name__,
         "output_kind": model.output_kind,
         "preprocessing": preprocess,
+        "settings": model.inference_settings(),
         "weights": digest.hexdigest(),
     }
 
@@ -344,7 +346,11 @@ def claim_run_folder(out: str | Path, suite: Suite, model: DepthModel) -> None:
     Raises:
         BenchError: ``out`` holds the units of another suite or model.
     """
-    claim = {"suite": suite.hash, "weights": model_identity(model)["weights"]}
+    identity = model_identity(model)
+    # settings only where the model has any, so that folders of models without them stay valid
+    claim = {"suite": suite.hash, "weights": identity["weights"]} | (
+        {"settings": identity["settings"]} if identity["settings"] else {}
+    )
     path = Path(out) / "run.json"
     if path.is_file():
         held = read_json(path, f"run folder {out}")

@@ -89,9 +89,11 @@ def verify_entry(
             ``tolerance_pixels`` pixels' share.
     """
     check_complete(entry, suite, where)
-    weights = model_identity(model)["weights"]
-    if entry.model.get("weights") != weights:
+    identity = model_identity(model)
+    if entry.model.get("weights") != identity["weights"]:
         raise BenchError(f"{where}: model.weights {str(entry.model.get('weights'))[:16]} is not {model.name}'s")
+    if entry.model.get("settings", {}) != identity["settings"]:
+        raise BenchError(f"{where}: model.settings {entry.model.get('settings', {})} are not {identity['settings']}")
     settings = suite_settings(suite, device)
     height, width = suite.protocol.size
     largest, cells = 0.0, 0

@@ -30,6 +30,7 @@ __all__ = [
     "PROBES",
     "dim_lamp",
     "grazing_floor",
+    "mirror",
     "photo_wall",
     "probe_names",
     "probe_scene",
@@ -296,6 +297,33 @@ def stairs(seed: int = 0) -> Scene:
     return room.scene("stairs", seed)
 
 
+def mirror(seed: int = 0) -> Scene:
+    """A large wall mirror in a wooden frame beside a sideboard, facing a sofa across the room.
+
+    Failure: a reflection read as space. The mirror shows the room again, as a perfect specular
+    bounce (:attr:`~kadv.scenes.Material.mirror`), while its depth is the mirror's plane; a model
+    that reads the reflected room as a room behind the wall puts a hole in the wall, and may
+    flatten the furniture beside it into the picture.
+    """
+    rng = np.random.default_rng([seed, 8])
+    W, H, D = rng.uniform(4.5, 5.5), rng.uniform(2.6, 3.0), rng.uniform(5.5, 6.5)
+    room = _Room(rng, (W, H, D))
+    frame, furniture, fabric = room.role("wood"), room.role("wood"), room.role("fabric")
+    glass = room.material(Material("mirror", base_color=np.full(3, rng.uniform(0.85, 0.95)), mirror=True))
+    z0, z1 = D / 2 - rng.uniform(0.9, 1.2), D / 2 + rng.uniform(0.9, 1.2)
+    y0, y1 = rng.uniform(0.35, 0.55), H - rng.uniform(0.35, 0.5)
+    border = 0.08
+    room.box([0.0, y0 - border, z0 - border], [0.04, y1 + border, z1 + border], frame, "mirror.frame")
+    corners = [[0.05, y0, z1], [0.05, y0, z0], [0.05, y1, z0], [0.05, y1, z1]]
+    room.parts.append(quad_part(facing(corners, [1.0, 0.0, 0.0]), glass, "mirror"))
+    room.box([0.0, 0.0, z1 + 0.2], [0.5, 0.85, z1 + 1.4], furniture, "sideboard")
+    room.box([W - 0.95, 0.0, z0 - 0.2], [W - 0.05, 0.8, z1 + 0.2], fabric, "sofa")
+    room.box([W / 2 - 0.4, 0.0, D / 2 - 0.5], [W / 2 + 0.4, 0.45, D / 2 + 0.5], furniture, "low_table")
+    room.camera([W - 1.4, 1.5, 0.9], [0.0, 1.3, D / 2])
+    room.camera([W - 0.8, 1.5, D / 2 - 1.5], [0.0, 1.3, D / 2 + 0.3])
+    return room.scene("mirror", seed)
+
+
 PROBES: dict[str, Callable[[int], Scene]] = {
     "photo_wall": photo_wall,
     "grazing_floor": grazing_floor,
@@ -304,6 +332,7 @@ PROBES: dict[str, Callable[[int], Scene]] = {
     "textureless_close": textureless_close,
     "dim_lamp": dim_lamp,
     "stairs": stairs,
+    "mirror": mirror,
 }
 
 

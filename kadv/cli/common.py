@@ -33,11 +33,12 @@ from omegaconf.errors import ConfigAttributeError, ConfigKeyError, OmegaConfBase
 
 from kadv.attack import RENAMED_BUDGET, StudySettings
 from kadv.catalogue import scene_from_node
-from kadv.errors import WeightsUnavailable, WriteError
+from kadv.errors import MissingExtra, WeightsUnavailable, WriteError
 from kadv.geometry import look_at
 from kadv.io import write_json
 from kadv.losses import DELTA1_TEMPERATURE, LossConfig
 from kadv.models import EMBEDDED, PRESETS, DepthModel, check_intrinsics, load_custom, load_model
+from kadv.models.marigold import MARIGOLD_SETTINGS
 from kadv.render import BakeConfig, DiffRenderConfig, Shading
 from kadv.render.exact import DEFAULT_MAX_RAYS
 from kadv.report.store import LOCK_FILES, RunDirectoryBusy
@@ -70,6 +71,7 @@ USER_ERRORS = (
     FileNotFoundError,
     NotADirectoryError,
     WeightsUnavailable,
+    MissingExtra,
     OmegaConfBaseException,
     RunDirectoryBusy,
 )
@@ -537,4 +539,5 @@ def _preset_model(node: dict) -> DepthModel:
                 f"model.{key}: the preset {node['name']!r} has {key} {getattr(preset, key)!r}, fixed by its "
                 f"checkpoint, not {node[key]!r}; for other weights use model=huggingface model.name=<id or dir>"
             )
-    return load_model(node["name"], node.get("weights"))
+    settings = {key: node[key] for key in MARIGOLD_SETTINGS if key in node}
+    return load_model(node["name"], node.get("weights"), **settings)

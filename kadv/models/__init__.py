@@ -1,4 +1,5 @@
-"""Depth models: the interface, Hugging Face adapters, your own modules, and the embedded kadv-tiny and kadv-tiny-dpt.
+"""Depth models: the interface, Hugging Face adapters, Marigold through diffusers, your own modules,
+and the embedded kadv-tiny and kadv-tiny-dpt.
 
 The names below load on first use, so that the preset list (``kadv.models.presets``) is read
 without importing torch or transformers.
@@ -16,6 +17,8 @@ _EXPORTS = {
     "EMBEDDED": "kadv.models.presets",
     "INTRINSICS": "kadv.models.base",
     "KadvTiny": "kadv.models.tiny",
+    "MarigoldDepthModel": "kadv.models.marigold",
+    "MarigoldSettings": "kadv.models.marigold",
     "ModelWeightsUnavailable": "kadv.models.huggingface",
     "ModuleDepthModel": "kadv.models.custom",
     "NetworkLayout": "kadv.models.preprocess",
@@ -31,6 +34,7 @@ _EXPORTS = {
     "load_huggingface": "kadv.models.huggingface",
     "load_kadv_tiny": "kadv.models.tiny",
     "load_kadv_tiny_dpt": "kadv.models.tiny_dpt",
+    "load_marigold": "kadv.models.marigold",
     "load_model": "kadv.models.registry",
     "preset_table": "kadv.models.presets",
     "resized_shape": "kadv.models.preprocess",
@@ -44,6 +48,7 @@ if TYPE_CHECKING:  # the same names, for type checkers and the API reference
     from kadv.models.counting import PassCount, count_passes
     from kadv.models.custom import ModuleDepthModel, check_depth_model, load_custom, wrap_model
     from kadv.models.huggingface import HuggingFaceDepthModel, ModelWeightsUnavailable, load_huggingface
+    from kadv.models.marigold import MarigoldDepthModel, MarigoldSettings, load_marigold
     from kadv.models.preprocess import NetworkLayout, Preprocess, resized_shape
     from kadv.models.presets import EMBEDDED, PRESETS, Preset, preset_table
     from kadv.models.registry import load_model
@@ -57,6 +62,8 @@ __all__ = [
     "DepthModel",
     "HuggingFaceDepthModel",
     "KadvTiny",
+    "MarigoldDepthModel",
+    "MarigoldSettings",
     "ModelWeightsUnavailable",
     "ModuleDepthModel",
     "NetworkLayout",
@@ -71,6 +78,7 @@ __all__ = [
     "load_huggingface",
     "load_kadv_tiny",
     "load_kadv_tiny_dpt",
+    "load_marigold",
     "load_model",
     "preset_table",
     "resized_shape",

@@ -60,6 +60,17 @@ class DepthModel(nn.Module):
         """The intrinsics the model receives: ``K`` where it takes them and they are given, else None."""
         return K if self.takes_K and self.intrinsics == "given" else None
 
+    @property
+    def differentiable(self) -> bool:
+        """Whether gradient methods may search it: its prediction's gradient is its own (a Marigold
+        ensemble, aligned by a non-differentiable fit, is not)."""
+        return True
+
+    def inference_settings(self) -> dict:
+        """Every setting besides the weights that changes the prediction (a bench entry's model
+        identity holds them): for a model that takes K, whether it is given."""
+        return {"intrinsics": self.intrinsics} if self.takes_K else {}
+
     def freeze(self) -> DepthModel:
         for parameter in self.parameters():
             parameter.requires_grad_(False)

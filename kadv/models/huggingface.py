@@ -11,9 +11,10 @@ from __future__ import annotations
 import json
 import os
 import socket
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 from urllib.parse import urlparse
 
 import torch
@@ -35,7 +36,10 @@ __all__ = [
     "hub_offline",
     "load_huggingface",
     "output_kind",
+    "resolve_weights",
 ]
+
+T = TypeVar("T")
 
 _HALF = (0.5, 0.5, 0.5)
 # What each family's image processor does when a checkpoint carries no preprocessor_config.json
@@ -243,6 +247,27 @@ def load_huggingface(source: str, name: str | None = None, hub_id: str | None = 
     Raises:
         ModelWeightsUnavailable: not cached and offline (or the download failed), with how to fix it.
     """
+
+    def load(location: str, local_only: bool) -> HuggingFaceDepthModel:
+        config = AutoConfig.from_pretrained(location, local_files_only=local_only)
+        kind = output_kind(config)
+        preprocess = family_preprocess(config, _processor_config(location, local_only))
+        network = AutoModelForDepthEstimation.from_pretrained(location, local_files_only=local_only)
+        adapter = DepthProDepthModel if config.model_type == "depth_pro" else HuggingFaceDepthModel
+        return adapter(network, preprocess, kind, name or source)
+
+    return resolve_weights(source, load, name, hub_id)
+
+
+def resolve_weights(
+    source: str, load: Callable[[str, bool], T], name: str | None = None, hub_id: str | None = None
+) -> T:
+    """``load(location, local_only)`` from a local directory, else the Hugging Face cache, else the
+    hub (unless offline or unreachable); ``load`` raises an ``OSError`` where the files are missing.
+
+    Raises:
+        ModelWeightsUnavailable: one message naming where kadv looked and how to provide the weights.
+    """
     name = name or source
     local_dir = Path(source).expanduser()
     location = str(local_dir) if local_dir.is_dir() else source
@@ -254,12 +279,7 @@ def load_huggingface(source: str, name: str | None = None, hub_id: str | None = 
             unreachable = True
             break
         try:
-            config = AutoConfig.from_pretrained(location, local_files_only=local_only)
-            kind = output_kind(config)
-            preprocess = family_preprocess(config, _processor_config(location, local_only))
-            network = AutoModelForDepthEstimation.from_pretrained(location, local_files_only=local_only)
-            adapter = DepthProDepthModel if config.model_type == "depth_pro" else HuggingFaceDepthModel
-            return adapter(network, preprocess, kind, name)
+            return load(location, local_only)
         except OSError as error:
             last_error = error
     where = f"the directory {local_dir}" if local_dir.is_dir() else f"the Hugging Face cache ({hub_id or source})"

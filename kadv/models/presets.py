@@ -19,7 +19,7 @@ class Preset:
     Attributes:
         hub_id: its Hugging Face id ("" for the embedded models).
         family: its transformers model type.
-        output_kind: "disparity" or "depth".
+        output_kind: its kind (:data:`kadv.losses.KINDS`); a Marigold checkpoint's config declares it.
         input_size: the network input its processor aims for, e.g. "518x518 keep-aspect /14"; what
             the checkpoint's own preprocessor_config.json says is what kadv uses.
     """
@@ -32,6 +32,7 @@ class Preset:
 
 _DA = "518x518 keep-aspect /14"
 _DINOV2_DPT = "image size, padded to /14"
+_MARIGOLD = "768 long edge, padded to /8"
 PRESETS = {
     "midas_dpt_large": Preset("Intel/dpt-large", "dpt", "disparity", "384x384"),
     "midas_dpt_hybrid": Preset("Intel/dpt-hybrid-midas", "dpt", "disparity", "384x384"),
@@ -65,6 +66,9 @@ PRESETS = {
         for where in ("indoor", "outdoor")
         for size in ("small", "base", "large")
     },
+    # diffusers pipelines (the kadv[diffusers] extra), loaded by kadv.models.marigold
+    "marigold_depth_v1_1": Preset("prs-eth/marigold-depth-v1-1", "marigold", "affine_depth", _MARIGOLD),
+    "marigold_e2e_ft_depth": Preset("GonzaloMG/marigold-e2e-ft-depth", "marigold", "affine_depth", _MARIGOLD),
 }
 # the embedded models, shipped in the package
 # (kadv.models.tiny: TINY_PREPROCESS; kadv.models.tiny_dpt: TINY_DPT_PROCESSOR)
@@ -76,8 +80,9 @@ EMBEDDED = {
 
 
 def weights_cached(hub_id: str) -> bool:
-    """Whether the Hugging Face cache holds ``hub_id``'s config (offline: it only reads the disk)."""
-    return isinstance(try_to_load_from_cache(hub_id, "config.json"), str)
+    """Whether the Hugging Face cache holds ``hub_id``'s config, or a diffusers pipeline's index
+    (offline: it only reads the disk)."""
+    return any(isinstance(try_to_load_from_cache(hub_id, file), str) for file in ("config.json", "model_index.json"))
 
 
 def preset_table() -> list[dict[str, str]]:

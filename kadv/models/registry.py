@@ -11,7 +11,7 @@ from kadv.models.tiny import load_kadv_tiny
 __all__ = ["load_model"]
 
 
-def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> DepthModel:
+def load_model(name_or_path: str | Path, weights: str | Path | None = None, **settings: object) -> DepthModel:
     """Load a frozen, eval-mode depth model.
 
     Args:
@@ -20,15 +20,30 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None) -> D
             Face depth-estimation id, or a local ``save_pretrained`` directory.
         weights: an explicit local directory (or, for ``kadv_tiny*``, a weights file) that overrides
             the cache, the hub, or the shipped copy of an embedded model.
+        **settings: a Marigold preset's :class:`~kadv.models.marigold.MarigoldSettings` (``steps``,
+            ``processing_resolution``, ``ensemble_size``, ``noise``, ``seed``); no other model takes any.
 
     Raises:
         ModelWeightsUnavailable: weights neither given, cached nor downloadable.
         FileNotFoundError: a path (starting with /, ./, ../ or ~) that is not a directory.
-        ValueError: an empty name or an unknown model.
+        MissingExtra: a Marigold preset without diffusers installed.
+        ValueError: an empty name, an unknown model, or settings the model does not take.
     """
     name = str(name_or_path)
     if not name:
         raise ValueError("model name is empty")
+    preset = PRESETS.get(name)
+    if preset is not None and preset.family == "marigold":
+        from kadv.models.marigold import MARIGOLD_SETTINGS, MarigoldSettings, load_marigold
+
+        unknown = sorted(set(settings) - set(MARIGOLD_SETTINGS))
+        if unknown:
+            raise ValueError(f"model.{unknown[0]}: Marigold takes no such setting")
+        return load_marigold(str(weights or preset.hub_id), name, preset.hub_id, MarigoldSettings(**settings))
+    if settings:
+        raise ValueError(
+            f"model.{sorted(settings)[0]}: model {name!r} takes no such setting (only Marigold presets do)"
+        )
     if name in ("kadv_tiny", "kadv_tiny_metric"):
         return load_kadv_tiny(weights, "disparity" if name == "kadv_tiny" else "depth")
     # transformers takes seconds to import; commands that load no Hugging Face model skip it

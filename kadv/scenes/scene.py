@@ -38,6 +38,9 @@ class Material:
             reflectance times :data:`CONDUCTOR_GREY`, the diffuse look it has without reflections.
         roughness: GGX roughness (Mitsuba's ``alpha``) of a coat or a metal (0: smooth), read by
             :attr:`kadv.render.Shading.reflections`.
+        mirror: a perfect mirror: the exact render shows what its specular bounce meets, under
+            every lighting, tinted by ``base_color``; its depth is its own surface's. The bake and
+            the differentiable renderer's gradient see a diffuse surface of ``base_color``.
     """
 
     name: str
@@ -53,6 +56,7 @@ class Material:
     coat_nonlinear: bool = False
     conductor: bool = False
     roughness: float = 0.0
+    mirror: bool = False
 
     def __post_init__(self) -> None:
         self.base_color = np.clip(np.asarray(self.base_color, np.float32).reshape(3), 0.0, 1.0)

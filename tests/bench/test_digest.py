@@ -32,6 +32,7 @@ def test_the_digest_sees_every_material_field_and_texel() -> None:
         {"texture": texture},
         {"roughness": 0.3},
         {"conductor": True},
+        {"mirror": True},
         {"base_color": np.array([0.1, 0.2, 0.3], np.float32)},
     ):
         materials = list(scene.materials)

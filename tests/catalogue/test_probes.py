@@ -7,9 +7,12 @@ import pytest
 import torch
 
 from kadv.attack import PenaltyConfig, check_init_views, file_init_views
+from kadv.geometry import intrinsics_from_fov
+from kadv.losses import depth_metrics
+from kadv.models import load_model
 from kadv.penalties import distance_to_surface
 from kadv.probes import PROBES, probe_names, probe_scene
-from kadv.render import ExactRenderer
+from kadv.render import ExactRenderer, Shading
 
 
 def _directions(count: int) -> np.ndarray:
@@ -59,3 +62,20 @@ def test_probes_are_deterministic_per_seed_and_vary_with_it() -> None:
 def test_an_unknown_probe_is_named_with_the_list() -> None:
     with pytest.raises(ValueError, match=r"no probe scene 'nope'; the probes are: photo_wall, grazing_floor"):
         probe_scene("nope")
+
+
+def test_the_mirror_probe_shows_the_room_on_the_mirrors_plane_and_kadv_tiny_reads_its_init_views() -> None:
+    scene = probe_scene("mirror", seed=0)
+    renderer = ExactRenderer(scene, Shading(lighting="direct"), progress=False)
+    glass = [index for index, material in enumerate(scene.materials) if material.mirror]
+    views = file_init_views(renderer, PenaltyConfig().margin)
+    model = load_model("kadv_tiny")
+    for view in views:
+        out = renderer.render(view.world_T_cam, intrinsics_from_fov(view.fov_x_deg, 96, 128), 96, 128)
+        on_mirror = torch.from_numpy(np.isin(scene.material_ids, glass))[out.triangle_ids.clamp_min(0)] & out.mask
+        assert on_mirror.float().mean() > 0.1, f"{view.name} sees the mirror"
+        # the depth is the mirror's plane (x = 0.05), and the mirror shows the room, not its own grey
+        torch.testing.assert_close(out.points[:, 0:1][on_mirror], torch.full((int(on_mirror.sum()),), 0.05))
+        assert out.rgb.permute(1, 0, 2, 3)[:, on_mirror[:, 0]].std(dim=1).min() > 0.05
+        delta1 = depth_metrics(model(out.rgb), out.depth, out.mask, "disparity")["delta1"]
+        assert delta1 > 0.85, f"kadv-tiny reads {view.name} (delta1 {float(delta1):.3f})"

@@ -24,6 +24,7 @@ from kadv.geometry import axis_angle_to_matrix, yaw_pitch_roll
 from kadv.report.outputs import read_trajectory
 from kadv.report.summary import SCHEMA_VERSION, RunSummary
 from tests.cli.in_process import call_main
+from tests.models.tiny_marigold import save_tiny_marigold
 
 BIN = Path(sys.executable).parent
 SMALL = [
@@ -346,6 +347,12 @@ BAD_INPUTS = [
     ("kadv-render", ["scene=procedural", "scene.seed=abc"], "scene.seed must be an integer, got 'abc'"),
     ("kadv-render", ["scene=procedural", "scene.stairs_share=2"], "scene.stairs_share must be in [0, 1], got 2.0"),
     ("kadv-render", ["scene=file", "scene.path=/no/such/room.glb"], "/no/such/room.glb"),
+    ("kadv-attack", ["model=marigold_depth_v1_1", "model.steps=0"], "model.steps must be at least 1, got 0"),
+    (
+        "kadv-attack",
+        ["model=marigold_depth_v1_1", "model.weights={marigold}", "model.ensemble_size=3"],
+        "attack.method=halving follows the gradient",
+    ),
     ("kadv-train-tiny", ["train.steps=-1"], "train.steps"),
     ("kadv-train-tiny", ["train.seed=7"], "the held-out rooms"),
     ("kadv-train-tiny", ["train.hall_share=1.2"], "train.hall_share (1.2)"),
@@ -387,7 +394,8 @@ def bad_input_values(tmp_path_factory) -> tuple[Path, dict]:
     wrong_model.write_text("import torch\n\ndef make():\n    return torch.nn.Conv2d(3, 2, 1)\n")
     canopy = root / "canopy"
     CHMv2Config().save_pretrained(canopy)  # refused on its config, before any weights are read
-    return root, {"corrupt": corrupt, "inside": _inside_box_params(root), "wrong_model": wrong_model, "canopy": canopy}
+    values = {"corrupt": corrupt, "inside": _inside_box_params(root), "wrong_model": wrong_model, "canopy": canopy}
+    return root, {**values, "marigold": save_tiny_marigold(root / "marigold")}
 
 
 @pytest.fixture(scope="module")
