@@ -51,11 +51,7 @@ def attack(
         starts: warm starts by init-view index, pose parameters (N, 6) relative to that init view
             (:class:`~kadv.attack.search.SearchContext`'s ``starts``).
     """
-    config.check_run(get_method(config.method).check, differentiable.config.supersample)
-    check_searchable(config.method, objective.model)
-    # all of them before any search: a view that cannot be moved in is refused before work is spent
-    fit = lambda init: fit_into_envelope(differentiable.renderer, init, config.envelope, objective.penalty.margin)
-    init_views = [fit(init) for init in init_views]
+    init_views = _checked(objective, differentiable, init_views, config)
     completed, result = dict(completed or {}), AttackResult(config.method)
     per_view = config.passes
     total = len(init_views) * per_view if per_view else None
@@ -79,6 +75,18 @@ def attack(
                 bar.n = (index + 1) * per_view
                 bar.refresh()
     return result
+
+
+def _checked(
+    objective: Objective, differentiable: DifferentiableRenderer, init_views: list[InitView], config: AttackConfig
+) -> list[InitView]:
+    """The init views moved into ``config.envelope``, once the method has accepted its settings and
+    the model; all of them before any search, so that a view that cannot be moved in is refused
+    before work is spent."""
+    config.check_run(get_method(config.method).check, differentiable.config.supersample)
+    check_searchable(config.method, objective.model)
+    fit = lambda init: fit_into_envelope(differentiable.renderer, init, config.envelope, objective.penalty.margin)
+    return [fit(init) for init in init_views]
 
 
 def _search_from(

@@ -160,14 +160,7 @@ def check_pose(
     ]
     functionals = _Functionals(weight_seed, FOCAL_WEIGHTS if focal else 1, (~edges).double())
     maps = lambda pose, K_view: supersampled_maps(renderer, pose, K_view, height, width, reference_supersample)
-    full, half = (_pose_reference(maps, base, K, functionals, steps, scale) for scale in (1.0, 0.5))
-    agreements = {name: min(_blocks(full[f], half[f])) for f, name in enumerate(FUNCTIONALS)}
-    if focal:
-        focal_full, focal_half = (
-            _focal_reference(maps, base, K, functionals, steps[2] * scale) for scale in (1.0, 0.5)
-        )
-        for f, name in enumerate(FUNCTIONALS):
-            agreements[name] = min(agreements[name], _cos(focal_full[f], focal_half[f]))
+    half, focal_half, agreements = _references(maps, base, K, functionals, steps)
     results = {}
     for name, config in configs.items():
         differentiable = DifferentiableRenderer(renderer, config, device)
@@ -184,6 +177,20 @@ def check_pose(
             }
         results[name] = GradientCheck(cosines, agreements)
     return results
+
+
+def _references(maps, base, K, functionals: _Functionals, steps) -> tuple:
+    """The finite-difference reference at half the ``steps`` (pose, and focal length where a third
+    step is given, else None), and how well it agrees with the reference at the full steps (per
+    functional, the lowest cosine over the blocks)."""
+    full, half = (_pose_reference(maps, base, K, functionals, steps, scale) for scale in (1.0, 0.5))
+    agreements = {name: min(_blocks(full[f], half[f])) for f, name in enumerate(FUNCTIONALS)}
+    if len(steps) <= 2:
+        return half, None, agreements
+    focal_full, focal_half = (_focal_reference(maps, base, K, functionals, steps[2] * scale) for scale in (1.0, 0.5))
+    for f, name in enumerate(FUNCTIONALS):
+        agreements[name] = min(agreements[name], _cos(focal_full[f], focal_half[f]))
+    return half, focal_half, agreements
 
 
 class _Functionals:

@@ -374,15 +374,9 @@ class ExactRenderer:
         hits, maps = self.cast_and_shade(*flat, angle, shade_centres, True, normals=colour)
         image = functools.partial(_image, batch=batch, height=height, width=width)
         rgb = None
-        if colour and sub_rgb is not None:
-            sub_rgb, sub_ids, sub_terms = self._given_sub_colours(sub_rgb, sub_ids, sub_terms, batch, s, height, width)
-        elif colour and s > 1:
-            sub_rgb, sub_ids, sub_terms = self._sub_colours(world_T_cam, K, height, width, s, angle)
-        elif colour:
-            sub_rgb, sub_ids = image(maps["rgb"], 3), image(hits.triangle_ids, 1)
-            sub_terms = image(maps["reflecting"], 6) if self.shader.reflecting else sub_terms
         if colour:
-            rgb = self._pixel_colours(sub_rgb, sub_ids, sub_terms, hits, maps["normals"], origins, directions, angle)
+            given = (sub_rgb, sub_ids, sub_terms)
+            rgb = self._colours(world_T_cam, K, s, angle, hits, maps, origins, directions, given)
         # a ray that meets a surface within a micrometre of the eye starts on it (the eye lies on the
         # surface): it measures no depth, so it is no hit in the mask
         mask = hits.hit & (hits.t > _MIN_HIT_DEPTH)
@@ -395,6 +389,21 @@ class ExactRenderer:
             points=image(maps["points"], 3),
             back_face=image(maps["back_face"], 1),
         )
+
+    def _colours(self, world_T_cam, K, s: int, angle: float, hits, maps, origins, directions, given) -> torch.Tensor:
+        """(B, 3, H, W) the pixels' colours from their s x s rays: those a caller has shaded
+        (``given``: sub_rgb, sub_ids, sub_terms, as :meth:`render` takes them), else cast here, or
+        with s = 1 the centre rays' ``hits`` and ``maps``."""
+        batch, height, width = origins.shape[0], origins.shape[1], origins.shape[3]
+        if given[0] is not None:
+            sub_rgb, sub_ids, sub_terms = self._given_sub_colours(*given, batch, s, height, width)
+        elif s > 1:
+            sub_rgb, sub_ids, sub_terms = self._sub_colours(world_T_cam, K, height, width, s, angle)
+        else:
+            image = functools.partial(_image, batch=batch, height=height, width=width)
+            sub_rgb, sub_ids = image(maps["rgb"], 3), image(hits.triangle_ids, 1)
+            sub_terms = image(maps["reflecting"], 6) if self.shader.reflecting else given[2]
+        return self._pixel_colours(sub_rgb, sub_ids, sub_terms, hits, maps["normals"], origins, directions, angle)
 
     def _render_apart(self, world_T_cam, K, height, width, supersample, sub_rgb, sub_ids, sub_terms, colour):
         """:meth:`render` of views whose intrinsics differ, one by one (a pixel's footprint is its view's)."""

@@ -320,6 +320,27 @@ def _checked_inputs(models: list, probes: list[str] | None, seeds) -> tuple[list
     return probes, seeds, loaded
 
 
+def _check_alignment(models: list, alignment: str | None) -> None:
+    """Refuse, as a :class:`RobustnessInputError`, an alignment one of ``models``' kinds does not allow."""
+    from kadv.losses.align import check_alignment, kind_fit
+
+    try:
+        for model in models:
+            check_alignment(
+                kind_fit(model.output_kind, alignment=alignment)[1], model.output_kind, f"model {model.name}"
+            )
+    except ValueError as error:
+        raise RobustnessInputError(str(error)) from None
+
+
+def _pooled(suite, runs: dict, models: list) -> dict[str, list[float]]:
+    """Each model's pooled worst delta1, overall then per radius: scored at every model's worst poses."""
+    from kadv.bench import pooled_worst
+
+    found = pooled_worst(suite, {name: run.entry for name, run in runs.items()}, {m.name: m for m in models})
+    return {name: [overall, *per_radius] for name, (overall, per_radius) in found.items()}
+
+
 def scorecard(
     models: list,
     probes: list[str] | None = None,
@@ -360,18 +381,12 @@ def scorecard(
     """
     import tempfile
 
-    from kadv.bench import pool_units, pooled_worst, suite_score
-    from kadv.losses.align import check_alignment, kind_fit
+    from kadv.bench import pool_units, suite_score
     from kadv.testing.runs import probe_suite, profiles, run_model
 
     probes, seeds, loaded = _checked_inputs(models, probes, seeds)
     settings = profile_settings(radii, envelope, typical_views, fail_below, options, "scorecard", search_seeds)
-    try:
-        for model in loaded:
-            fitted = kind_fit(model.output_kind, alignment=settings.checked.alignment)[1]
-            check_alignment(fitted, model.output_kind, f"model {model.name}")
-    except ValueError as error:
-        raise RobustnessInputError(str(error)) from None
+    _check_alignment(loaded, settings.checked.alignment)
     suite = probe_suite(probes, seeds, settings)
     folder = settings.checked.artifacts or current().artifacts or tempfile.mkdtemp(prefix="kadv-")
     suite.save(Path(folder) / f"suite-{suite.hash[:12]}.json")
@@ -381,9 +396,6 @@ def scorecard(
         for probe, profile in profiles(suite, run, probes, settings.fail_below).items():
             results[probe][name] = profile
     scores = {name: suite_score(suite, pool_units(suite, [run.entry])).to_dict() for name, run in runs.items()}
-    pooled = {}
-    if pool and len(loaded) > 1:
-        found = pooled_worst(suite, {n: r.entry for n, r in runs.items()}, {m.name: m for m in loaded})
-        pooled = {name: [overall, *per_radius] for name, (overall, per_radius) in found.items()}
+    pooled = _pooled(suite, runs, loaded) if pool and len(loaded) > 1 else {}
     names = [model.name for model in loaded]
     return Scorecard(names, probes, results, scores, pooled, {"name": suite.name, "hash": suite.hash})

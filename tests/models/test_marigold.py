@@ -12,10 +12,12 @@ import torch
 from kadv.attack import Study, StudySettings
 from kadv.attack.search import AttackConfig
 from kadv.bench import model_identity
+from kadv.cli.attack import main as attack_main
 from kadv.errors import MissingExtra
 from kadv.models import MarigoldDepthModel, MarigoldSettings, load_model
 from kadv.models.marigold import marigold_kind
 from kadv.scenes import box_room
+from tests.cli.in_process import call_main
 from tests.models.tiny_marigold import marigold_pipeline, save_tiny_marigold
 
 
@@ -119,7 +121,7 @@ def test_the_kind_is_read_from_the_pipelines_invariance_flags(flags, kind) -> No
     assert MarigoldDepthModel(pipe, "tiny").output_kind == kind
 
 
-def test_bad_settings_and_a_missing_extra_are_one_clear_error(checkpoint: Path, monkeypatch) -> None:
+def test_bad_settings_and_a_missing_extra_are_one_clear_error(checkpoint: Path, monkeypatch, tmp_path: Path) -> None:
     for settings, named in (
         ({"steps": 0}, "model.steps"),
         ({"noise": "pink"}, "model.noise"),
@@ -136,6 +138,11 @@ def test_bad_settings_and_a_missing_extra_are_one_clear_error(checkpoint: Path, 
     monkeypatch.setitem(sys.modules, "diffusers", None)  # as where the extra is not installed
     with pytest.raises(MissingExtra, match=r"pip install 'kadv\[diffusers\]'"):
         load_model("marigold_depth_v1_1", weights=checkpoint)
+    argv = ["kadv-attack", "model=marigold_depth_v1_1", f"model.weights={checkpoint}"]
+    result = call_main(attack_main, argv, cwd=tmp_path)
+    assert result.returncode == 2 and result.stderr.strip().splitlines() == [
+        "kadv-attack: error: model 'marigold_depth_v1_1' needs diffusers: pip install 'kadv[diffusers]'"
+    ]
 
 
 def test_missing_weights_say_where_kadv_looked(tmp_path: Path, monkeypatch) -> None:

@@ -155,6 +155,30 @@ def screen_fidelity(
     return 1 if seconds is not None and supersample > 1 and render_s > model_s else None
 
 
+def _move_lanes(
+    picks: list[ViewRecord],
+    current: np.ndarray,
+    best: np.ndarray,
+    region: np.ndarray,
+    pool: list[ViewRecord],
+    settings: HalvingSettings,
+) -> None:
+    """Each lane's step, in place: its pick becomes the incumbent and its region grows where it
+    raises the lane's objective, else the region shrinks; a lane whose region shrank below
+    ``stall_scale`` restarts from the next view of ``pool``."""
+    for lane, record in enumerate(picks):
+        if record.rankable and record.objective > best[lane]:
+            current[lane], best[lane] = record.params, record.objective
+            region[lane] = min(region[lane] * settings.grow, 1.0 / settings.step_fraction)
+        else:
+            region[lane] *= settings.shrink
+        if region[lane] < settings.stall_scale:
+            region[lane] = 1.0
+            if pool:
+                restart = pool.pop(0)
+                current[lane], best[lane] = restart.params, restart.objective
+
+
 def local_refine(
     context: SearchContext,
     starts: list[ViewRecord],
@@ -203,17 +227,7 @@ def local_refine(
             params = torch.tensor([r.params for r in picks], dtype=torch.float64)
             picks = context.evaluate(step + 1, params, lanes=range(active))
             records += picks
-        for lane, record in enumerate(picks):
-            if record.rankable and record.objective > best[lane]:
-                current[lane], best[lane] = record.params, record.objective
-                region[lane] = min(region[lane] * settings.grow, 1.0 / settings.step_fraction)
-            else:
-                region[lane] *= settings.shrink
-            if region[lane] < settings.stall_scale:
-                region[lane] = 1.0
-                if pool:
-                    restart = pool.pop(0)
-                    current[lane], best[lane] = restart.params, restart.objective
+        _move_lanes(picks, current, best, region, pool, settings)
         step += 2
         if settings.halve_every and ((step - first_step) // 2) % settings.halve_every == 0 and lanes > 1:
             kept = np.argsort(-best, kind="stable")[: lanes // 2]
