@@ -10,7 +10,7 @@ TEST_PACKAGES := $(DEMO_PACKAGES) $(shell sed -n 's/^test://p' system-packages.t
 
 DOCS_STAMP := $(VENV)/.kadv-docs-installed
 
-.PHONY: demo test test-kernels docs lint bench clean demo-packages test-packages
+.PHONY: demo test test-kernels docs lint bench figures clean demo-packages test-packages
 
 # Installs the missing ones of $(1) with apt-get as root; otherwise prints the one line to run and stops.
 # dpkg-query's status, not `dpkg -s`: a removed package whose configuration remains still passes `dpkg -s`.
@@ -75,6 +75,11 @@ lint: $(TEST_STAMP)
 
 bench: demo-packages $(TEST_STAMP)
 	cd benchmarks && for b in render reflections bake large_scenes penalty gradcheck warp_reach tiny_accuracy attack_step step_ops search_anytime ranking reference_render; do ../$(BIN)/python $$b.py || exit 1; done
+
+# the docs' tables of figures made again from the records in benchmarks/results/ (a test fails while
+# a page is out of date with them)
+figures: $(STAMP)
+	$(BIN)/python benchmarks/figures.py
 
 clean:
 	rm -rf $(VENV) outputs multirun .pytest_cache site

@@ -1,4 +1,5 @@
-"""Shared helpers for the benchmark scripts (timing, scene discovery)."""
+"""Shared helpers for the benchmark scripts (timing, scene discovery); imported first by each,
+it also takes ``--record`` (:mod:`record`)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,10 @@ import os
 from kadv.runtime import configure_runtime
 
 configure_runtime()
+
+import record
+
+record.start_if_asked()
 
 import argparse
 import statistics

@@ -67,9 +67,11 @@ def main() -> None:
         fields[f"forward_{resolution}"] = round(common.fastest_seconds(forward, args.repeats, warmup=0), 1)
         fields[f"backward_{resolution}"] = round(common.fastest_seconds(backward, args.repeats, warmup=0), 1)
         fields[f"peak_gib_{resolution}"] = round(peak_gib(), 1)
+    print("\n| processing resolution | forward | forward and backward | peak memory |\n|---|---|---|---|")
+    for resolution in resolutions:
         print(
-            f"resolution {resolution}: forward {fields[f'forward_{resolution}']} s, forward and backward "
-            f"{fields[f'backward_{resolution}']} s, peak {fields[f'peak_gib_{resolution}']} GiB"
+            f"| {resolution} | {fields[f'forward_{resolution}']} s | {fields[f'backward_{resolution}']} s "
+            f"| {fields[f'peak_gib_{resolution}']} GiB |"
         )
     print(
         "marigold_cost "

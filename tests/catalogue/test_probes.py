@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -79,3 +81,8 @@ def test_the_mirror_probe_shows_the_room_on_the_mirrors_plane_and_kadv_tiny_read
         assert out.rgb.permute(1, 0, 2, 3)[:, on_mirror[:, 0]].std(dim=1).min() > 0.05
         delta1 = depth_metrics(model(out.rgb), out.depth, out.mask, "disparity")["delta1"]
         assert delta1 > 0.85, f"kadv-tiny reads {view.name} (delta1 {float(delta1):.3f})"
+
+
+def test_every_probe_has_its_scene_config() -> None:
+    folder = Path(__file__).resolve().parents[2] / "conf" / "scene" / "probe"
+    assert sorted(path.stem for path in folder.glob("*.yaml")) == sorted(PROBES)
