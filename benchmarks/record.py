@@ -6,8 +6,9 @@ A record (``"schema": "kadv-benchmark-record-1"``, documented in ``benchmarks/RE
 ``benchmark``, ``date`` (UTC), ``commit`` and ``dirty`` (tracked files changed), ``source``
 (``files``: the repository's modules the run imported, the script among them; ``hash``: SHA-256
 of their bytes, to tell a stale record), ``machine`` (``cpu``, ``cores``, ``threads``, ``torch``,
-``device``, ``gpu``, ``load_at_start``: the one-minute load average before the run, and
-``others_running``: whether it was 0.5 or more), ``args`` (the command line after the script),
+``device``, ``gpu``, ``busy_at_start``: the share of the CPUs busy in the half second before
+the run, and ``others_running``: whether it was a quarter or more), ``args`` (the command line
+after the script),
 ``result`` (``line``: the last line; ``fields``: its ``key=value`` pairs; ``tables``: every
 Markdown table the script printed, as header and rows) and ``imported`` (False; True for a figure
 taken once from prose, with the date and commit the prose gave).
@@ -24,6 +25,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 __all__ = ["RESULTS", "SCHEMA", "machine_class", "parse_tables", "source_hash", "start_if_asked"]
@@ -32,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
 SCHEMA = "kadv-benchmark-record-1"
 _LINE = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)((?: [A-Za-z_][A-Za-z0-9_]*=\S*)+)$")
-_BUSY = 0.5  # a one-minute load average from this up: something else was running
+_BUSY = 0.25  # a share of the CPUs busy before the run from this up: something else was running
 # the record's own plumbing, which changes no figure
 _NOT_SOURCE = {"benchmarks/record.py", "benchmarks/figures.py"}
 
@@ -60,12 +62,26 @@ def start_if_asked() -> None:
     if "--record" not in sys.argv[1:]:
         return
     sys.argv = [sys.argv[0], *(arg for arg in sys.argv[1:] if arg != "--record")]
-    load, script = os.getloadavg()[0], Path(sys.argv[0]).resolve()
+    load, script = _busy_share(), Path(sys.argv[0]).resolve()
     tee = sys.stdout = _Tee(sys.stdout)
     failed = []
     previous = sys.excepthook
     sys.excepthook = lambda *error: (failed.append(error), previous(*error))
     atexit.register(lambda: failed or _append(tee.copy.getvalue(), load, script))
+
+
+def _busy_share(seconds: float = 0.5) -> float:
+    """The share of the machine's CPU time spent busy over ``seconds`` before the run starts (from
+    /proc/stat): another job's work, as this process has not started its own."""
+
+    def times() -> tuple[int, int]:
+        values = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+        idle = values[3] + values[4]  # idle and iowait
+        return sum(values) - idle, sum(values)
+
+    (busy0, total0), _ = times(), time.sleep(seconds)
+    busy1, total1 = times()
+    return (busy1 - busy0) / max(total1 - total0, 1)
 
 
 def _fields(text: str) -> dict:
@@ -143,7 +159,7 @@ def _machine(load: float) -> dict:
         "torch": torch.__version__,
         "device": device,
         "gpu": gpu,
-        "load_at_start": round(load, 2),
+        "busy_at_start": round(load, 2),
         "others_running": load >= _BUSY,
     }
 

@@ -27,7 +27,7 @@ def _record(benchmark: str, date: str, value: float, files: list[str], hash_: st
         "dirty": False,
         "source": {"files": files, "hash": hash_},
         "machine": {"cpu": cpu, "cores": 2, "threads": 2, "torch": "2.13.0+cpu", "device": "cpu", "gpu": None,
-                    "load_at_start": 0.1, "others_running": False},
+                    "busy_at_start": 0.1, "others_running": False},
         "args": ["--fast"],
         "result": {"line": f"{benchmark} ms={value}", "fields": {"ms": value}, "tables": [table]},
         "imported": False,
