@@ -1,5 +1,6 @@
-"""What the README's two commands cost: ``make demo`` and ``make test`` timed in a checkout (by
-default this one; a fresh clone's first run also creates ``.venv`` and bakes, and says so).
+"""What the README's two commands cost a newcomer: this repository's HEAD cloned into a temporary
+folder, then ``make demo`` and ``make test`` timed there (the first creates ``.venv`` and bakes);
+``--checkout DIR`` times an existing checkout instead.
 
 Last line: ``make_timings demo_s= test_s= tests_passed= fresh=`` (seconds of wall time; ``fresh``:
 whether the checkout had no ``.venv`` before).
@@ -10,18 +11,26 @@ Run: .venv/bin/python benchmarks/make_timings.py [--checkout DIR] [--record]
 from __future__ import annotations
 
 import argparse
+import os
 import re
+import shutil
 import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
-import common  # noqa: F401  first: kadv's runtime settings, --record
+import common  # first: kadv's runtime settings, --record
 
 
 def timed(target: str, checkout: Path) -> tuple[float, str]:
     """Seconds ``make target`` took in ``checkout``, and what it printed; a failure ends the script."""
+    print(f"make {target} in {checkout} ...", file=sys.stderr, flush=True)
     start = time.perf_counter()
-    result = subprocess.run(["make", target], cwd=checkout, capture_output=True, text=True)
+    scenes = {"KADV_TEST_SCENES": os.environ.get("KADV_TEST_SCENES", str(common.scenes_root()))}
+    result = subprocess.run(
+        ["make", target], cwd=checkout, capture_output=True, text=True, env={**os.environ, **scenes}
+    )
     seconds = time.perf_counter() - start
     if result.returncode != 0:
         raise SystemExit(f"make {target} failed in {checkout} (exit {result.returncode}):\n{result.stdout[-2000:]}")
@@ -30,12 +39,20 @@ def timed(target: str, checkout: Path) -> tuple[float, str]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--checkout", default=str(Path(__file__).resolve().parents[1]), help="the repository to time")
+    parser.add_argument("--checkout", default=None, help="an existing checkout to time (default: a fresh clone)")
     args = parser.parse_args()
-    checkout = Path(args.checkout).resolve()
+    clone = None
+    if args.checkout is None:
+        clone = Path(tempfile.mkdtemp(prefix="kadv-timings-")) / "kadv"
+        subprocess.run(["git", "clone", "--quiet", str(Path(__file__).resolve().parents[1]), str(clone)], check=True)
+    checkout = clone or Path(args.checkout).resolve()
     fresh = not (checkout / ".venv").exists()
-    demo, _ = timed("demo", checkout)
-    test, printed = timed("test", checkout)
+    try:
+        demo, _ = timed("demo", checkout)
+        test, printed = timed("test", checkout)
+    finally:
+        if clone is not None:
+            shutil.rmtree(clone.parent, ignore_errors=True)
     passed = re.findall(r"(\d+) passed", printed)
     print("| command | wall time | |\n|---|---|---|")
     print(f"| `make demo` | {demo / 60:.1f} min | {'creating .venv, baking' if fresh else '.venv made, bake cached'} |")
