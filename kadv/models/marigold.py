@@ -21,7 +21,15 @@ import torch.nn.functional as F
 from kadv.errors import MissingExtra
 from kadv.models.base import DepthModel
 
-__all__ = ["MARIGOLD_SETTINGS", "NOISES", "MarigoldDepthModel", "MarigoldSettings", "load_marigold", "marigold_kind"]
+__all__ = [
+    "MARIGOLD_SETTINGS",
+    "NOISES",
+    "PRESET_SETTINGS",
+    "MarigoldDepthModel",
+    "MarigoldSettings",
+    "load_marigold",
+    "marigold_kind",
+]
 
 # the starting latent: a fixed Gaussian draw (Marigold) or its mean (the one-step E2E-FT fine-tunes)
 NOISES = ("gaussian", "zeros")
@@ -62,6 +70,8 @@ class MarigoldSettings:
 
 # the model node's keys that are Marigold's settings
 MARIGOLD_SETTINGS = tuple(field.name for field in fields(MarigoldSettings))
+# a preset's own settings where they are not the defaults: the E2E-FT fine-tune takes one step from zeros
+PRESET_SETTINGS = {"marigold_e2e_ft_depth": {"steps": 1, "processing_resolution": 768, "noise": "zeros"}}
 
 
 def marigold_kind(prediction_type: str | None, scale_invariant: bool, shift_invariant: bool) -> str:

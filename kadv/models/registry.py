@@ -21,7 +21,8 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None, **se
         weights: an explicit local directory (or, for ``kadv_tiny*``, a weights file) that overrides
             the cache, the hub, or the shipped copy of an embedded model.
         **settings: a Marigold preset's :class:`~kadv.models.marigold.MarigoldSettings` (``steps``,
-            ``processing_resolution``, ``ensemble_size``, ``noise``, ``seed``); no other model takes any.
+            ``processing_resolution``, ``ensemble_size``, ``noise``, ``seed``), over the preset's own
+            (:data:`~kadv.models.marigold.PRESET_SETTINGS`); no other model takes any.
 
     Raises:
         ModelWeightsUnavailable: weights neither given, cached nor downloadable.
@@ -34,11 +35,12 @@ def load_model(name_or_path: str | Path, weights: str | Path | None = None, **se
         raise ValueError("model name is empty")
     preset = PRESETS.get(name)
     if preset is not None and preset.family == "marigold":
-        from kadv.models.marigold import MARIGOLD_SETTINGS, MarigoldSettings, load_marigold
+        from kadv.models.marigold import MARIGOLD_SETTINGS, PRESET_SETTINGS, MarigoldSettings, load_marigold
 
         unknown = sorted(set(settings) - set(MARIGOLD_SETTINGS))
         if unknown:
             raise ValueError(f"model.{unknown[0]}: Marigold takes no such setting")
+        settings = {**PRESET_SETTINGS.get(name, {}), **settings}
         return load_marigold(str(weights or preset.hub_id), name, preset.hub_id, MarigoldSettings(**settings))
     if settings:
         raise ValueError(

@@ -15,7 +15,7 @@ from kadv.bench import model_identity
 from kadv.cli.attack import main as attack_main
 from kadv.errors import MissingExtra
 from kadv.models import MarigoldDepthModel, MarigoldSettings, load_model
-from kadv.models.marigold import marigold_kind
+from kadv.models.marigold import PRESET_SETTINGS, marigold_kind
 from kadv.scenes import box_room
 from tests.cli.in_process import call_main
 from tests.models.tiny_marigold import marigold_pipeline, save_tiny_marigold
@@ -58,12 +58,11 @@ def test_the_prediction_is_the_pipelines_own(size, checkpoint: Path, pipeline) -
 
 def test_settings_reach_the_pipeline_and_zero_noise_is_the_e2e_fine_tunes_start(checkpoint: Path, pipeline) -> None:
     rgb = torch.rand(1, 3, 40, 40, generator=torch.Generator().manual_seed(2))
-    settings = {"steps": 1, "processing_resolution": 32, "noise": "zeros"}
-    model = load_model("marigold_e2e_ft_depth", weights=checkpoint, **settings)
+    model = load_model("marigold_e2e_ft_depth", weights=checkpoint, processing_resolution=32)  # its own: 1 step, zeros
     zeros = torch.zeros(1, 4, 4, 4)
     theirs = pipeline(rgb, num_inference_steps=1, processing_resolution=32, latents=zeros, output_type="pt")
     torch.testing.assert_close(model(rgb), theirs.prediction, atol=1e-4, rtol=0)
-    gaussian = load_model("marigold_e2e_ft_depth", weights=checkpoint, steps=1, processing_resolution=32)
+    gaussian = load_model("marigold_e2e_ft_depth", weights=checkpoint, processing_resolution=32, noise="gaussian")
     assert (gaussian(rgb) - model(rgb)).abs().max() > 1e-3
     assert model_identity(model)["settings"] != model_identity(gaussian)["settings"]  # two identities on the board
 
@@ -157,7 +156,8 @@ def test_missing_weights_say_where_kadv_looked(tmp_path: Path, monkeypatch) -> N
 def test_the_presets_yaml_settings_are_the_librarys_defaults() -> None:
     from tests.cli.test_config import _compose
 
-    for name, noise in (("marigold_depth_v1_1", "gaussian"), ("marigold_e2e_ft_depth", "zeros")):
+    for name in ("marigold_depth_v1_1", "marigold_e2e_ft_depth"):
         node = _compose("kadv_attack", f"model={name}").model
         keys = ("steps", "processing_resolution", "ensemble_size", "noise", "seed")
-        assert MarigoldSettings(**{key: node[key] for key in keys}) == MarigoldSettings(noise=noise)
+        assert MarigoldSettings(**{key: node[key] for key in keys}) == MarigoldSettings(**PRESET_SETTINGS.get(name, {}))
+    assert PRESET_SETTINGS["marigold_e2e_ft_depth"]["noise"] == "zeros"  # the fine-tune starts from zeros
