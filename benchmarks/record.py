@@ -62,12 +62,14 @@ def start_if_asked() -> None:
     if "--record" not in sys.argv[1:]:
         return
     sys.argv = [sys.argv[0], *(arg for arg in sys.argv[1:] if arg != "--record")]
+    # the code that runs is the checkout's as the run starts
+    commit = {"commit": _git("rev-parse", "HEAD"), "dirty": bool(_git("status", "--porcelain", "--untracked-files=no"))}
     load, script = _busy_share(), Path(sys.argv[0]).resolve()
     tee = sys.stdout = _Tee(sys.stdout)
     failed = []
     previous = sys.excepthook
     sys.excepthook = lambda *error: (failed.append(error), previous(*error))
-    atexit.register(lambda: failed or _append(tee.copy.getvalue(), load, script))
+    atexit.register(lambda: failed or _append(tee.copy.getvalue(), load, script, commit))
 
 
 def _busy_share(seconds: float = 0.5) -> float:
@@ -168,7 +170,7 @@ def _git(*args: str) -> str:
     return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True).stdout.strip()
 
 
-def _append(printed: str, load: float, script: Path) -> None:
+def _append(printed: str, load: float, script: Path, commit: dict) -> None:
     lines = [line for line in printed.splitlines() if line.strip()]
     match = _LINE.match(lines[-1]) if lines else None
     if match is None:
@@ -179,8 +181,7 @@ def _append(printed: str, load: float, script: Path) -> None:
         "schema": SCHEMA,
         "benchmark": match.group(1),
         "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "commit": _git("rev-parse", "HEAD"),
-        "dirty": bool(_git("status", "--porcelain", "--untracked-files=no")),
+        **commit,
         "source": {"files": files, "hash": source_hash(files)},
         "machine": _machine(load),
         "args": sys.argv[1:],
