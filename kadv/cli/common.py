@@ -38,7 +38,6 @@ from kadv.geometry import look_at
 from kadv.io import write_json
 from kadv.losses import DELTA1_TEMPERATURE, LossConfig
 from kadv.models import EMBEDDED, PRESETS, DepthModel, check_intrinsics, load_custom, load_model
-from kadv.models.marigold import MARIGOLD_SETTINGS
 from kadv.render import BakeConfig, DiffRenderConfig, Shading
 from kadv.render.exact import DEFAULT_MAX_RAYS
 from kadv.report.store import LOCK_FILES, RunDirectoryBusy
@@ -529,9 +528,14 @@ def model_from_config(node: Any) -> DepthModel:
     return model
 
 
+# the keys of every model node; any other key is a setting of the model (Marigold's), which
+# load_model takes or refuses
+_MODEL_KEYS = frozenset({"name", "hub_id", "output_kind", "weights", "intrinsics"})
+
+
 def _preset_model(node: dict) -> DepthModel:
-    """A preset's model by name (and ``model.weights``); a hub id or output kind other than the
-    preset's is refused naming the key."""
+    """A preset's model by name (and ``model.weights``, and its settings); a hub id or output kind
+    other than the preset's is refused naming the key."""
     preset = EMBEDDED.get(node["name"]) or PRESETS.get(node["name"])
     for key in ("hub_id", "output_kind"):
         if preset is not None and node.get(key) is not None and node[key] != getattr(preset, key):
@@ -539,5 +543,5 @@ def _preset_model(node: dict) -> DepthModel:
                 f"model.{key}: the preset {node['name']!r} has {key} {getattr(preset, key)!r}, fixed by its "
                 f"checkpoint, not {node[key]!r}; for other weights use model=huggingface model.name=<id or dir>"
             )
-    settings = {key: node[key] for key in MARIGOLD_SETTINGS if key in node}
+    settings = {key: value for key, value in node.items() if key not in _MODEL_KEYS}
     return load_model(node["name"], node.get("weights"), **settings)

@@ -17,18 +17,15 @@ from torch.nn import functional as F
 
 from kadv.checks import check_shape
 from kadv.geometry.camera import pixel_rays
-from kadv.geometry.vector import dot
 from kadv.render.bake import load_or_bake
 from kadv.render.colour import tone_map
 from kadv.render.irradiance import BakedLighting
-from kadv.render.lights import SURFACE_OFFSET
 from kadv.render.shading import Shader, Shading, compact_rows
 from kadv.render.surface import RayHits, Surfaces
 from kadv.scenes.scene import Scene
 
 __all__ = [
     "DEFAULT_MAX_RAYS",
-    "MIRROR_BOUNCES",
     "ExactRenderer",
     "RayHits",
     "RenderOutput",
@@ -38,8 +35,6 @@ __all__ = [
 ]
 
 _MIN_HIT_DEPTH = 1e-6  # metres
-# a ray between facing mirrors ends after this many bounces, on the last mirror's own shading
-MIRROR_BOUNCES = 4
 
 
 @dataclass
@@ -165,14 +160,6 @@ class ExactRenderer:
         self.baked = baked
         self.shader = Shader(self.surfaces, self.shading, self.baked)
         self.lights = self.shader.lights
-        # each triangle's mirror flag and tint, where the scene has mirrors
-        self._mirror = self._mirror_tint = None
-        if any(material.mirror for material in scene.materials):
-            per_material = torch.tensor([material.mirror for material in scene.materials])
-            tints = torch.from_numpy(np.stack([material.base_color for material in scene.materials]))
-            triangles = torch.from_numpy(scene.material_ids).long()
-            self._mirror = per_material[triangles].to(self.device)
-            self._mirror_tint = tints[triangles].float().to(self.device)
 
     def cast(self, origins: torch.Tensor | np.ndarray, directions: torch.Tensor | np.ndarray) -> RayHits:
         """First opaque hits of rays (..., 3), flattened, on the renderer's device (:meth:`Surfaces.cast`)."""
@@ -217,54 +204,11 @@ class ExactRenderer:
         parts = []
         for o, d in zip(origins.split(self.max_rays), directions.split(self.max_rays)):
             hits = self.cast(o, d)
-            parts.append((hits, self.shade(hits, o, d, pixel_angle, colour, geometry, normals)))
+            parts.append((hits, self.shader.shade(hits, o, d, pixel_angle, colour, geometry, normals)))
         if len(parts) == 1:
             return parts[0]
         hits = RayHits(*(torch.cat([getattr(h, f.name) for h, _ in parts]) for f in fields(RayHits)))
         return hits, {key: torch.cat([maps[key] for _, maps in parts]) for key in parts[0][1]}
-
-    def shade(
-        self,
-        hits: RayHits,
-        origins: torch.Tensor,
-        directions: torch.Tensor,
-        pixel_angle: float,
-        colour: bool = True,
-        geometry: bool = True,
-        normals: bool = True,
-        bounces: int = MIRROR_BOUNCES,
-    ) -> dict[str, torch.Tensor]:
-        """:meth:`Shader.shade`'s maps of ``hits`` of rays (N, 3), a mirror's colour (with
-        ``colour``) being what its specular bounce meets, shaded the same way, tinted by its
-        base colour, for at most ``bounces`` bounces (then its own shading)."""
-        maps = self.shader.shade(hits, origins, directions, pixel_angle, colour, geometry, normals)
-        if colour and bounces > 0 and self._mirror is not None:
-            maps["rgb"] = self._mirrored(hits, origins, directions, maps["rgb"], pixel_angle, bounces)
-        return maps
-
-    def _mirrored(
-        self,
-        hits: RayHits,
-        origins: torch.Tensor,
-        directions: torch.Tensor,
-        rgb: torch.Tensor,
-        pixel_angle: float,
-        bounces: int,
-    ) -> torch.Tensor:
-        """``rgb`` (N, 3) with each mirror hit's colour replaced by its reflection's."""
-        ids = hits.triangle_ids.clamp_min(0)
-        rows = torch.nonzero(hits.hit & self._mirror.index_select(0, ids)).squeeze(1)
-        if len(rows) == 0:
-            return rgb
-        mirror_ids, ray = ids.index_select(0, rows), directions.index_select(0, rows)
-        normal = self.surfaces.face_normals.index_select(0, mirror_ids)
-        normal = torch.where((dot(normal, ray) > 0)[:, None], -normal, normal)  # towards the eye
-        point = origins.index_select(0, rows) + ray * hits.t.double().index_select(0, rows)[:, None]
-        reflected = ray - 2.0 * dot(ray, normal)[:, None] * normal
-        start = point + SURFACE_OFFSET * normal
-        seen = self.cast(start, reflected)
-        colours = self.shade(seen, start, reflected, pixel_angle, geometry=False, bounces=bounces - 1)["rgb"]
-        return rgb.index_copy(0, rows, colours * self._mirror_tint.index_select(0, mirror_ids))
 
     def _with_reflections(
         self,

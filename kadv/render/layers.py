@@ -241,7 +241,7 @@ def render_anchor(
         o, d = (rays.reshape(-1, 3) for rays in world_rays(pose, centre_cam))
         centre_angle = pixel_angle(K_centres)
         for hits in _peel(renderer, o, d, renderer.cast(o, d), layers):
-            behind = renderer.shade(hits, o, d, centre_angle, geometry=False)
+            behind = renderer.shader.shade(hits, o, d, centre_angle, geometry=False)
             maps = _layer_maps(renderer, hits, behind, centre_cam.reshape(batch, -1, 3), pose)
             layered.append({key: _upsampled(value, h // supersample, supersample) for key, value in maps.items()})
 

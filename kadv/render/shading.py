@@ -33,7 +33,7 @@ from kadv.render.lights import SURFACE_OFFSET, DeltaLights, Sky, scene_lights, s
 from kadv.render.surface import RayHits, Surfaces, first_hits
 from kadv.scenes.scene import CONDUCTOR_GREY
 
-__all__ = ["LIGHTINGS", "Reflections", "Shader", "Shading", "shade"]
+__all__ = ["LIGHTINGS", "MIRROR_BOUNCES", "Reflections", "Shader", "Shading", "shade"]
 
 LIGHTINGS = ("direct", "baked", "scanned")
 
@@ -100,6 +100,8 @@ SHARP_ROUGHNESS = 0.03
 # windows in blotches, too few rays of the wide lobe meeting them (docs/reference_renders.md)
 _REFLECTION_SMOOTHING = 0.03
 _LOBE_SHARE = 0.5
+# a ray between facing mirrors ends after this many bounces, on the last mirror's own shading
+MIRROR_BOUNCES = 4
 # devices whose reflections are cast for the glossy hits only, counted (elsewhere every row, masked)
 _COMPACTING = ("cpu",)
 # added to every hash: the first point of Roberts' R2 sequence (1 / g, 1 / g^2 with g^3 = g + 1)
@@ -288,6 +290,13 @@ class Shader:
         self._background = torch.tensor(shading.background, dtype=torch.float32).to(device)
         self._emitter_caster = None
         self.reflecting = False
+        # each triangle's mirror flag and tint, where the scene has mirrors
+        self._mirror_flag = self._mirror_tint = None
+        if any(material.mirror for material in scene.materials):
+            triangles = torch.from_numpy(scene.material_ids).long()
+            flags = torch.tensor([material.mirror for material in scene.materials])
+            tints = torch.from_numpy(np.stack([material.base_color for material in scene.materials]))
+            self._mirror_flag, self._mirror_tint = flags[triangles].to(device), tints[triangles].float().to(device)
         if shading.lighting == "scanned" and scene.colors is None and all(m.texture is None for m in scene.materials):
             raise ValueError(
                 f"render.lighting=scanned: scene {scene.name!r} has no vertex colours and no textures, no captured "
@@ -330,9 +339,12 @@ class Shader:
         colour: bool = True,
         geometry: bool = True,
         normals: bool = True,
+        bounces: int = MIRROR_BOUNCES,
     ) -> dict[str, torch.Tensor]:
         """Shade hits of rays (N, 3) float64 on the surfaces' device; ``pixel_angle`` (radians per
-        sample) selects the texture mip level.
+        sample) selects the texture mip level. A mirror's colour is what its specular bounce meets,
+        shaded the same way and tinted by its base colour, for at most ``bounces`` bounces (then its
+        own shading).
 
         Returns "rgb" (N, 3) float32 and, with ``geometry``, the masked "points", "normals" (N, 3)
         float32 (with ``normals``: interpolating them is most of a bare cast's shading) and
@@ -360,18 +372,12 @@ class Shader:
         rgb = self._background.expand(len(t), 3)
         if colour:
             footprint = _footprint(t, directions, facing, pixel_angle)
-            background = self._background
-            if self.shading.lighting == "scanned":
-                shaded = self.surfaces.captured(ids, bary, footprint)
-            elif self.baked is None:
-                base = self.surfaces.albedo(ids, bary, footprint)
-                shaded = shade(self.shading, self._lights, points.float(), shading_normals, base)
-            else:
-                baked = self._baked_colours(hits, bary, footprint, back, points, directions, shading_normals)
-                shaded, background, terms = baked
+            shaded, background, terms = self._lit(hits, footprint, back, points, directions, shading_normals)
             rgb = torch.where(hit[:, None], shaded, background)
             if self._emitter_caster is not None:
                 rgb, terms = self._lamps_seen(hits, origins, directions, rgb, terms)
+            if bounces > 0 and self._mirror_flag is not None:
+                rgb = self._through_mirrors(hits, origins, directions, rgb, pixel_angle, bounces)
         maps = {"rgb": rgb.contiguous()}
         if colour and self.reflecting:
             maps["reflecting"] = terms
@@ -380,6 +386,49 @@ class Shader:
         if geometry and normals:
             maps["normals"] = torch.where(hit[:, None], shading_normals, 0.0)
         return maps
+
+    def _lit(
+        self,
+        hits: RayHits,
+        footprint: torch.Tensor,
+        back: torch.Tensor,
+        points: torch.Tensor | None,
+        directions: torch.Tensor,
+        shading_normals: torch.Tensor | None,
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """Each hit's colour (N, 3) under the lighting, the background, and (baked, where coats and
+        metals reflect) :meth:`shade`'s "reflecting" terms."""
+        ids, bary = hits.triangle_ids.clamp_min(0), hits.barycentrics
+        if self.shading.lighting == "scanned":
+            return self.surfaces.captured(ids, bary, footprint), self._background, None
+        if self.baked is None:
+            base = self.surfaces.albedo(ids, bary, footprint)
+            return shade(self.shading, self._lights, points.float(), shading_normals, base), self._background, None
+        return self._baked_colours(hits, bary, footprint, back, points, directions, shading_normals)
+
+    def _through_mirrors(
+        self,
+        hits: RayHits,
+        origins: torch.Tensor,
+        directions: torch.Tensor,
+        rgb: torch.Tensor,
+        pixel_angle: float,
+        bounces: int,
+    ) -> torch.Tensor:
+        """``rgb`` (N, 3) with each mirror hit's colour replaced by its reflection's."""
+        ids = hits.triangle_ids.clamp_min(0)
+        rows = torch.nonzero(hits.hit & self._mirror_flag.index_select(0, ids)).squeeze(1)
+        if len(rows) == 0:
+            return rgb
+        mirror_ids, ray = ids.index_select(0, rows), directions.index_select(0, rows)
+        normal = self.surfaces.face_normals.index_select(0, mirror_ids)
+        normal = torch.where((dot(normal, ray) > 0)[:, None], -normal, normal)  # towards the eye
+        point = origins.index_select(0, rows) + ray * hits.t.double().index_select(0, rows)[:, None]
+        reflected = ray - 2.0 * dot(ray, normal)[:, None] * normal
+        start = point + SURFACE_OFFSET * normal
+        seen = self.surfaces.cast(start, reflected)
+        colours = self.shade(seen, start, reflected, pixel_angle, geometry=False, bounces=bounces - 1)["rgb"]
+        return rgb.index_copy(0, rows, colours * self._mirror_tint.index_select(0, mirror_ids))
 
     def _shading_normals(
         self, ids: torch.Tensor, bary: torch.Tensor, back: torch.Tensor, directions: torch.Tensor
