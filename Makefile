@@ -74,7 +74,7 @@ lint: $(TEST_STAMP)
 	$(BIN)/ruff format --check .
 
 bench: demo-packages $(TEST_STAMP)
-	cd benchmarks && for b in render reflections bake large_scenes penalty gradcheck warp_reach tiny_accuracy attack_step step_ops search_anytime ranking reference_render; do ../$(BIN)/python $$b.py || exit 1; done
+	cd benchmarks && for b in render reflections bake large_scenes penalty gradcheck warp_reach tiny_accuracy attack_step step_ops search_anytime ranking reference_render view_choice; do ../$(BIN)/python $$b.py || exit 1; done
 
 # the docs' tables of figures made again from the records in benchmarks/results/ (a test fails while
 # a page is out of date with them)

@@ -67,8 +67,7 @@ def main() -> None:
         if name not in ("box_room", "procedural") and not scene_file(name).is_file():
             parser.error(f"--scenes: {name!r} is not box_room, procedural, a scene under {scenes_root()} or a file")
     here = str(Path(__file__).resolve().parent)
-    header = f"{'scene':<20} {'triangles':>10} {'points':>10} {'bake s':>8} {'cached s':>9} {'peak GiB':>9}"
-    print(header + f" {'seen buried':>12}")
+    print("| scene | triangles | points | bake s | cached s | peak GiB | seen buried |\n|---|---|---|---|---|---|---|")
     seconds, buried = {}, {}
     for name in args.scenes.split(","):
         with tempfile.TemporaryDirectory() as cache:
@@ -82,8 +81,8 @@ def main() -> None:
         name = Path(name).parent.name if name.endswith(".xml") else name
         seconds[name], buried[name] = row["bake_s"], row["seen_buried"]
         print(
-            f"{name:<20} {row['triangles']:>10} {row['points']:>10} {row['bake_s']:>8.1f} "
-            f"{row['cached_s']:>9.2f} {row['peak_gib']:>9.2f} {row['seen_buried']:>12.3f}"
+            f"| {name} | {row['triangles']} | {row['points']} | {row['bake_s']:.1f} | {row['cached_s']:.2f} | "
+            f"{row['peak_gib']:.2f} | {row['seen_buried']:.3f} |"
         )
     figures = [f"{name}_s={value:.1f}" for name, value in seconds.items()]
     figures += [f"{name}_seen_buried={value:.3f}" for name, value in buried.items()]

@@ -9,7 +9,6 @@ Run: .venv/bin/python benchmarks/large_scenes.py [--tilings 1 2 4]
 from __future__ import annotations
 
 import argparse
-import re
 import resource
 import subprocess
 import sys
@@ -74,6 +73,8 @@ def main() -> None:
         print(measure(args.measure))
         return
     peaks = {}
+    print("| tiling | triangles | load s | caster build s | render ms | bake s | peak after load GiB | peak GiB |")
+    print("|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as folder:
         for count in args.tilings:
             glb = tile(count, Path(folder) / f"grey_{count}x{count}.glb")
@@ -84,8 +85,9 @@ def main() -> None:
                 .stdout.strip()
                 .splitlines()[-1]
             )
-            print(f"{count}x{count}: {line}", flush=True)
-            peaks[count] = float(re.search(r" peak_gib=(\S+)", line).group(1))
+            row = dict(pair.split("=") for pair in line.split())
+            print(f"| {count}x{count} | " + " | ".join(row.values()) + " |", flush=True)
+            peaks[count] = float(row["peak_gib"])
     print("large_scenes " + " ".join(f"peak_gib_{c}x{c}={p:.2f}" for c, p in peaks.items()))
 
 

@@ -19,7 +19,7 @@ SIZES = ((240, 320), (480, 640))
 
 
 def exact_timings(scenes, backend: str, device: str) -> None:
-    print(f"{'scene':<22} {'size':>9} {'triangles':>10} {'render ms':>10} {'cast ms':>9}")
+    print("| scene | size | triangles | render ms | cast ms |\n|---|---|---|---|---|")
     for scene in scenes:
         renderer = ExactRenderer(scene, backend=backend, device=device)
         camera = scene.cameras[0]
@@ -28,10 +28,8 @@ def exact_timings(scenes, backend: str, device: str) -> None:
             origins, directions = pixel_rays(camera.world_T_cam, K, height, width)
             render = median_seconds(lambda: renderer.render(camera.world_T_cam, K, height, width))
             cast = median_seconds(lambda: renderer.cast(origins, directions))
-            print(
-                f"{scene.name:<22} {height:>4}x{width:<4} {scene.num_triangles:>10} "
-                f"{render * 1e3:>10.1f} {cast * 1e3:>9.1f}"
-            )
+            row = [scene.name, f"{height}x{width}", scene.num_triangles, f"{render * 1e3:.1f}", f"{cast * 1e3:.1f}"]
+            print("| " + " | ".join(map(str, row)) + " |")
 
 
 def differentiable_timings(
@@ -40,14 +38,14 @@ def differentiable_timings(
     """Prints the table; returns per-scene ms of the exact render and of the default configuration."""
     print(f"\nDifferentiableRenderer forward+backward at {height}x{width} (supersample 2, guard band 16)")
     summary: dict[str, list[float]] = {"exact": [], "default": []}
-    print(f"{'scene':<22} {'mode':<44} {'ms':>8}")
+    print("| scene | mode | ms |\n|---|---|---|")
     for scene in scenes:
         renderer = ExactRenderer(scene, backend=backend, device=device)
         camera = scene.cameras[0]
         K = camera.intrinsics(height, width)
         base = camera.world_T_cam[None]
         exact_ms = median_seconds(lambda: renderer.render(base, K, height, width, supersample=2), repeats=3) * 1e3
-        print(f"{scene.name:<22} {'exact render alone (s=2)':<44} {exact_ms:>8.0f}")
+        print(f"| {scene.name} | exact render alone (s=2) | {exact_ms:.0f} |")
         summary["exact"].append(exact_ms)
         for values, refresh in (("exact", "always"), ("warp", "every_k")):
             for silhouette in (False, True):
@@ -63,7 +61,7 @@ def differentiable_timings(
                 label = f"values={values} refresh={refresh} sil={'on' if silhouette else 'off'}"
                 label += " (warped)" if refresh == "every_k" else ""
                 step_ms = median_seconds(step, repeats=3) * 1e3
-                print(f"{scene.name:<22} {label:<44} {step_ms:>8.0f}")
+                print(f"| {scene.name} | {label} | {step_ms:.0f} |")
                 if config == DiffRenderConfig():
                     summary["default"].append(step_ms)
     return summary
