@@ -50,7 +50,7 @@ def main(
     }
     medians: dict[tuple[str, str], dict[str, float]] = {}
     focal: dict[tuple[str, str], dict[str, float]] = {}
-    print(f"{'scene':<16} {'method':<30} " + " ".join(f"{f:>15}" for f in FUNCTIONALS) + "   seconds")
+    print("| scene | method | " + " | ".join(FUNCTIONALS) + " | seconds |\n" + "|---" * (len(FUNCTIONALS) + 3) + "|")
     for scene_name, scene in scenes.items():
         start = time.perf_counter()
         results = gradient_check_poses(
@@ -70,8 +70,8 @@ def main(
             medians[scene_name, method] = {f: float(np.median([c.score(f) for c in checks])) for f in FUNCTIONALS}
             focal[scene_name, method] = {f: float(np.median([c.focal_score(f) for c in checks])) for f in FUNCTIONALS}
             for label, table in (("pose", medians), ("focal length", focal)):
-                row = " ".join(f"{table[scene_name, method][f]:>15.3f}" for f in FUNCTIONALS)
-                print(f"{scene_name:<16} {method + ' ' + label:<30} {row}   {seconds:7.0f}")
+                row = " | ".join(f"{table[scene_name, method][f]:.3f}" for f in FUNCTIONALS)
+                print(f"| {scene_name} | {method} {label} | {row} | {seconds:.0f} |")
     checked = [m for m in CONFIGS if m != "no silhouettes"]
 
     def least(table: dict, scene_names, functionals) -> float:
