@@ -3,7 +3,7 @@
 result line. ``common`` (which every script imports first) calls :func:`start_if_asked`.
 
 A record (``"schema": "kadv-benchmark-record-1"``, documented in ``benchmarks/README.md``):
-``benchmark``, ``date`` (UTC), ``commit`` and ``dirty`` (tracked files changed), ``source``
+``benchmark``, ``date`` (UTC), ``commit`` and ``dirty`` (tracked files changed, records aside), ``source``
 (``files``: the repository's modules the run imported, the script among them; ``hash``: SHA-256
 of their bytes, to tell a stale record), ``machine`` (``cpu``, ``cores``, ``threads``, ``torch``,
 ``device``, ``gpu``, ``busy_at_start``: the share of the CPUs busy in the half second before
@@ -63,7 +63,9 @@ def start_if_asked() -> None:
         return
     sys.argv = [sys.argv[0], *(arg for arg in sys.argv[1:] if arg != "--record")]
     # the code that runs is the checkout's as the run starts
-    commit = {"commit": _git("rev-parse", "HEAD"), "dirty": bool(_git("status", "--porcelain", "--untracked-files=no"))}
+    # records appended since the commit are data, not a change to the code that runs
+    changed = _git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!benchmarks/results")
+    commit = {"commit": _git("rev-parse", "HEAD"), "dirty": bool(changed)}
     load, script = _busy_share(), Path(sys.argv[0]).resolve()
     tee = sys.stdout = _Tee(sys.stdout)
     failed = []
