@@ -9,9 +9,12 @@ A page marks each generated block with an opening and a closing comment::
 Between them this script writes, for the latest record of that benchmark with those arguments on
 each machine class (:func:`record.machine_class`), the record's printed table (``table N``,
 counted from 1), or its last line's fields (``fields``, the default), then the command, the
-machine, the commit and the date. A record whose source has changed since it was made (its files'
-hash is no longer its ``source.hash``) is marked stale on the page, naming the command to run
-again. ``--check`` writes nothing and exits 1 where a block is not what the records make.
+machine, the commit and the date. ``<!-- figures summary NAME -->`` writes the table
+:data:`SUMMARIES` names: one figure a row, each from the latest record of its own benchmark, one
+table per machine class. A record whose source has changed since it was made (its files' hash is no
+longer its ``source.hash``) is marked stale on the page, naming the command to run again; a record
+imported from prose says that it was measured before records were kept, on the commit the prose
+gave. ``--check`` writes nothing and exits 1 where a block is not what the records make.
 
 Run: .venv/bin/python benchmarks/figures.py [--check]
 """
@@ -22,14 +25,114 @@ import argparse
 import json
 import re
 import shlex
+import string
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 from record import RESULTS, ROOT, machine_class, source_hash
 
-__all__ = ["PAGES", "generate", "latest_records", "render_block", "stale_pages"]
+__all__ = ["PAGES", "SUMMARIES", "Figure", "generate", "latest_records", "render_block", "stale_pages"]
 
 PAGES = ("README.md", "docs/performance.md", "docs/attack.md", "docs/testing.md", "docs/benchmark.md", "docs/models.md")
+
+
+@dataclass(frozen=True)
+class Figure:
+    """One row of a summary table: ``value`` formats the last-line fields of the latest record of
+    ``benchmark`` run with ``args`` (``{name}`` a field, as :meth:`str.format` reads it)."""
+
+    label: str
+    benchmark: str
+    args: tuple[str, ...]
+    value: str
+
+    def fields(self) -> set[str]:
+        return {name for _, name, _, _ in string.Formatter().parse(self.value) if name}
+
+
+SUMMARIES: dict[str, tuple[Figure, ...]] = {
+    # docs/performance.md's current figures
+    "current": (
+        Figure("`make demo` from a fresh clone (creating `.venv`, baking)", "make_timings", (), "{demo_s} s"),
+        Figure("`make test` from a fresh clone", "make_timings", (), "{test_s} s, {tests_passed} passed"),
+        Figure(
+            "one attack step, kadv-tiny + SSIM, 240x320, grey_white_room: (step - networks) / networks",
+            "attack_step",
+            (),
+            "{overhead_tiny}",
+        ),
+        Figure(
+            "the same with DA-V2-Small + perceptual: overhead; its networks; the render forward + backward",
+            "attack_step",
+            (),
+            "{overhead}; {networks_ms} ms; {render_ms} ms",
+        ),
+        Figure(
+            "black-box evaluations a second (exact renders of 8 views, s = 2, and kadv-tiny)",
+            "attack_step",
+            (),
+            "{evals_per_s}",
+        ),
+        Figure(
+            "exact render; differentiable render forward + backward (the default), 240x320, s = 2, mean over the "
+            "four bench scenes' file cameras",
+            "render",
+            (),
+            "{exact_ms_mean} ms; {differentiable_default_ms_mean} ms",
+        ),
+        Figure(
+            "the same with Warp's caster on the CPU",
+            "render",
+            ("--backend", "warp"),
+            "{exact_ms_mean} ms; {differentiable_default_ms_mean} ms",
+        ),
+        Figure(
+            "operations a kadv-tiny step dispatches (Warp's caster), of them outside the views; what a captured "
+            "step launches",
+            "step_ops",
+            ("--backend", "warp"),
+            "{total}, {non_view}; {captured_launches}",
+        ),
+        Figure(
+            "baked lighting, one bake: box room, generated room, grey_white_room, modern_hall, japanese_classroom",
+            "bake",
+            (),
+            "{box_room_s} s, {procedural_s} s, {grey_white_room_s} s, {modern_hall_s} s, {japanese_classroom_s} s",
+        ),
+        Figure(
+            "a 2.3-million-triangle scene (the grey room tiled 4x4): peak memory, bake included",
+            "large_scenes",
+            (),
+            "{peak_gib_4x4} GiB",
+        ),
+        Figure(
+            "gradient check, direct light: least median cosine, interior; full, box room; full, grey_white_room "
+            "(thresholds 0.99, 0.95, 0.95)",
+            "gradcheck",
+            (),
+            "{interior_median_cos}, {full_box_median_cos}, {full_real_median_cos}",
+        ),
+        Figure(
+            "the same under baked light",
+            "gradcheck",
+            ("--lighting", "baked"),
+            "{interior_median_cos}, {full_box_median_cos}, {full_real_median_cos}",
+        ),
+        Figure(
+            "the focal length's derivative, direct light (the same three)",
+            "gradcheck",
+            (),
+            "{focal_interior_median_cos}, {focal_full_box_median_cos}, {focal_full_real_median_cos}",
+        ),
+        Figure(
+            "embedded models' delta1 on the shared scenes: kadv-tiny, kadv-tiny-dpt",
+            "tiny_accuracy",
+            (),
+            "{kadv_tiny_real}, {kadv_tiny_dpt_real}",
+        ),
+    ),
+}
 _BLOCK = re.compile(r"(<!-- figures (?P<spec>[^>]*?) -->\n)(?P<body>.*?)(<!-- /figures -->)", re.S)
 
 
@@ -41,11 +144,12 @@ def read_records(folder: Path = RESULTS) -> list[dict]:
     return records
 
 
-def latest_records(records: list[dict], benchmark: str, args: list[str]) -> list[dict]:
-    """The latest record of ``benchmark`` run with ``args`` on each machine class, by date."""
+def latest_records(records: list[dict], benchmark: str, args: list[str], holds=lambda record: True) -> list[dict]:
+    """The latest record of ``benchmark`` run with ``args`` on each machine class, by date, of those
+    that hold what a block shows (``holds``: a record's fields or its N-th table)."""
     latest: dict[str, dict] = {}
     for record in records:
-        if record["benchmark"] == benchmark and record["args"] == args:
+        if record["benchmark"] == benchmark and record["args"] == args and holds(record):
             key = machine_class(record["machine"])
             if key not in latest or record["date"] >= latest[key]["date"]:
                 latest[key] = record
@@ -58,36 +162,105 @@ def _markdown(header: list[str], rows: list[list]) -> list[str]:
     ]
 
 
-def _caption(record: dict, command: str, root: Path) -> str:
-    machine = record["machine"]
-    where = machine.get("gpu") or f"{machine['cpu']}, {machine['cores']} cores, {machine['threads']} threads"
-    busy = "something else running" if machine.get("others_running") else "nothing else running"
-    made = "imported from the docs' prose" if record.get("imported") else f"`{command} --record`"
+def _command(benchmark: str, args: list[str]) -> str:
+    return " ".join(["python", f"benchmarks/{benchmark}.py", *map(shlex.quote, args)])
+
+
+def _where(machine: dict) -> str:
+    """The machine as a caption names it; what a record imported from prose lacks is left out."""
+    parts = [machine.get("gpu") or f"{machine['cpu']}, {machine['cores']} cores"]
+    if machine.get("threads"):
+        parts.append(f"{machine['threads']} thread{'s' if machine['threads'] > 1 else ''}")
+    if machine.get("torch"):
+        parts.append(f"torch {machine['torch']}")
+    if machine.get("others_running") is not None:
+        parts.append("something else running" if machine["others_running"] else "nothing else running")
+    return ", ".join(parts)
+
+
+def _commit(record: dict) -> str:
     dirty = " with uncommitted changes" if record.get("dirty") else ""
-    line = (
-        f"*{made}; {where}, torch {machine['torch']}, {busy}; commit {record['commit'][:7]}{dirty}, "
-        f"{record['date'][:10]}.*"
-    )
+    return f"commit {record['commit'][:7]}{dirty}" if record["commit"] else "commit not given"
+
+
+def _stale(record: dict, root: Path) -> bool:
+    """Whether the code ``record`` measured has changed since (a record without source files, one
+    imported from prose, cannot be checked and says so instead)."""
     files = record.get("source", {}).get("files")
-    if files and source_hash(files, root) != record["source"]["hash"]:
+    return bool(files) and source_hash(files, root) != record["source"]["hash"]
+
+
+def _caption(record: dict, command: str, root: Path) -> str:
+    when = f"{_commit(record)}, {record['date'][:10]}"
+    if record.get("imported"):
+        rerun = f" To measure today's code: `{command} --record`." if (root / command.split()[1]).is_file() else ""
+        return (
+            f"*Imported from the docs' prose, measured before records were kept and not checked against "
+            f"today's code: `{record.get('command') or command}`; {_where(record['machine'])}; {when}.*{rerun}"
+        )
+    line = f"*`{command} --record`; {_where(record['machine'])}; {when}.*"
+    if _stale(record, root):
         line += f" **Stale**: the code it measures has changed since; run `{command} --record` again."
     return line
+
+
+def render_summary(figures: tuple[Figure, ...], records: list[dict], root: Path = ROOT) -> str:
+    """One table per machine class: each figure from the latest record of its benchmark that holds
+    the fields its value needs, with that record's commit and date, marked stale where its code
+    changed since; then the commands of the figures no record holds yet."""
+    tables: dict[str, list[list[str]]] = {}
+    missing = []
+    for figure in figures:
+        command = _command(figure.benchmark, list(figure.args))
+        needed = figure.fields()
+        found = latest_records(
+            records, figure.benchmark, list(figure.args), lambda r: needed <= r["result"]["fields"].keys()
+        )
+        for record in found:
+            measured = f"{record['commit'][:7]}, {record['date'][:10]}" + (" **stale**" if _stale(record, root) else "")
+            if record["machine"].get("others_running"):
+                measured += ", something else running"
+            row = [figure.label, figure.value.format(**record["result"]["fields"]), measured, f"`{command}`"]
+            tables.setdefault(machine_class(record["machine"]), []).append(row)
+        if not found and f"`{command}`" not in missing:
+            missing.append(f"`{command}`")
+    parts = []
+    for where, rows in sorted(tables.items()):
+        lines = _markdown(["figure", "value", "measured (commit, date)", "command"], rows)
+        note = f"*{where}; each command run with `--record`.*"
+        if any("**stale**" in row[2] for row in rows):
+            note += " **stale**: the code the figure measures has changed since; run its command with `--record` again."
+        parts.append("\n".join([*lines, "", note]) + "\n")
+    if missing:
+        parts.append(f"*Not recorded yet (run with `--record`): {', '.join(missing)}.*\n")
+    return "\n".join(parts)
 
 
 def render_block(spec: str, records: list[dict], root: Path = ROOT) -> str:
     """The block's body for its ``spec`` (``BENCHMARK [ARGS...] [| table N | fields]``)."""
     what, _, shown = spec.partition("|")
     benchmark, *args = shlex.split(what)
-    command = " ".join(["python", f"benchmarks/{benchmark}.py", *map(shlex.quote, args)])
-    found = latest_records(records, benchmark, args)
+    if benchmark == "summary":
+        if args[0] not in SUMMARIES:
+            raise SystemExit(f"figures: no summary named {args[0]!r} (there are {', '.join(SUMMARIES)})")
+        return render_summary(SUMMARIES[args[0]], records, root)
+    command = _command(benchmark, args)
+    shown_words = shown.split()
+    table = int(shown_words[1]) if shown_words[:1] == ["table"] else 0
+    found = latest_records(
+        records,
+        benchmark,
+        args,
+        lambda r: len(r["result"]["tables"]) >= table if table else bool(r["result"]["fields"]),
+    )
     if not found:
         return f"*No record of `{command}` yet: run it with `--record`.*\n"
     parts = []
     for record in found:
-        shown_words = shown.split()
-        if shown_words[:1] == ["table"]:
-            table = record["result"]["tables"][int(shown_words[1]) - 1]
-            lines = _markdown(table["header"], table["rows"])
+        if table:
+            lines = _markdown(
+                record["result"]["tables"][table - 1]["header"], record["result"]["tables"][table - 1]["rows"]
+            )
         else:
             lines = _markdown(["field", "value"], sorted(record["result"]["fields"].items()))
         parts.append("\n".join([*lines, "", _caption(record, command, root)]) + "\n")

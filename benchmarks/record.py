@@ -143,8 +143,8 @@ def machine_class(machine: dict) -> str:
 
 
 def _machine(load: float) -> dict:
-    import torch
-
+    # torch as the run left it; a script that never loaded it cannot load it at exit
+    torch = sys.modules.get("torch")
     cpu = next(
         (
             line.split(":", 1)[1].strip()
@@ -155,14 +155,14 @@ def _machine(load: float) -> dict:
     )
     argv = sys.argv[1:]
     device = next((argv[i + 1] for i, arg in enumerate(argv[:-1]) if arg == "--device"), "cpu")
-    gpu = torch.cuda.get_device_name() if device.startswith("cuda") and torch.cuda.is_available() else None
+    cuda = torch is not None and device.startswith("cuda") and torch.cuda.is_available()
     return {
         "cpu": cpu,
         "cores": os.cpu_count(),
-        "threads": torch.get_num_threads(),
-        "torch": torch.__version__,
+        "threads": torch.get_num_threads() if torch else None,
+        "torch": torch.__version__ if torch else None,
         "device": device,
-        "gpu": gpu,
+        "gpu": torch.cuda.get_device_name() if cuda else None,
         "busy_at_start": round(load, 2),
         "others_running": load >= _BUSY,
     }

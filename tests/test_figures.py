@@ -62,3 +62,50 @@ def test_a_block_shows_the_latest_record_per_machine_and_says_when_its_code_chan
     source.write_text("x = 2\n")  # the code it measured changed
     assert figures.stale_pages(["page.md"], tmp_path) == ["page.md"]
     assert "**Stale**" in figures.generate(made, figures.read_records(results), tmp_path)
+
+
+def test_a_summary_takes_each_figure_from_its_own_latest_record_and_names_the_missing(figures, tmp_path) -> None:
+    source = tmp_path / "kadv" / "thing.py"
+    source.parent.mkdir()
+    source.write_text("x = 1\n")
+    hash_ = figures.source_hash(["kadv/thing.py"], tmp_path)
+    records = [
+        _record("speed", "2026-12-01T00:00:00Z", 10.0, ["kadv/thing.py"], hash_),
+        _record("speed", "2026-12-02T00:00:00Z", 12.0, ["kadv/thing.py"], "an older hash"),
+        {**_record("size", "2026-12-03T00:00:00Z", 3.0, ["kadv/thing.py"], hash_), "args": []},
+    ]
+    rows = (
+        figures.Figure("how fast", "speed", ("--fast",), "{ms} ms"),
+        figures.Figure("how big", "size", (), "{ms} GiB"),
+        figures.Figure("how far", "reach", (), "{m} m"),
+        figures.Figure("a field no record holds", "size", (), "{volume}"),
+    )
+    made = figures.render_summary(rows, records, tmp_path)
+    assert "| how fast | 12.0 ms | 0123456, 2026-12-02 **stale** | `python benchmarks/speed.py --fast` |" in made
+    assert "| how big | 3.0 GiB | 0123456, 2026-12-03 | `python benchmarks/size.py` |" in made
+    assert "*CPU A, 2 cores; each command run with `--record`.*" in made and "**stale**: the code" in made
+    assert "Not recorded yet" in made and "`python benchmarks/reach.py`" in made
+    assert "a field no record holds" not in made  # the size record holds no `volume`: no row, but named
+    assert made.count("`python benchmarks/size.py`") == 2
+
+
+def test_a_record_imported_from_prose_says_so_and_names_what_made_it(figures, tmp_path) -> None:
+    imported = {
+        **_record("speed", "2026-11-01T00:00:00Z", 7.0, [], ""),
+        "imported": True,
+        "commit": "",
+        "command": "a script of the time",
+        "machine": {"cpu": "CPU A", "cores": 2, "threads": None, "torch": None, "device": "cpu", "gpu": None,
+                    "busy_at_start": None, "others_running": None},
+    }  # fmt: skip
+    del imported["source"]
+    made = figures.render_block("speed --fast | table 1", [imported], tmp_path)
+    assert "| box | 7.0 |" in made and "Imported from the docs' prose" in made
+    assert "`a script of the time`; CPU A, 2 cores; commit not given, 2026-11-01" in made
+    assert "nothing else running" not in made and "Stale" not in made
+    # a block shows the latest record that holds what it asks for: a later record without a table
+    later = {
+        **_record("speed", "2026-12-05T00:00:00Z", 9.0, [], ""),
+        "result": {"line": "", "fields": {}, "tables": []},
+    }
+    assert "| box | 7.0 |" in figures.render_block("speed --fast | table 1", [imported, later], tmp_path)
