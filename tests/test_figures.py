@@ -34,15 +34,23 @@ def _record(benchmark: str, date: str, value: float, files: list[str], hash_: st
     }  # fmt: skip
 
 
+@pytest.fixture
+def measured(figures, tmp_path) -> tuple[Path, str]:
+    """A module a benchmark measured, in a repository at ``tmp_path``, and the hash of its source."""
+    source = tmp_path / "kadv" / "thing.py"
+    source.parent.mkdir()
+    source.write_text("x = 1\n")
+    return source, figures.source_hash(["kadv/thing.py"], tmp_path)
+
+
 def test_the_pages_are_what_their_records_make(figures) -> None:
     assert figures.stale_pages() == [], "run make figures"
 
 
-def test_a_block_shows_the_latest_record_per_machine_and_says_when_its_code_changed(figures, tmp_path) -> None:
-    source = tmp_path / "kadv" / "thing.py"
-    source.parent.mkdir()
-    source.write_text("x = 1\n")
-    hash_ = figures.source_hash(["kadv/thing.py"], tmp_path)
+def test_a_block_shows_the_latest_record_per_machine_and_says_when_its_code_changed(
+    figures, measured, tmp_path
+) -> None:
+    source, hash_ = measured
     records = [
         _record("speed", "2026-12-01T00:00:00Z", 10.0, ["kadv/thing.py"], hash_),
         _record("speed", "2026-12-02T00:00:00Z", 12.0, ["kadv/thing.py"], hash_),
@@ -64,11 +72,10 @@ def test_a_block_shows_the_latest_record_per_machine_and_says_when_its_code_chan
     assert "**Stale**" in figures.generate(made, figures.read_records(results), tmp_path)
 
 
-def test_a_summary_takes_each_figure_from_its_own_latest_record_and_names_the_missing(figures, tmp_path) -> None:
-    source = tmp_path / "kadv" / "thing.py"
-    source.parent.mkdir()
-    source.write_text("x = 1\n")
-    hash_ = figures.source_hash(["kadv/thing.py"], tmp_path)
+def test_a_summary_takes_each_figure_from_its_own_latest_record_and_names_the_missing(
+    figures, measured, tmp_path
+) -> None:
+    _, hash_ = measured
     records = [
         _record("speed", "2026-12-01T00:00:00Z", 10.0, ["kadv/thing.py"], hash_),
         _record("speed", "2026-12-02T00:00:00Z", 12.0, ["kadv/thing.py"], "an older hash"),
