@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -208,7 +209,7 @@ def main(budget: int, picture_path: Path | None) -> None:
                     pair[1]["delta1"]["scale_shift"],
                 )
                 picture(picture_path, max(pairs["free"], key=drop))
-        print(f"  ({name}: {time.perf_counter() - started:.0f} s)", flush=True)
+        print(f"  ({name}: {time.perf_counter() - started:.0f} s)", file=sys.stderr, flush=True)
     summary = []
     right = [pair[0]["delta1"]["none"] >= RIGHT for pair in figures["fixed", RADII[0][0]]]
     for radius in RADII:
