@@ -34,7 +34,15 @@ from record import RESULTS, ROOT, machine_class, source_hash
 
 __all__ = ["PAGES", "SUMMARIES", "Figure", "generate", "latest_records", "render_block", "stale_pages"]
 
-PAGES = ("README.md", "docs/performance.md", "docs/attack.md", "docs/testing.md", "docs/benchmark.md", "docs/models.md")
+PAGES = (
+    "README.md",
+    "docs/performance.md",
+    "docs/attack.md",
+    "docs/testing.md",
+    "docs/benchmark.md",
+    "docs/models.md",
+    "docs/lighting.md",
+)
 
 
 @dataclass(frozen=True)
