@@ -119,25 +119,25 @@ SUMMARIES: dict[str, tuple[Figure, ...]] = {
             "(thresholds 0.99, 0.95, 0.95)",
             "gradcheck",
             (),
-            "{interior_median_cos}, {full_box_median_cos}, {full_real_median_cos}",
+            "{interior_median_cos:.3f}, {full_box_median_cos:.3f}, {full_real_median_cos:.3f}",
         ),
         Figure(
             "the same under baked light",
             "gradcheck",
             ("--lighting", "baked"),
-            "{interior_median_cos}, {full_box_median_cos}, {full_real_median_cos}",
+            "{interior_median_cos:.3f}, {full_box_median_cos:.3f}, {full_real_median_cos:.3f}",
         ),
         Figure(
             "the focal length's derivative, direct light (the same three)",
             "gradcheck",
             (),
-            "{focal_interior_median_cos}, {focal_full_box_median_cos}, {focal_full_real_median_cos}",
+            "{focal_interior_median_cos:.3f}, {focal_full_box_median_cos:.3f}, {focal_full_real_median_cos:.3f}",
         ),
         Figure(
             "embedded models' delta1 on the shared scenes: kadv-tiny, kadv-tiny-dpt",
             "tiny_accuracy",
             (),
-            "{kadv_tiny_real}, {kadv_tiny_dpt_real}",
+            "{kadv_tiny_real:.3f}, {kadv_tiny_dpt_real:.3f}",
         ),
     ),
 }
@@ -270,7 +270,9 @@ def render_block(spec: str, records: list[dict], root: Path = ROOT) -> str:
                 record["result"]["tables"][table - 1]["header"], record["result"]["tables"][table - 1]["rows"]
             )
         else:
-            lines = _markdown(["field", "value"], sorted(record["result"]["fields"].items()))
+            # as the line printed them (a parsed 0.990 would show as 0.99)
+            printed = dict(pair.split("=", 1) for pair in record["result"]["line"].split()[1:])
+            lines = _markdown(["field", "value"], sorted((printed or record["result"]["fields"]).items()))
         parts.append("\n".join([*lines, "", _caption(record, command, root)]) + "\n")
     return "\n".join(parts)
 
