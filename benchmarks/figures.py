@@ -30,7 +30,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from record import RESULTS, ROOT, machine_class, source_hash
+from record import RESULTS, ROOT, machine_class, printed_fields, source_hash
 
 __all__ = ["PAGES", "SUMMARIES", "Figure", "generate", "latest_records", "render_block", "stale_pages"]
 
@@ -186,9 +186,11 @@ def _where(machine: dict) -> str:
     return ", ".join(parts)
 
 
-def _commit(record: dict) -> str:
+def _when(record: dict) -> str:
+    """The commit a record measured and its day."""
     dirty = " with uncommitted changes" if record.get("dirty") else ""
-    return f"commit {record['commit'][:7]}{dirty}" if record["commit"] else "commit not given"
+    commit = f"commit {record['commit'][:7]}{dirty}" if record["commit"] else "commit not given"
+    return f"{commit}, {record['date'][:10]}"
 
 
 def _stale(record: dict, root: Path) -> bool:
@@ -199,9 +201,10 @@ def _stale(record: dict, root: Path) -> bool:
 
 
 def _caption(record: dict, command: str, root: Path) -> str:
-    when = f"{_commit(record)}, {record['date'][:10]}"
+    when = _when(record)
     if record.get("imported"):
-        rerun = f" To measure today's code: `{command} --record`." if (root / command.split()[1]).is_file() else ""
+        script = root / "benchmarks" / f"{record['benchmark']}.py"
+        rerun = f" To measure today's code: `{command} --record`." if script.is_file() else ""
         return (
             f"*Imported from the docs' prose, measured before records were kept and not checked against "
             f"today's code: `{record.get('command') or command}`; {_where(record['machine'])}; {when}.*{rerun}"
@@ -217,6 +220,7 @@ def render_summary(figures: tuple[Figure, ...], records: list[dict], root: Path 
     the fields its value needs, with that record's commit and date, marked stale where its code
     changed since; then the commands of the figures no record holds yet."""
     tables: dict[str, list[list[str]]] = {}
+    stale_on: set[str] = set()
     missing = []
     for figure in figures:
         command = _command(figure.benchmark, list(figure.args))
@@ -225,18 +229,21 @@ def render_summary(figures: tuple[Figure, ...], records: list[dict], root: Path 
             records, figure.benchmark, list(figure.args), lambda r: needed <= r["result"]["fields"].keys()
         )
         for record in found:
-            measured = f"{record['commit'][:7]}, {record['date'][:10]}" + (" **stale**" if _stale(record, root) else "")
+            where, stale = machine_class(record["machine"]), _stale(record, root)
+            measured = f"{record['commit'][:7]}, {record['date'][:10]}" + (" **stale**" if stale else "")
             if record["machine"].get("others_running"):
                 measured += ", something else running"
             row = [figure.label, figure.value.format(**record["result"]["fields"]), measured, f"`{command}`"]
-            tables.setdefault(machine_class(record["machine"]), []).append(row)
+            tables.setdefault(where, []).append(row)
+            if stale:
+                stale_on.add(where)
         if not found and f"`{command}`" not in missing:
             missing.append(f"`{command}`")
     parts = []
     for where, rows in sorted(tables.items()):
         lines = _markdown(["figure", "value", "measured (commit, date)", "command"], rows)
         note = f"*{where}; each command run with `--record`.*"
-        if any("**stale**" in row[2] for row in rows):
+        if where in stale_on:
             note += " **stale**: the code the figure measures has changed since; run its command with `--record` again."
         parts.append("\n".join([*lines, "", note]) + "\n")
     if missing:
@@ -271,7 +278,7 @@ def render_block(spec: str, records: list[dict], root: Path = ROOT) -> str:
             )
         else:
             # as the line printed them (a parsed 0.990 would show as 0.99)
-            printed = dict(pair.split("=", 1) for pair in record["result"]["line"].split()[1:])
+            printed = printed_fields(record["result"]["line"])
             lines = _markdown(["field", "value"], sorted((printed or record["result"]["fields"]).items()))
         parts.append("\n".join([*lines, "", _caption(record, command, root)]) + "\n")
     return "\n".join(parts)

@@ -28,7 +28,7 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["RESULTS", "SCHEMA", "machine_class", "parse_tables", "source_hash", "start_if_asked"]
+__all__ = ["RESULTS", "SCHEMA", "machine_class", "parse_tables", "printed_fields", "source_hash", "start_if_asked"]
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results"
@@ -62,9 +62,9 @@ def start_if_asked() -> None:
     if "--record" not in sys.argv[1:]:
         return
     sys.argv = [sys.argv[0], *(arg for arg in sys.argv[1:] if arg != "--record")]
-    # the code that runs is the checkout's as the run starts
-    # records appended since the commit are data, not a change to the code that runs
-    changed = _git("status", "--porcelain", "--untracked-files=no", "--", ".", ":!benchmarks/results")
+    # the code that runs is the checkout's as the run starts; records appended since the commit are
+    # data, not a change to that code
+    changed = _git("status", "--porcelain", "--untracked-files=no", "--", ".", f":!{RESULTS.relative_to(ROOT)}")
     commit = {"commit": _git("rev-parse", "HEAD"), "dirty": bool(changed)}
     load, script = _busy_share(), Path(sys.argv[0]).resolve()
     tee = sys.stdout = _Tee(sys.stdout)
@@ -88,8 +88,13 @@ def _busy_share(seconds: float = 0.5) -> float:
     return (busy1 - busy0) / max(total1 - total0, 1)
 
 
-def _fields(text: str) -> dict:
-    """``key=value`` pairs of a result line, numbers as numbers."""
+def printed_fields(line: str) -> dict[str, str]:
+    """The ``key=value`` pairs of a result line ``name key=value ...``, as it printed them."""
+    return dict(pair.split("=", 1) for pair in line.split()[1:])
+
+
+def _fields(line: str) -> dict:
+    """The ``key=value`` pairs of a result line, numbers as numbers."""
 
     def value(raw: str):
         for kind in (int, float):
@@ -99,7 +104,7 @@ def _fields(text: str) -> dict:
                 pass
         return {"True": True, "False": False}.get(raw, raw)
 
-    return {key: value(raw) for key, _, raw in (pair.partition("=") for pair in text.split())}
+    return {key: value(raw) for key, raw in printed_fields(line).items()}
 
 
 def parse_tables(text: str) -> list[dict]:
@@ -187,7 +192,7 @@ def _append(printed: str, load: float, script: Path, commit: dict) -> None:
         "source": {"files": files, "hash": source_hash(files)},
         "machine": _machine(load),
         "args": sys.argv[1:],
-        "result": {"line": lines[-1], "fields": _fields(match.group(2)), "tables": parse_tables(printed)},
+        "result": {"line": lines[-1], "fields": _fields(lines[-1]), "tables": parse_tables(printed)},
         "imported": False,
     }
     RESULTS.mkdir(parents=True, exist_ok=True)
