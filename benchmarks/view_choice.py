@@ -27,7 +27,7 @@ from common import bench_scenes, default_lighting
 import torch
 
 from kadv.attack import AttackConfig, InitViewConfig, Study, StudySettings, sample_init_views, sample_valid_views
-from kadv.attack.init_views import score_views
+from kadv.attack.init_views import ViewScores, score_views
 from kadv.geometry import intrinsics_from_fov
 from kadv.losses import LossConfig
 from kadv.models import load_model
@@ -38,15 +38,17 @@ from kadv.render import ExactRenderer, Shading
 INIT_SIZE, SEARCH_SIZE = (120, 160), (96, 128)
 
 
-def content_weights(scenes, model, weights: list[float], picks: int, seed: int) -> dict[float, tuple]:
+def candidate_scores(renderer: ExactRenderer, model, seed: int) -> ViewScores:
+    """The model's scores of ``init.candidates`` seeded candidate views of the renderer's scene."""
+    config = InitViewConfig()
+    poses = sample_valid_views(renderer, config.candidates, seed, config, PenaltyConfig(), *INIT_SIZE)
+    fov = torch.full((len(poses),), config.fov_x_deg, dtype=torch.float64)
+    return score_views(model, renderer, poses, fov, *INIT_SIZE)
+
+
+def content_weights(scored: list[ViewScores], weights: list[float], picks: int) -> dict[float, tuple]:
     """Per weight: the picks' mean delta1, surfaces and far/near ratio, and the picks with at most
-    two surfaces, of ``picks`` init views a scene."""
-    config, penalty, scored = InitViewConfig(), PenaltyConfig(), []
-    for scene in scenes:
-        renderer = ExactRenderer(scene, Shading(lighting=default_lighting()))
-        poses = sample_valid_views(renderer, config.candidates, seed, config, penalty, *INIT_SIZE)
-        fov = torch.full((len(poses),), config.fov_x_deg, dtype=torch.float64)
-        scored.append(score_views(model, renderer, poses, fov, *INIT_SIZE))
+    two surfaces, of ``picks`` init views a scene (``scored``: each scene's candidates)."""
     rows = {}
     for weight in weights:
         picked = [
@@ -59,27 +61,28 @@ def content_weights(scenes, model, weights: list[float], picks: int, seed: int) 
     return rows
 
 
-def uninformative_chosen(scenes, model, check: bool, views: int, budget: int, loss: str, seed: int) -> tuple:
-    """Of the adversarial views the default search chooses with the check ``check``: how many are
-    uninformative, out of how many, and how many evaluated views the check judged uninformative."""
+def search_study(scene, model, check: bool, budget: int, loss: str) -> Study:
+    """The default search on ``scene`` at ``SEARCH_SIZE`` with the uninformative check ``check``."""
+    settings = StudySettings(
+        size=SEARCH_SIZE, shading=Shading(lighting=default_lighting()), loss=LossConfig(kind=loss),
+        penalty=PenaltyConfig(uninformative=check), attack=AttackConfig(budget_passes=budget), progress=False,
+    )  # fmt: skip
+    return Study.build(scene, model, settings)
+
+
+def uninformative_chosen(study: Study, init: list, seed: int) -> tuple[int, int, int]:
+    """Of the adversarial views the study's search chooses from ``init``: how many are uninformative,
+    out of how many, and how many evaluated views its check judged uninformative."""
     limit = PenaltyConfig().max_plane_share
     chosen = total = judged = 0
-    for scene in scenes:
-        settings = StudySettings(
-            size=SEARCH_SIZE, shading=Shading(lighting=default_lighting()), loss=LossConfig(kind=loss),
-            penalty=PenaltyConfig(uninformative=check), attack=AttackConfig(budget_passes=budget), progress=False,
-        )  # fmt: skip
-        study = Study.build(scene, model, settings)
-        # the same init views either way: chosen as the commands choose them, the check on
-        init = sample_init_views(study.renderer, model, views, seed, InitViewConfig(), PenaltyConfig(), *SEARCH_SIZE)
-        for view in study.attack(init, seed).views:
-            judged += sum(record.verdict == UNINFORMATIVE for record in view.records)
-            poses = torch.stack([record.world_T_cam(view.init.world_T_cam) for record in view.top])
-            K = intrinsics_from_fov(view.init.fov_x_deg, *SEARCH_SIZE)
-            out = study.renderer.render(poses, K, *SEARCH_SIZE)
-            shares = plane_shares(study.renderer, out.triangle_ids[:, 0].flatten(1))
-            chosen += int((shares > limit).sum())
-            total += len(view.top)
+    for view in study.attack(init, seed).views:
+        judged += sum(record.verdict == UNINFORMATIVE for record in view.records)
+        poses = torch.stack([record.world_T_cam(view.init.world_T_cam) for record in view.top])
+        K = intrinsics_from_fov(view.init.fov_x_deg, *SEARCH_SIZE)
+        out = study.renderer.render(poses, K, *SEARCH_SIZE)
+        shares = plane_shares(study.renderer, out.triangle_ids[:, 0].flatten(1))
+        chosen += int((shares > limit).sum())
+        total += len(view.top)
     return chosen, total, judged
 
 
@@ -98,15 +101,23 @@ def main() -> None:
         parser.error(f"--weights: numbers, comma-separated, got {args.weights!r}")
     if args.picks < 1 or args.views < 1 or args.budget < 3 or min(weights) < 0:
         parser.error("--picks and --views must be at least 1, --budget at least 3, --weights at least 0")
-    scenes, model = bench_scenes(), load_model("kadv_tiny")
-    rows = content_weights(scenes, model, weights, args.picks, args.seed)
+    model, scored, counts = load_model("kadv_tiny"), [], {False: (0, 0, 0), True: (0, 0, 0)}
+    for scene in bench_scenes():
+        studies = {check: search_study(scene, model, check, args.budget, args.loss) for check in (False, True)}
+        renderer = studies[True].renderer
+        scored.append(candidate_scores(renderer, model, args.seed))
+        # the same init views either way: chosen as the commands choose them, the check on
+        init = sample_init_views(
+            renderer, model, args.views, args.seed, InitViewConfig(), PenaltyConfig(), *SEARCH_SIZE
+        )
+        for check, study in studies.items():
+            counts[check] = tuple(a + b for a, b in zip(counts[check], uninformative_chosen(study, init, args.seed)))
+    rows = content_weights(scored, weights, args.picks)
     print("| content_weight | mean delta1 | mean surfaces | mean far/near | picks with <= 2 surfaces |")
     print("|---|---|---|---|---|")
     for weight, (delta1, surfaces, far_near, bare, picked) in rows.items():
         print(f"| {weight:g} | {delta1:.3f} | {surfaces:.1f} | {far_near:.2f} | {bare} of {picked} |")
-    off, on = (
-        uninformative_chosen(scenes, model, c, args.views, args.budget, args.loss, args.seed) for c in (False, True)
-    )
+    off, on = counts[False], counts[True]
     print("\n| penalty.uninformative | chosen views uninformative | evaluated views judged uninformative |")
     print("|---|---|---|")
     print(f"| false | {off[0]} of {off[1]} | - |")
